@@ -1,0 +1,8 @@
+//! Firmware entry point (placeholder).
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    eprintln!("the firmware runs on the board: cargo fw-build / cargo fw-flash");
+}

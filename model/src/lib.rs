@@ -1,0 +1,2 @@
+//! Rig physics.
+#![cfg_attr(not(test), no_std)]
