@@ -1,2 +1,193 @@
-//! Project automation.
-fn main() {}
+//! Project automation. `cargo xtask test` runs every check CI runs:
+//! installs the thumb target when missing, cross-builds the firmware and prints its flash
+//! and RAM use, checks `model` and `protocol` for the target, then fmt, clippy (warnings
+//! denied) and every host test.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+
+mod size;
+
+/// The firmware's target.
+const THUMB: &str = "thumbv7em-none-eabihf";
+/// Flash budget of the release firmware, bytes.
+const FLASH_BUDGET: u64 = 64 * 1024;
+/// Static RAM budget of the release firmware (capture buffer included), bytes.
+const RAM_BUDGET: u64 = 64 * 1024;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("test") => test(),
+        Some("firmware") => firmware().map(|_| ()),
+        Some("setup") => setup(),
+        _ => {
+            eprintln!(
+                "usage: cargo xtask <task>\n\n  test      every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, tests)\n  firmware  cross-build the release firmware and print its flash/RAM use\n  setup     install the thumb target and the rustfmt/clippy components when missing"
+            );
+            Err("no task given".into())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+type Result<T = ()> = std::result::Result<T, String>;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("xtask sits in the workspace")
+        .to_path_buf()
+}
+
+fn cargo() -> Command {
+    let mut c = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    c.current_dir(root());
+    c
+}
+
+fn run(step: &str, mut cmd: Command) -> Result {
+    eprintln!("\n==> {step}");
+    let status = cmd
+        .status()
+        .map_err(|e| format!("{step}: cannot start: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{step} failed ({status})"))
+    }
+}
+
+fn rustup_output(args: &[&str]) -> Result<String> {
+    let out = Command::new("rustup")
+        .args(args)
+        .output()
+        .map_err(|e| format!("rustup not found ({e}); install rustup first"))?;
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// Installs the thumb target and rustfmt/clippy when missing (retrying once, as downloads can fail).
+fn setup() -> Result {
+    let installed = rustup_output(&["target", "list", "--installed"])?;
+    if !installed.lines().any(|l| l.trim() == THUMB) {
+        let add = || {
+            Command::new("rustup")
+                .args(["target", "add", THUMB])
+                .status()
+                .map(|s| s.success())
+                .unwrap_or(false)
+        };
+        eprintln!("==> installing the {THUMB} target");
+        if !add() && !add() {
+            return Err(format!(
+                "`rustup target add {THUMB}` failed twice; check the network and retry"
+            ));
+        }
+    }
+    let components = rustup_output(&["component", "list", "--installed"])?;
+    for comp in ["rustfmt", "clippy"] {
+        if !components.lines().any(|l| l.starts_with(comp)) {
+            run(&format!("installing {comp}"), {
+                let mut c = Command::new("rustup");
+                c.args(["component", "add", comp]);
+                c
+            })?;
+        }
+    }
+    Ok(())
+}
+
+/// Builds the release firmware and prints (and checks) its flash and RAM use.
+fn firmware() -> Result<size::Usage> {
+    run("firmware release build (thumbv7em-none-eabihf)", {
+        let mut c = cargo();
+        c.args([
+            "build",
+            "--package",
+            "firmware",
+            "--release",
+            "--target",
+            THUMB,
+        ]);
+        c
+    })?;
+    let target_dir = std::env::var("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| root().join("target"));
+    let elf = target_dir.join(THUMB).join("release").join("firmware");
+    let usage = size::measure(&elf)?;
+    println!(
+        "firmware size: flash {} B ({:.1} KiB of {} KiB budget), static RAM {} B ({:.1} KiB of {} KiB budget)",
+        usage.flash,
+        usage.flash as f64 / 1024.0,
+        FLASH_BUDGET / 1024,
+        usage.ram,
+        usage.ram as f64 / 1024.0,
+        RAM_BUDGET / 1024
+    );
+    if usage.flash > FLASH_BUDGET || usage.ram > RAM_BUDGET {
+        return Err("firmware exceeds its flash or RAM budget".into());
+    }
+    Ok(usage)
+}
+
+fn test() -> Result {
+    setup()?;
+    run("rustfmt check", {
+        let mut c = cargo();
+        c.args(["fmt", "--all", "--", "--check"]);
+        c
+    })?;
+    firmware()?;
+    run("model and protocol build for the thumb target", {
+        let mut c = cargo();
+        c.args([
+            "build",
+            "--package",
+            "model",
+            "--package",
+            "protocol",
+            "--target",
+            THUMB,
+        ]);
+        c
+    })?;
+    run("clippy, firmware on the thumb target", {
+        let mut c = cargo();
+        c.args([
+            "clippy",
+            "--package",
+            "firmware",
+            "--release",
+            "--target",
+            THUMB,
+            "--",
+            "-D",
+            "warnings",
+        ]);
+        c
+    })?;
+    run("clippy, whole workspace on the host", {
+        let mut c = cargo();
+        c.args([
+            "clippy",
+            "--workspace",
+            "--all-targets",
+            "--",
+            "-D",
+            "warnings",
+        ]);
+        c
+    })?;
+    run("tests", {
+        let mut c = cargo();
+        c.args(["test", "--workspace"]);
+        c
+    })
+}

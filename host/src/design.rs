@@ -1,0 +1,213 @@
+//! `rig design`: the design calculator over the paper's model (Eqs. 1-4, 6, 7, 10, 12, 41).
+
+use model::{CamDrive, GearSet, Inertias, OutputShaft, friction};
+use serde::Serialize;
+
+use crate::RigError;
+
+/// The rig values a design is evaluated at (SI units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigParams {
+    /// Module, m.
+    pub module: f64,
+    /// Pressure angle, rad.
+    pub pressure_angle: f64,
+    /// Static friction coefficient.
+    pub mu_s: f64,
+    /// Dynamic friction coefficient.
+    pub mu_d: f64,
+    /// Cam eccentricity, m.
+    pub eccentricity: f64,
+    /// Carrier mass M_hat, kg.
+    pub carrier_mass: f64,
+    /// Load torque on the output, N m.
+    pub tau_rot: f64,
+    /// Vibration frequency, Hz.
+    pub vibration_hz: f64,
+    /// Inertias for Eq. (7), when known.
+    pub inertias: Option<Inertias>,
+}
+
+impl Default for RigParams {
+    /// The paper's rig: m 1 mm, 20 deg, mu_s 0.271, mu_d 0.174, e 1 mm, M_hat 3.82 kg,
+    /// tau_rot 3.68 N m, 10 Hz.
+    fn default() -> Self {
+        Self {
+            module: GearSet::MODULE_PAPER,
+            pressure_angle: GearSet::PRESSURE_ANGLE_STANDARD,
+            mu_s: model::MU_S_PAPER,
+            mu_d: model::MU_D_PAPER,
+            eccentricity: model::ECCENTRICITY_PAPER,
+            carrier_mass: model::CARRIER_MASS_PAPER,
+            tau_rot: model::TAU_ROT_MAX_PAPER,
+            vibration_hz: 10.0,
+            inertias: None,
+        }
+    }
+}
+
+/// One evaluated gear set, as printed by `rig design` (JSON keys are the field names).
+#[derive(Debug, Clone, Serialize)]
+pub struct DesignReport {
+    /// Tooth counts [Z1, Z2, Z3, Z4].
+    pub z: [u32; 4],
+    /// Tooth difference n = |Z1 - Z4|.
+    pub n: u32,
+    /// Reduction ratio rho (Eq. 1).
+    pub rho: f64,
+    /// Contact ratios epsilon_1..4 (Eq. 2).
+    pub contact_ratios: [f64; 4],
+    /// Lambda (Eq. 3).
+    pub big_lambda: f64,
+    /// lambda (Eq. 41) for the cam's eccentricity.
+    pub small_lambda: f64,
+    /// mu_s Lambda.
+    pub mu_s_lambda: f64,
+    /// mu_d Lambda.
+    pub mu_d_lambda: f64,
+    /// Hold verdict of Eq. (4): mu_s Lambda > 1.
+    pub holds_load: bool,
+    /// mu_d Lambda < 1: once moving, the output keeps moving after vibration stops.
+    pub keeps_moving_after_stop: bool,
+    /// Vibration (cam) speed, rad/s.
+    pub omega_n_rad_s: f64,
+    /// Load torque the requirement is evaluated at, N m.
+    pub tau_rot_nm: f64,
+    /// Required cam torque (Eq. 10, mu = mu_s), N m.
+    pub tau_cam_hat_nm: f64,
+    /// Equivalent output inertia (Eq. 7), kg m^2, when the masses were given.
+    pub i_hat_kg_m2: Option<f64>,
+    /// Friction coefficient from the given gross efficiency (Eqs. 12-13).
+    pub mu_from_eta: Option<f64>,
+    /// Warnings for the designer.
+    pub warnings: Vec<String>,
+}
+
+/// Evaluates `z` at `params`; `eta_gross` adds the friction coefficient it implies.
+pub fn evaluate(
+    z: [u32; 4],
+    params: &RigParams,
+    eta_gross: Option<f64>,
+) -> Result<DesignReport, RigError> {
+    let gear = GearSet::new(z, params.module, params.pressure_angle)
+        .map_err(|source| RigError::Gear { z, source })?;
+    let drive = CamDrive {
+        gear,
+        eccentricity: params.eccentricity,
+        carrier_mass: params.carrier_mass,
+    };
+    let omega_n = 2.0 * core::f64::consts::PI * params.vibration_hz;
+    let big_lambda = gear.big_lambda();
+    let shaft = OutputShaft::new(&gear, params.eccentricity, 1.0, params.mu_s, params.mu_d);
+    let mut warnings = Vec::new();
+    if shaft.keeps_moving_after_stop() {
+        warnings.push(format!(
+            "mu_d*Lambda = {:.3} < 1: once backdriven, the output keeps moving after vibration stops",
+            params.mu_d * big_lambda
+        ));
+    }
+    if !shaft.holds_at_rest() {
+        warnings.push(format!(
+            "mu_s*Lambda = {:.3} <= 1: the gear does not hold its load without vibration",
+            params.mu_s * big_lambda
+        ));
+    }
+    if params.eccentricity < 0.3e-3 {
+        warnings.push(
+            "eccentricity below 0.3 mm: the paper needs at least 0.3 mm to clear the backlash"
+                .into(),
+        );
+    }
+    Ok(DesignReport {
+        z,
+        n: gear.n(),
+        rho: gear.rho(),
+        contact_ratios: gear.contact_ratios(),
+        big_lambda,
+        small_lambda: gear.small_lambda(params.eccentricity),
+        mu_s_lambda: params.mu_s * big_lambda,
+        mu_d_lambda: params.mu_d * big_lambda,
+        holds_load: shaft.holds_at_rest(),
+        keeps_moving_after_stop: shaft.keeps_moving_after_stop(),
+        omega_n_rad_s: omega_n,
+        tau_rot_nm: params.tau_rot,
+        tau_cam_hat_nm: drive.required_cam_torque(params.mu_s, params.tau_rot, omega_n),
+        i_hat_kg_m2: params.inertias.map(|i| gear.equivalent_inertia(&i)),
+        mu_from_eta: eta_gross.map(|eta| friction::mu_from_eta_gross(&gear, eta)),
+        warnings,
+    })
+}
+
+/// Human-readable form of one report.
+pub fn render_text(r: &DesignReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let [z1, z2, z3, z4] = r.z;
+    let e = r.contact_ratios;
+    let _ = writeln!(s, "gear set Z1..Z4 = {z1}, {z2}, {z3}, {z4} (n = {})", r.n);
+    let _ = writeln!(s, "  rho (Eq. 1)                {:>10.3}", r.rho);
+    let _ = writeln!(
+        s,
+        "  contact ratios (Eq. 2)     {:.3} {:.3} {:.3} {:.3}",
+        e[0], e[1], e[2], e[3]
+    );
+    let _ = writeln!(s, "  Lambda (Eq. 3)             {:>10.3}", r.big_lambda);
+    let _ = writeln!(s, "  lambda (Eq. 41)            {:>10.4}", r.small_lambda);
+    let _ = writeln!(s, "  mu_s*Lambda                {:>10.3}", r.mu_s_lambda);
+    let _ = writeln!(s, "  mu_d*Lambda                {:>10.3}", r.mu_d_lambda);
+    let verdict = if r.holds_load {
+        "holds its load without vibration"
+    } else {
+        "backdrives without vibration"
+    };
+    let _ = writeln!(s, "  hold verdict (Eq. 4)       {verdict}");
+    let _ = writeln!(
+        s,
+        "  tau_cam_hat (Eq. 10)       {:>10.2} N mm at tau_rot {:.3} N m, {:.1} Hz",
+        r.tau_cam_hat_nm * 1e3,
+        r.tau_rot_nm,
+        r.omega_n_rad_s / (2.0 * core::f64::consts::PI)
+    );
+    if let Some(i) = r.i_hat_kg_m2 {
+        let _ = writeln!(s, "  I_hat (Eq. 7)              {i:>10.4} kg m^2");
+    }
+    if let Some(mu) = r.mu_from_eta {
+        let _ = writeln!(s, "  mu from eta_gross (Eq. 12) {mu:>10.4}");
+    }
+    for w in &r.warnings {
+        let _ = writeln!(s, "  warning: {w}");
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table1_verdicts_and_warnings() {
+        for z in model::TABLE1 {
+            let r = evaluate(z, &RigParams::default(), None).unwrap();
+            assert_eq!(r.holds_load, r.n == 1);
+            // mu_d Lambda < 1 for every Table 1 set: all keep moving after vibration stops.
+            assert!(r.keeps_moving_after_stop);
+            assert!(r.warnings.iter().any(|w| w.contains("mu_d*Lambda")));
+        }
+    }
+
+    #[test]
+    fn bad_gear_set_is_an_error_not_a_panic() {
+        let err = evaluate([49, 51, 50, 51], &RigParams::default(), None).unwrap_err();
+        assert!(
+            err.to_string().contains("unequal centre distances"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn mu_from_eta_matches_the_paper() {
+        let r = evaluate([50, 50, 51, 49], &RigParams::default(), Some(0.423)).unwrap();
+        assert!((r.mu_from_eta.unwrap() - 0.271).abs() < 0.001);
+        assert!(render_text(&r).contains("mu from eta_gross"));
+    }
+}

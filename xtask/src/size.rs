@@ -1,0 +1,44 @@
+//! Flash and static RAM use of an ELF, from its allocated sections.
+
+use std::path::Path;
+
+use object::{Object, ObjectSection, SectionFlags, SectionKind};
+
+/// Memory use of a firmware image, bytes.
+#[derive(Debug, Clone, Copy)]
+pub struct Usage {
+    /// Bytes stored in flash: code, read-only data and the initial values of `.data`.
+    pub flash: u64,
+    /// Static RAM: `.data`, `.bss` and `.uninit` (the stack is what is left over).
+    pub ram: u64,
+}
+
+/// Reads the section table of `elf`.
+pub fn measure(elf: &Path) -> Result<Usage, String> {
+    let bytes = std::fs::read(elf).map_err(|e| format!("cannot read {}: {e}", elf.display()))?;
+    let file = object::File::parse(&*bytes)
+        .map_err(|e| format!("{} is not an ELF: {e}", elf.display()))?;
+    let mut usage = Usage { flash: 0, ram: 0 };
+    for section in file.sections() {
+        let allocated = match section.flags() {
+            SectionFlags::Elf { sh_flags } => sh_flags & u64::from(object::elf::SHF_ALLOC) != 0,
+            _ => false,
+        };
+        if !allocated || section.size() == 0 {
+            continue;
+        }
+        let in_ram = (0x2000_0000..0x4000_0000).contains(&section.address());
+        match section.kind() {
+            SectionKind::UninitializedData | SectionKind::UninitializedTls => {
+                usage.ram += section.size()
+            }
+            _ if in_ram => {
+                // `.data`: lives in RAM, its initial values are stored in flash.
+                usage.ram += section.size();
+                usage.flash += section.size();
+            }
+            _ => usage.flash += section.size(),
+        }
+    }
+    Ok(usage)
+}
