@@ -14,6 +14,7 @@ pub mod excitation;
 pub mod friction;
 pub mod gear;
 mod math;
+pub mod plant;
 
 pub use calibration::{Calibration, CalibrationConsistency};
 pub use dynamics::{Inertias, OutputShaft};

@@ -1,0 +1,104 @@
+//! Physical effects the paper's model leaves out, which the plant can switch on so the
+//! discrepancy workflow (`rig explain`) can be tested on simulated data. Each is off by
+//! default; each enters at its physical place.
+
+use core::f64::consts::PI;
+
+/// Switchable effects (all off in [`Default`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct PlantEffects {
+    /// `speed-dependent-axial-friction`: mu_ax(w) = mu (1 - depth exp(-w / omega0)); the
+    /// paper's explanation for the low torque at 3.6 V. `(depth, omega0 rad/s)`.
+    pub axial_friction_speed: Option<(f64, f64)>,
+    /// `load-dependent-friction`: mu(tau) = mu (tau_rot / tau_ref)^exponent, the tooth-load
+    /// dependence of an average friction coefficient. `(exponent, tau_ref N m)`.
+    pub load_friction: Option<(f64, f64)>,
+    /// `thermal-drift`: the magnets weaken as the winding warms, C1(T) = C1 (1 - k (T - T0)).
+    /// `k` in 1/K.
+    pub thermal_drift: Option<f64>,
+    /// `current-sensor-offset`: the logger's current reads this much too high, A.
+    pub current_offset: f64,
+    /// `vibrator-viscous-loss`: an extra speed-proportional loss at the cam shaft, N m s/rad.
+    pub extra_viscous: f64,
+    /// `linear-bush-friction`: Coulomb force of the carrier's linear bush, N. It resists the
+    /// axial motion (cam torque F_b e |sin|) and holds the output at rest while
+    /// tau_rot < F_b * `bush_hold_arm` / (1 + w_n / `bush_omega`).
+    pub bush_friction: f64,
+    /// Lever arm turning the bush force into a holding torque on the output, m.
+    pub bush_hold_arm: f64,
+    /// Cam speed at which the bush's grip has halved, rad/s.
+    pub bush_omega: f64,
+}
+
+impl PlantEffects {
+    /// Axial friction coefficient at cam speed `omega_n` and load `tau_rot`, from `mu`.
+    pub fn axial_mu(&self, mu: f64, omega_n: f64, tau_rot: f64) -> f64 {
+        let mut m = mu;
+        if let Some((depth, omega0)) = self.axial_friction_speed {
+            m *= 1.0 - depth * libm::exp(-omega_n.abs() / omega0);
+        }
+        if let Some((exponent, tau_ref)) = self.load_friction
+            && tau_rot.abs() > 0.0
+        {
+            m *= libm::pow(tau_rot.abs() / tau_ref, exponent);
+        }
+        m
+    }
+
+    /// Factor on the torque constant at winding temperature `temp_c` (reference `ambient_c`).
+    pub fn torque_constant_factor(&self, temp_c: f64, ambient_c: f64) -> f64 {
+        match self.thermal_drift {
+            Some(k) => 1.0 - k * (temp_c - ambient_c),
+            None => 1.0,
+        }
+    }
+
+    /// Holding torque of the linear bush at cam speed `omega_n`, N m.
+    pub fn bush_hold_torque(&self, omega_n: f64) -> f64 {
+        if self.bush_friction <= 0.0 {
+            return 0.0;
+        }
+        self.bush_friction * self.bush_hold_arm / (1.0 + omega_n.abs() / self.bush_omega.max(1e-9))
+    }
+
+    /// Mean cam torque the bush adds over a turn, N m: (2 / pi) F_b e.
+    pub fn bush_mean_cam_torque(&self, eccentricity: f64) -> f64 {
+        2.0 / PI * self.bush_friction * eccentricity
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn effects_are_off_by_default() {
+        let e = PlantEffects::default();
+        assert_eq!(e.axial_mu(0.271, 10.0, 1.0), 0.271);
+        assert_eq!(e.torque_constant_factor(60.0, 25.0), 1.0);
+        assert_eq!(e.bush_hold_torque(0.0), 0.0);
+    }
+
+    #[test]
+    fn speed_dependent_friction_falls_at_low_speed_only() {
+        let e = PlantEffects {
+            axial_friction_speed: Some((0.5, 20.0)),
+            ..Default::default()
+        };
+        assert!(e.axial_mu(0.271, 31.4, 1.0) < e.axial_mu(0.271, 94.2, 1.0));
+        assert!((e.axial_mu(0.271, 1e6, 1.0) - 0.271).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bush_grip_fades_with_cam_speed() {
+        let e = PlantEffects {
+            bush_friction: 20.0,
+            bush_hold_arm: 0.05,
+            bush_omega: 30.0,
+            ..Default::default()
+        };
+        assert!((e.bush_hold_torque(0.0) - 1.0).abs() < 1e-12);
+        assert!((e.bush_hold_torque(30.0) - 0.5).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,422 @@
+//! The simulated rig: vibrator motor and cam, carrier, output shaft with its load, and the
+//! sensors, stepped at a fixed time step (`no_std`, so it could run on the target too).
+//!
+//! Integration: the winding current is advanced exactly over each step for the speed at the
+//! step's start (first-order exponential of the R-L circuit, stable at any step), the
+//! mechanics with semi-implicit Euler and Coulomb sticking. At the default 10 kHz the cam
+//! turns at most 0.01 rad per step; an energy ledger checks the balance.
+
+mod effects;
+mod motor;
+mod rng;
+mod sensors;
+
+pub use effects::PlantEffects;
+pub use motor::MotorParams;
+pub use rng::NoiseSource;
+pub use sensors::SensorParams;
+
+use crate::math::{cos, sin};
+use crate::{CamDrive, GearSet, OutputShaft};
+
+/// Copper's temperature coefficient of resistance, 1/K.
+const COPPER_TEMPCO: f64 = 0.0039;
+/// Below this speed (rad/s) a shaft counts as standing still.
+const STANDSTILL: f64 = 1e-6;
+
+/// What loads the output shaft.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub enum Load {
+    /// A mass hanging from a pulley on the output: tau_rot = m g r, inertia m r^2.
+    Mass {
+        /// Mass, kg.
+        mass: f64,
+        /// Pulley radius, m.
+        radius: f64,
+    },
+    /// A set torque, N m (a brake or a torque motor).
+    Torque(f64),
+}
+
+impl Load {
+    /// Torque on the output, N m.
+    pub fn torque(&self) -> f64 {
+        match *self {
+            Load::Mass { mass, radius } => mass * crate::G * radius,
+            Load::Torque(t) => t,
+        }
+    }
+
+    /// Inertia the load adds to the output, kg m^2.
+    pub fn inertia(&self) -> f64 {
+        match *self {
+            Load::Mass { mass, radius } => mass * radius * radius,
+            Load::Torque(_) => 0.0,
+        }
+    }
+}
+
+/// How the cam shaft is set up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub enum CamSetup {
+    /// The cam drives the carrier (normal operation).
+    Coupled,
+    /// The vibrator turns alone, nothing on the cam (the paper's no-load current test).
+    Uncoupled,
+    /// An arm on the vibrator shaft presses on a force gauge (the paper's torque test).
+    Blocked,
+}
+
+/// Everything that defines a simulated rig.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct PlantParams {
+    /// The vibrator.
+    pub motor: MotorParams,
+    /// Gear set, eccentricity and carrier mass.
+    pub drive: CamDrive,
+    /// Static friction coefficient of the teeth.
+    pub mu_s: f64,
+    /// Dynamic friction coefficient of the teeth.
+    pub mu_d: f64,
+    /// Axial friction coefficient in the cam torque (Eq. 9); the paper assumes mu_ax ~ mu.
+    pub mu_ax: f64,
+    /// Equivalent output inertia of the gear (Eq. 7), without the load, kg m^2.
+    pub i_hat: f64,
+    /// The load.
+    pub load: Load,
+    /// H-bridge supply, V.
+    pub supply: f64,
+    /// Whether the drive can take power back (synchronous H-bridge, backdrivable gearhead).
+    /// Without it the current cannot reverse and the carrier's inertial power is lost, so the
+    /// inertia term of Eq. (9) no longer averages out (`inertia-rectification`).
+    pub regeneration: bool,
+    /// Apply Eq. (40): the axial friction share falls as the output speeds up.
+    pub friction_split: bool,
+    /// How the cam is set up.
+    pub cam: CamSetup,
+    /// Sensors.
+    pub sensors: SensorParams,
+    /// Effects beyond the paper's model.
+    pub effects: PlantEffects,
+}
+
+impl PlantParams {
+    /// The paper's rig with gear set `z`, the load `load` and Table 2's vibrator.
+    pub fn paper(gear: GearSet, load: Load) -> Self {
+        Self {
+            motor: MotorParams::default(),
+            drive: CamDrive::paper(gear),
+            mu_s: crate::MU_S_PAPER,
+            mu_d: crate::MU_D_PAPER,
+            mu_ax: crate::MU_S_PAPER,
+            i_hat: crate::I_HAT_PAPER,
+            load,
+            supply: 12.0,
+            regeneration: true,
+            friction_split: false,
+            cam: CamSetup::Coupled,
+            sensors: SensorParams::default(),
+            effects: PlantEffects::default(),
+        }
+    }
+
+    /// The output shaft of Eq. (6), load inertia included.
+    pub fn output_shaft(&self) -> OutputShaft {
+        OutputShaft::new(
+            &self.drive.gear,
+            self.drive.eccentricity,
+            self.i_hat + self.load.inertia(),
+            self.mu_s,
+            self.mu_d,
+        )
+    }
+}
+
+/// The H-bridge command, as the firmware's PWM timer and pins set it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Drive {
+    /// Duty cycle, -1..1 (sign: direction pin).
+    pub duty: f64,
+    /// Bridge enabled. Disabled, the bridge is open and the current dies out at once.
+    pub enabled: bool,
+}
+
+/// The plant's physical state.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PlantState {
+    /// Simulated time, s.
+    pub time: f64,
+    /// Winding current, A.
+    pub current: f64,
+    /// Cam angle, rad (0: carrier at +e).
+    pub cam_angle: f64,
+    /// Cam speed omega_n, rad/s.
+    pub cam_speed: f64,
+    /// Output angle, rad (positive: the direction the load drives it).
+    pub output_angle: f64,
+    /// Output speed omega_t, rad/s.
+    pub output_speed: f64,
+    /// Winding temperature, deg C.
+    pub temperature: f64,
+    /// Torque on the gauge arm in the blocked-shaft setup, N m.
+    pub gauge_torque: f64,
+    /// Voltage across the motor over the last step, V.
+    pub motor_voltage: f64,
+}
+
+/// Energy bookkeeping, J, for the balance check.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EnergyLedger {
+    /// Delivered by the supply.
+    pub electrical_in: f64,
+    /// Lost in the winding resistance.
+    pub resistive: f64,
+    /// Lost in the gearhead (the part of the back-EMF power not reaching the cam shaft).
+    pub gearhead: f64,
+    /// Lost in the vibrator's own friction.
+    pub vibrator_friction: f64,
+    /// Lost in tooth (and bush) friction against the axial motion.
+    pub axial_friction: f64,
+    /// Work done by the load on the output.
+    pub load_work: f64,
+    /// Lost in the output's friction.
+    pub output_friction: f64,
+    /// Inertial power of the carrier the drive could not take back (no regeneration).
+    pub unreturned: f64,
+}
+
+/// The simulated rig.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    params: PlantParams,
+    state: PlantState,
+    rng: NoiseSource,
+    energy: EnergyLedger,
+    shaft: OutputShaft,
+}
+
+impl Plant {
+    /// A rig at rest at ambient temperature; `seed` fixes the sensor noise.
+    pub fn new(params: PlantParams, seed: u64) -> Self {
+        Self {
+            shaft: params.output_shaft(),
+            state: PlantState {
+                temperature: params.motor.ambient_c,
+                ..Default::default()
+            },
+            rng: NoiseSource::new(seed),
+            energy: EnergyLedger::default(),
+            params,
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &PlantParams {
+        &self.params
+    }
+
+    /// Changes the load (the operator hangs another mass).
+    pub fn set_load(&mut self, load: Load) {
+        self.params.load = load;
+        self.shaft = self.params.output_shaft();
+    }
+
+    /// Changes the cam setup (coupled, uncoupled, blocked on the gauge).
+    pub fn set_cam(&mut self, cam: CamSetup) {
+        self.params.cam = cam;
+        if cam == CamSetup::Blocked {
+            self.state.cam_speed = 0.0;
+        }
+    }
+
+    /// Stops the output and puts it back at angle zero (the operator resets the load).
+    pub fn reset_output(&mut self) {
+        self.state.output_angle = 0.0;
+        self.state.output_speed = 0.0;
+    }
+
+    /// The physical state.
+    pub fn state(&self) -> &PlantState {
+        &self.state
+    }
+
+    /// The energy ledger since the start.
+    pub fn energy(&self) -> &EnergyLedger {
+        &self.energy
+    }
+
+    /// Energy stored now: winding field, cam and carrier motion, output motion, J.
+    pub fn stored_energy(&self) -> f64 {
+        let s = &self.state;
+        let p = &self.params;
+        let e = p.drive.eccentricity;
+        let carrier = if p.cam == CamSetup::Coupled {
+            let v = e * s.cam_speed * sin(s.cam_angle);
+            0.5 * p.drive.carrier_mass * v * v
+        } else {
+            0.0
+        };
+        0.5 * p.motor.inductance * s.current * s.current
+            + 0.5 * p.motor.inertia * s.cam_speed * s.cam_speed
+            + carrier
+            + 0.5 * self.shaft.i_hat * s.output_speed * s.output_speed
+    }
+
+    /// ADC code of the current sensor now (with noise and quantisation).
+    pub fn current_adc(&mut self) -> u16 {
+        let i = self.state.current;
+        self.params.sensors.current_to_adc(i, &mut self.rng)
+    }
+
+    /// The current a logger on the sensor reads (the `current-sensor-offset` effect included), A.
+    pub fn logged_current(&mut self) -> f64 {
+        let noise =
+            self.params.sensors.acs_noise / self.params.sensors.acs_sensitivity * self.rng.normal();
+        self.state.current + self.params.effects.current_offset + noise
+    }
+
+    /// Encoder counter (16-bit, wrapping) now.
+    pub fn encoder_count(&self) -> u16 {
+        self.params.sensors.encoder_count(self.state.cam_angle)
+    }
+
+    /// Advances the plant by `dt` seconds under the bridge command `drive`.
+    pub fn step(&mut self, dt: f64, drive: Drive) {
+        let p = self.params;
+        let m = &p.motor;
+        let temp = self.state.temperature;
+        let resistance = m.resistance * (1.0 + COPPER_TEMPCO * (temp - m.ambient_c));
+        let omega = self.state.cam_speed;
+
+        // Electrical: exact R-L response for this step's back-EMF.
+        let v_bridge = drive.duty.clamp(-1.0, 1.0) * p.supply;
+        let i0 = self.state.current;
+        let (i1, i_mean, v_motor) = if drive.enabled {
+            let i_ss = (v_bridge - m.ke_cam() * omega) / resistance;
+            let tau = m.inductance / resistance;
+            let decay = libm::exp(-dt / tau);
+            let i1 = i_ss + (i0 - i_ss) * decay;
+            let mean = i_ss + (i0 - i_ss) * tau / dt * (1.0 - decay);
+            if !p.regeneration && (i1 < 0.0) != (v_bridge < 0.0) && i1 != 0.0 {
+                // Diode-clamped bridge: current cannot flow against the applied voltage.
+                (0.0, 0.5 * i0.max(0.0), m.ke_cam() * omega)
+            } else {
+                (i1, mean, v_bridge)
+            }
+        } else {
+            (0.0, 0.0, m.ke_cam() * omega)
+        };
+
+        // Mechanical, cam shaft.
+        let ktf = p.effects.torque_constant_factor(temp, m.ambient_c);
+        let t_motor = m.torque_per_amp * ktf * i_mean;
+        let tau_rot = p.load.torque();
+        let (s, c) = (sin(self.state.cam_angle), cos(self.state.cam_angle));
+        let e = p.drive.eccentricity;
+        let coupled = p.cam == CamSetup::Coupled;
+        let mass = if coupled { p.drive.carrier_mass } else { 0.0 };
+        let axial_force = if coupled {
+            let mut mu_ax = p.effects.axial_mu(p.mu_ax, omega, tau_rot);
+            if p.friction_split {
+                mu_ax = self.shaft.radial_friction(
+                    mu_ax,
+                    self.shaft.small_lambda * omega,
+                    self.state.output_speed,
+                );
+            }
+            p.drive.friction_force(mu_ax, tau_rot) + p.effects.bush_friction
+        } else {
+            0.0
+        };
+        let t_axial = axial_force * e * s.abs();
+        let viscous = m.viscous + p.effects.extra_viscous;
+        let kinetic = m.coulomb + m.running_loss;
+        let inertia = m.inertia + mass * e * e * s * s;
+        let t_carrier_full = mass * e * e * s * c * omega * omega;
+        // Without regeneration the drive cannot take back the carrier's inertial power: the
+        // part of the cycle where the carrier pushes the cam is lost, not returned.
+        let t_carrier = if !p.regeneration && t_carrier_full * omega < 0.0 {
+            0.0
+        } else {
+            t_carrier_full
+        };
+        let new_omega = if p.cam == CamSetup::Blocked {
+            self.state.gauge_torque = if t_motor.abs() > m.coulomb {
+                t_motor - m.coulomb * t_motor.signum()
+            } else {
+                0.0
+            };
+            0.0
+        } else if omega.abs() < STANDSTILL {
+            let drive_torque = t_motor - t_carrier;
+            let resist = m.coulomb + t_axial;
+            if drive_torque.abs() <= resist {
+                0.0
+            } else {
+                let net = drive_torque - drive_torque.signum() * (kinetic + t_axial);
+                net / inertia * dt
+            }
+        } else {
+            let friction = omega.signum() * (kinetic + viscous * omega.abs() + t_axial);
+            let accel = (t_motor - t_carrier - friction) / inertia;
+            let w = omega + accel * dt;
+            if w.signum() != omega.signum() && (t_motor - t_carrier).abs() <= kinetic + t_axial {
+                0.0
+            } else {
+                w
+            }
+        };
+        let omega_mean = 0.5 * (omega + new_omega);
+        let dtheta = new_omega * dt;
+
+        // Output shaft, Eq. (6), with the bush's hold when that effect is on.
+        let omega_n = if coupled { new_omega.abs() } else { 0.0 };
+        let wt = self.state.output_speed;
+        let bush_hold = p.effects.bush_hold_torque(omega_n);
+        let out_friction = self.shaft.friction_torque(tau_rot, wt, omega_n);
+        let new_wt = if wt.abs() < STANDSTILL && tau_rot.abs() <= bush_hold {
+            0.0
+        } else {
+            let a = self.shaft.acceleration(tau_rot, wt, omega_n);
+            let w = wt + a * dt;
+            if wt.abs() >= STANDSTILL && w.signum() != wt.signum() {
+                0.0
+            } else {
+                w
+            }
+        };
+        let wt_mean = 0.5 * (wt + new_wt);
+
+        // Thermal.
+        let heat = i_mean * i_mean * resistance;
+        self.state.temperature +=
+            (heat - (temp - m.ambient_c) / m.thermal_resistance) / m.thermal_capacity * dt;
+
+        // Ledger.
+        let led = &mut self.energy;
+        led.electrical_in += v_motor * i_mean * dt * if drive.enabled { 1.0 } else { 0.0 };
+        led.resistive += resistance * i_mean * i_mean * dt;
+        led.gearhead += (m.ke_cam() - m.torque_per_amp * ktf) * i_mean * omega_mean * dt;
+        if p.cam != CamSetup::Blocked && new_omega != 0.0 {
+            led.vibrator_friction += (kinetic + viscous * omega_mean.abs()) * omega_mean.abs() * dt;
+            led.axial_friction += t_axial * omega_mean.abs() * dt;
+            led.unreturned += (t_carrier - t_carrier_full) * omega_mean * dt;
+        }
+        led.load_work += tau_rot * wt_mean * dt;
+        led.output_friction += -out_friction * wt_mean * dt;
+
+        self.state.current = i1;
+        self.state.cam_speed = new_omega;
+        self.state.cam_angle += dtheta;
+        self.state.output_speed = new_wt;
+        self.state.output_angle += wt_mean * dt;
+        self.state.motor_voltage = v_motor;
+        self.state.time += dt;
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,112 @@
+//! The vibrator: a Mabuchi RS-735 DC motor with an 8.5:1 gearhead driving the cam.
+//!
+//! Parameters are chosen so the paper's calibration (Table 2) is what a calibration of
+//! this motor returns, and the paper's voltage-speed points hold:
+//! - torque constant at the cam shaft C1 = eta N Kt, Coulomb loss -C2 (also the static
+//!   friction that sets the start-up voltage), viscous loss C3 and running loss C4;
+//! - back-EMF at the cam shaft N Ke = 0.078 V s/rad and R = 0.44 ohm, so 3.6 / 6.2 / 8.8 V
+//!   give about 5 / 10 / 15 Hz under the paper's loads, and the motor breaks away at
+//!   R (-C2) / C1 = 0.98 V: it does not turn below 1.0 V.
+
+use crate::Calibration;
+
+/// Electrical, mechanical and thermal parameters of the vibrator (SI, cam-shaft side unless
+/// noted).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct MotorParams {
+    /// Winding resistance at the reference temperature, ohm.
+    pub resistance: f64,
+    /// Winding inductance, H.
+    pub inductance: f64,
+    /// Back-EMF constant at the motor shaft (= torque constant Kt), V s/rad.
+    pub ke_motor: f64,
+    /// Gearhead reduction N (motor turns per cam turn).
+    pub gear_ratio: f64,
+    /// Torque per ampere delivered at the cam shaft, C1 = eta N Kt, N m/A.
+    pub torque_per_amp: f64,
+    /// Coulomb (and static) friction torque at the cam shaft, N m (= -C2).
+    pub coulomb: f64,
+    /// Extra constant loss while turning, N m (= C4).
+    pub running_loss: f64,
+    /// Viscous loss at the cam shaft, N m s/rad (= C3).
+    pub viscous: f64,
+    /// Rotor, gearhead and cam inertia seen at the cam shaft, kg m^2.
+    pub inertia: f64,
+    /// Heat capacity of the winding, J/K.
+    pub thermal_capacity: f64,
+    /// Thermal resistance winding to ambient, K/W.
+    pub thermal_resistance: f64,
+    /// Ambient (and reference) temperature, deg C.
+    pub ambient_c: f64,
+}
+
+impl MotorParams {
+    /// The paper's vibrator, built around the calibration `cal` (Table 2 by default).
+    pub fn rs735(cal: &Calibration) -> Self {
+        let gear_ratio = 8.5;
+        Self {
+            resistance: 0.44,
+            inductance: 0.2e-3,
+            ke_motor: 0.078 / gear_ratio,
+            gear_ratio,
+            torque_per_amp: cal.c1,
+            coulomb: -cal.c2,
+            running_loss: cal.c4,
+            viscous: cal.c3,
+            // RS-735 rotor ~1.0e-5 kg m^2 times N^2, plus the cam and its shaft.
+            inertia: 1.0e-5 * gear_ratio * gear_ratio + 1.0e-4,
+            thermal_capacity: 40.0,
+            thermal_resistance: 6.0,
+            ambient_c: 25.0,
+        }
+    }
+
+    /// Back-EMF constant at the cam shaft, V s/rad.
+    pub fn ke_cam(&self) -> f64 {
+        self.ke_motor * self.gear_ratio
+    }
+
+    /// Lowest voltage that starts the motor from rest (no cam load), V.
+    pub fn breakaway_voltage(&self) -> f64 {
+        self.resistance * self.coulomb / self.torque_per_amp
+    }
+
+    /// The calibration this motor has by construction (Eqs. 15-17).
+    pub fn calibration(&self) -> Calibration {
+        Calibration::from_torque_and_no_load(
+            self.torque_per_amp,
+            -self.coulomb,
+            self.viscous / self.torque_per_amp,
+            (self.coulomb + self.running_loss) / self.torque_per_amp,
+        )
+    }
+}
+
+impl Default for MotorParams {
+    fn default() -> Self {
+        Self::rs735(&Calibration::PAPER)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn motor_reproduces_table2_and_the_start_voltage() {
+        let m = MotorParams::default();
+        let c = m.calibration().to_paper_units();
+        let paper = [62.1, -138.0, 0.235, 1.69, 0.00378, 2.25];
+        for (k, (got, want)) in c.iter().zip(paper).enumerate() {
+            let tol = if k == 3 { 0.5 } else { 0.05 };
+            assert!(
+                ((got - want) / want).abs() < tol,
+                "C{}: {got} vs {want}",
+                k + 1
+            );
+        }
+        let v = m.breakaway_voltage();
+        assert!(v < 1.0 && v > 0.9, "{v}");
+    }
+}

@@ -1,0 +1,236 @@
+//! Plant behaviour against the paper's numbers and first principles.
+
+use super::*;
+use crate::{Calibration, TABLE1};
+
+const DT: f64 = 1e-4;
+
+fn paper_plant(z: [u32; 4], load: Load) -> Plant {
+    Plant::new(PlantParams::paper(GearSet::paper(z).unwrap(), load), 42)
+}
+
+fn run(plant: &mut Plant, volts: f64, seconds: f64) {
+    let drive = Drive {
+        duty: volts / plant.params().supply,
+        enabled: true,
+    };
+    let steps = (seconds / DT) as usize;
+    for _ in 0..steps {
+        plant.step(DT, drive);
+    }
+}
+
+/// Mean cam speed over `seconds` at `volts`, after `settle` seconds.
+fn mean_speed(plant: &mut Plant, volts: f64, settle: f64, seconds: f64) -> (f64, f64) {
+    run(plant, volts, settle);
+    let drive = Drive {
+        duty: volts / plant.params().supply,
+        enabled: true,
+    };
+    let steps = (seconds / DT) as usize;
+    let (mut w, mut i) = (0.0, 0.0);
+    for _ in 0..steps {
+        plant.step(DT, drive);
+        w += plant.state().cam_speed;
+        i += plant.state().current;
+    }
+    (w / steps as f64, i / steps as f64)
+}
+
+#[test]
+fn paper_voltages_give_5_10_15_hz_under_load() {
+    for tau in [0.368, 1.84, 3.68] {
+        for (volts, hz) in [(3.6, 5.0), (6.2, 10.0), (8.8, 15.0)] {
+            let mut p = paper_plant([49, 51, 50, 50], Load::Torque(tau));
+            let (w, _) = mean_speed(&mut p, volts, 1.0, 1.0);
+            let f = w / (2.0 * core::f64::consts::PI);
+            assert!(
+                (f / hz - 1.0).abs() < 0.15,
+                "{volts} V, {tau} N m: {f:.2} Hz"
+            );
+        }
+    }
+}
+
+#[test]
+fn vibrator_does_not_turn_below_one_volt() {
+    for cam in [CamSetup::Uncoupled, CamSetup::Coupled] {
+        let mut p = paper_plant([49, 51, 50, 50], Load::Torque(0.0));
+        p.set_cam(cam);
+        run(&mut p, 0.95, 1.0);
+        assert_eq!(p.state().cam_speed, 0.0, "{cam:?}");
+        run(&mut p, 1.2, 1.0);
+        assert!(
+            p.state().cam_speed > 1.0,
+            "{cam:?}: {}",
+            p.state().cam_speed
+        );
+    }
+}
+
+fn line_fit(x: &[f64], y: &[f64]) -> (f64, f64) {
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
+    let slope = sxy / sxx;
+    (slope, my - slope * mx)
+}
+
+#[test]
+fn papers_calibration_procedure_returns_table2() {
+    // Torque-current: shaft blocked on the gauge arm, voltage steps.
+    let mut p = paper_plant([49, 51, 50, 50], Load::Torque(0.0));
+    p.set_cam(CamSetup::Blocked);
+    let (mut currents, mut torques) = (Vec::new(), Vec::new());
+    for k in 0..8 {
+        let volts = 1.2 + 0.2 * k as f64;
+        run(&mut p, volts, 0.05);
+        let n = 500;
+        let (mut i, mut t) = (0.0, 0.0);
+        for _ in 0..n {
+            run(&mut p, volts, DT);
+            i += p.logged_current();
+            t += p.state().gauge_torque;
+        }
+        currents.push(i / n as f64);
+        torques.push(t / n as f64);
+    }
+    let (c1, c2) = line_fit(&currents, &torques);
+    // No-load current sweep, 1.0-1.9 V.
+    let mut p = paper_plant([49, 51, 50, 50], Load::Torque(0.0));
+    p.set_cam(CamSetup::Uncoupled);
+    let (mut speeds, mut currents) = (Vec::new(), Vec::new());
+    for k in 0..10 {
+        let volts = 1.0 + 0.1 * k as f64;
+        let (w, i) = mean_speed(&mut p, volts, 1.0, 0.5);
+        speeds.push(w);
+        currents.push(i);
+    }
+    let (c5, c6) = line_fit(&speeds, &currents);
+    let got = Calibration::from_torque_and_no_load(c1, c2, c5, c6).to_paper_units();
+    let want = Calibration::PAPER.to_paper_units();
+    for k in 0..6 {
+        let tol = if k == 3 { 0.5 } else { 0.05 };
+        assert!(
+            ((got[k] - want[k]) / want[k]).abs() < tol,
+            "C{}: {} vs {}",
+            k + 1,
+            got[k],
+            want[k]
+        );
+    }
+}
+
+#[test]
+fn energy_balances() {
+    for regeneration in [true, false] {
+        energy_balances_with(regeneration);
+    }
+}
+
+fn energy_balances_with(regeneration: bool) {
+    let mut p = paper_plant([49, 51, 50, 50], Load::Torque(2.0));
+    let mut params = *p.params();
+    params.regeneration = regeneration;
+    p = Plant::new(params, 1);
+    let e0 = p.stored_energy();
+    run(&mut p, 6.2, 2.0);
+    let l = *p.energy();
+    let stored = p.stored_energy() - e0;
+    let vibrator_side =
+        l.resistive + l.gearhead + l.vibrator_friction + l.axial_friction + l.unreturned;
+    // The output's kinetic energy comes from the load, not the supply.
+    let out_ke = 0.5 * p.params().output_shaft().i_hat * p.state().output_speed.powi(2);
+    let balance = l.electrical_in - vibrator_side - (stored - out_ke);
+    assert!(
+        balance.abs() < 0.002 * l.electrical_in,
+        "imbalance {balance} of {}",
+        l.electrical_in
+    );
+    let out_balance = l.load_work - l.output_friction - out_ke;
+    assert!(
+        out_balance.abs() < 0.002 * l.load_work.abs().max(1e-3),
+        "output imbalance {out_balance} of {}",
+        l.load_work
+    );
+}
+
+#[test]
+fn fig5_held_without_vibration_falls_with_it() {
+    let mut p = paper_plant(
+        [50, 50, 51, 49],
+        Load::Mass {
+            mass: 1.0,
+            radius: 0.075,
+        },
+    );
+    p.step(DT, Drive::default());
+    for _ in 0..20_000 {
+        p.step(DT, Drive::default());
+    }
+    assert_eq!(p.state().output_speed, 0.0);
+    assert_eq!(p.state().output_angle, 0.0);
+    run(&mut p, 3.6, 1.0);
+    assert!(p.state().output_speed > 0.1, "{}", p.state().output_speed);
+    // mu_d Lambda < 1: after the vibration stops the load keeps going.
+    let w = p.state().output_speed;
+    for _ in 0..10_000 {
+        p.step(DT, Drive::default());
+    }
+    assert!(p.state().output_speed > w);
+}
+
+#[test]
+fn table1_backdrive_without_vibration_only_for_n_ge_2() {
+    for z in TABLE1 {
+        let mut p = paper_plant(z, Load::Torque(3.68));
+        for _ in 0..5_000 {
+            p.step(DT, Drive::default());
+        }
+        let n = GearSet::paper(z).unwrap().n();
+        assert_eq!(p.state().output_speed > 0.0, n >= 2, "{z:?}");
+    }
+}
+
+#[test]
+fn runs_repeat_exactly_with_a_seed() {
+    let mut a = paper_plant([49, 51, 50, 50], Load::Torque(1.0));
+    let mut b = paper_plant([49, 51, 50, 50], Load::Torque(1.0));
+    run(&mut a, 6.2, 0.2);
+    run(&mut b, 6.2, 0.2);
+    for _ in 0..100 {
+        assert_eq!(a.current_adc(), b.current_adc());
+    }
+    assert_eq!(a.encoder_count(), b.encoder_count());
+}
+
+#[test]
+fn without_regeneration_the_inertia_term_costs_current() {
+    let mut with = paper_plant([49, 51, 50, 50], Load::Torque(0.368));
+    let mut params = *with.params();
+    params.regeneration = false;
+    let mut without = Plant::new(params, 42);
+    let (w, i_with) = mean_speed(&mut with, 8.8, 1.0, 1.0);
+    let (_, i_without) = mean_speed(&mut without, 8.8, 1.0, 1.0);
+    // The rectified inertia torque averages M w^2 e^2 / (2 pi) over a turn.
+    let expected = 3.82 * w * w * 1e-6 / (2.0 * core::f64::consts::PI) / Calibration::PAPER.c1;
+    let extra = i_without - i_with;
+    assert!(
+        (extra / expected - 1.0).abs() < 0.3,
+        "{extra} A extra, expected {expected}"
+    );
+}
+
+#[test]
+fn measured_current_follows_eq10_and_the_calibration() {
+    // Steady state at 10 Hz: mean current = (Eq. 10 friction part + C3 w + C4 - C2) / C1; the
+    // inertia part averages out over a turn when the bridge regenerates.
+    let mut p = paper_plant([49, 51, 50, 50], Load::Torque(3.68));
+    let (w, i) = mean_speed(&mut p, 6.2, 1.0, 1.0);
+    let drive = p.params().drive;
+    let friction_part =
+        drive.required_cam_torque(p.params().mu_ax, 3.68, w) - drive.required_inertia_torque(w);
+    let expected = Calibration::PAPER.current_for(friction_part, w);
+    assert!((i - expected).abs() < 0.03, "{i} vs {expected}");
+}
