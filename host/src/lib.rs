@@ -2,6 +2,7 @@
 //! modules) the device client, the simulator and the reports.
 
 pub mod args;
+pub mod cli;
 pub mod demo;
 pub mod design;
 pub mod error;
