@@ -1,0 +1,85 @@
+//! The periodic telemetry sample and the supervisor state it reports.
+
+use serde::{Deserialize, Serialize};
+
+use crate::FaultFlags;
+use crate::flags::flag_set;
+use crate::sizes::{F32, TAG, U8, U16, U32, U64};
+
+/// State of the firmware's release supervisor. Only `SpinUp` and `Vibrating` shake the
+/// carrier; every other state holds the motor off.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum SupervisorState {
+    /// Vibrator off: the gear holds its load (when mu_s * Lambda > 1).
+    Locked,
+    /// Release requested: ramping the cam to the target frequency.
+    SpinUp,
+    /// Cam at speed: the gear is backdrivable.
+    Vibrating,
+    /// Release ended: braking the cam to rest.
+    Stopping,
+    /// A fault is latched: motor off until the fault is cleared.
+    Fault,
+}
+
+impl SupervisorState {
+    /// Lower-case name for logs and CSV columns.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Locked => "locked",
+            Self::SpinUp => "spin_up",
+            Self::Vibrating => "vibrating",
+            Self::Stopping => "stopping",
+            Self::Fault => "fault",
+        }
+    }
+}
+
+flag_set! {
+    /// Status bits of a telemetry sample, a `u8` on the wire.
+    pub struct StatusFlags(u8) {
+        /// mu_d * Lambda < 1: once moving, the output keeps moving after vibration stops.
+        const COASTS_AFTER_STOP = 0;
+        /// mu_s * Lambda <= 1: the gear does not hold its load even without vibration.
+        const NOT_SELF_LOCKING = 1;
+        /// A release request (host, refreshed by heartbeat) is live.
+        const HOST_RELEASE = 2;
+        /// The physical release input is held.
+        const BUTTON_RELEASE = 3;
+        /// A capture is recording.
+        const CAPTURE_RUNNING = 4;
+        /// The paper's default calibration is in use (none stored, or stored one invalid).
+        const CALIBRATION_DEFAULTS = 5;
+    }
+}
+
+/// One telemetry sample, sent at the rate set by `StartTelemetry`. SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TelemetrySample {
+    /// Sample counter since boot; a gap means samples were lost.
+    pub seq: u32,
+    /// Device clock at the sample, microseconds since boot.
+    pub device_time_us: u64,
+    /// Cam (vibrator shaft) speed w_n, rad/s.
+    pub cam_speed_rad_s: f32,
+    /// Motor current i_in, A.
+    pub current_a: f32,
+    /// PWM duty applied to the motor, -1..=1 (sign is direction).
+    pub pwm_duty: f32,
+    /// Estimated torque reaching the carrier, tau_cam, N m.
+    pub tau_cam_nm: f32,
+    /// Estimated output load torque tau_rot (from Eq. 10 inverted), N m.
+    pub tau_rot_nm: f32,
+    /// Supervisor state at the sample.
+    pub state: SupervisorState,
+    /// Active faults.
+    pub faults: FaultFlags,
+    /// Status bits.
+    pub status: StatusFlags,
+}
+
+impl TelemetrySample {
+    /// Largest serialised size, bytes.
+    pub const MAX_WIRE_SIZE: usize = U32 + U64 + 5 * F32 + TAG + U16 + U8;
+}

@@ -1,0 +1,204 @@
+//! Proptest strategies for every wire type, shared by the integration tests.
+#![allow(dead_code)]
+
+use heapless::{String, Vec};
+use proptest::collection::vec;
+use proptest::prelude::*;
+use protocol::*;
+
+pub fn calibration() -> impl Strategy<Value = Calibration> {
+    (
+        proptest::array::uniform6(any::<f32>()),
+        proptest::array::uniform4(any::<u16>()),
+        proptest::array::uniform9(any::<f32>()),
+    )
+        .prop_map(|(c, z, g)| Calibration {
+            c1_nmm_per_a: c[0],
+            c2_nmm: c[1],
+            c3_nmm_s_per_rad: c[2],
+            c4_nmm: c[3],
+            c5_a_s_per_rad: c[4],
+            c6_a: c[5],
+            z,
+            module_mm: g[0],
+            pressure_angle_deg: g[1],
+            eccentricity_mm: g[2],
+            carrier_mass_kg: g[3],
+            mu_s: g[4],
+            mu_d: g[5],
+            max_release_load_nm: g[6],
+            max_current_a: g[7],
+            max_freq_hz: g[8],
+        })
+}
+
+pub fn faults() -> impl Strategy<Value = FaultFlags> {
+    any::<u16>().prop_map(FaultFlags::from_bits_retain)
+}
+
+fn supervisor_state() -> impl Strategy<Value = SupervisorState> {
+    prop_oneof![
+        Just(SupervisorState::Locked),
+        Just(SupervisorState::SpinUp),
+        Just(SupervisorState::Vibrating),
+        Just(SupervisorState::Stopping),
+        Just(SupervisorState::Fault),
+    ]
+}
+
+fn telemetry() -> impl Strategy<Value = TelemetrySample> {
+    (
+        any::<u32>(),
+        any::<u64>(),
+        proptest::array::uniform5(any::<f32>()),
+        supervisor_state(),
+        faults(),
+        any::<u8>(),
+    )
+        .prop_map(
+            |(seq, device_time_us, f, state, faults, status)| TelemetrySample {
+                seq,
+                device_time_us,
+                cam_speed_rad_s: f[0],
+                current_a: f[1],
+                pwm_duty: f[2],
+                tau_cam_nm: f[3],
+                tau_rot_nm: f[4],
+                state,
+                faults,
+                status: StatusFlags::from_bits_retain(status),
+            },
+        )
+}
+
+fn capture_chunk() -> impl Strategy<Value = CaptureChunk> {
+    let sample =
+        (any::<u16>(), any::<i32>()).prop_map(|(current_adc, encoder_count)| CaptureSample {
+            current_adc,
+            encoder_count,
+        });
+    (
+        any::<u16>(),
+        any::<u32>(),
+        any::<u32>(),
+        vec(sample, 0..=CAPTURE_CHUNK_SAMPLES),
+    )
+        .prop_map(
+            |(capture_id, first_sample, total_samples, samples)| CaptureChunk {
+                capture_id,
+                first_sample,
+                total_samples,
+                samples: Vec::from_slice(&samples).unwrap(),
+            },
+        )
+}
+
+fn nack_code() -> impl Strategy<Value = NackCode> {
+    prop_oneof![
+        Just(NackCode::UnknownMessage),
+        Just(NackCode::BadArgument),
+        Just(NackCode::InFaultHold),
+        Just(NackCode::VersionMismatch),
+        Just(NackCode::CalibrationRejected),
+        Just(NackCode::Busy),
+        Just(NackCode::StorageFailed),
+    ]
+}
+
+fn device_info() -> impl Strategy<Value = DeviceInfo> {
+    let status = prop_oneof![
+        Just(CalibrationStatus::Valid),
+        Just(CalibrationStatus::Defaults),
+        Just(CalibrationStatus::Invalid),
+    ];
+    (
+        any::<[u8; 3]>(),
+        any::<u16>(),
+        any::<u32>(),
+        "[a-z0-9µ-]{0,8}",
+        status,
+    )
+        .prop_map(
+            |(v, protocol_version, schema_hash, board, calibration_status)| DeviceInfo {
+                firmware_version: FirmwareVersion {
+                    major: v[0],
+                    minor: v[1],
+                    patch: v[2],
+                },
+                protocol_version,
+                schema_hash,
+                board: String::try_from(board.as_str()).unwrap(),
+                calibration_status,
+            },
+        )
+}
+
+pub fn request() -> impl Strategy<Value = Request> {
+    prop_oneof![
+        (any::<u16>(), any::<u32>()).prop_map(|(protocol_version, schema_hash)| Request::Hello {
+            protocol_version,
+            schema_hash
+        }),
+        Just(Request::GetInfo),
+        (any::<bool>(), any::<f32>())
+            .prop_map(|(on, target_hz)| Request::Release { on, target_hz }),
+        Just(Request::Heartbeat),
+        Just(Request::GetCalibration),
+        calibration().prop_map(Request::SetCalibration),
+        any::<u16>().prop_map(|rate_hz| Request::StartTelemetry { rate_hz }),
+        Just(Request::StopTelemetry),
+        (any::<u16>(), any::<u32>()).prop_map(|(sample_rate_hz, samples)| {
+            Request::StartCapture {
+                sample_rate_hz,
+                samples,
+            }
+        }),
+        Just(Request::GetFaults),
+        Just(Request::ClearFaults),
+        Just(Request::RezeroCurrent),
+    ]
+}
+
+pub fn device_message() -> impl Strategy<Value = DeviceMessage> {
+    prop_oneof![
+        device_info().prop_map(DeviceMessage::Info),
+        any::<u16>().prop_map(|seq| DeviceMessage::Ack { seq }),
+        (any::<u16>(), nack_code()).prop_map(|(seq, code)| DeviceMessage::Nack { seq, code }),
+        telemetry().prop_map(DeviceMessage::Telemetry),
+        capture_chunk().prop_map(DeviceMessage::CaptureChunk),
+        (any::<u16>(), any::<u32>(), any::<u16>()).prop_map(
+            |(capture_id, total_samples, sample_rate_hz)| DeviceMessage::CaptureDone {
+                capture_id,
+                total_samples,
+                sample_rate_hz
+            }
+        ),
+        (faults(), any::<u64>()).prop_map(|(flags, device_time_us)| DeviceMessage::FaultEvent {
+            flags,
+            device_time_us
+        }),
+        (faults(), faults())
+            .prop_map(|(active, latched)| DeviceMessage::Faults { active, latched }),
+        calibration().prop_map(DeviceMessage::Calibration),
+    ]
+}
+
+/// Encodes into a fresh `MAX_FRAME_SIZE` buffer, as the firmware does.
+pub fn frame<M: serde::Serialize>(seq: u16, msg: &M) -> std::vec::Vec<u8> {
+    let mut buf = [0u8; MAX_FRAME_SIZE];
+    encode_frame(seq, msg, &mut buf).unwrap().to_vec()
+}
+
+/// Splits `bytes` at the given cut points (taken modulo the length), in order.
+pub fn split<'a>(bytes: &'a [u8], cuts: &[usize]) -> std::vec::Vec<&'a [u8]> {
+    let mut points: std::vec::Vec<usize> = cuts.iter().map(|c| c % (bytes.len() + 1)).collect();
+    points.sort_unstable();
+    let mut parts = std::vec::Vec::new();
+    let mut start = 0;
+    for p in points {
+        parts.push(&bytes[start..p]);
+        start = p;
+    }
+    parts.push(&bytes[start..]);
+    parts
+}
