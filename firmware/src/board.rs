@@ -25,6 +25,8 @@
 //! TIM15 is embassy's time driver (`time-driver-any` picks it on the G474);
 //! DMA1_CH1 = ADC1, DMA1_CH2 = USART2 TX, DMA1_CH3 = USART2 RX (through DMAMUX);
 //! IWDG ≈ 250 ms. Flash 0x0807_C000..0x0808_0000 (bank 2) holds the calibration store (`memory.x`).
+//! UART4's interrupt vector (the UART itself is unused) runs the control task's
+//! high-priority executor.
 //!
 //! (¹) From reset until [`Board::new`] runs every GPIO is a high-impedance analog input, so only
 //! the external pull-downs keep the bridge off while the MCU resets or is being flashed.
@@ -37,6 +39,7 @@
 
 use embassy_stm32::adc::{Adc, AdcChannel as _, AdcConfig, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::exti::{self, ExtiInput};
+use embassy_stm32::flash::{Blocking, FLASH_BASE, Flash};
 use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::mode::Async;
 use embassy_stm32::pac::timer::vals::Ossi;
@@ -210,11 +213,6 @@ impl CamMotor {
         self.enable.set_low();
         self.pwm.ch1().set_duty_cycle_fully_off();
     }
-
-    /// Whether the bridge is enabled.
-    pub fn is_enabled(&self) -> bool {
-        self.enable.is_set_high()
-    }
 }
 
 /// The cam shaft's AMT102-V incremental encoder on TIM4 in encoder mode 3 (x4).
@@ -355,16 +353,26 @@ impl ReleaseButton {
     pub fn is_held(&self) -> bool {
         self.input.is_high()
     }
+}
 
-    /// Waits until the button is held (returns at once if it already is).
-    pub async fn wait_for_hold(&mut self) {
-        self.input.wait_for_high().await;
-    }
+/// The STORAGE region of `memory.x` (last 16 KiB of bank 2) as a flash of its own.
+pub type CalibrationFlash = firmware::storage::Partition<Flash<'static, Blocking>>;
 
-    /// Waits until the button is let go (returns at once if it already is).
-    pub async fn wait_for_let_go(&mut self) {
-        self.input.wait_for_low().await;
-    }
+// Declaring linker symbols takes an `unsafe extern` block; only their addresses are taken
+// (safe), the symbols are never read.
+#[allow(unsafe_code)]
+unsafe extern "C" {
+    // Defined by memory.x.
+    static __storage_start: u8;
+    static __storage_end: u8;
+}
+
+/// Wraps the whole-chip flash driver into the STORAGE window. Erasing its 2 KiB pages in
+/// bank 2 does not stall code running from bank 1 (dual-bank read-while-write).
+fn calibration_flash(flash: Flash<'static, Blocking>) -> CalibrationFlash {
+    let start = (&raw const __storage_start) as u32;
+    let end = (&raw const __storage_end) as u32;
+    firmware::storage::Partition::new(flash, start - FLASH_BASE as u32, end - start)
 }
 
 /// Every driver of the rig, in its safe state.
@@ -383,6 +391,8 @@ pub struct Board {
     pub led: Output<'static>,
     /// Independent watchdog, configured but not yet started.
     pub watchdog: IndependentWatchdog<'static, IWDG>,
+    /// The calibration store's window of the internal flash.
+    pub storage: CalibrationFlash,
 }
 
 impl Board {
@@ -404,6 +414,7 @@ impl Board {
             release_button: ReleaseButton::new(p.PC13, p.EXTI13),
             led: Output::new(p.PA5, Level::Low, Speed::Low),
             watchdog: IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US),
+            storage: calibration_flash(Flash::new_blocking(p.FLASH)),
         }
     }
 }

@@ -1,12 +1,27 @@
 //! Firmware binary of the backdrive rig (Nucleo-G474RE, STM32G474RE).
 //!
 //! Thin on purpose: bring up the clocks and [`board`] drivers in their safe state (vibration
-//! off), then run tasks that only move data between peripherals and the control core.
+//! off), load the calibration from flash, then run tasks that only move data between the
+//! peripherals and the control core ([`firmware::Core`]):
+//!
+//! | task            | executor                 | does                                                    |
+//! |-----------------|--------------------------|---------------------------------------------------------|
+//! | `control`       | interrupt (UART4, P6)    | 1 kHz, paced by the ADC DMA: samples, encoder, button -> `Core::step` -> H-bridge |
+//! | `host_rx`       | thread                   | UART bytes -> `Core::receive`                            |
+//! | `host_tx`       | thread                   | `Core::transmit` -> UART                                 |
+//! | `persist`       | thread                   | writes a calibration to flash, reports the outcome       |
+//! | `status_led`    | thread                   | LD2: 1 Hz blink locked, on while vibrating, 5 Hz on a fault; logs state changes |
+//! | `watchdog_feeder` | thread                 | feeds the IWDG only when control, host_rx and host_tx all checked in |
+//!
+//! The control task runs on a higher-priority interrupt executor so that a flash erase
+//! (blocking, ~20 ms, in thread mode) or a long UART write never delays a control step.
+//! The core is shared through a critical-section mutex; each access is one short call.
+//!
 //! On the host this builds as a stub that says how to build and flash, so that
 //! `cargo build --workspace` and `cargo test --workspace` work without the thumb target.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
-/// Firmware version, reported at boot (and later to the host).
+/// Firmware version, reported at boot (and to the host in `Info`).
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 
 #[cfg(not(target_os = "none"))]
@@ -20,94 +35,278 @@ fn main() {
 }
 
 #[cfg(target_os = "none")]
-#[allow(
-    dead_code,
-    reason = "driver API for the control and comms tasks, which are not written yet"
-)]
 mod board;
 
 #[cfg(target_os = "none")]
-use {
-    defmt::{info, unwrap, warn},
-    defmt_rtt as _,
-    embassy_executor::Spawner,
-    embassy_stm32::{gpio::Output, peripherals::IWDG, wdg::IndependentWatchdog},
-    embassy_time::{Duration, Ticker},
-    panic_probe as _,
-};
+mod app {
+    use core::cell::RefCell;
+    use core::mem::MaybeUninit;
+    use core::sync::atomic::{AtomicU8, Ordering};
 
-/// Half-period of the LD2 heartbeat blink.
-#[cfg(target_os = "none")]
-const HEARTBEAT_HALF_PERIOD: Duration = Duration::from_millis(500);
-/// Watchdog feed period: well inside the ~250 ms IWDG timeout.
-#[cfg(target_os = "none")]
-const WATCHDOG_FEED_PERIOD: Duration = Duration::from_millis(100);
+    use defmt::{error, info, unwrap, warn};
+    use embassy_executor::{InterruptExecutor, Spawner};
+    use embassy_futures::select::{Either, select};
+    use embassy_stm32::gpio::Output;
+    use embassy_stm32::interrupt;
+    use embassy_stm32::interrupt::{InterruptExt, Priority};
+    use embassy_stm32::mode::Async;
+    use embassy_stm32::peripherals::IWDG;
+    use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+    use embassy_stm32::wdg::IndependentWatchdog;
+    use embassy_sync::blocking_mutex::Mutex;
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+    use embassy_sync::signal::Signal;
+    use embassy_time::{Duration, Instant, Ticker, Timer};
+    use firmware::storage::{CalibrationStore, StorageError};
+    use firmware::{BootInfo, Core, CoreConfig, Inputs, Outputs};
+    use protocol::{Calibration, CalibrationStatus, SupervisorState};
+    use {defmt_rtt as _, panic_probe as _};
 
-#[cfg(target_os = "none")]
-#[embassy_executor::main]
-async fn main(spawner: Spawner) {
-    // Before anything else can reset or clear them.
-    let reset = board::ResetCause::take();
-    let p = embassy_stm32::init(board::config());
-    let board::Board {
-        motor,
-        encoder,
-        current,
-        host_link,
-        release_button,
-        led,
-        watchdog,
-    } = board::Board::new(p);
+    use crate::board::{self, CalibrationFlash, CamEncoder, CamMotor, CurrentSense, Direction};
 
-    info!(
-        "rig firmware v{} booted; last reset by the watchdog: {}",
-        VERSION, reset.watchdog
-    );
-    if reset.watchdog {
-        warn!("the previous run stalled long enough for the IWDG to reset it");
+    /// The control core, shared by the tasks.
+    type SharedCore = Mutex<CriticalSectionRawMutex, RefCell<&'static mut Core>>;
+
+    /// Watchdog check-in bits: each task sets its own; the feeder needs all of them.
+    const CONTROL: u8 = 1 << 0;
+    const HOST_RX: u8 = 1 << 1;
+    const HOST_TX: u8 = 1 << 2;
+    const ALL_TASKS: u8 = CONTROL | HOST_RX | HOST_TX;
+    static CHECK_INS: AtomicU8 = AtomicU8::new(0);
+
+    /// Watchdog feed period: well inside the ~250 ms IWDG timeout.
+    const WATCHDOG_FEED_PERIOD: Duration = Duration::from_millis(100);
+
+    /// A calibration the core wants written to flash.
+    static PERSIST: Signal<CriticalSectionRawMutex, Calibration> = Signal::new();
+
+    /// Runs the control task above the thread-mode tasks.
+    static CONTROL_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
+
+    #[interrupt]
+    #[allow(unsafe_code, non_snake_case)]
+    unsafe fn UART4() {
+        // SAFETY: UART4's vector is dedicated to this executor (the UART itself is unused).
+        unsafe { CONTROL_EXECUTOR.on_interrupt() }
     }
-    info!("reset flags: {}", reset);
 
-    spawner.spawn(unwrap!(heartbeat(led)));
-    spawner.spawn(unwrap!(watchdog_feeder(watchdog)));
+    #[embassy_executor::main]
+    async fn main(spawner: Spawner) {
+        // Before anything else can reset or clear them.
+        let reset = board::ResetCause::take();
+        let p = embassy_stm32::init(board::config());
+        let board::Board {
+            motor,
+            encoder,
+            current,
+            host_link,
+            release_button,
+            led,
+            watchdog,
+            storage,
+        } = board::Board::new(p);
 
-    info!(
-        "board up: motor off (max duty {}), encoder at {}, current ADC @ {} Hz, host link @ {} Bd, release button held: {}",
-        motor.max_duty(),
-        encoder.count(),
-        board::CURRENT_SAMPLE_RATE.0,
-        board::HOST_BAUD_RATE,
-        release_button.is_held(),
-    );
+        info!(
+            "rig firmware v{} booted; last reset by the watchdog: {}",
+            crate::VERSION,
+            reset.watchdog
+        );
+        if reset.watchdog {
+            warn!("the previous run stalled long enough for the IWDG to reset it");
+        }
+        info!("reset flags: {}", reset);
 
-    // Held, not dropped, until the control and comms tasks take them: dropping a driver would
-    // release its pins or stop its peripheral, and the motor must stay driven off.
-    let _awaiting_control_core = (motor, encoder, current, host_link, release_button);
-    core::future::pending::<()>().await;
-}
+        let mut store = CalibrationStore::new(storage);
+        let loaded = store.load();
+        match loaded.status {
+            CalibrationStatus::Valid => info!("calibration loaded from flash"),
+            CalibrationStatus::Defaults => info!("no calibration stored: the paper's values"),
+            _ => error!("stored calibration is invalid: the paper's values, motor locked"),
+        }
+        let boot = BootInfo {
+            watchdog_reset: reset.watchdog,
+            calibration: loaded.calibration,
+            calibration_status: loaded.status,
+        };
+        // The core (~43 KiB, mostly the capture buffer) is built straight into its static
+        // slot (no stack temporary); the tasks share a reference to it through the mutex.
+        let slot = unwrap!(cortex_m::singleton!(: MaybeUninit<Core> = MaybeUninit::uninit()));
+        let core_ref: &'static mut Core = slot.write(Core::new(CoreConfig::default(), boot));
+        let core: &'static SharedCore =
+            unwrap!(cortex_m::singleton!(: SharedCore = Mutex::new(RefCell::new(core_ref))));
 
-/// Blinks LD2 so a glance at the board shows the executor is alive.
-#[cfg(target_os = "none")]
-#[embassy_executor::task]
-async fn heartbeat(mut led: Output<'static>) {
-    let mut ticker = Ticker::every(HEARTBEAT_HALF_PERIOD);
-    loop {
-        led.toggle();
-        ticker.next().await;
+        info!(
+            "board up: motor off (max duty {}), encoder at {}, current ADC @ {} Hz, host link @ {} Bd",
+            motor.max_duty(),
+            encoder.count(),
+            board::CURRENT_SAMPLE_RATE.0,
+            board::HOST_BAUD_RATE,
+        );
+
+        interrupt::UART4.set_priority(Priority::P6);
+        let control_spawner = CONTROL_EXECUTOR.start(interrupt::UART4);
+        control_spawner.spawn(unwrap!(control(
+            core,
+            motor,
+            encoder,
+            current,
+            release_button
+        )));
+        spawner.spawn(unwrap!(host_rx(core, host_link.rx)));
+        spawner.spawn(unwrap!(host_tx(core, host_link.tx)));
+        spawner.spawn(unwrap!(persist(core, store)));
+        spawner.spawn(unwrap!(status_led(core, led)));
+        spawner.spawn(unwrap!(watchdog_feeder(watchdog)));
     }
-}
 
-/// Starts the IWDG and keeps it fed.
-#[cfg(target_os = "none")]
-#[embassy_executor::task]
-async fn watchdog_feeder(mut watchdog: IndependentWatchdog<'static, IWDG>) {
-    watchdog.unleash();
-    let mut ticker = Ticker::every(WATCHDOG_FEED_PERIOD);
-    loop {
-        // For now only the executor's liveness is proven. Once they exist, the control task and
-        // the comms task must both check in (e.g. bits in an AtomicU8) since the last feed
-        // before it is fed, so that either one stalling resets the board into the safe state.
-        watchdog.pet();
-        ticker.next().await;
+    /// The 1 kHz control loop, paced by the ADC: every block of 10 current samples is one
+    /// step of the core, whose outputs go straight to the H-bridge.
+    #[embassy_executor::task]
+    async fn control(
+        core: &'static SharedCore,
+        mut motor: CamMotor,
+        encoder: CamEncoder,
+        mut current: CurrentSense,
+        button: board::ReleaseButton,
+    ) {
+        let mut block = [0u16; board::CURRENT_BLOCK_LEN];
+        let full_scale = motor.max_duty() as f32;
+        loop {
+            let samples: &[u16] = match current.read_block(&mut block).await {
+                Ok(()) => &block,
+                Err(board::SampleOverrun) => {
+                    // The step comes late; the core flags CONTROL_OVERRUN from the time.
+                    warn!("current samples lost (ADC DMA overrun)");
+                    &[]
+                }
+            };
+            let inputs = Inputs {
+                now_us: Instant::now().as_micros(),
+                current_adc: samples,
+                encoder_count: encoder.count(),
+                release_button: button.is_held(),
+            };
+            let out = core.lock(|c| c.borrow_mut().step(&inputs));
+            drive(&mut motor, &out, full_scale);
+            if let Some(calibration) = out.persist {
+                PERSIST.signal(calibration);
+            }
+            CHECK_INS.fetch_or(CONTROL, Ordering::Relaxed);
+        }
+    }
+
+    /// Applies the core's command to the bridge; disabled is the safe state.
+    fn drive(motor: &mut CamMotor, out: &Outputs, full_scale: f32) {
+        if !out.enable {
+            motor.stop();
+            return;
+        }
+        motor.set_direction(if out.duty < 0.0 {
+            Direction::Reverse
+        } else {
+            Direction::Forward
+        });
+        motor.set_duty((out.duty.abs().min(1.0) * full_scale) as u32);
+        motor.enable();
+    }
+
+    /// Host bytes into the core. Checks in at least every 10 ms, link idle or not.
+    #[embassy_executor::task]
+    async fn host_rx(core: &'static SharedCore, mut rx: RingBufferedUartRx<'static>) {
+        let mut buf = [0u8; 64];
+        loop {
+            match select(rx.read(&mut buf), Timer::after_millis(10)).await {
+                Either::First(Ok(n)) => {
+                    let now = Instant::now().as_micros();
+                    core.lock(|c| c.borrow_mut().receive(now, &buf[..n]));
+                }
+                // The next read restarts reception; the deframer drops the torn frame.
+                Either::First(Err(e)) => warn!("host link receive error: {}", e),
+                Either::Second(()) => {}
+            }
+            CHECK_INS.fetch_or(HOST_RX, Ordering::Relaxed);
+        }
+    }
+
+    /// The core's frames out to the host, polled every millisecond when idle.
+    #[embassy_executor::task]
+    async fn host_tx(core: &'static SharedCore, mut tx: UartTx<'static, Async>) {
+        let mut buf = [0u8; 256];
+        let mut idle = Ticker::every(Duration::from_millis(1));
+        loop {
+            let n = core.lock(|c| c.borrow_mut().transmit(&mut buf));
+            if n == 0 {
+                idle.next().await;
+            } else if let Err(e) = tx.write(&buf[..n]).await {
+                warn!("host link transmit error: {}", e);
+            }
+            CHECK_INS.fetch_or(HOST_TX, Ordering::Relaxed);
+        }
+    }
+
+    /// Writes calibrations to flash (blocking; only while the motor is off, as the core
+    /// refuses `SetCalibration` otherwise) and reports the outcome to the core.
+    #[embassy_executor::task]
+    async fn persist(core: &'static SharedCore, mut store: CalibrationStore<CalibrationFlash>) {
+        loop {
+            let calibration = PERSIST.wait().await;
+            let result = store.save(&calibration);
+            match result {
+                Ok(()) => info!("calibration stored"),
+                Err(StorageError::Flash(_)) => error!("calibration not stored: flash error"),
+                Err(StorageError::Verify) => error!("calibration not stored: read-back differs"),
+                Err(StorageError::RegionTooSmall) => {
+                    error!("calibration not stored: STORAGE region too small")
+                }
+            }
+            core.lock(|c| c.borrow_mut().persist_result(result.is_ok()));
+        }
+    }
+
+    /// LD2 shows the supervisor state; state and fault changes are logged.
+    #[embassy_executor::task]
+    async fn status_led(core: &'static SharedCore, mut led: Output<'static>) {
+        let mut ticker = Ticker::every(Duration::from_millis(100));
+        let mut tick = 0u32;
+        let mut last = (SupervisorState::Locked, 0u16);
+        loop {
+            let (state, faults) = core.lock(|c| {
+                let s = c.borrow().status();
+                (s.state, s.latched_faults.bits())
+            });
+            if (state, faults) != last {
+                info!("supervisor: {} (faults {:#06x})", state.name(), faults);
+                last = (state, faults);
+            }
+            let on = match state {
+                SupervisorState::SpinUp | SupervisorState::Vibrating => true,
+                SupervisorState::Fault => tick.is_multiple_of(2),
+                _ => tick % 10 < 5,
+            };
+            if on {
+                led.set_high();
+            } else {
+                led.set_low();
+            }
+            tick = tick.wrapping_add(1);
+            ticker.next().await;
+        }
+    }
+
+    /// Starts the IWDG and feeds it only when every task checked in since the last feed,
+    /// so a stalled control loop or host link resets the board into the safe state.
+    #[embassy_executor::task]
+    async fn watchdog_feeder(mut watchdog: IndependentWatchdog<'static, IWDG>) {
+        watchdog.unleash();
+        let mut ticker = Ticker::every(WATCHDOG_FEED_PERIOD);
+        loop {
+            ticker.next().await;
+            let seen = CHECK_INS.swap(0, Ordering::Relaxed);
+            if seen == ALL_TASKS {
+                watchdog.pet();
+            } else {
+                warn!("watchdog not fed: check-ins {:#05b}", seen);
+            }
+        }
     }
 }

@@ -1,0 +1,248 @@
+//! Raw capture: records the current ADC and the encoder at up to the ADC rate into a fixed
+//! buffer, then uploads it as `CaptureChunk`s and a `CaptureDone`.
+//!
+//! The buffer holds [`CAPTURE_CAPACITY`] samples of 4 bytes (ADC code, low 16 bits of the
+//! unwrapped encoder position): 40 000 bytes, 1.0 s at 10 kHz. The encoder is read once
+//! per control step; the samples in between get a linear interpolation of it. Sample
+//! rates below [`MIN_SAMPLE_RATE_HZ`] are refused so that the 16-bit encoder difference
+//! between two samples cannot wrap (150 rad/s moves ~2000 counts in 10 ms).
+
+use protocol::{CAPTURE_CHUNK_SAMPLES, CaptureChunk, CaptureSample, DeviceMessage, NackCode};
+
+/// Samples the capture buffer holds (1.0 s at 10 kHz).
+pub const CAPTURE_CAPACITY: usize = 10_000;
+/// Lowest capture sample rate, Hz.
+pub const MIN_SAMPLE_RATE_HZ: u16 = 100;
+
+/// One stored sample.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct RawSample {
+    adc: u16,
+    encoder: u16,
+}
+
+/// What the capture is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CapturePhase {
+    /// Nothing to do.
+    Idle,
+    /// Filling the buffer from the control steps.
+    Recording,
+    /// Sending the buffer to the host.
+    Uploading,
+}
+
+/// A capture accepted by [`Capture::start`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CapturePlan {
+    /// Capture id.
+    pub id: u16,
+    /// Samples it will record (clamped to the buffer).
+    pub samples: u32,
+    /// Actual sample rate, Hz.
+    pub sample_rate_hz: u16,
+}
+
+/// The capture recorder and uploader.
+#[derive(Debug, Clone)]
+pub struct Capture {
+    phase: CapturePhase,
+    id: u16,
+    decimation: u32,
+    countdown: u32,
+    sample_rate_hz: u16,
+    total: u32,
+    recorded: u32,
+    sent: u32,
+    upload_position: i32,
+    upload_last_raw: u16,
+    buf: [RawSample; CAPTURE_CAPACITY],
+}
+
+impl Capture {
+    /// An idle capture with an empty buffer.
+    pub fn new() -> Self {
+        Self {
+            phase: CapturePhase::Idle,
+            id: 0,
+            decimation: 1,
+            countdown: 0,
+            sample_rate_hz: 0,
+            total: 0,
+            recorded: 0,
+            sent: 0,
+            upload_position: 0,
+            upload_last_raw: 0,
+            buf: [RawSample::default(); CAPTURE_CAPACITY],
+        }
+    }
+
+    /// What the capture is doing.
+    pub fn phase(&self) -> CapturePhase {
+        self.phase
+    }
+
+    /// Starts recording `samples` at about `sample_rate_hz`, from an ADC running at `adc_hz`.
+    pub fn start(
+        &mut self,
+        sample_rate_hz: u16,
+        samples: u32,
+        adc_hz: u32,
+    ) -> Result<CapturePlan, NackCode> {
+        if self.phase != CapturePhase::Idle {
+            return Err(NackCode::Busy);
+        }
+        if samples == 0 || sample_rate_hz < MIN_SAMPLE_RATE_HZ {
+            return Err(NackCode::BadArgument);
+        }
+        let rate = u32::from(sample_rate_hz).min(adc_hz).max(1);
+        self.decimation = ((adc_hz + rate / 2) / rate).max(1);
+        self.sample_rate_hz = (adc_hz / self.decimation).min(u32::from(u16::MAX)) as u16;
+        self.id = self.id.wrapping_add(1);
+        self.total = samples.min(CAPTURE_CAPACITY as u32);
+        self.recorded = 0;
+        self.sent = 0;
+        self.countdown = 0;
+        self.phase = CapturePhase::Recording;
+        Ok(CapturePlan {
+            id: self.id,
+            samples: self.total,
+            sample_rate_hz: self.sample_rate_hz,
+        })
+    }
+
+    /// Records one control step: its ADC samples and the encoder position (low 16 bits of
+    /// the unwrapped count) at the previous and at this step.
+    pub fn record_step(&mut self, adc: &[u16], encoder_prev: u16, encoder_now: u16) {
+        if self.phase != CapturePhase::Recording || adc.is_empty() {
+            return;
+        }
+        let delta = i32::from(encoder_now.wrapping_sub(encoder_prev) as i16);
+        let n = adc.len() as i32;
+        for (j, &code) in adc.iter().enumerate() {
+            if self.countdown > 0 {
+                self.countdown -= 1;
+                continue;
+            }
+            self.countdown = self.decimation - 1;
+            let step = delta * (j as i32 + 1) / n;
+            self.buf[self.recorded as usize] = RawSample {
+                adc: code,
+                encoder: encoder_prev.wrapping_add(step as u16),
+            };
+            self.recorded += 1;
+            if self.recorded == self.total {
+                self.phase = CapturePhase::Uploading;
+                self.upload_position = 0;
+                self.upload_last_raw = self.buf[0].encoder;
+                return;
+            }
+        }
+    }
+
+    /// The next upload message (chunks, then `CaptureDone`), or `None` when not uploading.
+    pub fn next_message(&mut self) -> Option<DeviceMessage> {
+        if self.phase != CapturePhase::Uploading {
+            return None;
+        }
+        if self.sent == self.total {
+            self.phase = CapturePhase::Idle;
+            return Some(DeviceMessage::CaptureDone {
+                capture_id: self.id,
+                total_samples: self.total,
+                sample_rate_hz: self.sample_rate_hz,
+            });
+        }
+        let mut chunk = CaptureChunk {
+            capture_id: self.id,
+            first_sample: self.sent,
+            total_samples: self.total,
+            samples: heapless::Vec::new(),
+        };
+        let end = (self.sent as usize + CAPTURE_CHUNK_SAMPLES).min(self.total as usize);
+        for raw in &self.buf[self.sent as usize..end] {
+            let delta = raw.encoder.wrapping_sub(self.upload_last_raw) as i16;
+            self.upload_last_raw = raw.encoder;
+            self.upload_position = self.upload_position.wrapping_add(i32::from(delta));
+            // Cannot fail: the chunk holds CAPTURE_CHUNK_SAMPLES and `end` bounds the run.
+            let _ = chunk.samples.push(CaptureSample {
+                current_adc: raw.adc,
+                encoder_count: self.upload_position,
+            });
+        }
+        self.sent = end as u32;
+        Some(DeviceMessage::CaptureChunk(chunk))
+    }
+}
+
+impl Default for Capture {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn upload(c: &mut Capture) -> (Vec<CaptureSample>, Option<DeviceMessage>) {
+        let mut samples = Vec::new();
+        loop {
+            match c.next_message() {
+                Some(DeviceMessage::CaptureChunk(chunk)) => {
+                    assert_eq!(chunk.first_sample as usize, samples.len());
+                    samples.extend(chunk.samples);
+                }
+                done => return (samples, done),
+            }
+        }
+    }
+
+    #[test]
+    fn records_interpolated_encoder_and_uploads_in_order() {
+        let mut c = Capture::new();
+        let plan = c.start(10_000, 100, 10_000).unwrap();
+        assert_eq!(plan.samples, 100);
+        assert_eq!(c.start(10_000, 100, 10_000), Err(NackCode::Busy));
+        let mut enc = 65_500u16;
+        for k in 0..10u16 {
+            let next = enc.wrapping_add(20);
+            c.record_step(&[k; 10], enc, next);
+            enc = next;
+        }
+        assert_eq!(c.phase(), CapturePhase::Uploading);
+        let (samples, done) = upload(&mut c);
+        assert_eq!(samples.len(), 100);
+        assert_eq!(samples[0].encoder_count, 0);
+        // 20 counts per 10 samples: 2 per sample, across the 16-bit wrap.
+        assert_eq!(samples[99].encoder_count, 198);
+        assert_eq!(samples[55].current_adc, 5);
+        assert_eq!(
+            done,
+            Some(DeviceMessage::CaptureDone {
+                capture_id: plan.id,
+                total_samples: 100,
+                sample_rate_hz: 10_000
+            })
+        );
+        assert_eq!(c.phase(), CapturePhase::Idle);
+    }
+
+    #[test]
+    fn decimates_clamps_and_refuses_bad_arguments() {
+        let mut c = Capture::new();
+        assert_eq!(c.start(50, 10, 10_000), Err(NackCode::BadArgument));
+        assert_eq!(c.start(1000, 0, 10_000), Err(NackCode::BadArgument));
+        let plan = c.start(3000, 1_000_000, 10_000).unwrap();
+        assert_eq!(plan.samples, CAPTURE_CAPACITY as u32);
+        assert_eq!(plan.sample_rate_hz, 3333);
+        let mut c = Capture::new();
+        c.start(1000, 5, 10_000).unwrap();
+        for k in 0..5u16 {
+            c.record_step(&[k * 10, 1, 2, 3, 4, 5, 6, 7, 8, 9], 0, 0);
+        }
+        let (samples, _) = upload(&mut c);
+        let adc: Vec<u16> = samples.iter().map(|s| s.current_adc).collect();
+        assert_eq!(adc, [0, 10, 20, 30, 40]);
+    }
+}

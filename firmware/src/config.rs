@@ -1,0 +1,304 @@
+//! Everything the core needs to know about the board and the rig that is not in the
+//! calibration: sensor scaling, motor model, loop gains, supervisor and fault limits.
+//!
+//! [`CoreConfig::default`] is the real rig (Nucleo-G474RE, ACS714 +-5 A through a 2/3
+//! divider, AMT102-V at 2048 PPR, RS-735 with an 8.5:1 gearhead on a 12 V H-bridge).
+
+/// The ACS714 hall current sensor and the ADC that samples it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurrentSensorConfig {
+    /// Sensor sensitivity, V/A (185 mV/A for the +-5 A part).
+    pub sensitivity_v_per_a: f32,
+    /// Sensor supply, V; zero current reads half of it.
+    pub supply_v: f32,
+    /// Divider from the sensor output to the ADC pin (pin volts per sensor volt).
+    pub divider: f32,
+    /// ADC reference, V.
+    pub adc_reference_v: f32,
+    /// ADC resolution, bits.
+    pub adc_bits: u32,
+    /// Largest plausible distance of the measured zero from Vcc/2, in amperes.
+    pub zero_tolerance_a: f32,
+    /// Samples averaged for a zero measurement (motor off).
+    pub zero_samples: u32,
+    /// Time constant of the displayed (telemetry) current's low-pass, s.
+    pub display_time_constant_s: f32,
+}
+
+impl CurrentSensorConfig {
+    /// Amperes per ADC count.
+    pub fn amps_per_count(&self) -> f32 {
+        let full_scale = ((1u32 << self.adc_bits) - 1) as f32;
+        self.adc_reference_v / full_scale / self.divider / self.sensitivity_v_per_a
+    }
+
+    /// ADC reading of zero current for an ideal sensor (Vcc/2 through the divider), counts.
+    pub fn nominal_zero_counts(&self) -> f32 {
+        let full_scale = ((1u32 << self.adc_bits) - 1) as f32;
+        self.supply_v / 2.0 * self.divider / self.adc_reference_v * full_scale
+    }
+}
+
+impl Default for CurrentSensorConfig {
+    fn default() -> Self {
+        Self {
+            sensitivity_v_per_a: 0.185,
+            supply_v: 5.0,
+            divider: 2.0 / 3.0,
+            adc_reference_v: 3.3,
+            adc_bits: 12,
+            zero_tolerance_a: 0.3,
+            zero_samples: 1000,
+            display_time_constant_s: 0.02,
+        }
+    }
+}
+
+/// The vibrator motor as the speed loop's feed-forward sees it (cam-shaft side).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotorConfig {
+    /// Winding resistance, ohm (model::plant::MotorParams: 0.44).
+    pub resistance_ohm: f32,
+    /// Back-EMF constant at the cam shaft, V s/rad (0.078 for the RS-735 with 8.5:1).
+    pub ke_cam_v_s_per_rad: f32,
+    /// Largest duty the loop commands (keeps the bridge's bootstrap alive).
+    pub max_duty: f32,
+    /// Largest duty change, per second.
+    pub duty_slew_per_s: f32,
+    /// Drive the cam with a negative duty (direction pin high) instead.
+    pub reverse: bool,
+}
+
+impl Default for MotorConfig {
+    fn default() -> Self {
+        Self {
+            resistance_ohm: 0.44,
+            ke_cam_v_s_per_rad: 0.078,
+            max_duty: 0.95,
+            // 0.5/s accelerates the cam at ~77 rad/s^2 at most: ~1 A above the running
+            // current, which itself is 2.3-2.7 A (C6 = 2.25 A) under a 4.5 A limit.
+            duty_slew_per_s: 0.5,
+            reverse: false,
+        }
+    }
+}
+
+/// Gains and limits of the cam-speed PI loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedLoopConfig {
+    /// Proportional gain, duty per rad/s.
+    pub kp: f32,
+    /// Integral gain, duty per rad (per rad/s of error and second).
+    pub ki: f32,
+    /// Ramp rate of the speed reference, rad/s^2: limits the accelerating current.
+    pub max_accel_rad_s2: f32,
+    /// Largest duty the PI may add to (or take from) the feed-forward: bounds a runaway
+    /// when the speed feedback is lost.
+    pub max_correction: f32,
+}
+
+impl Default for SpeedLoopConfig {
+    fn default() -> Self {
+        // Plant: w/duty ~ (V/ke) / (tau_m s + 1), V/ke = 154 rad/s, tau_m ~ 75 ms. PI zero on
+        // the motor pole and a 30 ms closed-loop time constant: kp = tau_m / (154 * 0.03).
+        Self {
+            kp: 0.016,
+            ki: 0.22,
+            // 60 rad/s^2 takes 0.8 A of accelerating current (J = 8.2e-4 kg m^2, C1 =
+            // 62.1 N mm/A); 10 Hz is reached in ~1.05 s, 20 Hz in ~2.1 s.
+            max_accel_rad_s2: 60.0,
+            max_correction: 0.2,
+        }
+    }
+}
+
+/// When the supervisor starts, holds, retunes and stops the vibration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupervisorConfig {
+    /// Vibration frequency of a button release, Hz.
+    pub default_freq_hz: f32,
+    /// Lowest frequency a release may ask for, Hz.
+    pub min_freq_hz: f32,
+    /// Highest frequency a release may ask for, Hz (the calibration may lower it).
+    pub max_freq_hz: f32,
+    /// Relative speed error within which the cam counts as at speed.
+    pub at_speed_tolerance: f32,
+    /// How long the cam must stay at speed before `Vibrating`, us.
+    pub at_speed_time_us: u64,
+    /// Longest spin-up before `CANNOT_RELEASE`, us.
+    pub spin_up_timeout_us: u64,
+    /// Below this cam speed the cam counts as at rest, rad/s.
+    pub stop_speed_rad_s: f32,
+    /// Longest coast-down before `Locked` regardless of speed, us.
+    pub stop_timeout_us: u64,
+    /// Frequency added when the cam torque stays below Eq. (10)'s requirement, Hz.
+    pub freq_step_hz: f32,
+    /// How far below Eq. (10)'s zero-load requirement tau_cam may fall, N m.
+    pub weak_margin_nm: f32,
+    /// Consecutive weak revolutions before raising the frequency (or failing).
+    pub weak_revolutions: u8,
+    /// Revolutions ignored after reaching speed (settling) before the load checks run.
+    pub settle_revolutions: u8,
+    /// Consecutive revolutions above `max_release_load_nm` before `OVERLOAD`.
+    pub overload_revolutions: u8,
+    /// `JAM` when tau_cam exceeds this multiple of Eq. (10) at the largest release load.
+    pub jam_ratio: f32,
+    /// Requests other than status and clear are refused this long after a fault, us.
+    pub fault_hold_us: u64,
+}
+
+impl Default for SupervisorConfig {
+    fn default() -> Self {
+        Self {
+            default_freq_hz: 10.0,
+            min_freq_hz: 1.0,
+            max_freq_hz: 20.0,
+            at_speed_tolerance: 0.1,
+            at_speed_time_us: 100_000,
+            spin_up_timeout_us: 3_000_000,
+            stop_speed_rad_s: 2.0,
+            stop_timeout_us: 2_000_000,
+            freq_step_hz: 2.0,
+            weak_margin_nm: 0.002,
+            weak_revolutions: 3,
+            settle_revolutions: 1,
+            overload_revolutions: 1,
+            jam_ratio: 2.0,
+            fault_hold_us: 500_000,
+        }
+    }
+}
+
+/// Thresholds of the hardware faults.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaultConfig {
+    /// Board current limit, A; the effective limit is the lower of this and the
+    /// calibration's `max_current_a`.
+    pub overcurrent_a: f32,
+    /// How long the (1 ms mean) current must exceed the limit, us.
+    pub overcurrent_time_us: u64,
+    /// Duty magnitude above which the cam must turn.
+    pub stall_duty: f32,
+    /// Window in which the cam must move `stall_min_counts`, us.
+    pub stall_window_us: u64,
+    /// Encoder counts the cam must move per window while driven above `stall_duty`.
+    pub stall_min_counts: u32,
+    /// A step later than this many control periods is `CONTROL_OVERRUN`.
+    pub overrun_periods: u32,
+}
+
+impl Default for FaultConfig {
+    fn default() -> Self {
+        Self {
+            overcurrent_a: 4.8,
+            overcurrent_time_us: 10_000,
+            stall_duty: 0.25,
+            stall_window_us: 200_000,
+            stall_min_counts: 64,
+            overrun_periods: 2,
+        }
+    }
+}
+
+/// How the per-revolution cam torque becomes a load estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimatorConfig {
+    /// The bridge takes the carrier's inertial power back (synchronous rectification), so
+    /// Eq. (9)'s inertia term averages to zero over a revolution and is added back before
+    /// Eq. (10) is inverted. False for a drive that cannot sink current (a linear supply):
+    /// then the revolution mean carries the inertia term, as the paper assumes.
+    pub carrier_power_returned: bool,
+    /// A revolution slower than this is dropped (the cam is not really vibrating), us.
+    pub max_revolution_us: u64,
+}
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        Self {
+            carrier_power_returned: true,
+            max_revolution_us: 2_000_000,
+        }
+    }
+}
+
+/// The core's configuration. [`Default`] is the real rig.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CoreConfig {
+    /// Control step rate, Hz.
+    pub control_hz: u32,
+    /// Current samples per control step (10 at 10 kHz ADC and a 1 kHz loop).
+    pub samples_per_step: usize,
+    /// Encoder pulses per revolution per channel (AMT102-V: 2048); x4 decoding.
+    pub encoder_ppr: u32,
+    /// H-bridge supply, V (feed-forward).
+    pub supply_v: f32,
+    /// A host release lapses without a request for this long, us.
+    pub comms_timeout_us: u64,
+    /// Board name reported in `Info` (at most 16 bytes are sent).
+    pub board_name: &'static str,
+    /// Current sensor.
+    pub current: CurrentSensorConfig,
+    /// Motor model and drive limits.
+    pub motor: MotorConfig,
+    /// Speed loop.
+    pub speed_loop: SpeedLoopConfig,
+    /// Release supervisor.
+    pub supervisor: SupervisorConfig,
+    /// Fault thresholds.
+    pub faults: FaultConfig,
+    /// Torque estimator.
+    pub estimator: EstimatorConfig,
+}
+
+impl CoreConfig {
+    /// Control period, us.
+    pub fn period_us(&self) -> u64 {
+        1_000_000 / u64::from(self.control_hz.max(1))
+    }
+
+    /// Current (and capture) sample rate, Hz.
+    pub fn sample_rate_hz(&self) -> u32 {
+        self.control_hz * self.samples_per_step as u32
+    }
+
+    /// Quadrature counts per cam revolution.
+    pub fn counts_per_rev(&self) -> u32 {
+        4 * self.encoder_ppr
+    }
+}
+
+impl Default for CoreConfig {
+    fn default() -> Self {
+        Self {
+            control_hz: 1000,
+            samples_per_step: 10,
+            encoder_ppr: 2048,
+            supply_v: 12.0,
+            comms_timeout_us: protocol::COMMS_TIMEOUT_MS as u64 * 1000,
+            board_name: "nucleo-g474re",
+            current: CurrentSensorConfig::default(),
+            motor: MotorConfig::default(),
+            speed_loop: SpeedLoopConfig::default(),
+            supervisor: SupervisorConfig::default(),
+            faults: FaultConfig::default(),
+            estimator: EstimatorConfig::default(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use model::plant::SensorParams;
+
+    #[test]
+    fn current_scaling_matches_the_plant_sensor() {
+        let c = CurrentSensorConfig::default();
+        let s = SensorParams::default();
+        for code in [0u16, 1000, 2068, 3000, 4095] {
+            let core = (f32::from(code) - c.nominal_zero_counts()) * c.amps_per_count();
+            let plant = s.adc_to_current(code) as f32;
+            assert!((core - plant).abs() < 1e-3, "{code}: {core} vs {plant}");
+        }
+    }
+}

@@ -1,0 +1,332 @@
+//! Cam torque and output load, averaged over each cam revolution.
+//!
+//! tau_cam = C1 i + C2 - (C3 w + C4) (Eqs. 15-17) is linear in i and w, so its revolution
+//! mean is that of the revolution's mean current and mean speed. Per sample the estimator
+//! only adds raw ADC counts; at each revolution boundary (interpolated inside the step) it
+//! converts once and inverts Eq. (10) with the model in f64 for the load tau_rot.
+//!
+//! Eq. (9)'s inertia term exchanges power with the carrier and averages to zero over a
+//! turn when the drive takes power back; the paper's Eq. (10) is the mean over the
+//! acceleration phase and carries `M w^2 e^2 / pi`. With
+//! [`crate::config::EstimatorConfig::carrier_power_returned`] that term is added to the
+//! measured mean before Eq. (10) is inverted, and left out of the requirement the
+//! supervisor compares against.
+
+use core::f64::consts::TAU;
+
+use model::CamDrive;
+
+/// Calibration and geometry the estimator works with, SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimatorModel {
+    /// The cam drive: gear set, eccentricity and carrier mass.
+    pub drive: CamDrive,
+    /// Vibrator constants C1..C6.
+    pub vibrator: model::Calibration,
+    /// Friction coefficient used in Eq. (10) (the calibration's mu_s).
+    pub mu: f64,
+    /// Whether the revolution mean lacks Eq. (9)'s inertia term (see the module doc).
+    pub carrier_power_returned: bool,
+}
+
+impl EstimatorModel {
+    /// Cam torque from mean current `i` (A) and mean speed `w` (rad/s), N m.
+    pub fn cam_torque(&self, i: f64, w: f64) -> f64 {
+        self.vibrator.cam_torque(i, w)
+    }
+
+    /// Inertia share of Eq. (10) present in a revolution mean at speed `w`, N m.
+    fn inertia_in_mean(&self, w: f64) -> f64 {
+        if self.carrier_power_returned {
+            0.0
+        } else {
+            self.drive.required_inertia_torque(w)
+        }
+    }
+
+    /// Load torque explaining a revolution-mean cam torque at speed `w`, by inverting Eq. (10).
+    pub fn load(&self, tau_cam: f64, w: f64) -> f64 {
+        let added_back = self.drive.required_inertia_torque(w) - self.inertia_in_mean(w);
+        self.drive
+            .load_from_cam_torque(self.mu, tau_cam + added_back, w)
+    }
+
+    /// Revolution-mean cam torque Eq. (10) predicts for load `tau_rot` at speed `w`, N m.
+    pub fn required(&self, tau_rot: f64, w: f64) -> f64 {
+        self.drive.required_cam_torque(self.mu, tau_rot, w) - self.drive.required_inertia_torque(w)
+            + self.inertia_in_mean(w)
+    }
+}
+
+/// One revolution's estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RevolutionEstimate {
+    /// Mean motor current over the revolution, A.
+    pub current_a: f32,
+    /// Mean cam speed over the revolution, rad/s.
+    pub cam_speed_rad_s: f32,
+    /// Mean torque delivered to the cam, tau_cam, N m.
+    pub tau_cam_nm: f32,
+    /// Output load from Eq. (10) inverted, tau_rot, N m.
+    pub tau_rot_nm: f32,
+    /// Eq. (10)'s zero-load requirement at this speed, N m.
+    pub required_no_load_nm: f32,
+}
+
+/// Accumulates samples between revolution boundaries.
+#[derive(Debug, Clone)]
+pub struct TorqueEstimator {
+    counts_per_rev: i64,
+    max_revolution_us: u64,
+    running: bool,
+    next_boundary: i64,
+    last_cross_us: f64,
+    sum_counts: u64,
+    samples: u32,
+    last: Option<RevolutionEstimate>,
+    revolutions: u32,
+}
+
+/// One control step as the estimator needs it.
+#[derive(Debug, Clone, Copy)]
+pub struct StepSamples<'a> {
+    /// Raw current samples of the step, oldest first.
+    pub current_adc: &'a [u16],
+    /// Time of the previous step, us.
+    pub prev_us: u64,
+    /// Time of this step, us.
+    pub now_us: u64,
+    /// Unwrapped position at the previous step, counts (in the drive direction).
+    pub prev_position: i64,
+    /// Unwrapped position now, counts (in the drive direction).
+    pub position: i64,
+}
+
+impl TorqueEstimator {
+    /// An idle estimator.
+    pub fn new(counts_per_rev: u32, max_revolution_us: u64) -> Self {
+        Self {
+            counts_per_rev: i64::from(counts_per_rev.max(1)),
+            max_revolution_us,
+            running: false,
+            next_boundary: 0,
+            last_cross_us: 0.0,
+            sum_counts: 0,
+            samples: 0,
+            last: None,
+            revolutions: 0,
+        }
+    }
+
+    /// Starts a fresh revolution at `position` (counts, drive direction) at `now_us`.
+    pub fn start(&mut self, now_us: u64, position: i64) {
+        self.running = true;
+        self.next_boundary = position + self.counts_per_rev;
+        self.last_cross_us = now_us as f64;
+        self.sum_counts = 0;
+        self.samples = 0;
+        self.revolutions = 0;
+    }
+
+    /// Stops accumulating; the last estimate is kept for display.
+    pub fn stop(&mut self) {
+        self.running = false;
+    }
+
+    /// Completed revolutions since [`TorqueEstimator::start`].
+    pub fn revolutions(&self) -> u32 {
+        self.revolutions
+    }
+
+    /// The last completed revolution's estimate.
+    pub fn last(&self) -> Option<RevolutionEstimate> {
+        self.last
+    }
+
+    /// Takes one step; returns an estimate when a revolution completed within it.
+    /// `to_amps` converts a mean ADC reading to amperes (zero offset applied).
+    pub fn update(
+        &mut self,
+        step: &StepSamples,
+        model: &EstimatorModel,
+        to_amps: impl Fn(f32) -> f32,
+    ) -> Option<RevolutionEstimate> {
+        if !self.running {
+            return None;
+        }
+        let n = step.current_adc.len();
+        let mut result = None;
+        if step.position >= self.next_boundary && step.position > step.prev_position {
+            // Where in the step the boundary fell, by linear interpolation of the position.
+            let frac = (self.next_boundary - step.prev_position) as f64
+                / (step.position - step.prev_position) as f64;
+            let frac = frac.clamp(0.0, 1.0);
+            let split = libm::round(frac * n as f64) as usize;
+            let (before, after) = step.current_adc.split_at(split.min(n));
+            self.add(before);
+            let cross_us =
+                step.prev_us as f64 + frac * step.now_us.saturating_sub(step.prev_us) as f64;
+            let period_us = cross_us - self.last_cross_us;
+            if self.samples > 0 && period_us > 0.0 && period_us <= self.max_revolution_us as f64 {
+                let mean_counts = self.sum_counts as f64 / f64::from(self.samples);
+                let i = f64::from(to_amps(mean_counts as f32));
+                let w = TAU / (period_us * 1e-6);
+                let tau_cam = model.cam_torque(i, w);
+                let estimate = RevolutionEstimate {
+                    current_a: i as f32,
+                    cam_speed_rad_s: w as f32,
+                    tau_cam_nm: tau_cam as f32,
+                    tau_rot_nm: model.load(tau_cam, w) as f32,
+                    required_no_load_nm: model.required(0.0, w) as f32,
+                };
+                self.last = Some(estimate);
+                self.revolutions = self.revolutions.saturating_add(1);
+                result = Some(estimate);
+            }
+            self.last_cross_us = cross_us;
+            self.sum_counts = 0;
+            self.samples = 0;
+            // A step spanning several turns (not at 1 kHz) restarts the count past it.
+            while self.next_boundary <= step.position {
+                self.next_boundary += self.counts_per_rev;
+            }
+            self.add(after);
+        } else {
+            self.add(step.current_adc);
+        }
+        result
+    }
+
+    fn add(&mut self, samples: &[u16]) {
+        let mut sum = 0u32;
+        for &s in samples {
+            sum += u32::from(s);
+        }
+        self.sum_counts += u64::from(sum);
+        self.samples += samples.len() as u32;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use model::GearSet;
+
+    const CPR: u32 = 8192;
+
+    fn model() -> EstimatorModel {
+        EstimatorModel {
+            drive: CamDrive::paper(GearSet::paper([49, 51, 50, 50]).unwrap()),
+            vibrator: model::Calibration::PAPER,
+            mu: 0.271,
+            carrier_power_returned: true,
+        }
+    }
+
+    /// Feeds `revs` revolutions at `w` rad/s of current `i(theta)` sampled at 10 kHz, 1 kHz
+    /// steps; returns every estimate.
+    fn feed(
+        est: &mut TorqueEstimator,
+        w: f64,
+        revs: f64,
+        current: impl Fn(f64) -> f64,
+    ) -> Vec<RevolutionEstimate> {
+        let (zero, apc) = (2068.0f64, 0.006_525f64);
+        let mut out = Vec::new();
+        let steps = (revs * TAU / w * 1000.0) as u64;
+        est.start(0, 0);
+        let mut prev = 0i64;
+        for k in 1..=steps {
+            let mut block = [0u16; 10];
+            for (j, b) in block.iter_mut().enumerate() {
+                let t = (k - 1) as f64 * 1e-3 + (j + 1) as f64 * 1e-4;
+                *b = libm::round(zero + current(w * t) / apc) as u16;
+            }
+            let t = k as f64 * 1e-3;
+            let pos = libm::floor(w * t / TAU * f64::from(CPR)) as i64;
+            let step = StepSamples {
+                current_adc: &block,
+                prev_us: (k - 1) * 1000,
+                now_us: k * 1000,
+                prev_position: prev,
+                position: pos,
+            };
+            prev = pos;
+            let to_amps = |c: f32| ((f64::from(c) - zero) * apc) as f32;
+            out.extend(est.update(&step, &model(), to_amps));
+        }
+        out
+    }
+
+    #[test]
+    fn recovers_the_load_from_a_rippling_current() {
+        let m = model();
+        for (tau_rot, hz) in [
+            (0.368, 5.0),
+            (1.84, 10.0),
+            (3.68, 10.0),
+            (3.68, 15.0),
+            (1.0, 20.0),
+        ] {
+            let w = TAU * hz;
+            // Revolution-mean torque Eq. (10) predicts, and Eq. (9)'s ripple around it:
+            // friction |sin| (twice per turn) and the inertia term sin cos.
+            let tau_mean = m.required(tau_rot, w);
+            let friction = tau_mean * core::f64::consts::PI / 2.0;
+            let inertia = 3.82 * w * w * 1e-6;
+            let i = |theta: f64| {
+                let tau = friction * libm::fabs(libm::sin(theta))
+                    + inertia * libm::sin(theta) * libm::cos(theta);
+                m.vibrator.current_for(tau, w)
+            };
+            let est = feed(&mut TorqueEstimator::new(CPR, 2_000_000), w, 6.3, i);
+            assert_eq!(est.len(), 6, "{hz} Hz");
+            for e in &est[1..] {
+                let tau_err = (f64::from(e.tau_cam_nm) - tau_mean) / tau_mean;
+                let rot_err = (f64::from(e.tau_rot_nm) - tau_rot) / tau_rot;
+                let w_err = (f64::from(e.cam_speed_rad_s) - w) / w;
+                assert!(
+                    tau_err.abs() < 0.01,
+                    "{tau_rot} N m {hz} Hz: tau_cam {tau_err}"
+                );
+                assert!(
+                    rot_err.abs() < 0.02,
+                    "{tau_rot} N m {hz} Hz: tau_rot {rot_err}"
+                );
+                assert!(w_err.abs() < 0.005, "{hz} Hz: speed {w_err}");
+            }
+        }
+    }
+
+    #[test]
+    fn paper_convention_keeps_the_inertia_term_in_the_mean() {
+        let mut m = model();
+        let w = TAU * 10.0;
+        let inertia = m.drive.required_inertia_torque(w);
+        assert!(m.required(0.0, w).abs() < 1e-12);
+        m.carrier_power_returned = false;
+        assert!((m.required(0.0, w) - inertia).abs() < 1e-12);
+        // Both conventions invert their own requirement exactly.
+        for returned in [true, false] {
+            m.carrier_power_returned = returned;
+            let tau = m.required(2.0, w);
+            assert!((m.load(tau, w) - 2.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn idle_or_slow_cam_gives_no_estimate() {
+        let mut est = TorqueEstimator::new(CPR, 2_000_000);
+        let step = StepSamples {
+            current_adc: &[2068; 10],
+            prev_us: 0,
+            now_us: 1000,
+            prev_position: 0,
+            position: 100_000,
+        };
+        assert!(est.update(&step, &model(), |_| 0.0).is_none());
+        // At 2 rad/s one turn takes 3.1 s, longer than the 2 s limit.
+        let got = feed(&mut est, 2.0, 1.2, |_| 2.5);
+        assert!(got.is_empty());
+    }
+}

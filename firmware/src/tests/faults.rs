@@ -1,0 +1,316 @@
+//! Every fault: how it is detected, that it stops the motor at once, what clears it.
+
+use model::plant::CamSetup;
+use protocol::{
+    Calibration, CalibrationStatus, DeviceMessage, FaultFlags, NackCode, Request, SupervisorState,
+};
+
+use super::Rig;
+use crate::{BootInfo, CoreConfig};
+
+/// One ampere in ADC counts (0.185 V/A * 2/3 / 3.3 V * 4095).
+const COUNTS_PER_AMP: i32 = 153;
+
+fn faults(rig: &mut Rig, request: &Request) -> (FaultFlags, FaultFlags) {
+    let replies = rig.request(request);
+    match replies.last() {
+        Some(DeviceMessage::Faults { active, latched }) => (*active, *latched),
+        other => panic!("{request:?} answered {other:?}"),
+    }
+}
+
+/// Vibrating at 10 Hz, then `inject`; returns the step (ms) at which the bridge went off.
+fn inject_while_vibrating(rig: &mut Rig, inject: impl FnOnce(&mut Rig), max_ms: u64) -> u64 {
+    rig.vibrate(10.0);
+    inject(rig);
+    for k in 0..max_ms {
+        if k % 150 == 0 {
+            rig.send(&Request::Heartbeat);
+        }
+        let out = rig.step();
+        if !out.enable {
+            assert_eq!(out.duty, 0.0);
+            assert_eq!(rig.state(), SupervisorState::Fault);
+            return k + 1;
+        }
+    }
+    panic!("the motor kept running");
+}
+
+#[test]
+fn overcurrent_needs_threshold_and_duration() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    // 5.0 A-equivalent for 5 ms: too short.
+    rig.adc_offset = 5 * COUNTS_PER_AMP;
+    rig.run_ms(5);
+    rig.adc_offset = 0;
+    rig.run_ms(5);
+    assert!(rig.latched().is_empty());
+    // 10 ms: latched.
+    rig.adc_offset = 5 * COUNTS_PER_AMP;
+    rig.run_ms(11);
+    assert_eq!(rig.latched(), FaultFlags::OVERCURRENT);
+    // Still flowing: ClearFaults keeps it.
+    let (active, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert_eq!(
+        (active, latched),
+        (FaultFlags::OVERCURRENT, FaultFlags::OVERCURRENT)
+    );
+    rig.adc_offset = 0;
+    rig.step();
+    let (_, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert!(latched.is_empty());
+}
+
+#[test]
+fn overcurrent_while_vibrating_stops_the_motor() {
+    let mut rig = Rig::new(1.0);
+    let t = inject_while_vibrating(&mut rig, |r| r.adc_offset = 4 * COUNTS_PER_AMP, 100);
+    assert!(t <= 12, "{t} ms");
+    assert!(rig.latched().contains(FaultFlags::OVERCURRENT));
+}
+
+#[test]
+fn blocked_cam_trips_overcurrent_first() {
+    // Locked rotor at ~0.5 duty: 6 V / 0.44 ohm, far above the 4.5 A limit.
+    let mut rig = Rig::new(1.0);
+    let t = inject_while_vibrating(&mut rig, |r| r.plant.set_cam(CamSetup::Blocked), 1000);
+    assert!(t <= 12, "{t} ms");
+    assert_eq!(rig.latched(), FaultFlags::OVERCURRENT);
+}
+
+#[test]
+fn blocked_cam_is_a_stall() {
+    // With the current limits out of the way the stall window catches it.
+    let mut config = CoreConfig::default();
+    config.faults.overcurrent_a = 50.0;
+    let boot = BootInfo {
+        calibration: Calibration {
+            max_current_a: 50.0,
+            ..Calibration::paper()
+        },
+        calibration_status: CalibrationStatus::Valid,
+        watchdog_reset: false,
+    };
+    let mut rig = Rig::with_config(config, boot, 1.0, |_| {});
+    let t = inject_while_vibrating(&mut rig, |r| r.plant.set_cam(CamSetup::Blocked), 1000);
+    assert!((200..=260).contains(&t), "{t} ms");
+    assert_eq!(rig.latched(), FaultFlags::STALL);
+}
+
+#[test]
+fn frozen_encoder_is_encoder_loss() {
+    let mut rig = Rig::new(1.0);
+    let t = inject_while_vibrating(
+        &mut rig,
+        |r| r.encoder_frozen = Some(r.plant.encoder_count()),
+        1000,
+    );
+    assert!((200..=260).contains(&t), "{t} ms");
+    assert_eq!(rig.latched(), FaultFlags::ENCODER_LOSS);
+}
+
+#[test]
+fn implausible_current_zero_at_boot_and_rezero() {
+    let mut rig = Rig::new(0.0);
+    rig.adc_offset = COUNTS_PER_AMP / 2; // 0.5 A-equivalent off Vcc/2
+    rig.run_ms(150);
+    assert_eq!(rig.latched(), FaultFlags::CURRENT_ZERO_RANGE);
+    rig.run_ms(500);
+    // The condition stays until a good zero is measured.
+    let (active, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert_eq!(active, FaultFlags::CURRENT_ZERO_RANGE);
+    assert_eq!(latched, FaultFlags::CURRENT_ZERO_RANGE);
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: true,
+            target_hz: 10.0
+        }),
+        Err(NackCode::InFaultHold)
+    );
+    // A small offset (0.1 A) is within range and gets zeroed out.
+    rig.adc_offset = COUNTS_PER_AMP / 10;
+    assert_eq!(rig.ack(&Request::RezeroCurrent), Ok(()));
+    rig.run_ms(110);
+    let (active, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert!(active.is_empty() && latched.is_empty());
+    assert!(rig.core.status().current_a.abs() < 0.05);
+}
+
+#[test]
+fn late_step_is_a_control_overrun() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    rig.now_us += 1000; // 2 periods: still on time
+    rig.step();
+    assert!(rig.latched().is_empty());
+    rig.now_us += 2000; // 3 periods since the last step
+    rig.step();
+    assert_eq!(rig.latched(), FaultFlags::CONTROL_OVERRUN);
+    assert_eq!(rig.core.status().control_overruns, 1);
+    // An empty sample block (the ADC ring lapped) on time is no overrun.
+    rig.now_us += 1000;
+    rig.step_with(&[]);
+    assert_eq!(rig.core.status().control_overruns, 1);
+    let (_, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert!(latched.is_empty());
+}
+
+#[test]
+fn invalid_stored_calibration_latches_until_a_valid_one_is_set() {
+    let boot = BootInfo {
+        calibration_status: CalibrationStatus::Invalid,
+        ..BootInfo::default()
+    };
+    let mut rig = Rig::with(boot, 0.0, |_| {});
+    rig.run_ms(600);
+    assert_eq!(rig.latched(), FaultFlags::CALIBRATION_INVALID);
+    let (active, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert_eq!(active, FaultFlags::CALIBRATION_INVALID);
+    assert_eq!(latched, FaultFlags::CALIBRATION_INVALID);
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: true,
+            target_hz: 10.0
+        }),
+        Err(NackCode::InFaultHold)
+    );
+    // After the hold a calibration may be set; once stored the fault can be cleared.
+    rig.send(&Request::SetCalibration(Calibration::paper()));
+    rig.step();
+    assert!(rig.count(|m| matches!(m, DeviceMessage::Ack { .. })) >= 1);
+    assert_eq!(
+        rig.core.status().calibration_status,
+        CalibrationStatus::Valid
+    );
+    let (active, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert!(active.is_empty() && latched.is_empty());
+}
+
+#[test]
+fn implausible_boot_values_count_as_invalid() {
+    let boot = BootInfo {
+        calibration: Calibration {
+            mu_d: 0.5, // above mu_s
+            ..Calibration::paper()
+        },
+        calibration_status: CalibrationStatus::Valid,
+        watchdog_reset: false,
+    };
+    let rig = Rig::with(boot, 0.0, |_| {});
+    let s = rig.core.status();
+    assert_eq!(s.calibration_status, CalibrationStatus::Invalid);
+    assert_eq!(s.calibration, Calibration::paper());
+    assert_eq!(s.latched_faults, FaultFlags::CALIBRATION_INVALID);
+}
+
+#[test]
+fn watchdog_reset_is_reported_and_clearable() {
+    let boot = BootInfo {
+        watchdog_reset: true,
+        ..BootInfo::default()
+    };
+    let mut rig = Rig::with(boot, 0.0, |_| {});
+    rig.step();
+    assert_eq!(rig.latched(), FaultFlags::WATCHDOG_RESET);
+    assert!(rig.received.iter().any(|m| matches!(
+        m,
+        DeviceMessage::FaultEvent { flags, .. } if *flags == FaultFlags::WATCHDOG_RESET
+    )));
+    let (_, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert!(latched.is_empty());
+}
+
+#[test]
+fn fault_hold_refuses_commands_for_500_ms() {
+    let mut rig = Rig::new(1.0);
+    rig.vibrate(10.0);
+    rig.adc_offset = 5 * COUNTS_PER_AMP;
+    rig.run_ms(12);
+    rig.adc_offset = 0;
+    rig.step();
+    assert!(rig.latched().contains(FaultFlags::OVERCURRENT));
+    let events: Vec<_> = rig
+        .received
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMessage::FaultEvent {
+                flags,
+                device_time_us,
+            } => Some((*flags, *device_time_us)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(events.len(), 1, "a fault is announced once");
+    assert_eq!(events[0].0, FaultFlags::OVERCURRENT);
+
+    for request in [
+        Request::Heartbeat,
+        Request::GetCalibration,
+        Request::StartTelemetry { rate_hz: 10 },
+        Request::RezeroCurrent,
+        Request::Release {
+            on: false,
+            target_hz: 0.0,
+        },
+    ] {
+        assert_eq!(rig.ack(&request), Err(NackCode::InFaultHold), "{request:?}");
+    }
+    // Status and clear are always answered.
+    assert!(matches!(
+        rig.request(&Request::GetInfo)[..],
+        [DeviceMessage::Info(_)]
+    ));
+    assert!(matches!(
+        rig.request(&Request::GetFaults)[..],
+        [DeviceMessage::Faults { .. }]
+    ));
+    let hold_end = events[0].1 + 500_000;
+    while rig.now_us < hold_end {
+        rig.step();
+    }
+    assert_eq!(rig.ack(&Request::Heartbeat), Ok(()));
+    // Still latched: no release until cleared.
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: true,
+            target_hz: 10.0
+        }),
+        Err(NackCode::InFaultHold)
+    );
+    faults(&mut rig, &Request::ClearFaults);
+    assert!(rig.latched().is_empty());
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: true,
+            target_hz: 10.0
+        }),
+        Ok(())
+    );
+}
+
+#[test]
+fn button_must_be_let_go_after_a_fault() {
+    let mut rig = Rig::new(0.5);
+    rig.run_ms(150);
+    rig.button = true;
+    rig.run_until(2000, false, |s| s.state == SupervisorState::Vibrating)
+        .unwrap();
+    rig.now_us += 5000; // an overrun while the button is held
+    rig.step();
+    assert_eq!(rig.state(), SupervisorState::Fault);
+    rig.run_ms(600);
+    faults(&mut rig, &Request::ClearFaults);
+    rig.run_ms(1000);
+    assert!(
+        matches!(rig.state(), SupervisorState::Locked),
+        "{:?}",
+        rig.state()
+    );
+    rig.button = false;
+    rig.step();
+    rig.button = true;
+    rig.run_until(2000, false, |s| s.state == SupervisorState::SpinUp)
+        .unwrap();
+}

@@ -1,0 +1,251 @@
+//! Closed-loop tests of the whole core against `model::plant::Plant`, through the wire
+//! protocol, as the binary and the host drive it.
+
+mod faults;
+mod server;
+mod supervisor;
+
+use model::GearSet;
+use model::plant::{Drive, Load, Plant, PlantParams};
+use protocol::{
+    Calibration, DeviceDeframer, DeviceMessage, FaultFlags, MAX_FRAME_SIZE, NackCode, Request,
+    SupervisorState, encode_frame,
+};
+
+use crate::{BootInfo, Core, CoreConfig, Inputs, Outputs, Status};
+
+#[test]
+fn core_fits_its_ram_share() {
+    // 40 000 bytes of capture plus ~3 KB of state; the board has 64 KiB for statics.
+    let size = core::mem::size_of::<Core>();
+    assert!((40_000..48_000).contains(&size), "{size} bytes");
+}
+
+/// The paper's (49, 51, 50, 50) gear set.
+pub(crate) const PAPER_Z: [u32; 4] = [49, 51, 50, 50];
+
+/// Core + plant + a host end of the link, in virtual time (1 ms steps).
+pub(crate) struct Rig {
+    pub core: Core,
+    pub plant: Plant,
+    pub now_us: u64,
+    drive: Drive,
+    host_seq: u16,
+    host: DeviceDeframer,
+    /// Every device message received, in order.
+    pub received: Vec<DeviceMessage>,
+    /// The release button.
+    pub button: bool,
+    /// Added to every current ADC sample (sensor offset or a fault injection).
+    pub adc_offset: i32,
+    /// Report the encoder count frozen at this value (encoder lost).
+    pub encoder_frozen: Option<u16>,
+    /// How the "binary" answers a flash write (None: never answers).
+    pub persist_answer: Option<bool>,
+    /// Calibrations handed out for writing.
+    pub persisted: Vec<Calibration>,
+    /// Most bytes the link moves per step, a UART's pace (None: everything at once).
+    pub link_budget: Option<usize>,
+}
+
+impl Rig {
+    pub fn new(load_nm: f64) -> Self {
+        Self::with(BootInfo::default(), load_nm, |_| {})
+    }
+
+    /// A rig with `boot` and a plant built from the paper's with `tweak` applied.
+    pub fn with(boot: BootInfo, load_nm: f64, tweak: impl FnOnce(&mut PlantParams)) -> Self {
+        Self::with_config(CoreConfig::default(), boot, load_nm, tweak)
+    }
+
+    /// As [`Rig::with`], with a core configuration.
+    pub fn with_config(
+        config: CoreConfig,
+        boot: BootInfo,
+        load_nm: f64,
+        tweak: impl FnOnce(&mut PlantParams),
+    ) -> Self {
+        let gear = GearSet::paper(PAPER_Z).unwrap();
+        let mut params = PlantParams::paper(gear, Load::Torque(load_nm));
+        tweak(&mut params);
+        Self {
+            core: Core::new(config, boot),
+            plant: Plant::new(params, 11),
+            now_us: 0,
+            drive: Drive::default(),
+            host_seq: 0,
+            host: DeviceDeframer::new(),
+            received: Vec::new(),
+            button: false,
+            adc_offset: 0,
+            encoder_frozen: None,
+            persist_answer: Some(true),
+            persisted: Vec::new(),
+            link_budget: None,
+        }
+    }
+
+    /// One 1 ms control step (the plant advances at 10 kHz in between).
+    pub fn step(&mut self) -> Outputs {
+        let mut adc = [0u16; 10];
+        for a in adc.iter_mut() {
+            self.plant.step(1e-4, self.drive);
+            *a = (i32::from(self.plant.current_adc()) + self.adc_offset).clamp(0, 4095) as u16;
+        }
+        self.now_us += 1000;
+        let out = self.step_with(&adc);
+        self.drive = Drive {
+            duty: f64::from(out.duty),
+            enabled: out.enable,
+        };
+        out
+    }
+
+    /// Steps the core only, with these samples, at the rig's current time.
+    pub fn step_with(&mut self, adc: &[u16]) -> Outputs {
+        let encoder_count = self
+            .encoder_frozen
+            .unwrap_or_else(|| self.plant.encoder_count());
+        let out = self.core.step(&Inputs {
+            now_us: self.now_us,
+            current_adc: adc,
+            encoder_count,
+            release_button: self.button,
+        });
+        assert!((-1.0..=1.0).contains(&out.duty));
+        if !out.enable {
+            assert_eq!(out.duty, 0.0, "a disabled bridge has no duty");
+        }
+        if let Some(c) = out.persist {
+            self.persisted.push(c);
+            if let Some(ok) = self.persist_answer {
+                self.core.persist_result(ok);
+            }
+        }
+        self.pump();
+        out
+    }
+
+    /// Moves the core's outgoing bytes to the host end, in small pieces.
+    pub fn pump(&mut self) {
+        let mut buf = [0u8; 61];
+        let mut budget = self.link_budget.unwrap_or(usize::MAX);
+        while budget > 0 {
+            let take = budget.min(buf.len());
+            budget -= take;
+            let n = self.core.transmit(&mut buf[..take]);
+            if n == 0 {
+                break;
+            }
+            let received = &mut self.received;
+            self.host
+                .push(&buf[..n], |frame| received.push(frame.unwrap().msg));
+        }
+    }
+
+    pub fn run_ms(&mut self, ms: u64) {
+        for _ in 0..ms {
+            self.step();
+        }
+    }
+
+    /// Runs with a heartbeat every 150 ms, as the host keeps a release alive.
+    pub fn run_ms_alive(&mut self, ms: u64) {
+        for k in 0..ms {
+            if k % 150 == 0 {
+                self.send(&Request::Heartbeat);
+            }
+            self.step();
+        }
+    }
+
+    /// Runs until `done` or `ms` pass (alive or not); returns the time taken, ms.
+    pub fn run_until(
+        &mut self,
+        ms: u64,
+        alive: bool,
+        done: impl Fn(&Status) -> bool,
+    ) -> Option<u64> {
+        for k in 0..ms {
+            if alive && k % 150 == 0 {
+                self.send(&Request::Heartbeat);
+            }
+            self.step();
+            if done(&self.core.status()) {
+                return Some(k + 1);
+            }
+        }
+        None
+    }
+
+    /// Requests sent so far (the next request's seq).
+    pub fn sent_count(&self) -> u16 {
+        self.host_seq
+    }
+
+    /// Sends a request (bytes fed one at a time); returns its seq.
+    pub fn send(&mut self, request: &Request) -> u16 {
+        let seq = self.host_seq;
+        self.host_seq = self.host_seq.wrapping_add(1);
+        let mut buf = [0u8; MAX_FRAME_SIZE];
+        let frame = encode_frame(seq, request, &mut buf).unwrap();
+        for b in frame {
+            self.core.receive(self.now_us, core::slice::from_ref(b));
+        }
+        // A paced link sends the reply with the next step's bytes.
+        if self.link_budget.is_none() {
+            self.pump();
+        }
+        seq
+    }
+
+    /// Sends a request and returns the messages that arrived in reply.
+    pub fn request(&mut self, request: &Request) -> Vec<DeviceMessage> {
+        let before = self.received.len();
+        self.send(request);
+        self.received[before..].to_vec()
+    }
+
+    /// The single `Ack`/`Nack` answer to `request`: `Ok(())` or the Nack code.
+    pub fn ack(&mut self, request: &Request) -> Result<(), NackCode> {
+        let seq = self.host_seq;
+        let replies = self.request(request);
+        let answers: Vec<_> = replies
+            .iter()
+            .filter_map(|m| match m {
+                DeviceMessage::Ack { seq: s } if *s == seq => Some(Ok(())),
+                DeviceMessage::Nack { seq: s, code } if *s == seq => Some(Err(*code)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(answers.len(), 1, "{request:?}: {replies:?}");
+        answers[0]
+    }
+
+    pub fn state(&self) -> SupervisorState {
+        self.core.status().state
+    }
+
+    pub fn latched(&self) -> FaultFlags {
+        self.core.status().latched_faults
+    }
+
+    /// Boots (zero measured) and asks for a 10 Hz host release; returns when vibrating.
+    pub fn vibrate(&mut self, hz: f32) -> u64 {
+        self.run_ms(150);
+        assert_eq!(
+            self.ack(&Request::Release {
+                on: true,
+                target_hz: hz
+            }),
+            Ok(())
+        );
+        self.run_until(3000, true, |s| s.state == SupervisorState::Vibrating)
+            .expect("reaches Vibrating")
+    }
+
+    /// Messages of one kind received so far.
+    pub fn count(&self, pred: impl Fn(&DeviceMessage) -> bool) -> usize {
+        self.received.iter().filter(|m| pred(m)).count()
+    }
+}

@@ -1,0 +1,460 @@
+//! The protocol server: every request answered, arguments checked, streams paced,
+//! garbage counted.
+
+use protocol::{
+    Calibration, CalibrationStatus, CaptureSample, DeviceMessage, FaultFlags, MAX_FRAME_SIZE,
+    NackCode, PROTOCOL_VERSION, Request, SCHEMA_HASH, SupervisorState, encode_frame,
+};
+
+use super::Rig;
+
+/// What a reply must look like.
+type Expect = Box<dyn Fn(&DeviceMessage) -> bool>;
+
+fn hello() -> Request {
+    Request::Hello {
+        protocol_version: PROTOCOL_VERSION,
+        schema_hash: SCHEMA_HASH,
+    }
+}
+
+#[test]
+fn every_request_is_answered() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    let info = |m: &DeviceMessage| matches!(m, DeviceMessage::Info(i) if i.board == "nucleo-g474re" && i.protocol_version == PROTOCOL_VERSION && i.calibration_status == CalibrationStatus::Defaults);
+    let cases: Vec<(Request, Expect)> = vec![
+        (hello(), Box::new(info)),
+        (Request::GetInfo, Box::new(info)),
+        (
+            Request::Heartbeat,
+            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+        ),
+        (
+            Request::GetCalibration,
+            Box::new(|m| matches!(m, DeviceMessage::Calibration(c) if *c == Calibration::paper())),
+        ),
+        (
+            Request::StartTelemetry { rate_hz: 50 },
+            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+        ),
+        (
+            Request::StopTelemetry,
+            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+        ),
+        (
+            Request::GetFaults,
+            Box::new(
+                |m| matches!(m, DeviceMessage::Faults { active, latched } if active.is_empty() && latched.is_empty()),
+            ),
+        ),
+        (
+            Request::ClearFaults,
+            Box::new(|m| matches!(m, DeviceMessage::Faults { .. })),
+        ),
+        (
+            Request::RezeroCurrent,
+            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+        ),
+        (
+            Request::StartCapture {
+                sample_rate_hz: 1000,
+                samples: 10,
+            },
+            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+        ),
+        (
+            Request::Release {
+                on: false,
+                target_hz: 0.0,
+            },
+            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+        ),
+    ];
+    for (request, expect) in cases {
+        let replies = rig.request(&request);
+        assert_eq!(replies.len(), 1, "{request:?}: {replies:?}");
+        assert!(expect(&replies[0]), "{request:?}: {replies:?}");
+        if let DeviceMessage::Ack { seq } | DeviceMessage::Nack { seq, .. } = replies[0] {
+            // The reply echoes the request's sequence number (sent just before).
+            assert_eq!(seq, rig_last_seq(&rig));
+        }
+        rig.run_ms(120);
+    }
+}
+
+/// The seq of the request sent last (the rig counts from 0).
+fn rig_last_seq(rig: &Rig) -> u16 {
+    rig.sent_count().wrapping_sub(1)
+}
+
+#[test]
+fn hello_with_another_version_is_refused() {
+    let mut rig = Rig::new(0.0);
+    for (v, h) in [
+        (PROTOCOL_VERSION + 1, SCHEMA_HASH),
+        (PROTOCOL_VERSION, SCHEMA_HASH ^ 1),
+    ] {
+        assert_eq!(
+            rig.ack(&Request::Hello {
+                protocol_version: v,
+                schema_hash: h
+            }),
+            Err(NackCode::VersionMismatch)
+        );
+    }
+}
+
+#[test]
+fn release_arguments_are_checked_and_clamped() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    for hz in [0.5, 20.5, f32::NAN, f32::INFINITY, -10.0] {
+        assert_eq!(
+            rig.ack(&Request::Release {
+                on: true,
+                target_hz: hz
+            }),
+            Err(NackCode::BadArgument),
+            "{hz}"
+        );
+    }
+    // 18 Hz is allowed, but above the calibration's 15 Hz limit: clamped.
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: true,
+            target_hz: 18.0
+        }),
+        Ok(())
+    );
+    rig.step();
+    assert_eq!(rig.core.status().target_hz, 15.0);
+}
+
+#[test]
+fn set_calibration_persists_then_activates() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    let new = Calibration {
+        c1_nmm_per_a: 60.0,
+        max_freq_hz: 18.0,
+        ..Calibration::paper()
+    };
+    let seq = rig.send(&Request::SetCalibration(new));
+    // Not acknowledged before the flash write.
+    assert!(
+        !rig.received
+            .iter()
+            .any(|m| matches!(m, DeviceMessage::Ack { seq: s } if *s == seq))
+    );
+    rig.step();
+    assert_eq!(rig.persisted, [new]);
+    assert!(
+        rig.received
+            .iter()
+            .any(|m| matches!(m, DeviceMessage::Ack { seq: s } if *s == seq))
+    );
+    assert!(
+        matches!(rig.request(&Request::GetCalibration)[..], [DeviceMessage::Calibration(c)] if c == new)
+    );
+    let s = rig.core.status();
+    assert_eq!(s.calibration_status, CalibrationStatus::Valid);
+
+    // Invalid values are rejected without touching flash.
+    let bad = Calibration {
+        z: [49, 51, 50, 49], // unequal centre distances
+        ..Calibration::paper()
+    };
+    assert_eq!(
+        rig.ack(&Request::SetCalibration(bad)),
+        Err(NackCode::CalibrationRejected)
+    );
+    let bad = Calibration {
+        mu_s: f32::NAN,
+        ..Calibration::paper()
+    };
+    assert_eq!(
+        rig.ack(&Request::SetCalibration(bad)),
+        Err(NackCode::CalibrationRejected)
+    );
+    rig.step();
+    assert_eq!(rig.persisted.len(), 1);
+}
+
+#[test]
+fn failed_flash_write_keeps_the_old_calibration() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    rig.persist_answer = Some(false);
+    let new = Calibration {
+        c1_nmm_per_a: 60.0,
+        ..Calibration::paper()
+    };
+    let seq = rig.send(&Request::SetCalibration(new));
+    rig.step();
+    assert!(rig.received.iter().any(
+        |m| matches!(m, DeviceMessage::Nack { seq: s, code: NackCode::StorageFailed } if *s == seq)
+    ));
+    assert_eq!(rig.core.status().calibration, Calibration::paper());
+
+    // A binary that never answers: refused after 5 s; meanwhile another write is Busy.
+    rig.persist_answer = None;
+    let seq = rig.send(&Request::SetCalibration(new));
+    rig.step();
+    assert_eq!(rig.ack(&Request::SetCalibration(new)), Err(NackCode::Busy));
+    rig.run_ms(5001);
+    assert!(rig.received.iter().any(
+        |m| matches!(m, DeviceMessage::Nack { seq: s, code: NackCode::StorageFailed } if *s == seq)
+    ));
+}
+
+#[test]
+fn calibration_and_rezero_are_busy_while_the_motor_runs() {
+    let mut rig = Rig::new(0.5);
+    rig.vibrate(10.0);
+    assert_eq!(
+        rig.ack(&Request::SetCalibration(Calibration::paper())),
+        Err(NackCode::Busy)
+    );
+    assert_eq!(rig.ack(&Request::RezeroCurrent), Err(NackCode::Busy));
+    assert_eq!(rig.state(), SupervisorState::Vibrating);
+}
+
+#[test]
+fn telemetry_streams_at_the_clamped_rate() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    let telemetry = |rig: &Rig| rig.count(|m| matches!(m, DeviceMessage::Telemetry(_)));
+    assert_eq!(
+        rig.ack(&Request::StartTelemetry { rate_hz: 0 }),
+        Err(NackCode::BadArgument)
+    );
+    rig.ack(&Request::StartTelemetry { rate_hz: 100 }).unwrap();
+    rig.run_ms(1000);
+    assert_eq!(telemetry(&rig), 100);
+    rig.ack(&Request::StartTelemetry { rate_hz: 60_000 })
+        .unwrap();
+    let before = telemetry(&rig);
+    rig.run_ms(500);
+    assert_eq!(telemetry(&rig) - before, 500);
+    rig.ack(&Request::StopTelemetry).unwrap();
+    let before = telemetry(&rig);
+    rig.run_ms(100);
+    assert_eq!(telemetry(&rig), before);
+    // Samples count up without gaps and carry the state.
+    let seqs: Vec<u32> = rig
+        .received
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMessage::Telemetry(t) => Some(t.seq),
+            _ => None,
+        })
+        .collect();
+    assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1));
+}
+
+#[test]
+fn capture_uploads_while_telemetry_and_replies_continue() {
+    let mut rig = Rig::new(1.0);
+    rig.vibrate(10.0);
+    rig.ack(&Request::StartTelemetry { rate_hz: 1000 }).unwrap();
+    rig.ack(&Request::StartCapture {
+        sample_rate_hz: 10_000,
+        samples: 50_000,
+    })
+    .unwrap();
+    assert_eq!(
+        rig.ack(&Request::StartCapture {
+            sample_rate_hz: 10_000,
+            samples: 10
+        }),
+        Err(NackCode::Busy)
+    );
+    let start = rig.received.len();
+    // Simulate a 921 600 Bd link: ~92 bytes per ms leave the device.
+    rig.link_budget = Some(92);
+    let mut done_at = None;
+    for ms in 0..3000 {
+        if ms % 150 == 0 {
+            rig.send(&protocol::Request::Heartbeat);
+        }
+        rig.step();
+        if rig.received[start..]
+            .iter()
+            .any(|m| matches!(m, DeviceMessage::CaptureDone { .. }))
+        {
+            done_at = Some(ms);
+            break;
+        }
+    }
+    let done_at = done_at.expect("capture completes");
+    let mut samples: Vec<CaptureSample> = Vec::new();
+    let mut telemetry_during = 0;
+    for m in &rig.received[start..] {
+        match m {
+            DeviceMessage::CaptureChunk(c) => {
+                assert_eq!(c.first_sample as usize, samples.len());
+                assert_eq!(c.total_samples, 10_000);
+                samples.extend(c.samples.iter().copied());
+            }
+            DeviceMessage::Telemetry(_) if !samples.is_empty() => telemetry_during += 1,
+            DeviceMessage::CaptureDone {
+                total_samples,
+                sample_rate_hz,
+                ..
+            } => {
+                assert_eq!((*total_samples, *sample_rate_hz), (10_000, 10_000));
+            }
+            _ => {}
+        }
+    }
+    assert_eq!(samples.len(), 10_000);
+    // One second of recording plus the upload (~70 kB) sharing the link with telemetry.
+    assert!(done_at < 2500, "{done_at} ms");
+    assert!(
+        telemetry_during > 500,
+        "{telemetry_during} telemetry samples during upload"
+    );
+    // At 10 Hz the cam turns 8192 counts per 100 ms: ~8192 counts per 1000 samples.
+    let turned = samples[9999].encoder_count - samples[0].encoder_count;
+    assert!((80_000..84_000).contains(&turned), "{turned}");
+    // The current is the plant's (1 N m at 10 Hz: about 2.6 A, i.e. ~2068 + 400 counts).
+    let mean = samples
+        .iter()
+        .map(|s| f64::from(s.current_adc))
+        .sum::<f64>()
+        / 10_000.0;
+    assert!((2350.0..2600.0).contains(&mean), "{mean}");
+    assert_eq!(rig.state(), SupervisorState::Vibrating);
+    assert_eq!(rig.core.status().tx_dropped, 0);
+}
+
+#[test]
+fn garbage_is_counted_and_never_stops_the_server() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    // Line noise, an over-long run, a corrupted frame, stray delimiters.
+    let mut noise: Vec<u8> = (0..500u32).map(|i| (i * 7919 % 251) as u8).collect();
+    noise.push(0);
+    noise.extend(std::iter::repeat_n(0x55, 300));
+    noise.push(0);
+    let mut buf = [0u8; MAX_FRAME_SIZE];
+    let mut frame = encode_frame(77, &Request::GetInfo, &mut buf)
+        .unwrap()
+        .to_vec();
+    frame[2] ^= 0x40;
+    noise.extend(&frame);
+    noise.extend([0, 0, 0]);
+    for chunk in noise.chunks(13) {
+        rig.core.receive(rig.now_us, chunk);
+    }
+    let stats = rig.core.status().deframer;
+    // Two runs of noise and the 0x55 run overflow the 82-byte request buffer; the
+    // corrupted frame fails its CRC or its COBS.
+    assert_eq!(stats.overflow_errors, 3, "{stats:?}");
+    assert_eq!(stats.crc_errors + stats.framing_errors, 1, "{stats:?}");
+    assert_eq!(stats.frames_ok, 0);
+    rig.pump();
+    assert!(
+        rig.received.is_empty()
+            || rig
+                .received
+                .iter()
+                .all(|m| matches!(m, DeviceMessage::Nack { .. }))
+    );
+    // Still serving.
+    assert!(matches!(
+        rig.request(&Request::GetInfo)[..],
+        [DeviceMessage::Info(_)]
+    ));
+    assert!(rig.latched().is_empty());
+}
+
+#[test]
+fn unknown_message_is_refused_with_its_seq() {
+    let mut rig = Rig::new(0.0);
+    // A frame with a good CRC whose message tag no firmware knows.
+    let mut buf = [0u8; MAX_FRAME_SIZE];
+    let frame = encode_frame(4321, &200u8, &mut buf).unwrap().to_vec();
+    rig.core.receive(0, &frame);
+    rig.pump();
+    assert_eq!(
+        rig.received,
+        [DeviceMessage::Nack {
+            seq: 4321,
+            code: NackCode::UnknownMessage
+        }]
+    );
+    assert_eq!(rig.core.status().deframer.decode_errors, 1);
+}
+
+#[test]
+fn faults_report_active_and_latched() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    rig.adc_offset = 5 * 153;
+    rig.run_ms(20);
+    let replies = rig.request(&Request::GetFaults);
+    assert_eq!(
+        replies,
+        [DeviceMessage::Faults {
+            active: FaultFlags::OVERCURRENT,
+            latched: FaultFlags::OVERCURRENT
+        }]
+    );
+}
+
+#[test]
+fn open_loop_drives_a_fixed_voltage_while_kept_alive() {
+    let mut rig = Rig::new(2.0);
+    rig.run_ms(1200);
+    for volts in [f32::NAN, 30.0, -30.0] {
+        assert_eq!(
+            rig.ack(&Request::OpenLoop { volts }),
+            Err(NackCode::BadArgument)
+        );
+    }
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    // Exclusive with a speed-controlled release.
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: true,
+            target_hz: 10.0
+        }),
+        Err(NackCode::Busy)
+    );
+    let t = rig.run_until(4000, true, |s| s.state == SupervisorState::Vibrating);
+    assert!(t.is_some(), "{:?}", rig.core.status());
+    let s = rig.core.status();
+    assert!((s.duty - 6.2 / 12.0).abs() < 1e-3, "{}", s.duty);
+    assert_eq!(s.open_loop_volts, Some(6.2));
+    // The paper's 6.2 V gives about 10 Hz.
+    let hz = s.cam_speed_rad_s / core::f32::consts::TAU;
+    assert!((hz - 10.0).abs() < 1.5, "{hz} Hz");
+    rig.run_ms_alive(1500);
+    let s = rig.core.status();
+    assert!(s.estimate_valid);
+    // The per-revolution load estimate sees the 2 N m load.
+    assert!((s.tau_rot_nm - 2.0).abs() < 0.15, "{}", s.tau_rot_nm);
+    // 0 V ends it; the cam coasts to rest and the core locks.
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 0.0 }), Ok(()));
+    let t = rig.run_until(3000, false, |s| s.state == SupervisorState::Locked);
+    assert!(t.is_some());
+    assert!(rig.core.status().latched_faults.is_empty());
+}
+
+#[test]
+fn open_loop_without_heartbeat_times_out_to_safe() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(1200);
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 3.6 }), Ok(()));
+    let t = rig.run_until(2000, false, |s| !s.enabled && !s.latched_faults.is_empty());
+    assert!(t.is_some());
+    let s = rig.core.status();
+    assert!(
+        s.latched_faults.contains(FaultFlags::COMMS_TIMEOUT),
+        "{:?}",
+        s.latched_faults
+    );
+    assert_eq!(s.open_loop_volts, None);
+}
