@@ -204,9 +204,11 @@ impl Default for FaultConfig {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EstimatorConfig {
     /// The bridge takes the carrier's inertial power back (synchronous rectification), so
-    /// Eq. (9)'s inertia term averages to zero over a revolution and is added back before
-    /// Eq. (10) is inverted. False for a drive that cannot sink current (a linear supply):
-    /// then the revolution mean carries the inertia term, as the paper assumes.
+    /// True: the drive takes power back, Eq. (9)'s inertia term averages to zero over a
+    /// revolution. False (default, as the paper's bench supply and ref. [18]): the drive
+    /// cannot take the carrier's power back, so the revolution mean carries the rectified
+    /// inertia term M w^2 e^2 / (2 pi). Either way the rest of Eq. (10)'s inertia term is
+    /// added back before Eq. (10) is inverted for the load.
     pub carrier_power_returned: bool,
     /// A revolution slower than this is dropped (the cam is not really vibrating), us.
     pub max_revolution_us: u64,
@@ -215,7 +217,7 @@ pub struct EstimatorConfig {
 impl Default for EstimatorConfig {
     fn default() -> Self {
         Self {
-            carrier_power_returned: true,
+            carrier_power_returned: false,
             max_revolution_us: 2_000_000,
         }
     }

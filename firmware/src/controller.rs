@@ -247,9 +247,10 @@ pub struct Core {
     pub(crate) host_target_hz: f32,
     /// A live open-loop drive (`Request::OpenLoop`): the bridge voltage asked for, V.
     pub(crate) open_loop_volts: Option<f32>,
-    /// Cam speed at the last open-loop settle check and when it was taken.
-    open_loop_probe: (f32, u64),
-    open_loop_steady_since: Option<u64>,
+    /// Open-loop settle check: position and time of the last revolution start, and the
+    /// period of the revolution before it (0: none yet).
+    open_loop_rev: (i64, u64, u64),
+    open_loop_steady: bool,
     pub(crate) last_request_us: u64,
     pub(crate) button_held: bool,
     button_armed: bool,
@@ -296,8 +297,8 @@ impl Core {
             host_release: false,
             host_target_hz: config.supervisor.default_freq_hz,
             open_loop_volts: None,
-            open_loop_probe: (0.0, 0),
-            open_loop_steady_since: None,
+            open_loop_rev: (0, 0, 0),
+            open_loop_steady: false,
             last_request_us: 0,
             button_held: false,
             button_armed: false,
@@ -416,7 +417,9 @@ impl Core {
         if self.supervisor.drives_motor() && self.faults.latched().is_empty() {
             self.duty = match self.open_loop_volts {
                 Some(volts) => {
-                    // A bench supply's fixed voltage, reached through the duty slew limit.
+                    // A bench supply's fixed voltage, reached through the duty slew limit
+                    // and a soft start: the ramp pauses while the current is above 85 %
+                    // of the overcurrent limit and the cam is accelerating.
                     let m = self.config.motor;
                     // max/min, not clamp: clamp's NaN assertion would pull float formatting
                     // into the image.
@@ -424,7 +427,16 @@ impl Core {
                         .max(-m.max_duty)
                         .min(m.max_duty)
                         * dir;
-                    let step = m.duty_slew_per_s * dt;
+                    // Only while the cam turns: a shaft held on the force gauge draws its
+                    // stall current, which is what the calibration asks for.
+                    let accelerating = speed.abs() > self.config.supervisor.stop_speed_rad_s;
+                    let near_limit =
+                        self.current.step_mean_a().abs() > 0.85 * self.derived.current_limit_a;
+                    let step = if accelerating && near_limit && goal.abs() > self.duty.abs() {
+                        0.0
+                    } else {
+                        m.duty_slew_per_s * dt
+                    };
                     goal.max(self.duty - step).min(self.duty + step)
                 }
                 None => {
@@ -515,7 +527,7 @@ impl Core {
         let before = self.supervisor.state();
         let open_loop_settled = self
             .open_loop_volts
-            .map(|_| self.open_loop_settled(now, speed));
+            .map(|_| self.open_loop_settled(now, position));
         let mut inputs = SupervisorInputs {
             now_us: now,
             open_loop_settled,
@@ -545,26 +557,23 @@ impl Core {
         }
     }
 
-    /// Open-loop drive: the voltage ramp is done and the cam speed changed by less than 2 %
-    /// over each of the last two 50 ms probes.
-    fn open_loop_settled(&mut self, now: u64, speed: f32) -> bool {
-        const PROBE_US: u64 = 50_000;
+    /// Open-loop drive: the voltage ramp is done and two consecutive cam revolutions took
+    /// the same time within 2 % (a revolution mean: the cam's speed ripples within a turn).
+    fn open_loop_settled(&mut self, now: u64, position: i64) -> bool {
         let goal = self.open_loop_volts.unwrap_or(0.0) / self.config.supply_v * self.direction();
         let ramp_done = (self.duty - goal).abs() < 1e-3;
-        let (last_speed, last_us) = self.open_loop_probe;
-        if now.saturating_sub(last_us) >= PROBE_US {
-            self.open_loop_probe = (speed, now);
-            let steady = ramp_done
-                && speed.abs() > self.config.supervisor.stop_speed_rad_s
-                && (speed - last_speed).abs() <= 0.02 * speed.abs();
-            self.open_loop_steady_since = match (steady, self.open_loop_steady_since) {
-                (true, Some(t)) => Some(t),
-                (true, None) => Some(now),
-                (false, _) => None,
-            };
+        let per_rev = i64::from(self.config.counts_per_rev());
+        let (start_pos, start_us, last_period) = self.open_loop_rev;
+        if !ramp_done {
+            self.open_loop_rev = (position, now, 0);
+            self.open_loop_steady = false;
+        } else if (position - start_pos).abs() >= per_rev {
+            let period = now.saturating_sub(start_us);
+            let diff = period.abs_diff(last_period);
+            self.open_loop_steady = last_period > 0 && diff * 50 <= last_period;
+            self.open_loop_rev = (position, now, period);
         }
-        self.open_loop_steady_since
-            .is_some_and(|t| now.saturating_sub(t) >= PROBE_US)
+        self.open_loop_steady
     }
 
     fn status_flags(&self) -> StatusFlags {

@@ -35,12 +35,14 @@ impl EstimatorModel {
         self.vibrator.cam_torque(i, w)
     }
 
-    /// Inertia share of Eq. (10) present in a revolution mean at speed `w`, N m.
+    /// Inertia share present in a revolution mean at speed `w`, N m: none when the drive
+    /// takes the carrier's power back; otherwise the rectified half of Eq. (9)'s inertia
+    /// term, M w^2 e^2 / (2 pi), half of Eq. (10)'s acceleration-phase mean.
     fn inertia_in_mean(&self, w: f64) -> f64 {
         if self.carrier_power_returned {
             0.0
         } else {
-            self.drive.required_inertia_torque(w)
+            0.5 * self.drive.required_inertia_torque(w)
         }
     }
 
@@ -299,13 +301,14 @@ mod tests {
     }
 
     #[test]
-    fn paper_convention_keeps_the_inertia_term_in_the_mean() {
+    fn a_drive_that_cannot_take_power_back_keeps_the_rectified_inertia_term() {
         let mut m = model();
         let w = TAU * 10.0;
         let inertia = m.drive.required_inertia_torque(w);
         assert!(m.required(0.0, w).abs() < 1e-12);
         m.carrier_power_returned = false;
-        assert!((m.required(0.0, w) - inertia).abs() < 1e-12);
+        // Rectified over a turn: M w^2 e^2 / (2 pi), half of Eq. (10)'s term.
+        assert!((m.required(0.0, w) - 0.5 * inertia).abs() < 1e-12);
         // Both conventions invert their own requirement exactly.
         for returned in [true, false] {
             m.carrier_power_returned = returned;

@@ -184,7 +184,11 @@ impl Supervisor {
                 };
                 if self.held_for(at_speed, now, self.config.at_speed_time_us) {
                     self.enter(SupervisorState::Vibrating, now);
-                } else if now.saturating_sub(self.entered_us) >= self.config.spin_up_timeout_us {
+                } else if i.open_loop_settled.is_none()
+                    && now.saturating_sub(self.entered_us) >= self.config.spin_up_timeout_us
+                {
+                    // An open-loop drive has no speed to reach (a shaft held on the force
+                    // gauge never turns); heartbeats and the current limit bound it.
                     return FaultFlags::CANNOT_RELEASE;
                 }
             }

@@ -28,4 +28,190 @@ pub enum RigError {
     /// JSON serialisation failed.
     #[error("cannot format JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// A row of the measured data that cannot be used.
+    #[error("{file} row {row} (line {line}): {why}")]
+    MeasuredRow {
+        /// The data file.
+        file: String,
+        /// Data row, 1-based (the header is not counted).
+        row: usize,
+        /// Line in the file, 1-based.
+        line: u64,
+        /// What is wrong and what the row needs.
+        why: String,
+    },
+    /// A required column is missing from the measured data.
+    #[error(
+        "{file}: missing required column {column} (found: {found}); the header needs omega_n_rad_s, tau_rot_nm and i_in_a"
+    )]
+    MissingColumn {
+        /// The data file.
+        file: String,
+        /// The missing column.
+        column: String,
+        /// The columns the header has.
+        found: String,
+    },
+    /// Measured data without a single data row.
+    #[error("{file} is empty: it needs a header and at least {min_rows} rows")]
+    EmptyData {
+        /// The data file.
+        file: String,
+        /// Rows the analysis needs.
+        min_rows: usize,
+    },
+    /// Measured data with too few usable rows.
+    #[error("{file} has only {rows} rows with a current: explain needs at least {min_rows}")]
+    TooFewRows {
+        /// The data file.
+        file: String,
+        /// Rows with a measured current.
+        rows: usize,
+        /// Rows the analysis needs.
+        min_rows: usize,
+    },
+    /// Measured data that is not readable as CSV with a header.
+    #[error("{file}: {why}")]
+    MeasuredFile {
+        /// The data file.
+        file: String,
+        /// What is wrong and what to do.
+        why: String,
+    },
+    /// A rig (model) file that cannot be used.
+    #[error("rig file {file}: {why}")]
+    RigFile {
+        /// The rig file.
+        file: String,
+        /// What is wrong and what to write instead.
+        why: String,
+    },
+    /// A file or folder that cannot be read or written.
+    #[error("cannot {action} {path}: {source}")]
+    File {
+        /// What was tried ("read", "write", "create folder").
+        action: &'static str,
+        /// The path.
+        path: String,
+        /// The operating system's reason.
+        source: std::io::Error,
+    },
+    /// A plot of a report that cannot be drawn.
+    #[error("cannot draw {path}: {why}")]
+    Plot {
+        /// The plot file.
+        path: String,
+        /// The drawing backend's reason.
+        why: String,
+    },
+    /// The device (real or simulated) broke the protocol or did not answer.
+    #[error("device protocol: {0}")]
+    Protocol(String),
+    /// A serial port that would not open.
+    #[error(
+        "cannot open serial port {port}: {why}; `rig ports` lists the serial ports of this machine (or use --sim for the virtual device)"
+    )]
+    PortOpen {
+        /// The port asked for.
+        port: String,
+        /// The operating system's reason, with what to do.
+        why: String,
+    },
+    /// No device was named.
+    #[error(
+        "no device given: pass --port PORT (`rig ports` lists them; RIG_PORT also works) or --sim for the virtual device"
+    )]
+    NoDevice,
+    /// The device did not answer a request.
+    #[error(
+        "no reply from the device on {port} to {request} within {waited_ms} ms ({tries} tries): {hint}"
+    )]
+    NoReply {
+        /// The port.
+        port: String,
+        /// The request.
+        request: &'static str,
+        /// Total time waited, ms.
+        waited_ms: u64,
+        /// How often it was sent.
+        tries: u32,
+        /// What came back instead and what to check.
+        hint: String,
+    },
+    /// The device refused a request.
+    #[error("the device refused {request} ({code:?}): {advice}")]
+    Refused {
+        /// The request.
+        request: &'static str,
+        /// The device's reason.
+        code: protocol::NackCode,
+        /// What to do.
+        advice: String,
+    },
+    /// Host tool and firmware speak different protocol versions.
+    #[error("{}", version_mismatch_text(*device, *host, advice))]
+    VersionMismatch {
+        /// The device's protocol version, when it said.
+        device: Option<u16>,
+        /// This tool's protocol version.
+        host: u16,
+        /// Which side to update, and how.
+        advice: String,
+    },
+    /// Same protocol version, different message layouts (development builds).
+    #[error(
+        "device and rig tool both speak protocol v{version} but their schemas differ (device {device_hash:#010x}, tool {host_hash:#010x}): build both from the same checkout (cargo fw-flash; cargo install --path host --locked)"
+    )]
+    SchemaMismatch {
+        /// The shared protocol version.
+        version: u16,
+        /// The device's schema hash.
+        device_hash: u32,
+        /// This tool's schema hash.
+        host_hash: u32,
+    },
+    /// Reading or writing the port failed after it was open.
+    #[error("lost the link to {port}: {source}; check the cable and that the board is powered")]
+    Link {
+        /// The port.
+        port: String,
+        /// The operating system's reason.
+        source: std::io::Error,
+    },
+    /// A fault latched on the device stopped what was asked.
+    #[error(
+        "{what}: the device latched {faults}; `rig faults` shows them, `rig clear` clears them once the cause is gone"
+    )]
+    DeviceFault {
+        /// What was running.
+        what: String,
+        /// The fault names.
+        faults: String,
+    },
+    /// A calibration file that cannot be used; nothing was sent to the device.
+    #[error("calibration file {file}: {why}; nothing was written to the device")]
+    CalibrationFile {
+        /// The file.
+        file: String,
+        /// What is wrong and what to write instead.
+        why: String,
+    },
+    /// Calibration measurements that cannot be fitted.
+    #[error("calibration: {0}")]
+    CalibrationFit(String),
+    /// The operator's input ended or could not be used.
+    #[error("{0}")]
+    Operator(String),
+    /// The virtual device could not start.
+    #[error("cannot start the virtual device: {0}")]
+    VirtualDevice(String),
+}
+
+fn version_mismatch_text(device: Option<u16>, host: u16, advice: &str) -> String {
+    match device {
+        Some(d) => format!("device speaks protocol v{d}, this rig tool v{host}: {advice}"),
+        None => format!(
+            "the device refused this rig tool's protocol v{host} and did not say its own: {advice}"
+        ),
+    }
 }

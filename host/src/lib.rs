@@ -2,9 +2,16 @@
 //! modules) the device client, the simulator and the reports.
 
 pub mod args;
+pub mod calibrate;
 pub mod cli;
+pub mod client;
 pub mod demo;
 pub mod design;
+pub mod device;
 pub mod error;
+pub mod explain;
+pub mod ports;
+pub mod rigfile;
+pub mod sim;
 
 pub use error::RigError;

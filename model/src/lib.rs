@@ -10,6 +10,7 @@
 
 pub mod calibration;
 pub mod dynamics;
+pub mod effects;
 pub mod excitation;
 pub mod friction;
 pub mod gear;

@@ -115,7 +115,9 @@ impl PlantParams {
             i_hat: crate::I_HAT_PAPER,
             load,
             supply: 12.0,
-            regeneration: true,
+            // The paper's bench supply cannot sink current, and actuators in general do not
+            // return negative power (the paper's ref. [18]).
+            regeneration: false,
             friction_split: false,
             cam: CamSetup::Coupled,
             sensors: SensorParams::default(),

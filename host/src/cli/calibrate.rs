@@ -1,0 +1,381 @@
+//! `rig calibrate`: the paper's vibrator calibration on the device (see
+//! [`crate::calibrate`]): measure, fit, report, plot, write the TOML file, and write the
+//! constants to the device after confirmation.
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+use super::connect::{DeviceOpts, Session, confirm};
+use crate::RigError;
+use crate::calibrate::bench::{OperatorBench, SimBench};
+use crate::calibrate::plot::{self, FitPlot};
+use crate::calibrate::{
+    self, Bench, CalibrationResult, Measurements, Plan, Progress, Setup, TABLE2, file,
+};
+
+/// Arguments of `rig calibrate`.
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// Folder for calibration.toml, the two fit plots (SVG) and the measured points (CSV).
+    #[arg(long, value_name = "DIR", default_value = "calibration")]
+    out: PathBuf,
+    /// Gauge torques (N mm) from this CSV (a `gauge_nmm` column, one row per torque step)
+    /// instead of typing them.
+    #[arg(long, value_name = "FILE")]
+    gauge_csv: Option<PathBuf>,
+    /// Write the result to the device without asking.
+    #[arg(long, short = 'y')]
+    yes: bool,
+    /// Measure, fit and report only: no files, nothing written to the device.
+    #[arg(long)]
+    dry_run: bool,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Files written by `rig calibrate`.
+#[derive(Debug, Serialize)]
+pub struct CalibrationFiles {
+    /// The calibration file.
+    pub calibration: String,
+    /// Torque-current fit plot.
+    pub torque_plot: String,
+    /// No-load fit plot.
+    pub no_load_plot: String,
+    /// Measured points.
+    pub points: String,
+}
+
+/// What `rig calibrate --json` prints.
+#[derive(Debug, Serialize)]
+pub struct CalibrateReport {
+    /// The fit (c1..c6 in the paper's units at the top level).
+    #[serde(flatten)]
+    pub result: CalibrationResult,
+    /// Units of c1..c6.
+    pub units: [&'static str; 6],
+    /// What was measured.
+    pub measurements: Measurements,
+    /// Files written (none for `--dry-run`).
+    pub files: Option<CalibrationFiles>,
+    /// Whether the constants were written to the device.
+    pub written_to_device: bool,
+    /// Whether this was a dry run.
+    pub dry_run: bool,
+    /// Whether the device was the virtual one.
+    pub sim: bool,
+}
+
+/// Units of C1..C6 as in Table 2.
+pub const UNITS: [&str; 6] = ["N mm/A", "N mm", "N mm s/rad", "N mm", "A s/rad", "A"];
+
+/// Runs `rig calibrate`.
+pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    let plan = Plan::default();
+    // Check the inputs before anything moves.
+    let gauge = a
+        .gauge_csv
+        .as_deref()
+        .map(|p| calibrate::read_gauge_csv(p, &plan))
+        .transpose()?;
+    if !a.dry_run {
+        std::fs::create_dir_all(&a.out).map_err(|source| RigError::File {
+            action: "create folder",
+            path: a.out.display().to_string(),
+            source,
+        })?;
+    }
+    let mut session = dev.connect()?;
+    let latched = session.client.faults()?.latched;
+    if !latched.is_empty() {
+        return Err(RigError::DeviceFault {
+            what: "calibrate needs a device without faults".into(),
+            faults: latched.to_string(),
+        });
+    }
+    let base = session.client.calibration()?;
+    let bar = progress_bar(&plan, a.json);
+    let Session { client, device, .. } = &mut session;
+    let mut sim_bench;
+    let mut operator_bench;
+    let bench: &mut dyn Bench = match device {
+        Some(d) => {
+            sim_bench = SimBench::new(d, gauge);
+            &mut sim_bench
+        }
+        None => {
+            operator_bench = OperatorBench::new(gauge, bar.clone());
+            &mut operator_bench
+        }
+    };
+    let measurements = calibrate::measure(client, bench, &plan, &mut |p| match p {
+        Progress::Step { setup, volts } => bar.set_message(format!(
+            "{} {volts:.2} V",
+            if setup == Setup::NoLoad {
+                "no-load sweep"
+            } else {
+                "torque step"
+            }
+        )),
+        Progress::Done => bar.inc(1),
+    })?;
+    bar.finish_and_clear();
+    let result = calibrate::analyse(&measurements)?;
+    let files = if a.dry_run {
+        None
+    } else {
+        Some(write_files(
+            &a.out,
+            &result,
+            &measurements,
+            &base,
+            session.port(),
+        )?)
+    };
+    let new_cal = result.apply_to(&base);
+    let write = if a.dry_run {
+        false
+    } else if a.yes {
+        true
+    } else {
+        print_text(&result, &measurements, files.as_ref(), false)?;
+        let ok = confirm("Write C1..C6 to the device?")?;
+        if !ok {
+            eprintln!(
+                "not written to the device (without a terminal, pass --yes); `rig calibration set {}` writes it later",
+                files
+                    .as_ref()
+                    .map_or("FILE".into(), |f| f.calibration.clone())
+            );
+        }
+        ok
+    };
+    if write {
+        session.client.set_calibration(&new_cal)?;
+        let back = session.client.calibration()?;
+        if back != new_cal {
+            return Err(RigError::Protocol(format!(
+                "the device stored a different calibration than sent on {}: {back:?}",
+                session.port()
+            )));
+        }
+    }
+    let report = CalibrateReport {
+        result,
+        units: UNITS,
+        measurements,
+        files,
+        written_to_device: write,
+        dry_run: a.dry_run,
+        sim: session.device.is_some(),
+    };
+    if a.json {
+        let mut out = std::io::stdout().lock();
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+    } else {
+        if a.dry_run || a.yes {
+            print_text(
+                &report.result,
+                &report.measurements,
+                report.files.as_ref(),
+                a.dry_run,
+            )?;
+        }
+        if write {
+            println!("written to the device on {}", session.port());
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn progress_bar(plan: &Plan, json: bool) -> ProgressBar {
+    if json || !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(plan.steps() as u64);
+    if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} steps  {msg}") {
+        bar.set_style(style);
+    }
+    bar
+}
+
+fn write_files(
+    dir: &Path,
+    r: &CalibrationResult,
+    m: &Measurements,
+    base: &protocol::Calibration,
+    port: &str,
+) -> Result<CalibrationFiles, RigError> {
+    let write = |path: &Path, bytes: &[u8]| {
+        std::fs::write(path, bytes).map_err(|source| RigError::File {
+            action: "write",
+            path: path.display().to_string(),
+            source,
+        })
+    };
+    let toml_path = dir.join("calibration.toml");
+    let ci = |v: [f64; 2]| format!("[{:.6}, {:.6}]", v[0], v[1]);
+    let fit = format!(
+        "torque_points = {}\ntorque_r_squared = {:.8}\ntorque_residual_sd_nmm = {:.5}\nc1_ci95 = {}\nc2_ci95 = {}\n\
+         no_load_points = {}\nno_load_r_squared = {:.8}\nno_load_residual_sd_a = {:.6}\nc5_ci95 = {}\nc6_ci95 = {}\n\
+         c3_ci95 = {}\nc4_ci95 = {}\nc3_direct = {:.6}\nc4_direct = {:.6}\nconsistent = {}\n",
+        r.torque_fit.n,
+        r.torque_fit.r_squared,
+        r.torque_fit.residual_sd,
+        ci(r.torque_fit.slope_ci95),
+        ci(r.torque_fit.intercept_ci95),
+        r.no_load_fit.n,
+        r.no_load_fit.r_squared,
+        r.no_load_fit.residual_sd,
+        ci(r.no_load_fit.slope_ci95),
+        ci(r.no_load_fit.intercept_ci95),
+        ci(r.consistency.c3_derived.ci95),
+        ci(r.consistency.c4_derived.ci95),
+        r.consistency.c3_direct,
+        r.consistency.c4_direct,
+        r.consistency.agree,
+    );
+    let cal = r.apply_to(base);
+    let text = file::to_toml(
+        &cal,
+        &format!("Vibrator calibration measured by `rig calibrate` on {port}."),
+        Some(&fit),
+    );
+    write(&toml_path, text.as_bytes())?;
+    let points_path = dir.join("points.csv");
+    let mut csv = Vec::new();
+    calibrate::write_points_csv(m, &mut csv).map_err(|e| RigError::MeasuredFile {
+        file: points_path.display().to_string(),
+        why: e.to_string(),
+    })?;
+    write(&points_path, &csv)?;
+    let torque_plot = dir.join("torque_current.svg");
+    let torque_points: Vec<(f64, f64)> = m
+        .torque
+        .iter()
+        .map(|p| (p.step.current_a, p.gauge_nmm))
+        .collect();
+    plot::draw(
+        &torque_plot,
+        &FitPlot {
+            title: "Torque-current: |tau_cam| = C1 i_in + C2 (Eq. 15)",
+            x_label: "current i_in, A",
+            y_label: "gauge torque, N mm",
+            points: &torque_points,
+            fit: &r.torque_fit,
+            reference: Some((TABLE2[0], TABLE2[1])),
+        },
+    )?;
+    let no_load_plot = dir.join("no_load.svg");
+    let no_load_points: Vec<(f64, f64)> = m
+        .no_load
+        .iter()
+        .filter(|s| s.cam_speed_rad_s > 0.02)
+        .map(|s| (s.cam_speed_rad_s, s.current_a))
+        .collect();
+    plot::draw(
+        &no_load_plot,
+        &FitPlot {
+            title: "No-load current: |i_loss| = C5 w_n + C6 (Eq. 17)",
+            x_label: "cam speed w_n, rad/s",
+            y_label: "current, A",
+            points: &no_load_points,
+            fit: &r.no_load_fit,
+            reference: Some((TABLE2[4], TABLE2[5])),
+        },
+    )?;
+    let s = |p: &Path| p.display().to_string();
+    Ok(CalibrationFiles {
+        calibration: s(&toml_path),
+        torque_plot: s(&torque_plot),
+        no_load_plot: s(&no_load_plot),
+        points: s(&points_path),
+    })
+}
+
+fn print_text(
+    r: &CalibrationResult,
+    m: &Measurements,
+    files: Option<&CalibrationFiles>,
+    dry_run: bool,
+) -> Result<(), RigError> {
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "no-load sweep: {} steps ({} stalled), torque steps: {}",
+        m.no_load.len(),
+        r.stalled_points,
+        m.torque.len()
+    )?;
+    writeln!(
+        out,
+        "  torque fit:  R^2 {:.6}, residual sd {:.3} N mm (max {:.3})",
+        r.torque_fit.r_squared, r.torque_fit.residual_sd, r.torque_fit.residual_max
+    )?;
+    writeln!(
+        out,
+        "  no-load fit: R^2 {:.6}, residual sd {:.2} mA (max {:.2})",
+        r.no_load_fit.r_squared,
+        r.no_load_fit.residual_sd * 1e3,
+        r.no_load_fit.residual_max * 1e3
+    )?;
+    let ci = [
+        r.torque_fit.slope_ci95,
+        r.torque_fit.intercept_ci95,
+        r.consistency.c3_derived.ci95,
+        r.consistency.c4_derived.ci95,
+        r.no_load_fit.slope_ci95,
+        r.no_load_fit.intercept_ci95,
+    ];
+    writeln!(
+        out,
+        "  {:<3} {:>11} {:>25} {:>10} {:>8}  unit",
+        "", "value", "95 % interval", "Table 2", "diff"
+    )?;
+    for (k, v) in r.versus_paper.iter().enumerate() {
+        writeln!(
+            out,
+            "  C{} {:>11.5} [{:>11.5}, {:>11.5}] {:>10} {:>+7.1}%  {}{}",
+            k + 1,
+            v.measured,
+            ci[k][0],
+            ci[k][1],
+            v.paper,
+            v.rel_error * 100.0,
+            UNITS[k],
+            match k {
+                2 => "  (C1 C5)",
+                3 => "  (C1 C6 + C2)",
+                _ => "",
+            }
+        )?;
+    }
+    writeln!(
+        out,
+        "  direct fit of the loss torque: C3 {:.5}, C4 {:.4}: {}",
+        r.consistency.c3_direct,
+        r.consistency.c4_direct,
+        if r.consistency.agree {
+            "agrees with C1 C5 and C1 C6 + C2"
+        } else {
+            "DISAGREES with C1 C5 and C1 C6 + C2"
+        }
+    )?;
+    match files {
+        Some(f) => writeln!(
+            out,
+            "  wrote {}, {}, {}, {}",
+            f.calibration, f.torque_plot, f.no_load_plot, f.points
+        )?,
+        None if dry_run => writeln!(out, "  dry run: no files written, the device unchanged")?,
+        None => {}
+    }
+    Ok(())
+}

@@ -1,0 +1,97 @@
+//! `rig info`: the device's identity, versions and calibration source.
+
+use std::io::Write;
+use std::process::ExitCode;
+
+use clap::Args;
+use protocol::{CalibrationStatus, DeviceInfo};
+use serde::Serialize;
+
+use super::connect::DeviceOpts;
+use crate::RigError;
+
+/// Arguments of `rig info`.
+#[derive(Debug, Args)]
+pub struct InfoArgs {
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What `rig info` prints.
+#[derive(Debug, Serialize)]
+pub struct InfoReport {
+    /// The port (or the virtual device's pseudo-terminal).
+    pub port: String,
+    /// Whether this is the virtual device.
+    pub sim: bool,
+    /// Firmware version, `major.minor.patch`.
+    pub firmware_version: String,
+    /// The firmware's protocol version.
+    pub protocol_version: u16,
+    /// The firmware's schema hash, hex.
+    pub schema_hash: String,
+    /// This tool's protocol version.
+    pub host_protocol_version: u16,
+    /// Board name.
+    pub board: String,
+    /// Where the active calibration came from: `valid`, `defaults` or `invalid`.
+    pub calibration_status: &'static str,
+}
+
+/// Lower-case name of a calibration status.
+pub fn calibration_status_name(s: CalibrationStatus) -> &'static str {
+    match s {
+        CalibrationStatus::Valid => "valid",
+        CalibrationStatus::Defaults => "defaults",
+        CalibrationStatus::Invalid => "invalid",
+        _ => "unknown",
+    }
+}
+
+impl InfoReport {
+    /// The report for `info` read on `port`.
+    pub fn new(info: &DeviceInfo, port: &str, sim: bool) -> Self {
+        Self {
+            port: port.to_owned(),
+            sim,
+            firmware_version: info.firmware_version.to_string(),
+            protocol_version: info.protocol_version,
+            schema_hash: format!("{:#010x}", info.schema_hash),
+            host_protocol_version: protocol::PROTOCOL_VERSION,
+            board: info.board.to_string(),
+            calibration_status: calibration_status_name(info.calibration_status),
+        }
+    }
+}
+
+/// Runs `rig info`.
+pub fn run(a: InfoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    let mut s = dev.connect()?;
+    let info = s.client.info()?;
+    let report = InfoReport::new(&info, s.port(), s.device.is_some());
+    let mut out = std::io::stdout().lock();
+    if a.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+    } else {
+        writeln!(out, "device     {} on {}", report.board, report.port)?;
+        writeln!(out, "firmware   {}", report.firmware_version)?;
+        writeln!(
+            out,
+            "protocol   v{} (schema {}), same as this tool",
+            report.protocol_version, report.schema_hash
+        )?;
+        let note = match info.calibration_status {
+            CalibrationStatus::Valid => "stored calibration in use",
+            CalibrationStatus::Defaults => {
+                "nothing stored: the paper's Table 2 values are in use (rig calibrate)"
+            }
+            _ => {
+                "the stored calibration failed its check: the paper's values are in use (rig calibrate, or rig calibration set FILE)"
+            }
+        };
+        writeln!(out, "calibration {}: {note}", report.calibration_status)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,492 @@
+//! `rig monitor`: live telemetry. In a terminal, a full-screen view with charts of the
+//! current, cam speed, tau_cam and the load estimate and the supervisor state (ratatui);
+//! `--plain` (or no terminal) prints one line per sample; `--csv FILE` logs every sample.
+
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use protocol::{SupervisorState, TelemetrySample};
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Style, Stylize};
+use ratatui::symbols::Marker;
+use ratatui::text::Line;
+use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType, Paragraph};
+
+use super::connect::{DeviceOpts, interrupt_flag};
+use crate::client::LinkStats;
+use crate::{RigError, args};
+
+/// Arguments of `rig monitor`.
+#[derive(Debug, Args)]
+pub struct MonitorArgs {
+    /// One line per sample instead of the full-screen view (the default without a terminal).
+    #[arg(long)]
+    plain: bool,
+    /// Also log every sample to this CSV file.
+    #[arg(long, value_name = "FILE")]
+    csv: Option<PathBuf>,
+    /// Stop after this many (device) seconds; default: until q or Ctrl-C.
+    #[arg(long, value_name = "S", value_parser = args::positive, allow_hyphen_values = true)]
+    seconds: Option<f64>,
+    /// Telemetry rate, samples per second (at most 1000).
+    #[arg(long, value_name = "HZ", default_value_t = 50, value_parser = clap::value_parser!(u16).range(1..=1000))]
+    rate: u16,
+    /// Vibrate at this frequency (Hz) while monitoring; locked again on exit. In the
+    /// full-screen view `r` toggles the release at this frequency (default 10 Hz).
+    #[arg(long, value_name = "HZ", value_parser = args::positive, allow_hyphen_values = true)]
+    release: Option<f64>,
+    /// One JSON object per sample (JSON lines) instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What a key in the full-screen view asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum KeyAction {
+    None,
+    Quit,
+    ToggleRelease,
+}
+
+/// CSV header of the monitor log.
+pub const CSV_HEADER: [&str; 10] = [
+    "device_time_s",
+    "state",
+    "cam_speed_rad_s",
+    "cam_hz",
+    "current_a",
+    "pwm_duty",
+    "tau_cam_nm",
+    "tau_rot_nm",
+    "faults",
+    "status",
+];
+
+fn csv_row(t: &TelemetrySample) -> [String; 10] {
+    [
+        format!("{:.6}", t.device_time_us as f64 * 1e-6),
+        t.state.name().to_owned(),
+        format!("{:.4}", t.cam_speed_rad_s),
+        format!("{:.4}", t.cam_speed_rad_s.abs() / std::f32::consts::TAU),
+        format!("{:.4}", t.current_a),
+        format!("{:.4}", t.pwm_duty),
+        format!("{:.6}", t.tau_cam_nm),
+        format!("{:.5}", t.tau_rot_nm),
+        t.faults.names().collect::<Vec<_>>().join("|"),
+        t.status.names().collect::<Vec<_>>().join("|"),
+    ]
+}
+
+/// One line of `--plain` output.
+pub fn plain_line(t: &TelemetrySample) -> String {
+    format!(
+        "{:10.3} s  {:<9} cam {:6.2} Hz  i {:6.3} A  duty {:+.3}  tau_cam {:7.2} N mm  tau_rot {:6.3} N m  faults {}",
+        t.device_time_us as f64 * 1e-6,
+        t.state.name(),
+        t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
+        t.current_a,
+        t.pwm_duty,
+        t.tau_cam_nm * 1e3,
+        t.tau_rot_nm,
+        t.faults
+    )
+}
+
+/// The full-screen view's state: the last [`MonitorView::WINDOW_S`] seconds of samples.
+#[derive(Debug, Default)]
+pub struct MonitorView {
+    history: VecDeque<TelemetrySample>,
+    series: [Vec<(f64, f64)>; 4],
+    port: String,
+    stats: LinkStats,
+    /// A message for the operator (the last release toggle's outcome).
+    pub note: Option<String>,
+}
+
+impl MonitorView {
+    /// Seconds of history on the charts.
+    pub const WINDOW_S: f64 = 10.0;
+
+    /// An empty view of the device on `port`.
+    pub fn new(port: &str) -> Self {
+        Self {
+            port: port.to_owned(),
+            ..Self::default()
+        }
+    }
+
+    /// Adds a sample, forgetting those older than the window.
+    pub fn push(&mut self, t: TelemetrySample) {
+        let now = t.device_time_us;
+        self.history.push_back(t);
+        while self
+            .history
+            .front()
+            .is_some_and(|f| (now - f.device_time_us) as f64 * 1e-6 > Self::WINDOW_S)
+        {
+            self.history.pop_front();
+        }
+    }
+
+    /// Records the link counters to show.
+    pub fn set_stats(&mut self, stats: LinkStats) {
+        self.stats = stats;
+    }
+
+    /// Draws the view into `frame`.
+    pub fn render(&mut self, frame: &mut Frame<'_>) {
+        let [status, top, bottom] = Layout::vertical([
+            Constraint::Length(5),
+            Constraint::Fill(1),
+            Constraint::Fill(1),
+        ])
+        .areas(frame.area());
+        let [a, b] = Layout::horizontal([Constraint::Fill(1); 2]).areas(top);
+        let [c, d] = Layout::horizontal([Constraint::Fill(1); 2]).areas(bottom);
+        frame.render_widget(self.status(), status);
+        let now = self.history.back().map_or(0, |t| t.device_time_us);
+        let values: [fn(&TelemetrySample) -> f64; 4] = [
+            |t| f64::from(t.current_a),
+            |t| f64::from(t.cam_speed_rad_s.abs()) / std::f64::consts::TAU,
+            |t| f64::from(t.tau_cam_nm) * 1e3,
+            |t| f64::from(t.tau_rot_nm),
+        ];
+        for (k, value) in values.iter().enumerate() {
+            self.series[k] = self
+                .history
+                .iter()
+                .map(|t| (-((now - t.device_time_us) as f64) * 1e-6, value(t)))
+                .collect();
+        }
+        let titles = [
+            ("current i_in, A", Color::Yellow),
+            ("cam speed, Hz", Color::Cyan),
+            ("tau_cam (estimate), N mm", Color::Green),
+            ("load tau_rot (estimate), N m", Color::Magenta),
+        ];
+        for ((area, series), (title, color)) in
+            [a, b, c, d].into_iter().zip(&self.series).zip(titles)
+        {
+            render_chart(frame, area, title, color, series);
+        }
+    }
+
+    fn status(&self) -> Paragraph<'static> {
+        let Some(t) = self.history.back() else {
+            return Paragraph::new(format!("waiting for telemetry from {} ...", self.port))
+                .block(Block::bordered().title(" rig monitor "));
+        };
+        let state_color = match t.state {
+            SupervisorState::Locked => Color::Green,
+            SupervisorState::SpinUp | SupervisorState::Stopping => Color::Yellow,
+            SupervisorState::Vibrating => Color::Cyan,
+            _ => Color::Red,
+        };
+        let line1 = Line::from(vec![
+            "state ".into(),
+            t.state.name().to_uppercase().fg(state_color).bold(),
+            format!(
+                "   t {:.2} s   cam {:.2} Hz   i {:.3} A   duty {:+.3}   tau_cam {:.2} N mm   tau_rot {:.3} N m",
+                t.device_time_us as f64 * 1e-6,
+                t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
+                t.current_a,
+                t.pwm_duty,
+                t.tau_cam_nm * 1e3,
+                t.tau_rot_nm
+            )
+            .into(),
+        ]);
+        let faults = if t.faults.is_empty() {
+            "faults none".to_owned().fg(Color::Green)
+        } else {
+            format!("faults {}", t.faults).fg(Color::Red).bold()
+        };
+        let line2 = Line::from(vec![
+            faults,
+            format!(
+                "   status {}   link: {} frames, {} bad, {} samples lost   r release/lock, q quit",
+                t.status, self.stats.frames_ok, self.stats.frame_errors, self.stats.telemetry_lost
+            )
+            .into(),
+        ]);
+        let line3 = Line::from(self.note.clone().unwrap_or_default()).fg(Color::Yellow);
+        Paragraph::new(vec![line1, line2, line3])
+            .block(Block::bordered().title(format!(" rig monitor: {} ", self.port)))
+    }
+}
+
+fn render_chart(
+    frame: &mut Frame<'_>,
+    area: Rect,
+    title: &str,
+    color: Color,
+    series: &[(f64, f64)],
+) {
+    let (lo, hi) = series
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.1), hi.max(p.1))
+        });
+    let (lo, hi) = if lo.is_finite() {
+        let pad = ((hi - lo) * 0.1).max(1e-3 * hi.abs().max(1.0));
+        (lo - pad, hi + pad)
+    } else {
+        (0.0, 1.0)
+    };
+    let dataset = Dataset::default()
+        .marker(Marker::Braille)
+        .graph_type(GraphType::Line)
+        .style(Style::default().fg(color))
+        .data(series);
+    let chart = Chart::new(vec![dataset])
+        .block(Block::bordered().title(format!(" {title} ")))
+        .x_axis(
+            Axis::default()
+                .bounds([-MonitorView::WINDOW_S, 0.0])
+                .labels([format!("-{:.0} s", MonitorView::WINDOW_S), "now".into()]),
+        )
+        .y_axis(
+            Axis::default()
+                .bounds([lo, hi])
+                .labels([format!("{lo:.2}"), format!("{hi:.2}")]),
+        );
+    frame.render_widget(chart, area);
+}
+
+/// Runs `rig monitor`.
+pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    let stop = interrupt_flag();
+    let mut csv = match &a.csv {
+        Some(path) => {
+            let file = File::create(path).map_err(|source| RigError::File {
+                action: "create",
+                path: path.display().to_string(),
+                source,
+            })?;
+            let mut w = csv::Writer::from_writer(file);
+            w.write_record(CSV_HEADER).map_err(csv_error(path))?;
+            Some(w)
+        }
+        None => None,
+    };
+    let mut s = dev.connect()?;
+    s.client.start_telemetry(a.rate)?;
+    let full_screen =
+        !a.plain && !a.json && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
+    let mut terminal = if full_screen {
+        Some(ratatui::try_init().map_err(RigError::Output)?)
+    } else {
+        None
+    };
+    let release_hz = a.release.unwrap_or(10.0);
+    let mut released = false;
+    if a.release.is_some() {
+        s.client.release(true, release_hz as f32)?;
+        released = true;
+    }
+    let mut view = MonitorView::new(s.port());
+    let mut out = std::io::stdout().lock();
+    let mut first = None;
+    let mut count = 0u64;
+    let mut last_draw = Instant::now() - Duration::from_secs(1);
+    let result = (|| -> Result<(), RigError> {
+        loop {
+            if stop.load(Ordering::SeqCst) {
+                return Ok(());
+            }
+            if terminal.is_some() {
+                match key_action()? {
+                    KeyAction::Quit => return Ok(()),
+                    KeyAction::ToggleRelease => {
+                        let on = !released;
+                        view.note = Some(match s.client.release(on, release_hz as f32) {
+                            Ok(()) => {
+                                released = on;
+                                if on {
+                                    format!("released at {release_hz} Hz: the load can move")
+                                } else {
+                                    "locked".into()
+                                }
+                            }
+                            Err(e) => e.to_string(),
+                        });
+                    }
+                    KeyAction::None => {}
+                }
+            }
+            if let Some(t) = s.client.next_telemetry(Duration::from_millis(30))? {
+                count += 1;
+                let start = *first.get_or_insert(t.device_time_us);
+                if let Some(w) = csv.as_mut() {
+                    w.write_record(csv_row(&t)).map_err(csv_error(
+                        a.csv.as_deref().unwrap_or(std::path::Path::new("")),
+                    ))?;
+                }
+                if a.json {
+                    serde_json::to_writer(&mut out, &sample_json(&t))?;
+                    writeln!(out)?;
+                } else if terminal.is_none() {
+                    writeln!(out, "{}", plain_line(&t))?;
+                }
+                view.push(t);
+                if a.seconds
+                    .is_some_and(|limit| (t.device_time_us - start) as f64 * 1e-6 >= limit)
+                {
+                    return Ok(());
+                }
+            }
+            if let Some(term) = terminal.as_mut()
+                && last_draw.elapsed() >= Duration::from_millis(50)
+            {
+                view.set_stats(s.client.stats());
+                term.draw(|f| view.render(f)).map_err(RigError::Output)?;
+                last_draw = Instant::now();
+            }
+        }
+    })();
+    if terminal.is_some() {
+        let _ = ratatui::try_restore();
+    }
+    // A reader that went away (`rig monitor --plain | head`) ends the monitor normally.
+    let result = match result {
+        Err(RigError::Output(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => other,
+    };
+    if released {
+        // Lock before leaving; should this fail, the device stops at its comms timeout.
+        let _ = s.client.release(false, 0.0);
+    }
+    let _ = s.client.stop_telemetry();
+    if let Some(mut w) = csv {
+        w.flush()?;
+    }
+    result?;
+    if !a.json {
+        let st = s.client.stats();
+        eprintln!(
+            "{count} samples; {} lost in the stream, {} bad frames",
+            st.telemetry_lost, st.frame_errors
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn csv_error(path: &std::path::Path) -> impl Fn(csv::Error) -> RigError + '_ {
+    move |e| RigError::MeasuredFile {
+        file: path.display().to_string(),
+        why: format!("cannot write the log: {e}"),
+    }
+}
+
+/// A telemetry sample as a JSON object (SI units, names as in the CSV).
+pub fn sample_json(t: &TelemetrySample) -> serde_json::Value {
+    serde_json::json!({
+        "device_time_s": t.device_time_us as f64 * 1e-6,
+        "seq": t.seq,
+        "state": t.state.name(),
+        "cam_speed_rad_s": t.cam_speed_rad_s,
+        "current_a": t.current_a,
+        "pwm_duty": t.pwm_duty,
+        "tau_cam_nm": t.tau_cam_nm,
+        "tau_rot_nm": t.tau_rot_nm,
+        "faults": t.faults.names().collect::<Vec<_>>(),
+        "status": t.status.names().collect::<Vec<_>>(),
+    })
+}
+
+/// The key pressed, if any: q, Esc or Ctrl-C quit (the terminal is in raw mode, so Ctrl-C
+/// is a key), r toggles the release.
+fn key_action() -> Result<KeyAction, RigError> {
+    use ratatui::crossterm::event::{self, Event, KeyCode, KeyEventKind, KeyModifiers};
+    while event::poll(Duration::ZERO).map_err(RigError::Output)? {
+        if let Event::Key(k) = event::read().map_err(RigError::Output)?
+            && k.kind == KeyEventKind::Press
+        {
+            let ctrl_c =
+                k.code == KeyCode::Char('c') && k.modifiers.contains(KeyModifiers::CONTROL);
+            if ctrl_c || matches!(k.code, KeyCode::Char('q') | KeyCode::Esc) {
+                return Ok(KeyAction::Quit);
+            }
+            if k.code == KeyCode::Char('r') {
+                return Ok(KeyAction::ToggleRelease);
+            }
+        }
+    }
+    Ok(KeyAction::None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{FaultFlags, StatusFlags};
+    use ratatui::Terminal;
+    use ratatui::backend::TestBackend;
+
+    fn sample(ms: u64, state: SupervisorState) -> TelemetrySample {
+        TelemetrySample {
+            seq: ms as u32,
+            device_time_us: ms * 1000,
+            cam_speed_rad_s: 62.832,
+            current_a: 2.5,
+            pwm_duty: 0.3,
+            tau_cam_nm: 0.05,
+            tau_rot_nm: 1.2,
+            state,
+            faults: FaultFlags::empty(),
+            status: StatusFlags::HOST_RELEASE,
+        }
+    }
+
+    #[test]
+    fn view_renders_state_and_the_four_charts() {
+        let mut view = MonitorView::new("/dev/pts/9");
+        for ms in (0..12_000).step_by(20) {
+            view.push(sample(ms, SupervisorState::Vibrating));
+        }
+        // The window keeps 10 s.
+        assert!(view.history.len() <= 502);
+        view.note = Some("released at 10 Hz".into());
+        let mut term = Terminal::new(TestBackend::new(120, 40)).unwrap();
+        term.draw(|f| view.render(f)).unwrap();
+        let text: String = term
+            .backend()
+            .buffer()
+            .content()
+            .iter()
+            .map(|c| c.symbol())
+            .collect();
+        for want in [
+            "VIBRATING",
+            "current i_in",
+            "cam speed",
+            "tau_cam",
+            "tau_rot",
+            "10.00 Hz",
+            "/dev/pts/9",
+            "released at 10 Hz",
+        ] {
+            assert!(text.contains(want), "missing {want}");
+        }
+    }
+
+    #[test]
+    fn plain_line_and_csv_row_agree() {
+        let t = sample(1500, SupervisorState::Locked);
+        let line = plain_line(&t);
+        assert!(
+            line.contains("1.500 s") && line.contains("locked") && line.contains("10.00 Hz"),
+            "{line}"
+        );
+        let row = csv_row(&t);
+        assert_eq!(row.len(), CSV_HEADER.len());
+        assert_eq!(row[1], "locked");
+        assert_eq!(row[9], "HOST_RELEASE");
+    }
+}

@@ -1,0 +1,239 @@
+//! `rig sim <scenario>`: the paper's experiments and the fault drills on the simulated rig
+//! (firmware core + plant in closed loop, virtual time).
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Subcommand};
+
+use crate::RigError;
+use crate::sim::scenarios::{faults, fig5, sweep, table1};
+
+/// Arguments of `rig sim`.
+#[derive(Debug, Args)]
+pub struct SimArgs {
+    /// The scenario.
+    #[command(subcommand)]
+    pub scenario: Scenario,
+}
+
+/// The scenarios.
+#[derive(Debug, Subcommand)]
+pub enum Scenario {
+    /// Fig. 5: (50, 49) with 1 kg on 75 mm, held without vibration, falls once released.
+    Fig5(Fig5Args),
+    /// Table 1: the six gear sets at 3.68 N m, with and without vibration.
+    Table1(Table1Args),
+    /// Figs. 8-9: current and cam torque over load (0.368-3.68 N m) at 3.6, 6.2, 8.8 V.
+    TorqueSweep(SweepArgs),
+    /// Fault drills: overcurrent (jammed cam), encoder-loss, comms-loss, bad-calibration.
+    Faults(FaultArgs),
+}
+
+/// Arguments of `rig sim fig5`.
+#[derive(Debug, Args)]
+pub struct Fig5Args {
+    /// Hold phase without vibration, s (the paper held 14.5 s).
+    #[arg(long, default_value_t = 14.5, value_parser = crate::args::positive)]
+    pub hold: f64,
+    /// Vibration frequency of the release, Hz (3.6 V gave about 5 Hz).
+    #[arg(long, default_value_t = 5.0, value_parser = crate::args::positive)]
+    pub freq: f64,
+    /// Sensor-noise seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `rig sim table1`.
+#[derive(Debug, Args)]
+pub struct Table1Args {
+    /// Vibration frequency of the release, Hz.
+    #[arg(long, default_value_t = 10.0, value_parser = crate::args::positive)]
+    pub freq: f64,
+    /// Sensor-noise seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `rig sim torque-sweep`.
+#[derive(Debug, Args)]
+pub struct SweepArgs {
+    /// Number of load levels from 0.368 to 3.68 N m (at least 2).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(2..=100))]
+    pub levels: u32,
+    /// Repeats per point.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub repeats: u32,
+    /// Rest between points, s (the motor cools).
+    #[arg(long, default_value_t = 10.0, value_parser = crate::args::non_negative)]
+    pub rest: f64,
+    /// Seed of the noise and the test order.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write one row per test point to this CSV file.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Print a JSON summary.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `rig sim faults`.
+#[derive(Debug, Args)]
+pub struct FaultArgs {
+    /// Drills to run (default: all).
+    #[arg(value_parser = clap::builder::PossibleValuesParser::new(faults::DRILLS))]
+    pub drills: Vec<String>,
+    /// Sensor-noise seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `rig sim`.
+pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
+    let mut out = std::io::stdout().lock();
+    match a.scenario {
+        Scenario::Fig5(a) => {
+            let opts = fig5::Fig5Options {
+                hold_s: a.hold,
+                vibration_hz: a.freq as f32,
+                seed: a.seed,
+                ..Default::default()
+            };
+            let r = fig5::run(&opts)?;
+            if a.json {
+                serde_json::to_writer_pretty(&mut out, &r)?;
+                writeln!(out)?;
+            } else {
+                writeln!(out, "fig5, (Z1, Z4) = (50, 49), 1.0 kg on 75 mm:")?;
+                writeln!(
+                    out,
+                    "  held without vibration for {:.1} s: {}",
+                    r.hold_s, r.held_without_vibration
+                )?;
+                match r.release_to_motion_s {
+                    Some(t) => writeln!(out, "  load moved {:.3} s after the release request", t)?,
+                    None => writeln!(out, "  load did not move after the release request")?,
+                }
+                writeln!(
+                    out,
+                    "  output speed after the cam stopped: {:.3} rad/s (mu_d*Lambda = {:.3})",
+                    r.output_speed_after_stop_rad_s, r.mu_d_lambda
+                )?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Scenario::Table1(a) => {
+            let rows = table1::run(&model::TABLE1, a.freq as f32, a.seed)?;
+            if a.json {
+                serde_json::to_writer_pretty(&mut out, &rows)?;
+                writeln!(out)?;
+            } else {
+                writeln!(out, "table1 at tau_rot = {} N m:", table1::TAU_ROT)?;
+                for r in &rows {
+                    writeln!(
+                        out,
+                        "  {:?} n={} without vibration: {:<11} with vibration: {:<11} {}",
+                        r.z,
+                        r.n,
+                        if r.backdriven_without_vibration {
+                            "backdriven"
+                        } else {
+                            "held"
+                        },
+                        if r.backdriven_with_vibration {
+                            "backdriven"
+                        } else {
+                            "held"
+                        },
+                        if r.agrees_with_paper {
+                            "as in the paper"
+                        } else {
+                            "DIFFERS from the paper"
+                        }
+                    )?;
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Scenario::TorqueSweep(a) => {
+            let n = a.levels as f64;
+            let opts = sweep::SweepOptions {
+                loads: (0..a.levels)
+                    .map(|k| 0.368 + (3.68 - 0.368) * k as f64 / (n - 1.0))
+                    .collect(),
+                repeats: a.repeats,
+                rest_s: a.rest,
+                seed: a.seed,
+                ..Default::default()
+            };
+            let points = sweep::run(&opts)?;
+            if let Some(path) = &a.csv {
+                sweep::write_csv(&points, path)?;
+            }
+            let summary = sweep::summarise(&points, &opts);
+            if a.json {
+                serde_json::to_writer_pretty(&mut out, &summary)?;
+                writeln!(out)?;
+            } else {
+                writeln!(out, "torque sweep: {} points", summary.points)?;
+                for (v, hz) in &summary.mean_hz_per_voltage {
+                    writeln!(out, "  {v:.1} V: {hz:.2} Hz mean cam frequency")?;
+                }
+                writeln!(
+                    out,
+                    "  current grows with load: {}, with speed: {}",
+                    summary.current_grows_with_load, summary.current_grows_with_speed
+                )?;
+                writeln!(
+                    out,
+                    "  tau_cam estimate grows with load: {}, with speed: {}",
+                    summary.tau_cam_grows_with_load, summary.tau_cam_grows_with_speed
+                )?;
+                writeln!(
+                    out,
+                    "  RMS(tau_cam measured - Eq. 10) = {:.2} N mm",
+                    summary.rmse_tau_cam_vs_eq10_nm * 1e3
+                )?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Scenario::Faults(a) => {
+            let outcomes = faults::run(&a.drills, a.seed)?;
+            if a.json {
+                serde_json::to_writer_pretty(&mut out, &outcomes)?;
+                writeln!(out)?;
+            } else {
+                for o in &outcomes {
+                    writeln!(
+                        out,
+                        "  {:<16} motor off: {:<5} latched: {:<5} safe after {} faults: {}",
+                        o.name,
+                        o.motor_off,
+                        o.fault_latched,
+                        o.time_to_safe_s
+                            .map(|t| format!("{t:.3} s"))
+                            .unwrap_or_else(|| "never".into()),
+                        o.faults.join(",")
+                    )?;
+                }
+            }
+            let all_safe = outcomes.iter().all(|o| o.motor_off && o.fault_latched);
+            Ok(if all_safe {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
+        }
+    }
+}

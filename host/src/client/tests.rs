@@ -1,0 +1,363 @@
+//! The client against scripted fake devices over an in-memory pipe.
+
+use std::io::{Read, Write};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::thread;
+use std::time::Duration;
+
+use protocol::{
+    CalibrationStatus, CaptureChunk, CaptureSample, DeviceInfo, DeviceMessage, FaultFlags,
+    FirmwareVersion, Frame, NackCode, PROTOCOL_VERSION, Request, RequestDeframer, SCHEMA_HASH,
+};
+
+use super::*;
+
+fn device_info(protocol_version: u16, schema_hash: u32) -> DeviceInfo {
+    DeviceInfo {
+        firmware_version: FirmwareVersion {
+            major: 0,
+            minor: 1,
+            patch: 0,
+        },
+        protocol_version,
+        schema_hash,
+        board: "fake".try_into().unwrap(),
+        calibration_status: CalibrationStatus::Defaults,
+    }
+}
+
+/// Runs a fake device on the far end of a pipe: `answer` maps each request (with its
+/// sequence number) to the frames to send back, as `(frame seq, message)`.
+fn fake_device(
+    mut answer: impl FnMut(u16, Request) -> Vec<(u16, DeviceMessage)> + Send + 'static,
+) -> Client<PipeEnd> {
+    let (host, mut dev) = memory_pipe(Duration::from_millis(2));
+    thread::spawn(move || {
+        let mut deframer = RequestDeframer::new();
+        let mut buf = [0u8; 512];
+        loop {
+            let n = match dev.read(&mut buf) {
+                Ok(n) => n,
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
+                Err(_) => return,
+            };
+            let mut requests = Vec::new();
+            deframer.push(&buf[..n], |f| requests.push(f));
+            for Frame { seq, msg } in requests.into_iter().flatten() {
+                for (out_seq, reply) in answer(seq, msg) {
+                    let frame = protocol::encode_frame_vec(out_seq, &reply).unwrap();
+                    if dev.write_all(&frame).is_err() {
+                        return;
+                    }
+                }
+            }
+        }
+    });
+    let mut opts = ClientOptions::new("test pipe");
+    opts.reply_timeout = Duration::from_millis(50);
+    Client::new(host, opts)
+}
+
+/// A well-behaved device: Info for hello, Ack for the rest.
+fn good_answer(seq: u16, req: Request) -> Vec<(u16, DeviceMessage)> {
+    let msg = match req {
+        Request::Hello { .. } | Request::GetInfo => {
+            DeviceMessage::Info(device_info(PROTOCOL_VERSION, SCHEMA_HASH))
+        }
+        Request::GetFaults => DeviceMessage::Faults {
+            active: FaultFlags::empty(),
+            latched: FaultFlags::COMMS_TIMEOUT,
+        },
+        Request::GetCalibration => DeviceMessage::Calibration(protocol::Calibration::paper()),
+        _ => DeviceMessage::Ack { seq },
+    };
+    vec![(seq, msg)]
+}
+
+#[test]
+fn hello_and_requests_are_matched_by_seq() {
+    let mut c = fake_device(good_answer);
+    let info = c.hello().unwrap();
+    assert_eq!(info.protocol_version, PROTOCOL_VERSION);
+    let f = c.faults().unwrap();
+    assert_eq!(f.latched, FaultFlags::COMMS_TIMEOUT);
+    assert_eq!(c.calibration().unwrap(), protocol::Calibration::paper());
+    c.release(true, 10.0).unwrap();
+    assert!(c.keeping_alive());
+    c.release(false, 0.0).unwrap();
+    assert!(!c.keeping_alive());
+    assert_eq!(c.stats().retries, 0);
+}
+
+#[test]
+fn newer_device_says_update_the_host() {
+    let mut c = fake_device(|seq, _| {
+        vec![(
+            seq,
+            DeviceMessage::Info(device_info(PROTOCOL_VERSION + 1, 7)),
+        )]
+    });
+    let e = c.hello().unwrap_err().to_string();
+    assert!(
+        e.contains(&format!("protocol v{}", PROTOCOL_VERSION + 1)),
+        "{e}"
+    );
+    assert!(e.contains("update the host tool"), "{e}");
+}
+
+#[test]
+fn older_device_says_flash_the_firmware() {
+    let mut c = fake_device(|seq, _| {
+        vec![(
+            seq,
+            DeviceMessage::Info(device_info(PROTOCOL_VERSION - 1, 7)),
+        )]
+    });
+    let e = c.hello().unwrap_err().to_string();
+    assert!(e.contains("cargo fw-flash"), "{e}");
+}
+
+#[test]
+fn same_version_other_schema_is_refused() {
+    let mut c = fake_device(|seq, _| {
+        vec![(
+            seq,
+            DeviceMessage::Info(device_info(PROTOCOL_VERSION, SCHEMA_HASH ^ 1)),
+        )]
+    });
+    let e = c.hello().unwrap_err().to_string();
+    assert!(e.contains("schema"), "{e}");
+}
+
+#[test]
+fn version_nack_is_explained() {
+    let mut c = fake_device(|seq, req| match req {
+        Request::Hello { .. } => vec![(
+            seq,
+            DeviceMessage::Nack {
+                seq,
+                code: NackCode::VersionMismatch,
+            },
+        )],
+        _ => vec![(
+            seq,
+            DeviceMessage::Info(device_info(PROTOCOL_VERSION + 3, 1)),
+        )],
+    });
+    let e = c.hello().unwrap_err().to_string();
+    assert!(e.contains("update the host tool"), "{e}");
+}
+
+#[test]
+fn lost_replies_are_retried_for_idempotent_requests_only() {
+    let calls = Arc::new(AtomicU32::new(0));
+    let seen = Arc::clone(&calls);
+    let mut c = fake_device(move |seq, req| {
+        // The first try of every request goes unanswered.
+        if seen.fetch_add(1, Ordering::SeqCst).is_multiple_of(2) {
+            return vec![];
+        }
+        good_answer(seq, req)
+    });
+    c.info().unwrap();
+    assert_eq!(c.stats().retries, 1);
+    calls.store(0, Ordering::SeqCst);
+    let e = c
+        .ack(&Request::StartCapture {
+            sample_rate_hz: 10_000,
+            samples: 10,
+        })
+        .unwrap_err();
+    assert!(matches!(e, RigError::NoReply { tries: 1, .. }), "{e}");
+}
+
+#[test]
+fn silent_device_is_a_clear_error() {
+    let mut c = fake_device(|_, _| vec![]);
+    let e = c.hello().unwrap_err().to_string();
+    assert!(e.contains("no reply"), "{e}");
+    assert!(e.contains("test pipe"), "{e}");
+    assert!(e.contains("nothing came back"), "{e}");
+}
+
+#[test]
+fn garbage_suggests_the_baud_rate() {
+    let (host, mut dev) = memory_pipe(Duration::from_millis(2));
+    thread::spawn(move || {
+        let mut buf = [0u8; 64];
+        loop {
+            match dev.read(&mut buf) {
+                // What a device at another baud rate looks like: bytes, but never a frame.
+                Ok(_) => {
+                    if dev
+                        .write_all(&[0x55, 0x13, 0xF0, 0x00, 0x7E, 0x00])
+                        .is_err()
+                    {
+                        return;
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
+                Err(_) => return,
+            }
+        }
+    });
+    let mut opts = ClientOptions::new("test pipe");
+    opts.reply_timeout = Duration::from_millis(30);
+    let mut c = Client::new(host, opts);
+    let e = c.hello().unwrap_err().to_string();
+    assert!(e.contains("--baud"), "{e}");
+}
+
+#[test]
+fn nack_names_the_request_and_the_fix() {
+    let mut c = fake_device(|seq, _| {
+        vec![(
+            seq,
+            DeviceMessage::Nack {
+                seq,
+                code: NackCode::InFaultHold,
+            },
+        )]
+    });
+    let e = c.release(true, 10.0).unwrap_err().to_string();
+    assert!(e.contains("Release(on)"), "{e}");
+    assert!(e.contains("rig clear"), "{e}");
+    assert!(!c.keeping_alive());
+}
+
+#[test]
+fn stale_and_unsolicited_frames_do_not_answer_requests() {
+    let mut c = fake_device(|seq, req| {
+        let mut out = vec![
+            // A late answer to an older request, and a telemetry sample in between.
+            (
+                seq.wrapping_sub(1),
+                DeviceMessage::Ack {
+                    seq: seq.wrapping_sub(1),
+                },
+            ),
+            (
+                900,
+                DeviceMessage::FaultEvent {
+                    flags: FaultFlags::STALL,
+                    device_time_us: 5,
+                },
+            ),
+        ];
+        out.extend(good_answer(seq, req));
+        out
+    });
+    c.heartbeat().unwrap();
+    c.info().unwrap();
+    assert!(c.stats().stale_replies >= 2);
+    assert_eq!(c.take_fault_events(), vec![(FaultFlags::STALL, 5); 2]);
+}
+
+#[test]
+fn heartbeats_keep_a_release_alive_while_waiting() {
+    let beats = Arc::new(AtomicU32::new(0));
+    let counter = Arc::clone(&beats);
+    let mut c = fake_device(move |seq, req| {
+        if matches!(req, Request::Heartbeat) {
+            counter.fetch_add(1, Ordering::SeqCst);
+        }
+        good_answer(seq, req)
+    });
+    c.release(true, 10.0).unwrap();
+    // 0.5 s of waiting at 10x speed: about 33 heartbeats of 15 ms.
+    c.opts.time_scale = 10.0;
+    assert!(c.recv(Duration::from_millis(500)).unwrap().is_none());
+    let n = beats.load(Ordering::SeqCst);
+    assert!((20..=40).contains(&n), "{n} heartbeats");
+    assert_eq!(c.stats().stale_replies, 0, "heartbeat acks are expected");
+    c.release(false, 0.0).unwrap();
+    let before = beats.load(Ordering::SeqCst);
+    c.recv(Duration::from_millis(100)).unwrap();
+    assert_eq!(beats.load(Ordering::SeqCst), before);
+}
+
+#[test]
+fn telemetry_gaps_are_counted() {
+    let mut c = fake_device(|seq, req| {
+        let mut out = good_answer(seq, req.clone());
+        if matches!(req, Request::StartTelemetry { .. }) {
+            for s in [1u32, 2, 5, 6] {
+                let t = protocol::TelemetrySample {
+                    seq: s,
+                    device_time_us: u64::from(s) * 1000,
+                    cam_speed_rad_s: 0.0,
+                    current_a: 0.0,
+                    pwm_duty: 0.0,
+                    tau_cam_nm: 0.0,
+                    tau_rot_nm: 0.0,
+                    state: protocol::SupervisorState::Locked,
+                    faults: FaultFlags::empty(),
+                    status: protocol::StatusFlags::empty(),
+                };
+                out.push((1000 + s as u16, DeviceMessage::Telemetry(t)));
+            }
+        }
+        out
+    });
+    c.start_telemetry(100).unwrap();
+    let mut got = Vec::new();
+    while let Some(t) = c.next_telemetry(Duration::from_millis(50)).unwrap() {
+        got.push(t.seq);
+    }
+    assert_eq!(got, vec![1, 2, 5, 6]);
+    assert_eq!(c.stats().telemetry_lost, 2);
+}
+
+#[test]
+fn capture_is_assembled_and_drops_reported() {
+    let mut c = fake_device(|seq, req| {
+        let mut out = good_answer(seq, req.clone());
+        if let Request::StartCapture { samples, .. } = req {
+            let chunk = |first: u32| {
+                DeviceMessage::CaptureChunk(CaptureChunk {
+                    capture_id: 9,
+                    first_sample: first,
+                    total_samples: samples,
+                    samples: (first..first + 32)
+                        .map(|i| CaptureSample {
+                            current_adc: 2068 + 28,
+                            encoder_count: i as i32,
+                        })
+                        .collect(),
+                })
+            };
+            out.push((2, chunk(0)));
+            // Chunk 32..64 is lost on the way.
+            out.push((4, chunk(64)));
+            out.push((
+                5,
+                DeviceMessage::CaptureDone {
+                    capture_id: 9,
+                    total_samples: samples,
+                    sample_rate_hz: 10_000,
+                },
+            ));
+        }
+        out
+    });
+    let mut updates = 0;
+    let cap = c.capture(10_000, 96, |_| updates += 1).unwrap();
+    assert_eq!(updates, 2);
+    assert!(cap.completed);
+    assert_eq!(cap.samples.len(), 64);
+    assert_eq!(cap.dropped, 32);
+    assert_eq!(cap.gaps, 1);
+    // 28 LSB of 6.5 mA above the zero: about 0.18 A.
+    let i = cap.mean_current_a().unwrap();
+    assert!((i - 0.18).abs() < 0.01, "{i}");
+}
+
+#[test]
+fn broken_link_is_an_error_not_a_panic() {
+    let (host, dev) = memory_pipe(Duration::from_millis(2));
+    drop(dev);
+    let mut c = Client::new(host, ClientOptions::new("test pipe"));
+    let e = c.info().unwrap_err().to_string();
+    assert!(e.contains("test pipe"), "{e}");
+}

@@ -1,0 +1,259 @@
+//! The virtual device behind `--sim`: the firmware core and the simulated plant
+//! ([`SimRig`]) on a pseudo-terminal, run in real time (or `speed` times faster) by a
+//! thread of this process. The client opens the pseudo-terminal's port by name, exactly as
+//! it opens a board's serial port, so every verb goes through the real serial path.
+//!
+//! Because the device lives in this process, procedures that need a hand at the rig (the
+//! calibration's force gauge, uncoupling the cam) reach into the plant through
+//! [`VirtualDevice::with_plant`].
+//!
+//! The device shares the machine with its host, and pseudo-terminal bytes are moved by a
+//! kernel worker: on a busy machine a heartbeat can arrive hundreds of milliseconds late,
+//! which at `speed` 20 is many virtual seconds. So while a release (or open-loop drive) is
+//! live and the host has been quiet for 0.2 virtual seconds, virtual time stands still for
+//! up to 1.5 s of wall time, waiting for the host. A host that really stopped still trips
+//! the comms timeout, after that grace.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use model::plant::Plant;
+
+use crate::RigError;
+use crate::sim::{PLANT_HZ, SimConfig, SimRig};
+
+mod pty;
+
+pub use pty::PtyMaster;
+
+/// Longest virtual time one loop turn may cover, s: if this process is starved of CPU the
+/// simulation slows down instead of jumping past the host's heartbeats.
+const MAX_TURN_S: f64 = 0.02;
+
+/// Device output held while the host is not reading, bytes (a UART's queue would also
+/// overflow): beyond it new output is dropped, as frames lost on the line.
+const MAX_PENDING: usize = 1 << 20;
+
+/// Virtual time without a byte from the host after which a live release waits for the host,
+/// s (a heartbeat is due every 0.15 s).
+const HOST_QUIET_S: f64 = 0.2;
+
+/// Longest wall time virtual time waits for a quiet host before the comms timeout may trip.
+const HOST_GRACE: Duration = Duration::from_millis(1500);
+
+/// How long one turn waits for host bytes.
+const POLL: Duration = Duration::from_millis(1);
+
+struct Shared {
+    rig: Mutex<SimRig>,
+    stop: AtomicBool,
+    dropped_bytes: Mutex<u64>,
+}
+
+/// A simulated rig on a pseudo-terminal, running until dropped.
+pub struct VirtualDevice {
+    port: String,
+    speed: f64,
+    shared: Arc<Shared>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for VirtualDevice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("VirtualDevice")
+            .field("port", &self.port)
+            .field("speed", &self.speed)
+            .finish()
+    }
+}
+
+impl VirtualDevice {
+    /// Boots a simulated rig from `config` on a new pseudo-terminal, running `speed` times
+    /// faster than real time (1 = real time).
+    pub fn start(config: SimConfig, speed: f64) -> Result<Self, RigError> {
+        if !(speed.is_finite() && speed > 0.0) {
+            return Err(RigError::BadValue {
+                what: format!("--speed {speed}"),
+                why: "must be a positive number (1 = real time)".into(),
+            });
+        }
+        let fail = |what: &str, e: &dyn std::fmt::Display| {
+            RigError::VirtualDevice(format!(
+                "{what}: {e} (pseudo-terminals must be available: /dev/ptmx)"
+            ))
+        };
+        let (master, port) =
+            PtyMaster::open().map_err(|e| fail("cannot open a pseudo-terminal pair", &e))?;
+        let shared = Arc::new(Shared {
+            rig: Mutex::new(SimRig::new(config)),
+            stop: AtomicBool::new(false),
+            dropped_bytes: Mutex::new(0),
+        });
+        let worker = Arc::clone(&shared);
+        let thread = std::thread::Builder::new()
+            .name("virtual-device".into())
+            .spawn(move || run(master, &worker, speed))
+            .map_err(|e| fail("cannot start the simulation thread", &e))?;
+        Ok(Self {
+            port,
+            speed,
+            shared,
+            thread: Some(thread),
+        })
+    }
+
+    /// Starts the paper's (49, 50) rig; it reports itself as board `virtual`.
+    pub fn paper(speed: f64) -> Result<Self, RigError> {
+        let mut config = SimConfig::paper();
+        config.core.board_name = "virtual";
+        Self::start(config, speed)
+    }
+
+    /// The pseudo-terminal's port name, to open like a serial port.
+    pub fn port_name(&self) -> &str {
+        &self.port
+    }
+
+    /// Virtual seconds per wall-clock second.
+    pub fn speed(&self) -> f64 {
+        self.speed
+    }
+
+    /// Runs `f` on the simulated rig (the simulation pauses meanwhile).
+    pub fn with_rig<R>(&self, f: impl FnOnce(&mut SimRig) -> R) -> R {
+        f(&mut lock(&self.shared.rig))
+    }
+
+    /// Runs `f` on the plant, as an operator's hand at the rig.
+    pub fn with_plant<R>(&self, f: impl FnOnce(&mut Plant) -> R) -> R {
+        self.with_rig(|rig| f(rig.plant_mut()))
+    }
+
+    /// Virtual time since boot, s.
+    pub fn time(&self) -> f64 {
+        self.with_rig(|rig| rig.time())
+    }
+
+    /// Device output dropped because the host did not read it, bytes.
+    pub fn dropped_bytes(&self) -> u64 {
+        *lock(&self.shared.dropped_bytes)
+    }
+}
+
+impl Drop for VirtualDevice {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::SeqCst);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // The simulation is plain data: a panic elsewhere does not make it unusable.
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The device loop: host bytes in, time advanced, device bytes out.
+fn run(mut master: PtyMaster, shared: &Shared, speed: f64) {
+    let mut buf = [0u8; 4096];
+    let mut pending: Vec<u8> = Vec::new();
+    let mut owed = 0.0f64;
+    let mut last = Instant::now();
+    let mut last_rx = 0.0f64;
+    let mut pace = speed;
+    let mut quiet_since: Option<Instant> = None;
+    let tick = 1.0 / f64::from(PLANT_HZ);
+    while !shared.stop.load(Ordering::SeqCst) {
+        let received = if master.wait_readable(POLL) {
+            master.read_available(&mut buf)
+        } else {
+            0
+        };
+        let now = Instant::now();
+        owed = (owed + (now - last).as_secs_f64() * pace).min(MAX_TURN_S);
+        last = now;
+        let ticks = (owed / tick).floor();
+        owed -= ticks * tick;
+        {
+            let mut rig = lock(&shared.rig);
+            if received > 0 {
+                rig.to_device(&buf[..received]);
+                last_rx = rig.time();
+            }
+            if ticks > 0.0 {
+                rig.advance(ticks * tick);
+            }
+            let status = rig.core().status();
+            let awaiting_host = status.host_release || status.open_loop_volts.is_some();
+            pace = if awaiting_host && rig.time() - last_rx > HOST_QUIET_S {
+                let since = *quiet_since.get_or_insert(now);
+                if now - since < HOST_GRACE { 0.0 } else { speed }
+            } else {
+                quiet_since = None;
+                speed
+            };
+            let before = pending.len();
+            rig.from_device(&mut pending);
+            if pending.len() > MAX_PENDING {
+                *lock(&shared.dropped_bytes) += (pending.len() - before) as u64;
+                pending.truncate(before);
+            }
+        }
+        let written = master.write_available(&pending);
+        pending.drain(..written);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::client::{Client, ClientOptions, open_serial};
+
+    fn connect(dev: &VirtualDevice) -> Client<crate::client::SerialTransport> {
+        let io = open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).unwrap();
+        let mut opts = ClientOptions::new(dev.port_name());
+        opts.time_scale = dev.speed();
+        Client::connect(io, opts).unwrap().0
+    }
+
+    #[test]
+    fn a_late_host_keeps_its_release_and_a_gone_host_loses_it() {
+        let dev = VirtualDevice::paper(20.0).unwrap();
+        let mut client = connect(&dev);
+        client.release(true, 10.0).unwrap();
+        client.recv(Duration::from_millis(50)).unwrap();
+        // 300 ms without heartbeats is 6 virtual seconds at 20x, far more than the comms
+        // timeout: the device waits for the host instead.
+        std::thread::sleep(Duration::from_millis(300));
+        client.recv(Duration::from_millis(50)).unwrap();
+        assert!(client.faults().unwrap().latched.is_empty());
+        // A host that stops for good still loses the release, after the grace.
+        std::thread::sleep(HOST_GRACE + Duration::from_millis(500));
+        let latched = client.faults().unwrap().latched;
+        assert!(
+            latched.contains(protocol::FaultFlags::COMMS_TIMEOUT),
+            "{latched}"
+        );
+    }
+
+    #[test]
+    fn client_talks_to_the_virtual_device_over_its_pty() {
+        let dev = VirtualDevice::paper(4.0).unwrap();
+        let io = open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).unwrap();
+        let mut opts = ClientOptions::new(dev.port_name());
+        opts.time_scale = dev.speed();
+        let (mut client, info) = Client::connect(io, opts).unwrap();
+        assert_eq!(info.protocol_version, protocol::PROTOCOL_VERSION);
+        client.faults().unwrap();
+        let t0 = dev.time();
+        std::thread::sleep(Duration::from_millis(50));
+        assert!(dev.time() > t0, "virtual time runs");
+        // A second client after the first closed the port.
+        drop(client);
+        let io = open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).unwrap();
+        let (_client, _) = Client::connect(io, ClientOptions::new(dev.port_name())).unwrap();
+    }
+}

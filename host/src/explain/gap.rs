@@ -1,0 +1,208 @@
+//! Where a fitted model and the measurement disagree: RMSE, residuals binned by cam speed,
+//! load and time or temperature, a whiteness test in time order and correlation tests of the
+//! residuals against the test conditions.
+
+use serde::Serialize;
+
+use super::fit::Fit;
+use super::library::ThermalDriver;
+use super::points::TestPoints;
+use super::stats;
+
+/// Bins of time or temperature.
+const THERMAL_BINS: usize = 5;
+
+/// Mean residual of one bin.
+#[derive(Debug, Clone, Serialize)]
+pub struct Bin {
+    /// What the bin holds (e.g. "10.1 Hz", "1.47 N m", "31-35 C").
+    pub label: String,
+    /// Centre of the bin in the axis' unit (rad/s, N m, deg C or s).
+    pub centre: f64,
+    /// Rows in the bin.
+    pub rows: usize,
+    /// Mean residual (measured - model), mA.
+    pub mean_residual_ma: f64,
+    /// Standard error of that mean, mA.
+    pub std_error_ma: f64,
+}
+
+/// Whiteness of the residuals in time order.
+#[derive(Debug, Clone, Serialize)]
+pub struct Whiteness {
+    /// The order tested: "t_s" or "file".
+    pub order: String,
+    /// Lags of the Ljung-Box test.
+    pub lags: usize,
+    /// Ljung-Box statistic.
+    pub ljung_box_q: f64,
+    /// Its p-value (small: the residuals are correlated in time).
+    pub p_value: f64,
+    /// Durbin-Watson statistic (2: no lag-one correlation).
+    pub durbin_watson: f64,
+}
+
+/// Correlation of the residuals with one test condition.
+#[derive(Debug, Clone, Serialize)]
+pub struct Correlation {
+    /// The condition.
+    pub with: String,
+    /// Pearson correlation.
+    pub r: f64,
+    /// Two-sided p-value.
+    pub p_value: f64,
+}
+
+/// The disagreement of one fitted model with the measurement.
+#[derive(Debug, Clone, Serialize)]
+pub struct Gap {
+    /// Root mean square residual, A.
+    pub rmse_a: f64,
+    /// Mean residual, A.
+    pub mean_residual_a: f64,
+    /// Rows.
+    pub rows: usize,
+    /// Residuals by cam speed level.
+    pub by_speed: Vec<Bin>,
+    /// Residuals by load level.
+    pub by_load: Vec<Bin>,
+    /// Residuals by motor temperature (or time when no temperature was logged).
+    pub by_thermal: Vec<Bin>,
+    /// The axis of `by_thermal`: "temp_c", "t_s" or none.
+    pub thermal_axis: Option<String>,
+    /// Whiteness in time order.
+    pub whiteness: Whiteness,
+    /// Correlations with the test conditions (and of |residual| with the friction current).
+    pub correlations: Vec<Correlation>,
+}
+
+fn bin(label: String, centre: f64, residuals: &[f64]) -> Bin {
+    let n = residuals.len();
+    let m = stats::mean(residuals);
+    let sd = if n > 1 {
+        (residuals.iter().map(|e| (e - m) * (e - m)).sum::<f64>() / (n - 1) as f64).sqrt()
+    } else {
+        0.0
+    };
+    Bin {
+        label,
+        centre,
+        rows: n,
+        mean_residual_ma: m * 1e3,
+        std_error_ma: sd / (n.max(1) as f64).sqrt() * 1e3,
+    }
+}
+
+fn group(
+    levels: &[usize],
+    centres: &[f64],
+    residuals: &[f64],
+    label: impl Fn(f64) -> String,
+) -> Vec<Bin> {
+    centres
+        .iter()
+        .enumerate()
+        .map(|(id, &c)| {
+            let r: Vec<f64> = levels
+                .iter()
+                .zip(residuals)
+                .filter(|(l, _)| **l == id)
+                .map(|(_, e)| *e)
+                .collect();
+            bin(label(c), c, &r)
+        })
+        .collect()
+}
+
+/// The gap between `fit` (fitted to every point) and the measured currents.
+pub fn gap(points: &TestPoints, fit: &Fit) -> Gap {
+    let res = &fit.residuals;
+    let n = res.len();
+    let by_speed = group(&points.speed_level, &points.speed_centres, res, |w| {
+        format!("{:.1} Hz", w / (2.0 * std::f64::consts::PI))
+    });
+    let by_load = group(&points.load_level, &points.load_centres, res, |t| {
+        format!("{t:.2} N m")
+    });
+    let x: Vec<f64> = points.ops.iter().map(|o| o.thermal).collect();
+    let (thermal_axis, offset, unit) = match points.thermal {
+        ThermalDriver::Temperature { reference_c } => (Some("temp_c"), reference_c, "C"),
+        ThermalDriver::Time => (Some("t_s"), 0.0, "s"),
+        ThermalDriver::Unavailable => (None, 0.0, ""),
+    };
+    let by_thermal = if thermal_axis.is_some() {
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
+        let bins = THERMAL_BINS.min(n);
+        (0..bins)
+            .map(|b| {
+                let part = &order[b * n / bins..(b + 1) * n / bins];
+                let r: Vec<f64> = part.iter().map(|&k| res[k]).collect();
+                let lo = x[part[0]] + offset;
+                let hi = x[*part.last().expect("non-empty bin")] + offset;
+                let c = part.iter().map(|&k| x[k]).sum::<f64>() / part.len() as f64 + offset;
+                bin(format!("{lo:.0}-{hi:.0} {unit}"), c, &r)
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let ordered: Vec<f64> = points.time_order.iter().map(|&k| res[k]).collect();
+    let lags = (n / 5).clamp(1, 10);
+    let (q, p) = stats::ljung_box(&ordered, lags);
+    let whiteness = Whiteness {
+        order: if points.time_known { "t_s" } else { "file" }.into(),
+        lags,
+        ljung_box_q: q,
+        p_value: p,
+        durbin_watson: stats::durbin_watson(&ordered),
+    };
+    let mut conditions: Vec<(String, Vec<f64>)> = vec![
+        (
+            "omega_n_rad_s".into(),
+            points.ops.iter().map(|o| o.omega_n).collect(),
+        ),
+        (
+            "tau_rot_nm".into(),
+            points.ops.iter().map(|o| o.tau_rot).collect(),
+        ),
+        (
+            "tau_rot_nm*omega_n_rad_s".into(),
+            points.ops.iter().map(|o| o.tau_rot * o.omega_n).collect(),
+        ),
+    ];
+    if let Some(axis) = thermal_axis {
+        conditions.push((axis.to_string(), x.clone()));
+    }
+    let mut correlations: Vec<Correlation> = conditions
+        .into_iter()
+        .map(|(with, v)| {
+            let r = stats::pearson(&v, res);
+            Correlation {
+                with,
+                r,
+                p_value: stats::correlation_p_value(r, n),
+            }
+        })
+        .collect();
+    let ev = fit.model.evaluator();
+    let fric: Vec<f64> = points.ops.iter().map(|o| ev.friction_current(o)).collect();
+    let abs: Vec<f64> = res.iter().map(|e| e.abs()).collect();
+    let r = stats::pearson(&fric, &abs);
+    correlations.push(Correlation {
+        with: "|residual| vs friction current".into(),
+        r,
+        p_value: stats::correlation_p_value(r, n),
+    });
+    Gap {
+        rmse_a: stats::rms(res),
+        mean_residual_a: stats::mean(res),
+        rows: n,
+        by_speed,
+        by_load,
+        by_thermal,
+        thermal_axis: thermal_axis.map(str::to_string),
+        whiteness,
+        correlations,
+    }
+}

@@ -1,0 +1,73 @@
+//! The paper's experiments and the fault drills as scenarios on the simulated rig. Each
+//! returns a result type that serialises to the JSON the `rig sim` verb prints.
+
+pub mod faults;
+pub mod fig5;
+pub mod sweep;
+pub mod table1;
+
+use protocol::{DeviceMessage, Request};
+
+use super::SimLink;
+use crate::RigError;
+
+/// Heartbeat interval the scenarios keep while a release is live, s.
+pub const HEARTBEAT_S: f64 = protocol::HEARTBEAT_INTERVAL_MS as f64 / 1000.0;
+
+/// Output rotation (rad) that counts as "the load moved": 0.1 mm of rope on a 75 mm pulley.
+pub const MOTION_RAD: f64 = 0.1e-3 / 0.075;
+
+/// Sends `req` and requires an `Ack`.
+pub fn expect_ack(link: &mut SimLink, req: &Request) -> Result<(), RigError> {
+    match link.request(req)? {
+        DeviceMessage::Ack { .. } => Ok(()),
+        other => Err(RigError::Protocol(format!(
+            "{req:?} was answered with {other:?}"
+        ))),
+    }
+}
+
+/// Opens the session (hello) as the host tool does.
+pub fn hello(link: &mut SimLink) -> Result<(), RigError> {
+    let reply = link.request(&Request::Hello {
+        protocol_version: protocol::PROTOCOL_VERSION,
+        schema_hash: protocol::SCHEMA_HASH,
+    })?;
+    match reply {
+        DeviceMessage::Info(_) => Ok(()),
+        other => Err(RigError::Protocol(format!(
+            "hello was answered with {other:?}"
+        ))),
+    }
+}
+
+/// Requests a release at `hz` and keeps it alive with heartbeats.
+pub fn release(link: &mut SimLink, hz: f32) -> Result<(), RigError> {
+    expect_ack(
+        link,
+        &Request::Release {
+            on: true,
+            target_hz: hz,
+        },
+    )?;
+    link.keep_alive(Some(HEARTBEAT_S));
+    Ok(())
+}
+
+/// Ends the release and stops the heartbeats.
+pub fn lock(link: &mut SimLink) -> Result<(), RigError> {
+    expect_ack(
+        link,
+        &Request::Release {
+            on: false,
+            target_hz: 0.0,
+        },
+    )?;
+    link.keep_alive(None);
+    Ok(())
+}
+
+/// Whether the output has moved since it was last reset.
+pub fn output_moved(link: &SimLink) -> bool {
+    link.rig.plant().state().output_angle.abs() > MOTION_RAD
+}

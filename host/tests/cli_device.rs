@@ -1,0 +1,363 @@
+//! Every device verb of `rig`, run through the real binary against the virtual device
+//! (`--sim`: the firmware core and the simulated plant on a pseudo-terminal), faster than
+//! real time.
+
+use std::borrow::BorrowMut;
+use std::time::Duration;
+
+use assert_cmd::Command;
+use serde_json::Value;
+
+/// Virtual seconds per wall-clock second in these tests.
+const SPEED: &str = "20";
+
+fn rig() -> Command {
+    let mut c = Command::cargo_bin("rig").expect("the rig binary is built");
+    c.env_remove("RIG_PORT").timeout(Duration::from_secs(120));
+    c
+}
+
+fn sim(args: &[&str]) -> Command {
+    let mut c = rig();
+    c.args(["--sim", "--speed", SPEED]).args(args);
+    c
+}
+
+fn stdout_of(mut c: impl BorrowMut<Command>) -> String {
+    let out = c
+        .borrow_mut()
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    String::from_utf8(out).expect("stdout is UTF-8")
+}
+
+fn json_of(c: impl BorrowMut<Command>) -> Value {
+    let text = stdout_of(c);
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("not JSON ({e}):\n{text}"))
+}
+
+#[test]
+fn help_lists_every_verb() {
+    let text = stdout_of(rig().arg("--help"));
+    for verb in [
+        "ports",
+        "info",
+        "faults",
+        "clear",
+        "release",
+        "monitor",
+        "capture",
+        "calibrate",
+        "calibration",
+        "design",
+        "sim",
+        "explain",
+        "demo",
+    ] {
+        assert!(
+            text.lines().any(|l| l.trim_start().starts_with(verb)),
+            "--help lacks {verb}:\n{text}"
+        );
+    }
+    for opt in ["--port", "--baud", "--sim", "--speed"] {
+        assert!(text.contains(opt), "--help lacks {opt}");
+    }
+    for verb in [
+        "ports",
+        "info",
+        "release",
+        "monitor",
+        "capture",
+        "calibrate",
+        "calibration",
+    ] {
+        rig().args([verb, "--help"]).assert().success();
+    }
+}
+
+#[test]
+fn ports_lists_as_json() {
+    let v = json_of(rig().args(["ports", "--json"]));
+    let list = v.as_array().expect("an array");
+    for p in list {
+        assert!(p.get("port").is_some() && p.get("stlink").is_some(), "{p}");
+    }
+    rig().arg("ports").assert().success();
+}
+
+#[test]
+fn info_json_has_the_contract_keys() {
+    let v = json_of(rig().args(["--sim", "info", "--json"]));
+    assert_eq!(v["protocol_version"], protocol::PROTOCOL_VERSION);
+    assert_eq!(v["host_protocol_version"], protocol::PROTOCOL_VERSION);
+    assert!(
+        v["firmware_version"].as_str().unwrap().split('.').count() == 3,
+        "{v}"
+    );
+    assert_eq!(v["board"], "virtual");
+    assert_eq!(v["sim"], true);
+    let text = stdout_of(sim(&["info"]));
+    assert!(
+        text.contains("firmware") && text.contains("protocol   v1"),
+        "{text}"
+    );
+}
+
+#[test]
+fn faults_and_clear() {
+    let v = json_of(sim(&["faults", "--json"]));
+    assert_eq!(v["active"], serde_json::json!([]));
+    assert_eq!(v["latched"], serde_json::json!([]));
+    assert!(stdout_of(sim(&["faults"])).contains("no faults"));
+    let v = json_of(sim(&["clear", "--json"]));
+    assert_eq!(v["latched"], serde_json::json!([]));
+    assert!(stdout_of(sim(&["clear"])).contains("faults cleared"));
+}
+
+#[test]
+fn release_vibrates_for_a_bounded_time_then_locks() {
+    let v = json_of(sim(&[
+        "release", "on", "--freq", "10", "--for", "2", "--json",
+    ]));
+    let states: Vec<&str> = v["states"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap())
+        .collect();
+    assert!(states.contains(&"vibrating"), "{v}");
+    assert_eq!(v["final_state"], "locked", "{v}");
+    assert_eq!(v["ended_by"], "for");
+    let hz = v["mean_vibrating_hz"].as_f64().unwrap();
+    assert!((hz - 10.0).abs() < 0.5, "{hz}");
+    let text = stdout_of(sim(&["release", "on", "--freq", "5", "--for", "1.5"]));
+    assert!(
+        text.contains("vibrating") && text.contains("locked after"),
+        "{text}"
+    );
+    assert!(stdout_of(sim(&["release", "off"])).contains("vibration off"));
+}
+
+#[test]
+fn monitor_prints_lines_and_logs_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("mon.csv");
+    let text = stdout_of(sim(&[
+        "monitor",
+        "--plain",
+        "--seconds",
+        "0.5",
+        "--rate",
+        "100",
+        "--csv",
+        csv.to_str().unwrap(),
+    ]));
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines.len() >= 45, "{} lines", lines.len());
+    assert!(
+        lines
+            .iter()
+            .all(|l| l.contains("locked") && l.contains("faults none")),
+        "{text}"
+    );
+    let log = std::fs::read_to_string(&csv).unwrap();
+    assert!(
+        log.starts_with("device_time_s,state,cam_speed_rad_s"),
+        "{log}"
+    );
+    assert_eq!(log.lines().count(), lines.len() + 1);
+    // JSON lines, one object per sample.
+    let text = stdout_of(sim(&[
+        "monitor",
+        "--json",
+        "--seconds",
+        "0.2",
+        "--rate",
+        "50",
+    ]));
+    for line in text.lines() {
+        let v: Value = serde_json::from_str(line).unwrap();
+        assert_eq!(v["state"], "locked");
+    }
+    assert!(text.lines().count() >= 9);
+    // Released while monitoring: the supervisor spins the cam up to the target.
+    let text = stdout_of(sim(&[
+        "monitor",
+        "--plain",
+        "--seconds",
+        "2",
+        "--rate",
+        "20",
+        "--release",
+        "10",
+    ]));
+    assert!(
+        text.contains("spin_up") && text.contains("vibrating"),
+        "{text}"
+    );
+}
+
+#[test]
+fn capture_burst_is_complete_and_converted() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("cap.csv");
+    let v = json_of(sim(&[
+        "capture",
+        "--seconds",
+        "0.3",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(v["sample_rate_hz"], 10_000);
+    assert_eq!(v["total_samples"], 3000);
+    assert_eq!(v["received"], 3000);
+    assert_eq!(v["dropped"], 0);
+    assert_eq!(v["completed"], true);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("index,t_s,current_adc,current_a,encoder_count,cam_angle_rad")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 3000);
+    for (k, r) in rows.iter().enumerate() {
+        assert_eq!(r[0], k.to_string());
+        // Motor off: the current reads near zero.
+        assert!(r[3].parse::<f64>().unwrap().abs() < 0.2, "{r:?}");
+    }
+    // During vibration at 10 Hz: the encoder turns 10 revolutions a second.
+    let v = json_of(sim(&[
+        "capture",
+        "--seconds",
+        "0.5",
+        "--release",
+        "10",
+        "--json",
+    ]));
+    let w = v["mean_cam_speed_rad_s"].as_f64().unwrap();
+    assert!((w / std::f64::consts::TAU - 10.0).abs() < 0.5, "{w}");
+    assert!(v["mean_current_a"].as_f64().unwrap() > 1.0, "{v}");
+    assert_eq!(v["dropped"], 0);
+    // Longer than the buffer: clamped, and said so.
+    let text = stdout_of(sim(&["capture", "--seconds", "1.5"]));
+    assert!(text.contains("recorded 10000 of the 15000"), "{text}");
+    assert!(text.contains("no samples dropped"), "{text}");
+}
+
+#[test]
+fn calibrate_reproduces_table2() {
+    let dir = tempfile::tempdir().unwrap();
+    let v = json_of(sim(&["calibrate", "--yes", "--json"]).current_dir(dir.path()));
+    let table2 = [62.1, -138.0, 0.235, 1.69, 0.00378, 2.25];
+    for (k, want) in table2.iter().enumerate() {
+        let key = format!("c{}", k + 1);
+        let got = v[&key].as_f64().unwrap_or_else(|| panic!("no {key}: {v}"));
+        let tol = if k == 3 { 0.5 } else { 0.05 };
+        assert!(
+            ((got - want) / want).abs() < tol,
+            "{key} = {got}, Table 2 {want}"
+        );
+    }
+    assert_eq!(v["written_to_device"], true);
+    assert_eq!(v["consistency"]["agree"], true);
+    assert!(v["torque_fit"]["r_squared"].as_f64().unwrap() > 0.999);
+    assert!(v["no_load_fit"]["r_squared"].as_f64().unwrap() > 0.99);
+    let out = dir.path().join("calibration");
+    for f in [
+        "calibration.toml",
+        "torque_current.svg",
+        "no_load.svg",
+        "points.csv",
+    ] {
+        assert!(out.join(f).is_file(), "missing {f}");
+    }
+    let svg = std::fs::read_to_string(out.join("torque_current.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("Torque-current"));
+    // The file it wrote is a valid calibration file for `calibration set`.
+    let cal = out.join("calibration.toml");
+    let set = json_of(sim(&[
+        "calibration",
+        "set",
+        cal.to_str().unwrap(),
+        "--yes",
+        "--json",
+    ]));
+    assert_eq!(set["written"], true, "{set}");
+}
+
+#[test]
+fn calibrate_dry_run_writes_nothing_and_takes_gauge_readings_from_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    // The paper's torque line at the currents a blocked RS-735 draws (V / 0.44 ohm).
+    let mut gauge = String::from("volts,gauge_nmm\n");
+    for k in 0..9 {
+        let volts = 1.05 + 0.1 * f64::from(k);
+        gauge.push_str(&format!("{volts:.2},{:.3}\n", 62.1 * volts / 0.44 - 138.0));
+    }
+    let path = dir.path().join("gauge.csv");
+    std::fs::write(&path, gauge).unwrap();
+    let v = json_of(
+        sim(&[
+            "calibrate",
+            "--dry-run",
+            "--json",
+            "--gauge-csv",
+            path.to_str().unwrap(),
+        ])
+        .current_dir(dir.path()),
+    );
+    assert_eq!(v["dry_run"], true);
+    assert_eq!(v["written_to_device"], false);
+    assert!(v["files"].is_null());
+    assert!(!dir.path().join("calibration").exists());
+    let c1 = v["c1"].as_f64().unwrap();
+    assert!((c1 / 62.1 - 1.0).abs() < 0.05, "{c1}");
+    let text = stdout_of(sim(&["calibrate", "--dry-run"]).current_dir(dir.path()));
+    assert!(text.contains("C1") && text.contains("dry run"), "{text}");
+}
+
+#[test]
+fn calibration_get_and_set_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("cal.toml");
+    let text = stdout_of(sim(&["calibration", "get", file.to_str().unwrap()]));
+    assert!(text.contains("wrote"), "{text}");
+    let toml = std::fs::read_to_string(&file).unwrap();
+    assert!(toml.contains("c1_nmm_per_a = 62.1"), "{toml}");
+    let printed = stdout_of(sim(&["calibration", "get"]));
+    assert!(printed.contains("c6_a = 2.25"));
+    let v = json_of(sim(&["calibration", "get", "--json"]));
+    assert!((v["c1_nmm_per_a"].as_f64().unwrap() - 62.1).abs() < 1e-4);
+    // Unchanged: nothing to write.
+    let same = stdout_of(sim(&[
+        "calibration",
+        "set",
+        file.to_str().unwrap(),
+        "--yes",
+    ]));
+    assert!(same.contains("already has this calibration"), "{same}");
+    // A partial file changes only its keys.
+    std::fs::write(&file, "c1_nmm_per_a = 60.5\nmax_freq_hz = 12.0\n").unwrap();
+    let v = json_of(sim(&[
+        "calibration",
+        "set",
+        file.to_str().unwrap(),
+        "--yes",
+        "--json",
+    ]));
+    assert_eq!(v["written"], true);
+    assert_eq!(v["changed"].as_array().unwrap().len(), 2, "{v}");
+    assert!((v["calibration"]["c1_nmm_per_a"].as_f64().unwrap() - 60.5).abs() < 1e-4);
+    assert!((v["calibration"]["c2_nmm"].as_f64().unwrap() + 138.0).abs() < 1e-4);
+    // Without --yes and without a terminal it refuses.
+    let out = sim(&["calibration", "set", file.to_str().unwrap()])
+        .assert()
+        .failure();
+    let e = String::from_utf8_lossy(&out.get_output().stderr).into_owned();
+    assert!(e.contains("--yes"), "{e}");
+}

@@ -1,0 +1,205 @@
+//! `rig explain` through the real binary: the JSON contract, the report folder, the augmented
+//! model round trip and the messages for bad input.
+
+use std::path::Path;
+
+use assert_cmd::Command;
+use serde_json::Value;
+
+fn rig() -> Command {
+    Command::cargo_bin("rig").expect("the rig binary is built")
+}
+
+fn json(args: &[&str]) -> Value {
+    let out = rig()
+        .args(args)
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    serde_json::from_slice(&out).expect("stdout is one JSON object")
+}
+
+/// A synthetic sweep with `effect` ("none" for none) saved as CSV in `dir`.
+fn synthetic_csv(dir: &Path, effect: &str, seed: &str) -> String {
+    let path = dir.join(format!("{effect}-{seed}.csv"));
+    let p = path.to_str().unwrap().to_string();
+    rig()
+        .args([
+            "explain",
+            "--synthetic",
+            effect,
+            "--seed",
+            seed,
+            "--no-report",
+            "--json",
+        ])
+        .args(["--write-synthetic", &p])
+        .assert()
+        .success();
+    p
+}
+
+#[test]
+fn json_contract_on_measured_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = synthetic_csv(dir.path(), "speed-dependent-axial-friction", "3");
+    let v = json(&["explain", "--measured", &csv, "--json"]);
+    assert_eq!(v["verdict"], "explained");
+    let effects = v["effects"].as_array().unwrap();
+    assert_eq!(effects[0]["name"], "speed-dependent-axial-friction");
+    assert!(effects[0]["params"]["omega_c_rad_s"].as_f64().unwrap() > 0.0);
+    for key in [
+        "rmse_before_a",
+        "rmse_after_a",
+        "holdout_rmse_before_a",
+        "holdout_rmse_after_a",
+    ] {
+        assert!(v[key].as_f64().is_some(), "missing {key}: {v}");
+    }
+    assert!(v["holdout_rmse_after_a"].as_f64() < v["holdout_rmse_before_a"].as_f64());
+    // The default report folder sits beside the data.
+    let report = dir.path().join("speed-dependent-axial-friction-3-explain");
+    for f in [
+        "report.md",
+        "candidates.csv",
+        "explanation.json",
+        "residuals_before.svg",
+        "residuals_after.svg",
+    ] {
+        assert!(report.join(f).is_file(), "missing {f}");
+    }
+    let svg = std::fs::read_to_string(report.join("residuals_after.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("circle"));
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(md.contains("Verdict: explained") && md.contains("speed-dependent-axial-friction"));
+}
+
+#[test]
+fn effect_free_data_and_the_text_output() {
+    let v = json(&["explain", "--synthetic", "none", "--seed", "5", "--json"]);
+    assert_eq!(v["verdict"], "no-missing-effect");
+    assert_eq!(v["effects"], serde_json::json!([]));
+    let out = rig()
+        .args(["explain", "--synthetic", "none", "--seed", "5"])
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let text = String::from_utf8(out).unwrap();
+    assert!(
+        text.contains("verdict: no-missing-effect") && text.contains("finding:"),
+        "{text}"
+    );
+}
+
+#[test]
+fn written_model_is_loaded_back_and_explains_the_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = synthetic_csv(dir.path(), "thermal-drift", "2");
+    let model = dir.path().join("augmented.toml");
+    let m = model.to_str().unwrap();
+    let report = dir.path().join("report");
+    let r = report.to_str().unwrap();
+    let first = json(&[
+        "explain",
+        "--measured",
+        &csv,
+        "--write-model",
+        m,
+        "--report",
+        r,
+        "--json",
+    ]);
+    assert_eq!(first["verdict"], "explained");
+    assert_eq!(first["effects"][0]["name"], "thermal-drift");
+    let text = std::fs::read_to_string(&model).unwrap();
+    assert!(text.contains("[model]") && text.contains("thermal-drift") && text.contains("k_per_c"));
+    assert!(report.join("report.md").is_file());
+    let second = json(&[
+        "explain",
+        "--measured",
+        &csv,
+        "--model",
+        m,
+        "--no-report",
+        "--json",
+    ]);
+    assert_eq!(second["verdict"], "no-missing-effect", "{second}");
+    assert_eq!(
+        second["known_effects"],
+        serde_json::json!(["thermal-drift"])
+    );
+}
+
+#[test]
+fn bad_input_fails_with_a_message_naming_the_row_or_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+    let mut good = String::from("omega_n_rad_s,tau_rot_nm,i_in_a\n");
+    for k in 0..12 {
+        good.push_str(&format!("31.4,{},2.5\n", 0.368 * (k + 1) as f64));
+    }
+    let cases = [
+        (
+            write("bad_number.csv", &format!("{good}31.4,1.0,abc\n")),
+            "bad_number.csv row 13 (line 14): column i_in_a is not a number ('abc')",
+        ),
+        (
+            write("missing.csv", "omega_n_rad_s,i_in_a\n31.4,2.5\n"),
+            "missing.csv: missing required column tau_rot_nm",
+        ),
+        (
+            write("empty.csv", ""),
+            "empty.csv is empty: it needs a header and at least 10 rows",
+        ),
+        (
+            write("nan.csv", &format!("{good}31.4,NaN,2.5\n")),
+            "nan.csv row 13 (line 14): column tau_rot_nm is not a finite number ('NaN')",
+        ),
+    ];
+    for (path, message) in cases {
+        let out = rig()
+            .args(["explain", "--measured", &path, "--json", "--no-report"])
+            .assert()
+            .failure()
+            .get_output()
+            .clone();
+        let err = String::from_utf8(out.stderr).unwrap();
+        assert!(err.contains(message), "{err}");
+        assert!(out.stdout.is_empty(), "nothing on stdout on failure");
+    }
+    let out = rig()
+        .args(["explain", "--measured", "/nonexistent/x.csv", "--no-report"])
+        .assert()
+        .failure()
+        .get_output()
+        .clone();
+    assert!(
+        String::from_utf8(out.stderr)
+            .unwrap()
+            .contains("cannot read /nonexistent/x.csv")
+    );
+    let bad_rig = write("rig.toml", "[gear]\nz = [49, 51, 50, 51]\n");
+    let out = rig()
+        .args(["explain", "--synthetic", "none", "--model", &bad_rig])
+        .assert()
+        .failure()
+        .get_output()
+        .clone();
+    assert!(
+        String::from_utf8(out.stderr)
+            .unwrap()
+            .contains("unequal centre distances")
+    );
+    rig()
+        .args(["explain", "--synthetic", "gremlins"])
+        .assert()
+        .failure();
+}
