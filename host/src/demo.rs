@@ -1,15 +1,25 @@
-//! `rig demo`: the README's main job. For now it runs the design check on the paper's
-//! Table 1 and compares every verdict with the paper.
+//! `rig demo`: the README's main job. On the virtual device it runs the whole rig: the
+//! design check of the paper's Table 1, the vibrator calibration, the Fig. 5 switching,
+//! the Table 1 backdrive test, the torque sweep of Figs. 8-9 and the fault drills, and
+//! writes a report folder. On a real rig (`--port`) it runs only the parts that cannot
+//! move a load: design check, identity, faults and the stored calibration.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
 
 use crate::RigError;
+use crate::calibrate::{self, Plan, bench::SimBench};
+use crate::cli::connect::{DeviceOpts, Session};
 use crate::design::{self, DesignReport, RigParams};
+use crate::sim::scenarios::{faults, fig5, sweep, table1};
 
 /// The paper's Table 1: which gear sets had a non-backdriven point (n = 1 only).
 pub const TABLE1_PAPER_HOLDS: [bool; 6] = [true, true, false, false, false, false];
 
-/// Result of the demo's design check.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct DemoSummary {
+/// The design check over Table 1.
+#[derive(Debug, Clone, Serialize)]
+pub struct DesignCheck {
     /// One evaluated gear set per Table 1 row.
     pub table1: Vec<DesignReport>,
     /// Whether every hold verdict agrees with the paper.
@@ -17,7 +27,7 @@ pub struct DemoSummary {
 }
 
 /// Runs the design check over Table 1 at the paper's rig values.
-pub fn run() -> Result<DemoSummary, RigError> {
+pub fn design_check() -> Result<DesignCheck, RigError> {
     let table1 = model::TABLE1
         .iter()
         .map(|&z| design::evaluate(z, &RigParams::default(), None))
@@ -26,22 +36,286 @@ pub fn run() -> Result<DemoSummary, RigError> {
         .iter()
         .zip(TABLE1_PAPER_HOLDS)
         .all(|(r, holds)| r.holds_load == holds);
-    Ok(DemoSummary {
+    Ok(DesignCheck {
         table1,
         agrees_with_paper,
     })
 }
 
+/// Settings of the simulated demo.
+#[derive(Debug, Clone)]
+pub struct DemoOptions {
+    /// Report folder.
+    pub out: PathBuf,
+    /// Fewer sweep points and repeats (for a quick look).
+    pub quick: bool,
+    /// Seed of the noise and the test order.
+    pub seed: u64,
+}
+
+/// The calibration step's outcome, paper units.
+#[derive(Debug, Clone, Serialize)]
+pub struct CalibrationCheck {
+    /// C1..C6 measured on the virtual rig (N mm/A, N mm, N mm s/rad, N mm, A s/rad, A).
+    pub measured: [f64; 6],
+    /// Table 2.
+    pub paper: [f64; 6],
+    /// Every constant within 5 % of Table 2 (C4 within 50 %).
+    pub within_tolerance: bool,
+}
+
+/// What the demo found; `summary.json` in the report folder.
+#[derive(Debug, Clone, Serialize)]
+pub struct DemoSummary {
+    /// Where it ran: `virtual device` or the port.
+    pub device: String,
+    /// Design check of Table 1.
+    pub design: DesignCheck,
+    /// Vibrator calibration (virtual device only).
+    pub calibration: Option<CalibrationCheck>,
+    /// Fig. 5 switching (virtual device only).
+    pub fig5: Option<fig5::Fig5Result>,
+    /// Table 1 backdrive test (virtual device only).
+    pub table1: Option<Vec<table1::Table1Row>>,
+    /// Torque sweep summary (virtual device only).
+    pub torque_sweep: Option<sweep::SweepSummary>,
+    /// Fault drills (virtual device only).
+    pub faults: Option<Vec<faults::FaultOutcome>>,
+    /// Device identity and state (real rig only).
+    pub device_state: Option<DeviceState>,
+    /// Files written.
+    pub files: Vec<String>,
+    /// Every check agrees with the paper (or, on a real rig, the device is healthy).
+    pub all_ok: bool,
+}
+
+/// What the demo reads from a real rig.
+#[derive(Debug, Clone, Serialize)]
+pub struct DeviceState {
+    /// Firmware version.
+    pub firmware_version: String,
+    /// Board name.
+    pub board: String,
+    /// Latched faults.
+    pub latched_faults: String,
+    /// Stored calibration C1..C6, paper units.
+    pub calibration: [f64; 6],
+}
+
+fn write(path: &Path, bytes: &[u8], files: &mut Vec<String>) -> Result<(), RigError> {
+    std::fs::write(path, bytes).map_err(|source| RigError::File {
+        action: "write",
+        path: path.display().to_string(),
+        source,
+    })?;
+    files.push(path.display().to_string());
+    Ok(())
+}
+
+fn write_json<T: Serialize>(
+    dir: &Path,
+    name: &str,
+    value: &T,
+    files: &mut Vec<String>,
+) -> Result<(), RigError> {
+    let text = serde_json::to_string_pretty(value)?;
+    write(&dir.join(name), text.as_bytes(), files)
+}
+
+fn create_dir(dir: &Path) -> Result<(), RigError> {
+    std::fs::create_dir_all(dir).map_err(|source| RigError::File {
+        action: "create folder",
+        path: dir.display().to_string(),
+        source,
+    })
+}
+
+/// The whole simulated rig, with a report folder.
+pub fn run_simulated(
+    opts: &DemoOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<DemoSummary, RigError> {
+    create_dir(&opts.out)?;
+    let mut files = Vec::new();
+    progress("design check of Table 1");
+    let design = design_check()?;
+    write_json(&opts.out, "design.json", &design, &mut files)?;
+
+    progress("calibration on the virtual device (the paper's procedure)");
+    let calibration = calibrate_virtual(&opts.out, &mut files)?;
+
+    progress("fig5: 1 kg on 75 mm, held 14.5 s, then released");
+    let fig5 = fig5::run(&fig5::Fig5Options {
+        seed: opts.seed,
+        ..Default::default()
+    })?;
+    write_json(&opts.out, "fig5.json", &fig5, &mut files)?;
+
+    progress("table1: six gear sets at 3.68 N m");
+    let table1 = table1::run(&model::TABLE1, 10.0, opts.seed)?;
+    write_json(&opts.out, "table1.json", &table1, &mut files)?;
+
+    progress("torque sweep: 0.368-3.68 N m at 3.6, 6.2, 8.8 V");
+    let sweep_opts = if opts.quick {
+        sweep::SweepOptions {
+            loads: vec![0.368, 1.84, 3.68],
+            repeats: 1,
+            rest_s: 5.0,
+            seed: opts.seed,
+            ..Default::default()
+        }
+    } else {
+        sweep::SweepOptions {
+            seed: opts.seed,
+            ..Default::default()
+        }
+    };
+    let points = sweep::run(&sweep_opts)?;
+    let csv_path = opts.out.join("torque_sweep.csv");
+    sweep::write_csv(&points, &csv_path)?;
+    files.push(csv_path.display().to_string());
+    let svg_path = opts.out.join("torque_sweep.svg");
+    crate::sim::plot::sweep_figure(&svg_path, &points)?;
+    files.push(svg_path.display().to_string());
+    let torque_sweep = sweep::summarise(&points, &sweep_opts);
+    write_json(&opts.out, "torque_sweep.json", &torque_sweep, &mut files)?;
+
+    progress("fault drills");
+    let faults = faults::run(&[], opts.seed)?;
+    write_json(&opts.out, "faults.json", &faults, &mut files)?;
+
+    let all_ok = design.agrees_with_paper
+        && calibration.within_tolerance
+        && fig5.held_without_vibration
+        && fig5.release_to_motion_s.is_some()
+        && table1.iter().all(|r| r.agrees_with_paper)
+        && torque_sweep.current_grows_with_load
+        && torque_sweep.current_grows_with_speed
+        && torque_sweep.tau_cam_grows_with_load
+        && torque_sweep.tau_cam_grows_with_speed
+        && faults.iter().all(|f| f.motor_off && f.fault_latched);
+    let summary_path = opts.out.join("summary.json");
+    files.push(summary_path.display().to_string());
+    let summary = DemoSummary {
+        device: "virtual device".into(),
+        design,
+        calibration: Some(calibration),
+        fig5: Some(fig5),
+        table1: Some(table1),
+        torque_sweep: Some(torque_sweep),
+        faults: Some(faults),
+        device_state: None,
+        files,
+        all_ok,
+    };
+    let text = serde_json::to_string_pretty(&summary)?;
+    std::fs::write(&summary_path, text).map_err(|source| RigError::File {
+        action: "write",
+        path: summary_path.display().to_string(),
+        source,
+    })?;
+    Ok(summary)
+}
+
+/// The paper's calibration on a virtual device over its pseudo-terminal, 20x real time.
+fn calibrate_virtual(out: &Path, files: &mut Vec<String>) -> Result<CalibrationCheck, RigError> {
+    let dev = DeviceOpts {
+        port: None,
+        baud: protocol::DEFAULT_BAUD_RATE,
+        sim: true,
+        speed: 20.0,
+    };
+    let mut session = dev.connect()?;
+    let base = session.client.calibration()?;
+    let plan = Plan::default();
+    let Session { client, device, .. } = &mut session;
+    let device = device
+        .as_ref()
+        .ok_or_else(|| RigError::Protocol("the virtual device did not start".into()))?;
+    let mut bench = SimBench::new(device, None);
+    let measurements = calibrate::measure(client, &mut bench, &plan, &mut |_| {})?;
+    let result = calibrate::analyse(&measurements)?;
+    let dir = out.join("calibration");
+    create_dir(&dir)?;
+    let written = crate::cli::calibrate::write_files(
+        &dir,
+        &result,
+        &measurements,
+        &base,
+        "the virtual device",
+    )?;
+    files.extend([
+        written.calibration,
+        written.torque_plot,
+        written.no_load_plot,
+        written.points,
+    ]);
+    let measured = result.constants();
+    let paper = model::Calibration::PAPER.to_paper_units();
+    let within_tolerance = measured.iter().zip(paper).enumerate().all(|(k, (m, p))| {
+        let tol = if k == 3 { 0.5 } else { 0.05 };
+        ((m - p) / p).abs() < tol
+    });
+    Ok(CalibrationCheck {
+        measured,
+        paper,
+        within_tolerance,
+    })
+}
+
+/// The parts that cannot move a load, on a real rig: design check, identity, faults and
+/// the stored calibration.
+pub fn run_on_device(dev: &DeviceOpts, out: &Path) -> Result<DemoSummary, RigError> {
+    create_dir(out)?;
+    let mut files = Vec::new();
+    let design = design_check()?;
+    write_json(out, "design.json", &design, &mut files)?;
+    let mut session = dev.connect()?;
+    let faults = session.client.faults()?;
+    let cal = session.client.calibration()?;
+    let device_state = DeviceState {
+        firmware_version: session.info.firmware_version.to_string(),
+        board: session.info.board.to_string(),
+        latched_faults: faults.latched.to_string(),
+        calibration: [
+            f64::from(cal.c1_nmm_per_a),
+            f64::from(cal.c2_nmm),
+            f64::from(cal.c3_nmm_s_per_rad),
+            f64::from(cal.c4_nmm),
+            f64::from(cal.c5_a_s_per_rad),
+            f64::from(cal.c6_a),
+        ],
+    };
+    let all_ok = design.agrees_with_paper && faults.latched.is_empty();
+    let summary = DemoSummary {
+        device: session.port().to_string(),
+        design,
+        calibration: None,
+        fig5: None,
+        table1: None,
+        torque_sweep: None,
+        faults: None,
+        device_state: Some(device_state),
+        files,
+        all_ok,
+    };
+    write_json(out, "summary.json", &summary, &mut Vec::new())?;
+    Ok(summary)
+}
+
 /// Short human-readable summary.
 pub fn render_text(s: &DemoSummary) -> String {
     use std::fmt::Write;
-    let mut out = String::from("design check, paper's Table 1 (mu_s = 0.271, mu_d = 0.174):\n");
+    let mut out = format!(
+        "rig demo on the {}\n\ndesign check, paper's Table 1 (mu_s = 0.271, mu_d = 0.174):\n",
+        s.device
+    );
     let _ = writeln!(
         out,
         "  {:<16} {:>8} {:>12} {:>12}  verdict",
         "Z1,Z2,Z3,Z4", "rho", "mu_s*Lambda", "mu_d*Lambda"
     );
-    for (r, paper) in s.table1.iter().zip(TABLE1_PAPER_HOLDS) {
+    for (r, paper) in s.design.table1.iter().zip(TABLE1_PAPER_HOLDS) {
         let z = r.z.map(|v| v.to_string()).join(",");
         let verdict = if r.holds_load { "holds" } else { "backdrives" };
         let mark = if r.holds_load == paper {
@@ -57,11 +331,108 @@ pub fn render_text(s: &DemoSummary) -> String {
     }
     let _ = writeln!(
         out,
-        "result: {}",
-        if s.agrees_with_paper {
+        "  {}",
+        if s.design.agrees_with_paper {
             "every verdict agrees with the paper"
         } else {
             "some verdicts disagree with the paper"
+        }
+    );
+    if let Some(c) = &s.calibration {
+        let _ = writeln!(
+            out,
+            "\ncalibration (paper's procedure on the virtual rig), measured vs Table 2:"
+        );
+        for (k, (m, p)) in c.measured.iter().zip(c.paper).enumerate() {
+            let _ = writeln!(
+                out,
+                "  C{} {:>10.5} {:>10.5}  ({:+.1} %)",
+                k + 1,
+                m,
+                p,
+                (m / p - 1.0) * 100.0
+            );
+        }
+    }
+    if let Some(f) = &s.fig5 {
+        let _ = writeln!(
+            out,
+            "\nfig5: held without vibration for {:.1} s: {}; moved {} after the release; {:.3} rad/s after the cam stopped (mu_d*Lambda = {:.3})",
+            f.hold_s,
+            f.held_without_vibration,
+            f.release_to_motion_s
+                .map_or("never".into(), |t| format!("{t:.3} s")),
+            f.output_speed_after_stop_rad_s,
+            f.mu_d_lambda
+        );
+    }
+    if let Some(rows) = &s.table1 {
+        let agree = rows.iter().filter(|r| r.agrees_with_paper).count();
+        let _ = writeln!(
+            out,
+            "table1: {agree} of {} gear sets as in the paper (n = 1 holds, all backdrive with vibration)",
+            rows.len()
+        );
+    }
+    if let Some(t) = &s.torque_sweep {
+        let hz: Vec<String> = t
+            .mean_hz_per_voltage
+            .iter()
+            .map(|(v, f)| format!("{v} V -> {f:.1} Hz"))
+            .collect();
+        let _ = writeln!(
+            out,
+            "torque sweep: {} points, {}; current and tau_cam grow with load: {}, with speed: {}; RMS(measured - Eq. 10) = {:.2} N mm",
+            t.points,
+            hz.join(", "),
+            t.current_grows_with_load && t.tau_cam_grows_with_load,
+            t.current_grows_with_speed && t.tau_cam_grows_with_speed,
+            t.rmse_tau_cam_vs_eq10_nm * 1e3
+        );
+    }
+    if let Some(f) = &s.faults {
+        let drills: Vec<String> = f
+            .iter()
+            .map(|o| {
+                format!(
+                    "{} {}",
+                    o.name,
+                    o.time_to_safe_s.map_or("never safe".into(), |t| format!(
+                        "safe in {:.0} ms",
+                        t * 1e3
+                    ))
+                )
+            })
+            .collect();
+        let _ = writeln!(out, "fault drills: {}", drills.join(", "));
+    }
+    if let Some(d) = &s.device_state {
+        let _ = writeln!(
+            out,
+            "\ndevice: firmware {} on {}, latched faults: {}",
+            d.firmware_version, d.board, d.latched_faults
+        );
+        let _ = writeln!(out, "stored calibration C1..C6: {:?}", d.calibration);
+        let _ = writeln!(
+            out,
+            "(motion tests need an operator: see `rig release`, `rig calibrate`, `rig monitor`)"
+        );
+    }
+    if !s.files.is_empty() {
+        let _ = writeln!(
+            out,
+            "\nreport: {} files, summary in {}",
+            s.files.len(),
+            s.files.last().map_or("", String::as_str)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "result: {}",
+        if s.all_ok {
+            "everything agrees with the paper"
+        } else {
+            "SOME CHECKS FAILED (see summary.json)"
         }
     );
     out
@@ -70,8 +441,8 @@ pub fn render_text(s: &DemoSummary) -> String {
 #[cfg(test)]
 mod tests {
     #[test]
-    fn demo_agrees_with_the_paper() {
-        let s = super::run().unwrap();
+    fn design_check_agrees_with_the_paper() {
+        let s = super::design_check().unwrap();
         assert!(s.agrees_with_paper);
         assert_eq!(s.table1.len(), 6);
     }

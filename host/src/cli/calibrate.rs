@@ -206,7 +206,8 @@ fn progress_bar(plan: &Plan, json: bool) -> ProgressBar {
     bar
 }
 
-fn write_files(
+/// Writes calibration.toml, the two fit plots (SVG) and the measured points (CSV) into `dir`.
+pub fn write_files(
     dir: &Path,
     r: &CalibrationResult,
     m: &Measurements,

@@ -36,7 +36,7 @@ pub enum Command {
     Design(design::DesignArgs),
     /// Simulated rig (firmware core + plant): fig5, table1, torque-sweep, faults.
     Sim(sim::SimArgs),
-    /// The main job: runs the design check on the paper's Table 1 and summarises it.
+    /// The main job: the whole simulated rig (design, calibration, fig5, table1, sweep, faults) with a report folder.
     Demo(demo::DemoArgs),
     /// Find where the current model and measured data disagree, name the missing effect, add it.
     Explain(crate::explain::cli::ExplainArgs),
@@ -65,7 +65,7 @@ impl Cli {
     pub fn run(self) -> Result<std::process::ExitCode, crate::RigError> {
         match self.command {
             Command::Design(a) => design::run(a),
-            Command::Demo(a) => demo::run(a),
+            Command::Demo(a) => demo::run(a, &self.device),
             Command::Explain(a) => crate::explain::cli::run(a),
             Command::Sim(a) => sim::run(a),
             Command::Ports(a) => ports::run(a),
