@@ -138,17 +138,34 @@ fn bad_input_exits_non_zero_with_a_reason() {
 }
 
 #[test]
-fn demo_runs_the_design_check() {
-    let out = rig()
-        .arg("demo")
+fn demo_runs_the_simulated_rig_and_writes_its_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let assert = rig()
+        .args(["demo", "--quick", "--out", out.to_str().unwrap()])
         .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    let text = String::from_utf8_lossy(&out);
+        .success();
+    let text = String::from_utf8_lossy(&assert.get_output().stdout).into_owned();
     assert!(
         text.contains("every verdict agrees with the paper"),
         "{text}"
     );
+    assert!(text.contains("everything agrees with the paper"), "{text}");
+    for file in [
+        "design.json",
+        "fig5.json",
+        "table1.json",
+        "torque_sweep.csv",
+        "torque_sweep.svg",
+        "faults.json",
+        "summary.json",
+        "calibration/calibration.toml",
+    ] {
+        assert!(out.join(file).exists(), "{file} missing");
+    }
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["all_ok"], Value::Bool(true));
+    let c = summary["calibration"]["measured"].as_array().unwrap();
+    assert!((c[0].as_f64().unwrap() / 62.1 - 1.0).abs() < 0.05);
 }
