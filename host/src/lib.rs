@@ -12,6 +12,7 @@ pub mod error;
 pub mod explain;
 pub mod ports;
 pub mod rigfile;
+pub mod scenario;
 pub mod sim;
 
 pub use error::RigError;

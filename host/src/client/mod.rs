@@ -336,6 +336,12 @@ impl<T: Read + Write> Client<T> {
         self.keep_alive
     }
 
+    /// Starts sending heartbeats during every wait (after a release sent with
+    /// [`Client::request`]).
+    pub fn start_keep_alive(&mut self) {
+        self.keep_alive = true;
+    }
+
     /// Stops sending heartbeats (the device stops at its comms timeout).
     pub fn stop_keep_alive(&mut self) {
         self.keep_alive = false;

@@ -1,0 +1,99 @@
+//! Scenarios written once ([`host::scenario`]) and run on the simulated rig here, and on a
+//! real rig when `RIG_PORT` names its serial port and `RIG_ALLOW_MOTION=1` says the
+//! vibrator may run (a released gear can drop its load: clear the load first).
+
+use hil_tests::{Target, target};
+use host::scenario::{self, DeviceLink, RigLink};
+use host::sim::{SimConfig, SimLink, SimRig};
+
+fn simulated() -> SimLink {
+    let mut link = SimLink::new(SimRig::new(SimConfig::paper()));
+    link.wait(1.2); // the current-sensor zero is measured at boot
+    link
+}
+
+/// The session the scenarios run on, or `None` (skipped, with the reason printed).
+fn with_link(test: &str, run: &mut dyn FnMut(&mut dyn RigLink)) {
+    match target() {
+        Target::Simulated => run(&mut simulated()),
+        Target::Serial(port) => {
+            if std::env::var("RIG_ALLOW_MOTION").as_deref() != Ok("1") {
+                eprintln!(
+                    "{test}: skipped on {port}: set RIG_ALLOW_MOTION=1 to let the vibrator run (clear the load first)"
+                );
+                return;
+            }
+            let (client, _) = host::client::Client::open(&port, protocol::DEFAULT_BAUD_RATE)
+                .expect("the rig answers");
+            run(&mut DeviceLink::new(client));
+        }
+    }
+}
+
+#[test]
+fn release_cycle_reaches_vibrating_then_locked_without_faults() {
+    with_link("release cycle", &mut |link| {
+        let r = scenario::release_cycle(link, 10.0, 1.0).expect("release cycle runs");
+        let up = r.to_vibrating_s.expect("reaches Vibrating");
+        assert!(up < 5.0, "{r:?}");
+        assert!(r.to_locked_s.is_some(), "{r:?}");
+        assert_eq!(
+            r.latched,
+            protocol::FaultFlags::empty().to_string(),
+            "{r:?}"
+        );
+    });
+}
+
+#[test]
+fn comms_loss_stops_the_motor_and_latches() {
+    with_link("comms loss", &mut |link| {
+        let r = scenario::comms_loss_drill(link, 10.0).expect("drill runs");
+        let t = r.to_safe_s.expect("reaches the safe state");
+        // 500 ms comms timeout, heartbeats every 150 ms.
+        assert!(t <= 0.7, "{r:?}");
+        assert!(r.comms_timeout_latched, "{r:?}");
+        assert!(r.cleared, "{r:?}");
+    });
+}
+
+#[test]
+fn real_rig_identity_without_motion() {
+    let Some(port) = hil_tests::real_rig_or_skip("real rig identity") else {
+        return;
+    };
+    let (mut client, info) =
+        host::client::Client::open(&port, protocol::DEFAULT_BAUD_RATE).expect("the rig answers");
+    assert_eq!(info.protocol_version, protocol::PROTOCOL_VERSION);
+    let faults = client.faults().expect("faults");
+    eprintln!(
+        "rig on {port}: firmware {}, latched faults {}",
+        info.firmware_version, faults.latched
+    );
+    let cal = client.calibration().expect("calibration");
+    assert!(cal.validate().is_ok());
+}
+
+#[test]
+fn release_cycle_over_the_virtual_devices_serial_port() {
+    // The same scenario through the real serial path: client, pseudo-terminal, firmware core.
+    let dev = host::device::VirtualDevice::paper(5.0).expect("virtual device");
+    let io =
+        host::client::open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).expect("pty opens");
+    let mut opts = host::client::ClientOptions::new(dev.port_name());
+    opts.time_scale = dev.speed();
+    opts.reply_timeout = std::time::Duration::from_secs(1);
+    let (client, _) = host::client::Client::connect(io, opts).expect("hello");
+    let mut link = DeviceLink::new(client);
+    link.wait(1.2).expect("boot");
+    let r = scenario::release_cycle(&mut link, 10.0, 1.0).expect("release cycle runs");
+    assert!(
+        r.to_vibrating_s.is_some() && r.to_locked_s.is_some(),
+        "{r:?}"
+    );
+    assert_eq!(
+        r.latched,
+        protocol::FaultFlags::empty().to_string(),
+        "{r:?}"
+    );
+}
