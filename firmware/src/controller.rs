@@ -170,14 +170,7 @@ impl Derived {
             f64::from(cal.pressure_angle_deg).to_radians(),
         )
         .ok()?;
-        let vibrator = model::Calibration::from_paper_units([
-            f64::from(cal.c1_nmm_per_a),
-            f64::from(cal.c2_nmm),
-            f64::from(cal.c3_nmm_s_per_rad),
-            f64::from(cal.c4_nmm),
-            f64::from(cal.c5_a_s_per_rad),
-            f64::from(cal.c6_a),
-        ]);
+        let vibrator = model::Calibration::from_paper_units(cal.constants());
         if !vibrator.is_plausible() {
             return None;
         }

@@ -277,14 +277,7 @@ pub fn run_on_device(dev: &DeviceOpts, out: &Path) -> Result<DemoSummary, RigErr
         firmware_version: session.info.firmware_version.to_string(),
         board: session.info.board.to_string(),
         latched_faults: faults.latched.to_string(),
-        calibration: [
-            f64::from(cal.c1_nmm_per_a),
-            f64::from(cal.c2_nmm),
-            f64::from(cal.c3_nmm_s_per_rad),
-            f64::from(cal.c4_nmm),
-            f64::from(cal.c5_a_s_per_rad),
-            f64::from(cal.c6_a),
-        ],
+        calibration: cal.constants(),
     };
     let all_ok = design.agrees_with_paper && faults.latched.is_empty();
     let summary = DemoSummary {

@@ -75,6 +75,19 @@ impl Calibration {
         }
     }
 
+    /// C1..C6 in the paper's units (see the field docs), widened to `f64` for the model.
+    pub fn constants(&self) -> [f64; 6] {
+        [
+            self.c1_nmm_per_a,
+            self.c2_nmm,
+            self.c3_nmm_s_per_rad,
+            self.c4_nmm,
+            self.c5_a_s_per_rad,
+            self.c6_a,
+        ]
+        .map(f64::from)
+    }
+
     /// Range checks shared by host (before sending) and firmware (before storing).
     ///
     /// They reject values that are non-finite or physically meaningless, not values that

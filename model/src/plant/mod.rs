@@ -198,6 +198,12 @@ pub struct Plant {
     rng: NoiseSource,
     energy: EnergyLedger,
     shaft: OutputShaft,
+    /// For the (dt, R) they were computed at (R drifts slowly with temperature): the step's
+    /// decay exp(-dt R / L), the mean-current factor tau / dt (1 - decay) and 1 / R.
+    decay_cache: (f64, f64, [f64; 3]),
+    /// sin and cos of the cam angle they were computed at, and steps until a full
+    /// evaluation.
+    trig_cache: (f64, f64, f64, u32),
 }
 
 impl Plant {
@@ -211,8 +217,47 @@ impl Plant {
             },
             rng: NoiseSource::new(seed),
             energy: EnergyLedger::default(),
+            decay_cache: (f64::NAN, f64::NAN, [0.0; 3]),
+            trig_cache: (0.0, 0.0, 1.0, 0),
             params,
         }
+    }
+
+    /// The winding's step response over `dt` at `resistance`: [exp(-dt / tau), the
+    /// mean-current factor tau / dt (1 - exp(-dt / tau)), 1 / R]. Recomputed only when dt or R
+    /// moved by more than 1e-4 relative (the error that leaves is below 1e-8 of a step).
+    fn winding(&mut self, dt: f64, resistance: f64) -> [f64; 3] {
+        let (cdt, cr, value) = self.decay_cache;
+        if cdt == dt && (resistance - cr).abs() <= 1e-4 * cr {
+            return value;
+        }
+        let tau = self.params.motor.inductance / resistance;
+        let decay = libm::exp(-dt / tau);
+        let value = [decay, tau / dt * (1.0 - decay), 1.0 / resistance];
+        self.decay_cache = (dt, resistance, value);
+        value
+    }
+
+    /// sin and cos of the cam angle. A step turns the cam by at most a few hundredths of a
+    /// radian, so the last pair is rotated by the step's angle (Taylor to the 4th order,
+    /// error below 1e-12); a full evaluation every 64 steps keeps rounding from building up.
+    fn cam_trig(&mut self) -> (f64, f64) {
+        let angle = self.state.cam_angle;
+        let (at, s0, c0, left) = self.trig_cache;
+        let d = angle - at;
+        if d == 0.0 {
+            return (s0, c0);
+        }
+        let (s, c, left) = if d.abs() < 0.05 && left > 0 {
+            let d2 = d * d;
+            let sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
+            let cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0);
+            (s0 * cd + c0 * sd, c0 * cd - s0 * sd, left - 1)
+        } else {
+            (sin(angle), cos(angle), 64)
+        };
+        self.trig_cache = (angle, s, c, left);
+        (s, c)
     }
 
     /// The parameters.
@@ -297,11 +342,10 @@ impl Plant {
         let v_bridge = drive.duty.clamp(-1.0, 1.0) * p.supply;
         let i0 = self.state.current;
         let (i1, i_mean, v_motor) = if drive.enabled {
-            let i_ss = (v_bridge - m.ke_cam() * omega) / resistance;
-            let tau = m.inductance / resistance;
-            let decay = libm::exp(-dt / tau);
+            let [decay, mean_factor, conductance] = self.winding(dt, resistance);
+            let i_ss = (v_bridge - m.ke_cam() * omega) * conductance;
             let i1 = i_ss + (i0 - i_ss) * decay;
-            let mean = i_ss + (i0 - i_ss) * tau / dt * (1.0 - decay);
+            let mean = i_ss + (i0 - i_ss) * mean_factor;
             if !p.regeneration && (i1 < 0.0) != (v_bridge < 0.0) && i1 != 0.0 {
                 // Diode-clamped bridge: current cannot flow against the applied voltage.
                 (0.0, 0.5 * i0.max(0.0), m.ke_cam() * omega)
@@ -316,7 +360,7 @@ impl Plant {
         let ktf = p.effects.torque_constant_factor(temp, m.ambient_c);
         let t_motor = m.torque_per_amp * ktf * i_mean;
         let tau_rot = p.load.torque();
-        let (s, c) = (sin(self.state.cam_angle), cos(self.state.cam_angle));
+        let (s, c) = self.cam_trig();
         let e = p.drive.eccentricity;
         let coupled = p.cam == CamSetup::Coupled;
         let mass = if coupled { p.drive.carrier_mass } else { 0.0 };
