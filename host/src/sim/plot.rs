@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::scenarios::sweep::SweepPoint;
@@ -22,6 +23,30 @@ fn span(v: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// One panel: axes over `x` and `y` with the load on the x axis.
+fn panel<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    caption: &str,
+    x: (f64, f64),
+    y: (f64, f64),
+    y_desc: &str,
+) -> Result<ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String> {
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(x.0..x.1, y.0..y.1)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc("tau_rot, N m")
+        .y_desc(y_desc)
+        .draw()
+        .map_err(|e| e.to_string())?;
+    Ok(chart)
+}
+
 /// Draws Figs. 8 and 9 of the sweep side by side into the SVG `path`.
 pub fn sweep_figure(path: &Path, points: &[SweepPoint]) -> Result<(), RigError> {
     let err = |e: String| RigError::Plot {
@@ -36,20 +61,14 @@ pub fn sweep_figure(path: &Path, points: &[SweepPoint]) -> Result<(), RigError> 
     voltages.dedup();
     let (x0, x1) = span(points.iter().map(|p| p.tau_rot_nm));
 
-    let (i0, i1) = span(points.iter().map(|p| p.i_in_a));
-    let mut chart = ChartBuilder::on(&left)
-        .caption("current (Fig. 8)", ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(x0..x1, i0..i1)
-        .map_err(|e| err(e.to_string()))?;
-    chart
-        .configure_mesh()
-        .x_desc("tau_rot, N m")
-        .y_desc("i_in, A")
-        .draw()
-        .map_err(|e| err(e.to_string()))?;
+    let mut chart = panel(
+        &left,
+        "current (Fig. 8)",
+        (x0, x1),
+        span(points.iter().map(|p| p.i_in_a)),
+        "i_in, A",
+    )
+    .map_err(err)?;
     for (k, &v) in voltages.iter().enumerate() {
         let color = COLORS[k % COLORS.len()];
         chart
@@ -70,27 +89,18 @@ pub fn sweep_figure(path: &Path, points: &[SweepPoint]) -> Result<(), RigError> 
         .map_err(|e| err(e.to_string()))?;
 
     let nmm = |p: &SweepPoint| p.tau_cam_meas_nm * 1e3;
-    let (t0, t1) = span(
-        points
-            .iter()
-            .flat_map(|p| [nmm(p), p.tau_cam_eq10_nm * 1e3]),
-    );
-    let mut chart = ChartBuilder::on(&right)
-        .caption(
-            "cam torque (Fig. 9): points measured, lines Eq. (10)",
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(x0..x1, t0..t1)
-        .map_err(|e| err(e.to_string()))?;
-    chart
-        .configure_mesh()
-        .x_desc("tau_rot, N m")
-        .y_desc("tau_cam, N mm")
-        .draw()
-        .map_err(|e| err(e.to_string()))?;
+    let mut chart = panel(
+        &right,
+        "cam torque (Fig. 9): points measured, lines Eq. (10)",
+        (x0, x1),
+        span(
+            points
+                .iter()
+                .flat_map(|p| [nmm(p), p.tau_cam_eq10_nm * 1e3]),
+        ),
+        "tau_cam, N mm",
+    )
+    .map_err(err)?;
     for (k, &v) in voltages.iter().enumerate() {
         let color = COLORS[k % COLORS.len()];
         chart
