@@ -42,12 +42,19 @@ fn sweep_csv(effects: PlantEffects, seed: u64) -> Dataset {
 }
 
 #[test]
-fn clean_simulated_sweep_has_no_missing_effect() {
+fn clean_simulated_sweep_misses_nothing_in_the_mean() {
     let data = sweep_csv(PlantEffects::default(), 31);
     let e = explain::explain(&data, &rig_model(), &Options::default())
         .unwrap()
         .explanation;
-    assert_eq!(e.verdict, Verdict::NoMissingEffect, "{}", e.finding);
+    // The 0.5 s window (as the paper's) does not span a whole number of cam half-turns, so
+    // the |sin| ripple of the friction torque leaves a test-to-test scatter in proportion to
+    // the friction term: the mesh-ripple variance model may rightly pick that up. No effect
+    // that moves the mean current may be named, and the model already fits to the noise.
+    for effect in &e.effects {
+        assert_eq!(effect.name, "mesh-load-sharing-ripple", "{}", e.finding);
+    }
+    assert!(e.rmse_before_a < 0.005, "{}", e.finding);
 }
 
 #[test]

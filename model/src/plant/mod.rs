@@ -204,6 +204,10 @@ pub struct Plant {
     /// sin and cos of the cam angle they were computed at, and steps until a full
     /// evaluation.
     trig_cache: (f64, f64, f64, u32),
+    /// The gear's axial force per unit of output torque (Eq. 8), computed once.
+    axial_per_torque: f64,
+    /// 1 / thermal resistance and 1 / heat capacity of the winding.
+    thermal: [f64; 2],
 }
 
 impl Plant {
@@ -219,6 +223,11 @@ impl Plant {
             energy: EnergyLedger::default(),
             decay_cache: (f64::NAN, f64::NAN, [0.0; 3]),
             trig_cache: (0.0, 0.0, 1.0, 0),
+            axial_per_torque: params.drive.gear.axial_force_per_torque(),
+            thermal: [
+                1.0 / params.motor.thermal_resistance,
+                1.0 / params.motor.thermal_capacity,
+            ],
             params,
         }
     }
@@ -332,17 +341,21 @@ impl Plant {
 
     /// Advances the plant by `dt` seconds under the bridge command `drive`.
     pub fn step(&mut self, dt: f64, drive: Drive) {
-        let p = self.params;
-        let m = &p.motor;
         let temp = self.state.temperature;
-        let resistance = m.resistance * (1.0 + COPPER_TEMPCO * (temp - m.ambient_c));
+        let resistance = self.params.motor.resistance
+            * (1.0 + COPPER_TEMPCO * (temp - self.params.motor.ambient_c));
+        let winding = self.winding(dt, resistance);
+        let (s, c) = self.cam_trig();
+        // Borrowed, not copied: the parameters are a few hundred bytes and this runs at 10 kHz.
+        let p = &self.params;
+        let m = &p.motor;
         let omega = self.state.cam_speed;
 
         // Electrical: exact R-L response for this step's back-EMF.
         let v_bridge = drive.duty.clamp(-1.0, 1.0) * p.supply;
         let i0 = self.state.current;
         let (i1, i_mean, v_motor) = if drive.enabled {
-            let [decay, mean_factor, conductance] = self.winding(dt, resistance);
+            let [decay, mean_factor, conductance] = winding;
             let i_ss = (v_bridge - m.ke_cam() * omega) * conductance;
             let i1 = i_ss + (i0 - i_ss) * decay;
             let mean = i_ss + (i0 - i_ss) * mean_factor;
@@ -360,7 +373,6 @@ impl Plant {
         let ktf = p.effects.torque_constant_factor(temp, m.ambient_c);
         let t_motor = m.torque_per_amp * ktf * i_mean;
         let tau_rot = p.load.torque();
-        let (s, c) = self.cam_trig();
         let e = p.drive.eccentricity;
         let coupled = p.cam == CamSetup::Coupled;
         let mass = if coupled { p.drive.carrier_mass } else { 0.0 };
@@ -373,7 +385,7 @@ impl Plant {
                     self.state.output_speed,
                 );
             }
-            p.drive.friction_force(mu_ax, tau_rot) + p.effects.bush_friction
+            mu_ax * tau_rot.abs() * self.axial_per_torque + p.effects.bush_friction
         } else {
             0.0
         };
@@ -426,7 +438,8 @@ impl Plant {
         let new_wt = if wt.abs() < STANDSTILL && tau_rot.abs() <= bush_hold {
             0.0
         } else {
-            let a = self.shaft.acceleration(tau_rot, wt, omega_n);
+            // Eq. (6) with the friction computed above (the same as `OutputShaft::acceleration`).
+            let a = (tau_rot + out_friction) / self.shaft.i_hat;
             let w = wt + a * dt;
             if wt.abs() >= STANDSTILL && w.signum() != wt.signum() {
                 0.0
@@ -439,7 +452,7 @@ impl Plant {
         // Thermal.
         let heat = i_mean * i_mean * resistance;
         self.state.temperature +=
-            (heat - (temp - m.ambient_c) / m.thermal_resistance) / m.thermal_capacity * dt;
+            (heat - (temp - m.ambient_c) * self.thermal[0]) * self.thermal[1] * dt;
 
         // Ledger.
         let led = &mut self.energy;

@@ -53,7 +53,7 @@ impl SensorParams {
         let v_sensor = self.acs_supply / 2.0
             + self.acs_zero_error
             + self.acs_sensitivity * current
-            + self.acs_noise * rng.normal();
+            + self.acs_noise * rng.normal_fast();
         let v_pin = (v_sensor * self.divider).clamp(0.0, self.adc_reference);
         let full = self.adc_full_scale() as f64;
         libm::round(v_pin / self.adc_reference * full).clamp(0.0, full) as u16
