@@ -137,7 +137,8 @@ impl<T: Read + Write> RigLink for DeviceLink<T> {
     }
 }
 
-fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), RigError> {
+/// Requests a release at `hz` and keeps it alive with heartbeats.
+pub fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), RigError> {
     let req = Request::Release {
         on: true,
         target_hz: hz,
@@ -145,6 +146,21 @@ fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), RigError> {
     match link.request(&req)? {
         DeviceMessage::Ack { .. } => {
             link.keep_alive(true);
+            Ok(())
+        }
+        other => Err(refused(&req, &other)),
+    }
+}
+
+/// Ends the release and stops the heartbeats.
+pub fn lock<L: RigLink + ?Sized>(link: &mut L) -> Result<(), RigError> {
+    let req = Request::Release {
+        on: false,
+        target_hz: 0.0,
+    };
+    match link.request(&req)? {
+        DeviceMessage::Ack { .. } => {
+            link.keep_alive(false);
             Ok(())
         }
         other => Err(refused(&req, &other)),
@@ -180,11 +196,7 @@ pub fn release_cycle<L: RigLink + ?Sized>(
     release(link, hz)?;
     let to_vibrating_s = link.wait_for_state(6.0, &|s| s == SupervisorState::Vibrating)?;
     link.wait(hold_s)?;
-    link.request(&Request::Release {
-        on: false,
-        target_hz: 0.0,
-    })?;
-    link.keep_alive(false);
+    lock(link)?;
     let to_locked_s = link.wait_for_state(4.0, &|s| s == SupervisorState::Locked)?;
     let latched = link.latched_faults()?;
     link.request(&Request::StopTelemetry)?;

@@ -124,14 +124,7 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, RigError> {
         DeviceMessage::Ack { .. }
     );
     link.wait(0.2);
-    let latched = match link.request(&Request::GetFaults)? {
-        DeviceMessage::Faults { latched, .. } => latched,
-        other => {
-            return Err(RigError::Protocol(format!(
-                "GetFaults was answered with {other:?}"
-            )));
-        }
-    };
+    let latched = crate::scenario::RigLink::latched_faults(&mut link)?;
     Ok(FaultOutcome {
         name: name.to_string(),
         motor_off: motor_off(&link),

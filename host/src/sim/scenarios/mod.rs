@@ -43,28 +43,12 @@ pub fn hello(link: &mut SimLink) -> Result<(), RigError> {
 
 /// Requests a release at `hz` and keeps it alive with heartbeats.
 pub fn release(link: &mut SimLink, hz: f32) -> Result<(), RigError> {
-    expect_ack(
-        link,
-        &Request::Release {
-            on: true,
-            target_hz: hz,
-        },
-    )?;
-    link.keep_alive(Some(HEARTBEAT_S));
-    Ok(())
+    crate::scenario::release(link, hz)
 }
 
 /// Ends the release and stops the heartbeats.
 pub fn lock(link: &mut SimLink) -> Result<(), RigError> {
-    expect_ack(
-        link,
-        &Request::Release {
-            on: false,
-            target_hz: 0.0,
-        },
-    )?;
-    link.keep_alive(None);
-    Ok(())
+    crate::scenario::lock(link)
 }
 
 /// Whether the output has moved since it was last reset.
