@@ -356,7 +356,7 @@ impl ReleaseButton {
 }
 
 /// The STORAGE region of `memory.x` (last 16 KiB of bank 2) as a flash of its own.
-pub type CalibrationFlash = firmware::storage::Partition<Flash<'static, Blocking>>;
+pub type CalibrationFlash = firmware_core::storage::Partition<Flash<'static, Blocking>>;
 
 // Declaring linker symbols takes an `unsafe extern` block; only their addresses are taken
 // (safe), the symbols are never read.
@@ -372,7 +372,7 @@ unsafe extern "C" {
 fn calibration_flash(flash: Flash<'static, Blocking>) -> CalibrationFlash {
     let start = (&raw const __storage_start) as u32;
     let end = (&raw const __storage_end) as u32;
-    firmware::storage::Partition::new(flash, start - FLASH_BASE as u32, end - start)
+    firmware_core::storage::Partition::new(flash, start - FLASH_BASE as u32, end - start)
 }
 
 /// Every driver of the rig, in its safe state.

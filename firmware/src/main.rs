@@ -2,7 +2,7 @@
 //!
 //! Thin on purpose: bring up the clocks and [`board`] drivers in their safe state (vibration
 //! off), load the calibration from flash, then run tasks that only move data between the
-//! peripherals and the control core ([`firmware::Core`]):
+//! peripherals and the control core ([`firmware_core::Core`]):
 //!
 //! | task            | executor                 | does                                                    |
 //! |-----------------|--------------------------|---------------------------------------------------------|
@@ -57,8 +57,8 @@ mod app {
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
-    use firmware::storage::{CalibrationStore, StorageError};
-    use firmware::{BootInfo, Core, CoreConfig, Inputs, Outputs};
+    use firmware_core::storage::{CalibrationStore, StorageError};
+    use firmware_core::{BootInfo, Core, CoreConfig, Inputs, Outputs};
     use protocol::{Calibration, CalibrationStatus, SupervisorState};
     use {defmt_rtt as _, panic_probe as _};
 

@@ -4,10 +4,10 @@
 
 use std::collections::BTreeMap;
 
-use host::explain::{self, Dataset, Options, Verdict};
-use host::rigfile::{EffectEntry, RigFile};
-use host::sim::scenarios::sweep;
+use explain::{self, Dataset, Options, Verdict};
 use model::plant::PlantEffects;
+use rigfile::{EffectEntry, RigFile};
+use sim::scenarios::sweep;
 
 /// The simulated drive cannot take the carrier's power back: its revolution mean carries
 /// half of Eq. (10)'s inertia term. That is part of the rig, so the model says so.
@@ -35,7 +35,7 @@ fn sweep_csv(effects: PlantEffects, seed: u64) -> Dataset {
     let dir = std::env::temp_dir().join(format!("rig-explain-sil-{seed}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("sweep.csv");
-    sweep::write_csv(&points, &path).unwrap();
+    sweep::write_csv(&points, std::fs::File::create(&path).unwrap()).unwrap();
     let data = Dataset::read_csv(&path).expect("the sweep CSV is explain's input format");
     let _ = std::fs::remove_dir_all(&dir);
     data

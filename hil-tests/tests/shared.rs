@@ -1,10 +1,12 @@
-//! Scenarios written once ([`host::scenario`]) and run on the simulated rig here, and on a
+//! Scenarios written once ([`sim::riglink`]) and run on the simulated rig here, and on a
 //! real rig when `RIG_PORT` names its serial port and `RIG_ALLOW_MOTION=1` says the
 //! vibrator may run (a released gear can drop its load: clear the load first).
 
 use hil_tests::{Target, target};
-use host::scenario::{self, DeviceLink, RigLink};
-use host::sim::{SimConfig, SimLink, SimRig};
+use host::scenario::DeviceLink;
+use sim::RigLink;
+use sim::riglink as scenario;
+use sim::{SimConfig, SimLink, SimRig};
 
 fn simulated() -> SimLink {
     let mut link = SimLink::new(SimRig::new(SimConfig::paper()));
@@ -12,10 +14,51 @@ fn simulated() -> SimLink {
     link
 }
 
+/// Either rig behind one error type, so a test body is written once.
+enum AnyLink {
+    Simulated(Box<SimLink>),
+    Real(Box<DeviceLink<Box<dyn serialport::SerialPort>>>),
+}
+
+impl RigLink for AnyLink {
+    type Error = host::RigError;
+
+    fn request(
+        &mut self,
+        req: &protocol::Request,
+    ) -> Result<protocol::DeviceMessage, host::RigError> {
+        match self {
+            AnyLink::Simulated(l) => Ok(l.as_mut().request(req).map_err(host::RigError::from)?),
+            AnyLink::Real(l) => RigLink::request(l.as_mut(), req),
+        }
+    }
+
+    fn keep_alive(&mut self, on: bool) {
+        match self {
+            AnyLink::Simulated(l) => RigLink::keep_alive(l.as_mut(), on),
+            AnyLink::Real(l) => l.keep_alive(on),
+        }
+    }
+
+    fn wait(&mut self, seconds: f64) -> Result<(), host::RigError> {
+        match self {
+            AnyLink::Simulated(l) => Ok(RigLink::wait(l.as_mut(), seconds)?),
+            AnyLink::Real(l) => l.wait(seconds),
+        }
+    }
+
+    fn state(&mut self) -> Result<protocol::SupervisorState, host::RigError> {
+        match self {
+            AnyLink::Simulated(l) => Ok(RigLink::state(l.as_mut())?),
+            AnyLink::Real(l) => l.state(),
+        }
+    }
+}
+
 /// The session the scenarios run on, or `None` (skipped, with the reason printed).
-fn with_link(test: &str, run: &mut dyn FnMut(&mut dyn RigLink)) {
+fn with_link(test: &str, run: &mut dyn FnMut(&mut AnyLink)) {
     match target() {
-        Target::Simulated => run(&mut simulated()),
+        Target::Simulated => run(&mut AnyLink::Simulated(Box::new(simulated()))),
         Target::Serial(port) => {
             if std::env::var("RIG_ALLOW_MOTION").as_deref() != Ok("1") {
                 eprintln!(
@@ -25,7 +68,7 @@ fn with_link(test: &str, run: &mut dyn FnMut(&mut dyn RigLink)) {
             }
             let (client, _) = host::client::Client::open(&port, protocol::DEFAULT_BAUD_RATE)
                 .expect("the rig answers");
-            run(&mut DeviceLink::new(client));
+            run(&mut AnyLink::Real(Box::new(DeviceLink::new(client))));
         }
     }
 }

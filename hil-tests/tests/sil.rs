@@ -1,6 +1,6 @@
 //! Software-in-the-loop: the paper's experiments and the fault drills on the simulated rig.
 
-use host::sim::scenarios::{faults, fig5, sweep, table1};
+use sim::scenarios::{faults, fig5, sweep, table1};
 
 #[test]
 fn fig5_load_held_without_vibration_and_falls_once_released() {

@@ -12,7 +12,7 @@ use crate::RigError;
 use crate::calibrate::{self, Plan, bench::SimBench};
 use crate::cli::connect::{DeviceOpts, Session};
 use crate::design::{self, DesignReport, RigParams};
-use crate::sim::scenarios::{faults, fig5, sweep, table1};
+use sim::scenarios::{faults, fig5, sweep, table1};
 
 /// The paper's Table 1: which gear sets had a non-backdriven point (n = 1 only).
 pub const TABLE1_PAPER_HOLDS: [bool; 6] = [true, true, false, false, false, false];
@@ -172,10 +172,10 @@ pub fn run_simulated(
     };
     let points = sweep::run(&sweep_opts)?;
     let csv_path = opts.out.join("torque_sweep.csv");
-    sweep::write_csv(&points, &csv_path)?;
+    crate::sweep_report::write_csv(&points, &csv_path)?;
     files.push(csv_path.display().to_string());
     let svg_path = opts.out.join("torque_sweep.svg");
-    crate::sim::plot::sweep_figure(&svg_path, &points)?;
+    crate::sweep_report::sweep_figure(&svg_path, &points)?;
     files.push(svg_path.display().to_string());
     let torque_sweep = sweep::summarise(&points, &sweep_opts);
     write_json(&opts.out, "torque_sweep.json", &torque_sweep, &mut files)?;

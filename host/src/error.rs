@@ -202,6 +202,18 @@ pub enum RigError {
     /// The operator's input ended or could not be used.
     #[error("{0}")]
     Operator(String),
+    /// The virtual rig or a scenario failed.
+    #[error(transparent)]
+    Sim(#[from] sim::SimError),
+    /// The discrepancy workflow failed.
+    #[error(transparent)]
+    Explain(#[from] explain::ExplainError),
+    /// A rig file that cannot be read, used or written.
+    #[error(transparent)]
+    RigFileInvalid(#[from] rigfile::RigFileError),
+    /// A report file or plot that cannot be written.
+    #[error(transparent)]
+    Report(#[from] reporting::ReportError),
     /// The virtual device could not start.
     #[error("cannot start the virtual device: {0}")]
     VirtualDevice(String),

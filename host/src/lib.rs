@@ -9,10 +9,8 @@ pub mod demo;
 pub mod design;
 pub mod device;
 pub mod error;
-pub mod explain;
 pub mod ports;
-pub mod rigfile;
 pub mod scenario;
-pub mod sim;
+pub mod sweep_report;
 
 pub use error::RigError;

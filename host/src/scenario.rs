@@ -1,87 +1,14 @@
-//! Rig scenarios written once against [`RigLink`], a host session with a rig: the
-//! simulated rig in virtual time ([`crate::sim::SimLink`]) or a real rig over its serial
-//! port ([`crate::client::Client`]). `hil-tests` runs them on either.
+//! The real rig's side of the shared scenarios: [`DeviceLink`], a [`sim::RigLink`] over the
+//! serial client, so the scenarios of [`sim::riglink`] run on a real rig as on the virtual one.
 
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
-use protocol::{DeviceMessage, FaultFlags, Request, SupervisorState};
-use serde::Serialize;
+use protocol::{DeviceMessage, Request, SupervisorState};
+use sim::RigLink;
 
 use crate::RigError;
 use crate::client::Client;
-use crate::sim::SimLink;
-
-/// Telemetry rate the scenarios watch the state at, Hz.
-const TELEMETRY_HZ: u16 = 50;
-
-/// A host session with a rig, simulated or real.
-pub trait RigLink {
-    /// Sends `req` and returns its reply (a `Nack` is an error).
-    fn request(&mut self, req: &Request) -> Result<DeviceMessage, RigError>;
-    /// Keeps a release alive with heartbeats (true) or lets it lapse (false).
-    fn keep_alive(&mut self, on: bool);
-    /// Lets `seconds` pass (virtual or wall-clock), heartbeats going on when kept alive.
-    fn wait(&mut self, seconds: f64) -> Result<(), RigError>;
-    /// The supervisor state of the newest telemetry sample.
-    fn state(&mut self) -> Result<SupervisorState, RigError>;
-
-    /// Waits until `done(state)` or `limit_s` passes; returns the time waited.
-    fn wait_for_state(
-        &mut self,
-        limit_s: f64,
-        done: &dyn Fn(SupervisorState) -> bool,
-    ) -> Result<Option<f64>, RigError> {
-        let step = 0.01;
-        let mut waited = 0.0;
-        while waited <= limit_s {
-            if done(self.state()?) {
-                return Ok(Some(waited));
-            }
-            self.wait(step)?;
-            waited += step;
-        }
-        Ok(None)
-    }
-
-    /// Latched faults.
-    fn latched_faults(&mut self) -> Result<FaultFlags, RigError> {
-        match self.request(&Request::GetFaults)? {
-            DeviceMessage::Faults { latched, .. } => Ok(latched),
-            other => Err(RigError::Protocol(format!(
-                "GetFaults was answered with {other:?}"
-            ))),
-        }
-    }
-}
-
-fn refused(req: &Request, other: &DeviceMessage) -> RigError {
-    RigError::Protocol(format!("{req:?} was answered with {other:?}"))
-}
-
-impl RigLink for SimLink {
-    fn request(&mut self, req: &Request) -> Result<DeviceMessage, RigError> {
-        match SimLink::request(self, req)? {
-            nack @ DeviceMessage::Nack { .. } => Err(refused(req, &nack)),
-            reply => Ok(reply),
-        }
-    }
-
-    fn keep_alive(&mut self, on: bool) {
-        SimLink::keep_alive(self, on.then_some(crate::sim::scenarios::HEARTBEAT_S));
-    }
-
-    fn wait(&mut self, seconds: f64) -> Result<(), RigError> {
-        SimLink::wait(self, seconds);
-        Ok(())
-    }
-
-    fn state(&mut self) -> Result<SupervisorState, RigError> {
-        self.last_telemetry
-            .map(|t| t.state)
-            .ok_or_else(|| RigError::Protocol("no telemetry from the simulated rig yet".into()))
-    }
-}
 
 /// A real rig's session: the client plus the newest telemetry state.
 pub struct DeviceLink<T: Read + Write> {
@@ -101,6 +28,8 @@ impl<T: Read + Write> DeviceLink<T> {
 }
 
 impl<T: Read + Write> RigLink for DeviceLink<T> {
+    type Error = RigError;
+
     fn request(&mut self, req: &Request) -> Result<DeviceMessage, RigError> {
         self.client.request(req)
     }
@@ -135,113 +64,4 @@ impl<T: Read + Write> RigLink for DeviceLink<T> {
         self.last_state
             .ok_or_else(|| RigError::Protocol("the rig sends no telemetry".into()))
     }
-}
-
-/// Requests a release at `hz` and keeps it alive with heartbeats.
-pub fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), RigError> {
-    let req = Request::Release {
-        on: true,
-        target_hz: hz,
-    };
-    match link.request(&req)? {
-        DeviceMessage::Ack { .. } => {
-            link.keep_alive(true);
-            Ok(())
-        }
-        other => Err(refused(&req, &other)),
-    }
-}
-
-/// Ends the release and stops the heartbeats.
-pub fn lock<L: RigLink + ?Sized>(link: &mut L) -> Result<(), RigError> {
-    let req = Request::Release {
-        on: false,
-        target_hz: 0.0,
-    };
-    match link.request(&req)? {
-        DeviceMessage::Ack { .. } => {
-            link.keep_alive(false);
-            Ok(())
-        }
-        other => Err(refused(&req, &other)),
-    }
-}
-
-fn start_telemetry<L: RigLink + ?Sized>(link: &mut L) -> Result<(), RigError> {
-    link.request(&Request::StartTelemetry {
-        rate_hz: TELEMETRY_HZ,
-    })?;
-    link.wait(0.1)
-}
-
-/// Outcome of [`release_cycle`].
-#[derive(Debug, Clone, Serialize)]
-pub struct ReleaseCycle {
-    /// From the release request to `Vibrating`, s.
-    pub to_vibrating_s: Option<f64>,
-    /// From the end of the release to `Locked`, s.
-    pub to_locked_s: Option<f64>,
-    /// Faults latched at the end.
-    pub latched: String,
-}
-
-/// Release at `hz` for `hold_s`, then lock: the supervisor must reach `Vibrating`, then
-/// `Locked`, with no fault.
-pub fn release_cycle<L: RigLink + ?Sized>(
-    link: &mut L,
-    hz: f32,
-    hold_s: f64,
-) -> Result<ReleaseCycle, RigError> {
-    start_telemetry(link)?;
-    release(link, hz)?;
-    let to_vibrating_s = link.wait_for_state(6.0, &|s| s == SupervisorState::Vibrating)?;
-    link.wait(hold_s)?;
-    lock(link)?;
-    let to_locked_s = link.wait_for_state(4.0, &|s| s == SupervisorState::Locked)?;
-    let latched = link.latched_faults()?;
-    link.request(&Request::StopTelemetry)?;
-    Ok(ReleaseCycle {
-        to_vibrating_s,
-        to_locked_s,
-        latched: latched.to_string(),
-    })
-}
-
-/// Outcome of [`comms_loss_drill`].
-#[derive(Debug, Clone, Serialize)]
-pub struct CommsLoss {
-    /// From the last heartbeat opportunity to the motor-off state, s.
-    pub to_safe_s: Option<f64>,
-    /// `COMMS_TIMEOUT` was latched.
-    pub comms_timeout_latched: bool,
-    /// The fault cleared once the cause was gone.
-    pub cleared: bool,
-}
-
-/// Release, then stop the heartbeats as a host that vanished: the rig must stop the motor
-/// and latch `COMMS_TIMEOUT`; a clear afterwards succeeds.
-pub fn comms_loss_drill<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<CommsLoss, RigError> {
-    start_telemetry(link)?;
-    release(link, hz)?;
-    link.wait_for_state(6.0, &|s| s == SupervisorState::Vibrating)?;
-    link.keep_alive(false);
-    let to_safe_s = link.wait_for_state(3.0, &|s| {
-        matches!(
-            s,
-            SupervisorState::Fault | SupervisorState::Locked | SupervisorState::Stopping
-        )
-    })?;
-    let comms_timeout_latched = link.latched_faults()?.contains(FaultFlags::COMMS_TIMEOUT);
-    // Outside the 500 ms fault hold, and with the cam at rest, the clear succeeds.
-    link.wait(2.5)?;
-    let cleared = match link.request(&Request::ClearFaults)? {
-        DeviceMessage::Faults { latched, .. } => latched.is_empty(),
-        _ => false,
-    };
-    link.request(&Request::StopTelemetry)?;
-    Ok(CommsLoss {
-        to_safe_s,
-        comms_timeout_latched,
-        cleared,
-    })
 }

@@ -147,19 +147,24 @@ fn test() -> Result {
         c
     })?;
     firmware()?;
-    run("model and protocol build for the thumb target", {
-        let mut c = cargo();
-        c.args([
-            "build",
-            "--package",
-            "model",
-            "--package",
-            "protocol",
-            "--target",
-            THUMB,
-        ]);
-        c
-    })?;
+    run(
+        "model, protocol and firmware-core build for the thumb target",
+        {
+            let mut c = cargo();
+            c.args([
+                "build",
+                "--package",
+                "model",
+                "--package",
+                "protocol",
+                "--package",
+                "firmware-core",
+                "--target",
+                THUMB,
+            ]);
+            c
+        },
+    )?;
     run("clippy, firmware on the thumb target", {
         let mut c = cargo();
         c.args([
@@ -185,6 +190,12 @@ fn test() -> Result {
             "-D",
             "warnings",
         ]);
+        c
+    })?;
+    run("docs, warnings denied", {
+        let mut c = cargo();
+        c.args(["doc", "--workspace", "--no-deps"]);
+        c.env("RUSTDOCFLAGS", "-D warnings");
         c
     })?;
     run("tests", {

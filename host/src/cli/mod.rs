@@ -10,6 +10,7 @@ pub mod clear;
 pub mod connect;
 pub mod demo;
 pub mod design;
+pub mod explain;
 pub mod faults;
 pub mod info;
 pub mod monitor;
@@ -39,7 +40,7 @@ pub enum Command {
     /// The main job: the whole simulated rig (design, calibration, fig5, table1, sweep, faults) with a report folder.
     Demo(demo::DemoArgs),
     /// Find where the current model and measured data disagree, name the missing effect, add it.
-    Explain(crate::explain::cli::ExplainArgs),
+    Explain(crate::cli::explain::ExplainArgs),
     /// List serial ports, marking ST-LINK virtual COM ports (Nucleo boards).
     Ports(ports::PortsArgs),
     /// Device identity: firmware and protocol versions, board, calibration source.
@@ -66,7 +67,7 @@ impl Cli {
         match self.command {
             Command::Design(a) => design::run(a),
             Command::Demo(a) => demo::run(a, &self.device),
-            Command::Explain(a) => crate::explain::cli::run(a),
+            Command::Explain(a) => crate::cli::explain::run(a),
             Command::Sim(a) => sim::run(a),
             Command::Ports(a) => ports::run(a),
             Command::Info(a) => info::run(a, &self.device),

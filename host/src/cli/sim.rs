@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use clap::{Args, Subcommand};
 
 use crate::RigError;
-use crate::sim::scenarios::{faults, fig5, sweep, table1};
+use sim::scenarios::{faults, fig5, sweep, table1};
 
 /// Arguments of `rig sim`.
 #[derive(Debug, Args)]
@@ -179,7 +179,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             };
             let points = sweep::run(&opts)?;
             if let Some(path) = &a.csv {
-                sweep::write_csv(&points, path)?;
+                crate::sweep_report::write_csv(&points, path)?;
             }
             let summary = sweep::summarise(&points, &opts);
             if a.json {

@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 use model::plant::Plant;
 
 use crate::RigError;
-use crate::sim::{PLANT_HZ, SimConfig, SimRig};
+use sim::{PLANT_HZ, SimConfig, SimRig};
 
 mod pty;
 

@@ -1,0 +1,51 @@
+//! `rig explain` speed: the whole analysis (CSV parsing, base fit, every candidate, the
+//! bootstrap guard, held-out validation, the gap tables) on 1e5 rows, and on the paper's
+//! 150-row sweep. Target: 1e5 rows in under 1 s.
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use explain::synth::{self, SweepPlan};
+use explain::{Dataset, Options, explain};
+use rigfile::RigFile;
+
+/// A synthetic sweep with a hidden speed-dependent axial friction, as CSV bytes.
+fn sweep_csv(repeats: usize) -> Vec<u8> {
+    let rig = RigFile::paper();
+    let mut truth = rig.current_model().expect("the paper's rig is valid");
+    truth.effects.axial_corner_speed = 20.0;
+    let plan = SweepPlan {
+        repeats,
+        test_seconds: (0.5, 1.5),
+        ..SweepPlan::default()
+    };
+    let rows = synth::generate(&truth, &plan, 7);
+    let data = Dataset::from_rows("bench.csv", rows).expect("valid rows");
+    let mut out = Vec::new();
+    data.write_csv(&mut out).expect("in memory");
+    out
+}
+
+fn bench(c: &mut Criterion) {
+    let rig = RigFile::paper();
+    let options = Options::default();
+    let mut group = c.benchmark_group("explain");
+    group.sample_size(10);
+    group.measurement_time(Duration::from_secs(20));
+    for (name, repeats) in [("paper_sweep_150_rows", 5), ("rows_1e5", 3334)] {
+        let csv = sweep_csv(repeats);
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let data =
+                    Dataset::parse_csv(black_box(csv.as_slice()), "bench.csv").expect("parses");
+                let outcome = explain(&data, &rig, &options).expect("explains");
+                black_box(outcome.explanation.verdict)
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,474 @@
+//! The finding in words, the text summary and the report folder of `rig explain`: residual
+//! plots before and after, the candidate table, every step and the gap in detail.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::gap::{Bin, Gap};
+use super::select::Selection;
+use super::{CandidateReport, Explanation, Outcome, Verdict};
+use crate::ExplainError;
+use reporting::plot::{self, Panel};
+
+fn ma(a: f64) -> String {
+    format!("{:.1} mA", a * 1e3)
+}
+
+fn opt_ma(a: Option<f64>) -> String {
+    a.map(ma).unwrap_or_else(|| "n/a".into())
+}
+
+fn p_text(p: f64) -> String {
+    if p < 0.001 {
+        "p < 0.001".into()
+    } else {
+        format!("p {p:.3}")
+    }
+}
+
+/// The bin of `gap` that stands out most (largest |mean| / standard error).
+fn worst_bin(gap: &Gap) -> Option<(&'static str, &Bin)> {
+    let mut best: Option<(&'static str, &Bin, f64)> = None;
+    for (axis, bins) in [
+        ("cam speed", &gap.by_speed),
+        ("load", &gap.by_load),
+        ("temperature/time", &gap.by_thermal),
+    ] {
+        for b in bins {
+            let z = b.mean_residual_ma.abs() / b.std_error_ma.max(1e-9);
+            if best.is_none_or(|(_, _, zb)| z > zb) {
+                best = Some((axis, b, z));
+            }
+        }
+    }
+    best.map(|(a, b, _)| (a, b))
+}
+
+fn params_text(
+    p: &std::collections::BTreeMap<String, f64>,
+    iv: &std::collections::BTreeMap<String, [f64; 2]>,
+) -> String {
+    p.iter()
+        .map(|(k, v)| match iv.get(k) {
+            Some([lo, hi]) => format!("{k} = {v:.4} [{lo:.4}, {hi:.4}]"),
+            None => format!("{k} = {v:.4}"),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The finding in words.
+pub fn finding(e: &Explanation, selection: &Selection) -> String {
+    let mut s = String::new();
+    let model = if e.known_effects.is_empty() {
+        format!(
+            "The paper's model (Eq. 10 with mu fitted = {:.3})",
+            e.mu_before
+        )
+    } else {
+        format!(
+            "The loaded model (mu = {:.3}, with {})",
+            e.mu_before,
+            e.known_effects.join(", ")
+        )
+    };
+    match e.verdict {
+        Verdict::NoMissingEffect => {
+            let _ = write!(
+                s,
+                "{model} agrees with the measurement to {} RMS (held-out {}): no candidate effect is needed.",
+                ma(e.rmse_before_a),
+                opt_ma(e.holdout_rmse_before_a)
+            );
+            if let Some(step) = selection.steps.first() {
+                let _ = write!(s, " Closest candidate: {}.", step.reason);
+            }
+            let w = &e.gap_after.whiteness;
+            let _ = write!(
+                s,
+                " The residuals are {} in time order (Ljung-Box {}).",
+                if w.p_value < 0.01 {
+                    "not white"
+                } else {
+                    "white"
+                },
+                p_text(w.p_value)
+            );
+        }
+        Verdict::Explained | Verdict::Ambiguous => {
+            let _ = write!(
+                s,
+                "{model} misses the measured current by {} RMS",
+                ma(e.rmse_before_a)
+            );
+            if let Some((axis, b)) = worst_bin(&e.gap_before) {
+                let _ = write!(
+                    s,
+                    "; the residuals stand out by {} (mean {:+.1} mA at {}, {} rows)",
+                    axis, b.mean_residual_ma, b.label, b.rows
+                );
+            }
+            s.push_str(". ");
+            for (k, eff) in e.effects.iter().enumerate() {
+                let _ = write!(
+                    s,
+                    "{} {}: {}. It lowers the BIC by {:.1} ({}), held-out RMSE {}. ",
+                    if k == 0 { "Missing:" } else { "Also:" },
+                    eff.name,
+                    eff.description,
+                    -eff.delta_bic,
+                    p_text(eff.p_value),
+                    opt_ma(eff.holdout_rmse_a)
+                );
+            }
+            if e.verdict == Verdict::Ambiguous {
+                let _ = write!(
+                    s,
+                    "The data cannot tell {} apart (BIC within 2 of each other); the model takes {}, more tests at other loads, speeds or temperatures would separate them. ",
+                    e.ambiguous.join(", "),
+                    e.ambiguous[0]
+                );
+            }
+            let w = &e.gap_after.whiteness;
+            let _ = write!(
+                s,
+                "With it the gap shrinks from {} to {} RMS (held-out {} -> {}); the residuals are {} in time order (Ljung-Box {}).",
+                ma(e.rmse_before_a),
+                ma(e.rmse_after_a),
+                opt_ma(e.holdout_rmse_before_a),
+                opt_ma(e.holdout_rmse_after_a),
+                if w.p_value < 0.01 {
+                    "still not white"
+                } else {
+                    "white"
+                },
+                p_text(w.p_value)
+            );
+        }
+    }
+    s
+}
+
+/// The text `rig explain` prints without `--json`.
+pub fn render_text(e: &Explanation, source: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "rig explain: {source} ({} rows with a current)", e.rows);
+    let _ = writeln!(s, "verdict: {}", e.verdict.as_str());
+    let _ = writeln!(
+        s,
+        "  before: RMSE {}  held-out {}  mu {:.4}",
+        ma(e.rmse_before_a),
+        opt_ma(e.holdout_rmse_before_a),
+        e.mu_before
+    );
+    let _ = writeln!(
+        s,
+        "  after:  RMSE {}  held-out {}  mu {:.4}",
+        ma(e.rmse_after_a),
+        opt_ma(e.holdout_rmse_after_a),
+        e.mu_after
+    );
+    if !e.effects.is_empty() {
+        let _ = writeln!(s, "effects, strongest first:");
+        for eff in &e.effects {
+            let _ = writeln!(
+                s,
+                "  {:<32} delta-BIC {:>8.1}  {}  held-out {}",
+                eff.name,
+                eff.delta_bic,
+                p_text(eff.p_value),
+                opt_ma(eff.holdout_rmse_a)
+            );
+            let _ = writeln!(s, "    {}", params_text(&eff.params, &eff.intervals));
+        }
+    }
+    if !e.ambiguous.is_empty() {
+        let _ = writeln!(s, "ambiguous: {}", e.ambiguous.join(", "));
+    }
+    let _ = writeln!(s, "candidates (first step):");
+    for c in &e.candidates {
+        let _ = writeln!(s, "  {}", candidate_line(c));
+    }
+    let _ = writeln!(s, "finding: {}", e.finding);
+    if let Some(d) = &e.report_dir {
+        let _ = writeln!(s, "report: {d}");
+    }
+    if let Some(m) = &e.model_written {
+        let _ = writeln!(s, "model written: {m}");
+    }
+    s
+}
+
+fn candidate_line(c: &CandidateReport) -> String {
+    if c.applicable && c.rmse_a.is_none() {
+        return format!(
+            "{:<32} delta-BIC {:>8.1}  (score-test estimate, not fitted)",
+            c.name,
+            c.delta_bic.unwrap_or(f64::NAN)
+        );
+    }
+    match c.delta_bic {
+        Some(d) => format!(
+            "{:<32} delta-BIC {:>8.1}  RMSE {:>9}  held-out {:>9}  {}",
+            c.name,
+            d,
+            opt_ma(c.rmse_a),
+            opt_ma(c.holdout_rmse_a),
+            params_text(&c.params, &c.intervals)
+        ),
+        None => format!(
+            "{:<32} not applicable: {}",
+            c.name,
+            c.note.as_deref().unwrap_or("")
+        ),
+    }
+}
+
+fn gap_markdown(title: &str, g: &Gap) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "### {title}\n");
+    let _ = writeln!(
+        s,
+        "RMSE {} over {} rows, mean residual {:+.1} mA.\n",
+        ma(g.rmse_a),
+        g.rows,
+        g.mean_residual_a * 1e3
+    );
+    for (axis, bins) in [
+        ("cam speed", &g.by_speed),
+        ("load", &g.by_load),
+        (g.thermal_axis.as_deref().unwrap_or("time"), &g.by_thermal),
+    ] {
+        if bins.is_empty() {
+            continue;
+        }
+        let _ = writeln!(
+            s,
+            "| {axis} | rows | mean residual, mA | std. error, mA |\n|---|---|---|---|"
+        );
+        for b in bins {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:+.1} | {:.1} |",
+                b.label, b.rows, b.mean_residual_ma, b.std_error_ma
+            );
+        }
+        s.push('\n');
+    }
+    let w = &g.whiteness;
+    let _ = writeln!(
+        s,
+        "Whiteness (order: {}): Ljung-Box Q = {:.1} over {} lags, {}; Durbin-Watson {:.2}.\n",
+        w.order,
+        w.ljung_box_q,
+        w.lags,
+        p_text(w.p_value),
+        w.durbin_watson
+    );
+    let _ = writeln!(s, "| residual correlated with | r | p |\n|---|---|---|");
+    for c in &g.correlations {
+        let _ = writeln!(s, "| {} | {:+.3} | {:.2e} |", c.with, c.r, c.p_value);
+    }
+    s.push('\n');
+    s
+}
+
+/// The report as Markdown.
+pub fn markdown(e: &Explanation, source: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# rig explain: {source}\n");
+    let _ = writeln!(s, "**Verdict: {}**\n", e.verdict.as_str());
+    let _ = writeln!(s, "{}\n", e.finding);
+    let _ = writeln!(
+        s,
+        "| | RMSE | held-out RMSE | BIC | mu |\n|---|---|---|---|---|\n| before | {} | {} | {:.1} | {:.4} |\n| after | {} | {} | {:.1} | {:.4} |\n",
+        ma(e.rmse_before_a),
+        opt_ma(e.holdout_rmse_before_a),
+        e.bic_before,
+        e.mu_before,
+        ma(e.rmse_after_a),
+        opt_ma(e.holdout_rmse_after_a),
+        e.bic_after,
+        e.mu_after
+    );
+    let _ = writeln!(
+        s,
+        "![residuals before](residuals_before.svg)\n\n![residuals after](residuals_after.svg)\n"
+    );
+    if !e.effects.is_empty() {
+        let _ = writeln!(s, "## Effects added, strongest first\n");
+        let _ = writeln!(
+            s,
+            "| effect | parameters [95 % interval] | delta-BIC | guard | held-out RMSE |\n|---|---|---|---|---|"
+        );
+        for eff in &e.effects {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.1} | {} | {} |",
+                eff.name,
+                params_text(&eff.params, &eff.intervals),
+                eff.delta_bic,
+                p_text(eff.p_value),
+                opt_ma(eff.holdout_rmse_a)
+            );
+        }
+        s.push('\n');
+    }
+    for (k, step) in e.steps.iter().enumerate() {
+        let _ = writeln!(s, "## Step {}: {}\n", k + 1, step.reason);
+        let _ = writeln!(
+            s,
+            "| candidate | parameters [95 % interval] | delta-BIC | RMSE | held-out RMSE |\n|---|---|---|---|---|"
+        );
+        for c in &step.candidates {
+            match c.delta_bic {
+                Some(d) => {
+                    let _ = writeln!(
+                        s,
+                        "| {} | {} | {:.1} | {} | {} |",
+                        c.name,
+                        params_text(&c.params, &c.intervals),
+                        d,
+                        opt_ma(c.rmse_a),
+                        opt_ma(c.holdout_rmse_a)
+                    );
+                }
+                None => {
+                    let _ = writeln!(
+                        s,
+                        "| {} | not applicable: {} | | | |",
+                        c.name,
+                        c.note.as_deref().unwrap_or("")
+                    );
+                }
+            }
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(s, "## The gap in detail\n");
+    s.push_str(&gap_markdown("Before", &e.gap_before));
+    s.push_str(&gap_markdown("After", &e.gap_after));
+    s
+}
+
+fn candidates_csv(e: &Explanation) -> String {
+    let mut s = String::from(
+        "step,name,applicable,delta_bic,rmse_a,holdout_rmse_a,params,intervals,note\n",
+    );
+    for (k, step) in e.steps.iter().enumerate() {
+        for c in &step.candidates {
+            let f = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
+            let params = c
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k}={v}"))
+                .collect::<Vec<_>>()
+                .join(";");
+            let iv = c
+                .intervals
+                .iter()
+                .map(|(k, [lo, hi])| format!("{k}=[{lo};{hi}]"))
+                .collect::<Vec<_>>()
+                .join(";");
+            let _ = writeln!(
+                s,
+                "{},{},{},{},{},{},\"{}\",\"{}\",\"{}\"",
+                k + 1,
+                c.name,
+                c.applicable,
+                f(c.delta_bic),
+                f(c.rmse_a),
+                f(c.holdout_rmse_a),
+                params,
+                iv,
+                c.note.as_deref().unwrap_or("")
+            );
+        }
+    }
+    s
+}
+
+fn write(path: &Path, text: &str) -> Result<(), ExplainError> {
+    reporting::write_atomic(path, text.as_bytes())?;
+    Ok(())
+}
+
+/// Writes the report folder `dir`: `report.md`, `candidates.csv`, `explanation.json`,
+/// `residuals_before.svg` and `residuals_after.svg`.
+pub fn write_report(dir: &Path, outcome: &Outcome, source: &str) -> Result<(), ExplainError> {
+    std::fs::create_dir_all(dir).map_err(|source| ExplainError::File {
+        action: "create folder",
+        path: dir.display().to_string(),
+        source,
+    })?;
+    let e = &outcome.explanation;
+    write(&dir.join("report.md"), &markdown(e, source))?;
+    write(&dir.join("candidates.csv"), &candidates_csv(e))?;
+    write(
+        &dir.join("explanation.json"),
+        &(serde_json::to_string_pretty(e)? + "\n"),
+    )?;
+    let pts = &outcome.points;
+    let axes = |res: &[f64]| {
+        let r: Vec<f64> = res.iter().map(|v| v * 1e3).collect();
+        let mut panels = vec![
+            Panel {
+                x_label: "cam speed w_n, rad/s".into(),
+                x: pts.ops.iter().map(|o| o.omega_n).collect(),
+                residual_ma: r.clone(),
+            },
+            Panel {
+                x_label: "load tau_rot, N m".into(),
+                x: pts.ops.iter().map(|o| o.tau_rot).collect(),
+                residual_ma: r.clone(),
+            },
+        ];
+        match pts.thermal {
+            super::library::ThermalDriver::Temperature { reference_c } => panels.push(Panel {
+                x_label: "motor temperature, C".into(),
+                x: pts.ops.iter().map(|o| o.thermal + reference_c).collect(),
+                residual_ma: r,
+            }),
+            super::library::ThermalDriver::Time => panels.push(Panel {
+                x_label: "time, s".into(),
+                x: pts.ops.iter().map(|o| o.thermal).collect(),
+                residual_ma: r,
+            }),
+            super::library::ThermalDriver::Unavailable => {}
+        }
+        panels
+    };
+    let y_max = outcome
+        .before
+        .residuals
+        .iter()
+        .chain(&outcome.after.residuals)
+        .fold(0.0f64, |m, v| m.max(v.abs()))
+        * 1.1e3;
+    plot::residual_figure(
+        &dir.join("residuals_before.svg"),
+        &format!("before: RMSE {}", ma(e.rmse_before_a)),
+        &axes(&outcome.before.residuals),
+        y_max,
+    )?;
+    let title = if e.effects.is_empty() {
+        format!("after (no effect added): RMSE {}", ma(e.rmse_after_a))
+    } else {
+        format!(
+            "after adding {}: RMSE {}",
+            e.effects
+                .iter()
+                .map(|f| f.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            ma(e.rmse_after_a)
+        )
+    };
+    plot::residual_figure(
+        &dir.join("residuals_after.svg"),
+        &title,
+        &axes(&outcome.after.residuals),
+        y_max,
+    )?;
+    Ok(())
+}

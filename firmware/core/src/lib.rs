@@ -1,0 +1,68 @@
+//! Hardware-free control core of the rig firmware: the cam-speed loop, the per-revolution
+//! tau_cam estimator, the release supervisor, faults, the protocol server, the raw capture
+//! and the calibration store.
+//!
+//! The core is a state machine with time passed in (no I/O, no heap, no embassy): the
+//! binary calls [`Core::step`] at `control_hz` with the current samples, encoder count and
+//! release button, applies the returned [`Outputs`] to the H-bridge, feeds host bytes to
+//! [`Core::receive`] and sends what [`Core::transmit`] yields. A simulator drives it the
+//! same way with `model::plant::Plant` in place of the hardware.
+//!
+//! ```
+//! use firmware_core::{BootInfo, Core, CoreConfig, Inputs};
+//!
+//! let mut core = Core::new(CoreConfig::default(), BootInfo::default());
+//! let samples = [2068u16; 10]; // 1 ms of ADC samples at zero current
+//! let out = core.step(&Inputs {
+//!     now_us: 1000,
+//!     current_adc: &samples,
+//!     encoder_count: 0,
+//!     release_button: false,
+//! });
+//! assert!(!out.enable && out.duty == 0.0); // vibration off: the safe state
+//! ```
+//!
+//! Per-sample work is integer sums and f32 arithmetic (the Cortex-M4F has a single-precision
+//! FPU); the model's f64 functions run once per revolution or when the calibration changes.
+//!
+//! # Safety policy
+//! The motor runs only in `SpinUp` and `Vibrating`, only while a release is live (a host
+//! `Release` kept alive by any request within `comms_timeout_us`, or the held button),
+//! and never while a fault is latched. Faults latch until `ClearFaults`, which clears
+//! only those whose condition is gone; for `fault_hold_us` after a fault every request
+//! other than `Hello`, `GetInfo`, `GetFaults` and `ClearFaults` is refused.
+//!
+//! # Memory
+//! [`Core`] holds the capture buffer ([`CAPTURE_CAPACITY`] samples of 4 bytes, 40 000
+//! bytes, 1.0 s at 10 kHz) and is 43 000 bytes in all on the target; the release image
+//! uses ~45 KiB of static RAM and ~60.5 KiB of flash (`cargo xtask firmware`). Build it
+//! in place (`MaybeUninit::write(Core::new(..))` into a static slot, as the binary does)
+//! rather than on the stack.
+#![cfg_attr(not(test), no_std)]
+
+mod capture;
+mod config;
+mod controller;
+mod current;
+mod encoder;
+mod estimator;
+mod faults;
+mod server;
+mod speed_loop;
+pub mod storage;
+mod supervisor;
+mod tx_queue;
+
+#[cfg(test)]
+mod tests;
+
+pub use capture::{CAPTURE_CAPACITY, MIN_SAMPLE_RATE_HZ};
+pub use config::{
+    CoreConfig, CurrentSensorConfig, EstimatorConfig, FaultConfig, MotorConfig, SpeedLoopConfig,
+    SupervisorConfig,
+};
+pub use controller::{BootInfo, Core, Inputs, Outputs, Status};
+pub use estimator::{EstimatorModel, RevolutionEstimate};
+pub use server::FIRMWARE_VERSION;
+pub use speed_loop::FeedForward;
+pub use tx_queue::TX_QUEUE_LEN;

@@ -1,0 +1,237 @@
+//! The `rig explain` command line: arguments and the run behind them.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::Args;
+use model::effects::{Effect, EffectParams};
+use model::plant::NoiseSource;
+
+use crate::RigError;
+use explain::data::Dataset;
+use explain::synth::{self, SweepPlan};
+use explain::{Options, SyntheticTruth, library, report_files};
+use rigfile::RigFile;
+
+const AFTER_HELP: &str = "\
+Measured data: CSV with a header in SI units, one row per test point. Required columns
+omega_n_rad_s, tau_rot_nm, i_in_a; optional t_s, v_in_v, temp_c, backdriven (0/1); other
+columns are ignored. A row with backdriven = 0 may leave i_in_a empty.
+
+Rig file (--model, alias --rig): TOML, every key optional (the paper's rig otherwise):
+  [gear]         z = [49, 51, 50, 50], module_mm = 1.0, pressure_angle_deg = 20.0
+  [cam]          eccentricity_mm = 1.0, carrier_mass_kg = 3.82
+  [friction]     mu_s = 0.271, mu_d = 0.174
+  [calibration]  c1 = 62.1, c2 = -138.0, c3 = 0.235, c4 = 1.69, c5 = 0.00378, c6 = 2.25
+                 (Table 2, N mm, A and s), temperature_c = 25.0
+  [model]        mu = ..., [[model.effects]] name = \"...\", params = { ... }
+                 (written by --write-model; loaded effects are refitted, not searched for)
+
+Effects searched for: speed-dependent-axial-friction, load-dependent-friction,
+current-sensor-offset, thermal-drift, vibrator-viscous-loss, inertia-rectification,
+linear-bush-friction (needs backdriven = 0 rows), tooth-compliance, mesh-load-sharing-ripple.
+
+Verdicts: explained, no-missing-effect, ambiguous. Exit code 0 for any verdict, 1 on bad input.";
+
+/// Arguments of `rig explain`.
+#[derive(Debug, Clone, Args)]
+#[command(after_long_help = AFTER_HELP)]
+pub struct ExplainArgs {
+    /// Measured steady-state data (CSV, see below).
+    #[arg(long, value_name = "FILE.csv", required_unless_present = "synthetic")]
+    pub measured: Option<PathBuf>,
+    /// Rig file (TOML) with the rig and, written by --write-model, a fitted model [default: the paper's (49, 51, 50, 50) rig].
+    #[arg(long, visible_alias = "rig", value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// Print one JSON object on stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Report folder (residual plots before and after, candidate table, finding) [default: <data name>-explain beside the measured file; none for --synthetic].
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// Write no report folder.
+    #[arg(long, conflicts_with = "report")]
+    pub no_report: bool,
+    /// Write the augmented model (the rig file with its fitted [model]) to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub write_model: Option<PathBuf>,
+    /// Explain a synthetic sweep of the paper's test plan with this hidden effect ("none": effect-free) instead of --measured.
+    #[arg(long, value_name = "EFFECT", conflicts_with = "measured", value_parser = parse_hidden)]
+    pub synthetic: Option<Hidden>,
+    /// Seed of the synthetic sweep (test order, noise, effect size).
+    #[arg(long, default_value_t = 1, requires = "synthetic")]
+    pub seed: u64,
+    /// Current noise of the synthetic sweep, mA.
+    #[arg(long, default_value_t = 20.0, requires = "synthetic", value_parser = crate::args::non_negative)]
+    pub noise_ma: f64,
+    /// Also save the synthetic sweep as CSV.
+    #[arg(long, value_name = "FILE.csv", requires = "synthetic")]
+    pub write_synthetic: Option<PathBuf>,
+    /// Level of the false-discovery guard (probability that effect-free data gives a finding).
+    #[arg(long, default_value_t = 0.002, value_parser = parse_alpha)]
+    pub alpha: f64,
+    /// Folds of the held-out validation over blocks of test points.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u8).range(2..=20))]
+    pub folds: u8,
+}
+
+/// The hidden effect of `--synthetic`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Hidden(pub Option<Effect>);
+
+fn parse_hidden(s: &str) -> Result<Hidden, String> {
+    if s == "none" {
+        return Ok(Hidden(None));
+    }
+    Effect::from_name(s)
+        .map(|e| Hidden(Some(e)))
+        .ok_or_else(|| {
+            format!(
+                "unknown effect '{s}': give none or one of {}",
+                Effect::ALL.map(|e| e.name()).join(", ")
+            )
+        })
+}
+
+fn parse_alpha(s: &str) -> Result<f64, String> {
+    let v = crate::args::finite(s)?;
+    if v > 0.0 && v < 0.5 {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{v}: the guard level must lie in (0, 0.5), e.g. 0.01"
+        ))
+    }
+}
+
+/// The default report folder for measured data `path`: `<stem>-explain` beside it.
+pub fn default_report_dir(path: &Path) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "measured".into());
+    path.with_file_name(format!("{stem}-explain"))
+}
+
+/// A synthetic sweep of `rig` with `hidden`, its data set and truth.
+pub fn synthetic_data(
+    rig: &RigFile,
+    hidden: Option<Effect>,
+    seed: u64,
+    noise_a: f64,
+) -> Result<(Dataset, SyntheticTruth), RigError> {
+    let mut truth = rig.current_model()?;
+    truth.effects = EffectParams::default();
+    let plan = SweepPlan {
+        noise_a,
+        ..SweepPlan::default()
+    };
+    let mut rng = NoiseSource::new(seed ^ 0x9e37_79b9_7f4a_7c15);
+    if let Some(e) = hidden {
+        truth.effects = synth::plausible_effect(e, &truth, &plan, &mut rng);
+    }
+    let rows = synth::generate(&truth, &plan, seed);
+    let data = Dataset::from_rows("synthetic", rows)?;
+    let params = hidden
+        .map(|e| {
+            library::report_params(
+                e,
+                &truth.effects,
+                library::ThermalDriver::Temperature {
+                    reference_c: plan.ambient_c,
+                },
+            )
+        })
+        .unwrap_or_default();
+    Ok((
+        data,
+        SyntheticTruth {
+            effect: hidden.map(|e| e.name().to_string()),
+            params,
+            seed,
+            noise_a,
+        },
+    ))
+}
+
+/// Runs `rig explain`.
+pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
+    let rig = match &args.model {
+        Some(p) => RigFile::load(p)?,
+        None => RigFile::paper(),
+    };
+    let (data, truth, source, default_dir) = match (&args.measured, args.synthetic) {
+        (Some(path), _) => {
+            let data = Dataset::read_csv(path)?;
+            (
+                data,
+                None,
+                path.display().to_string(),
+                Some(default_report_dir(path)),
+            )
+        }
+        (None, Some(Hidden(hidden))) => {
+            let (data, truth) = synthetic_data(&rig, hidden, args.seed, args.noise_ma * 1e-3)?;
+            if let Some(p) = &args.write_synthetic {
+                let file = std::fs::File::create(p).map_err(|source| RigError::File {
+                    action: "write",
+                    path: p.display().to_string(),
+                    source,
+                })?;
+                data.write_csv(file)?;
+            }
+            let name = format!(
+                "synthetic sweep ({}, seed {})",
+                hidden.map_or("no effect", |e| e.name()),
+                args.seed
+            );
+            (data, Some(truth), name, None)
+        }
+        (None, None) => {
+            return Err(RigError::BadValue {
+                what: "rig explain".into(),
+                why: "give --measured FILE.csv (or --synthetic EFFECT)".into(),
+            });
+        }
+    };
+    let options = Options {
+        alpha: args.alpha,
+        folds: args.folds as usize,
+        ..Options::default()
+    };
+    let mut outcome = explain::explain(&data, &rig, &options)?;
+    outcome.explanation.synthetic = truth;
+    if let Some(p) = &args.write_model {
+        outcome.augmented_rig().save(p)?;
+        outcome.explanation.model_written = Some(p.display().to_string());
+    }
+    let dir = if args.no_report {
+        None
+    } else {
+        args.report.clone().or(default_dir)
+    };
+    if let Some(d) = &dir {
+        outcome.explanation.report_dir = Some(d.display().to_string());
+        if let Err(e) = report_files::write_report(d, &outcome, &source) {
+            if args.report.is_some() {
+                return Err(e.into());
+            }
+            // The default folder is a convenience: the analysis still prints.
+            eprintln!("warning: no report written ({e}); choose a folder with --report DIR");
+            outcome.explanation.report_dir = None;
+        }
+    }
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        serde_json::to_writer_pretty(&mut out, &outcome.explanation)?;
+        writeln!(out)?;
+    } else {
+        write!(
+            out,
+            "{}",
+            report_files::render_text(&outcome.explanation, &source)
+        )?;
+    }
+    Ok(ExitCode::SUCCESS)
+}

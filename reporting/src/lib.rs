@@ -1,0 +1,154 @@
+//! Report helpers shared by the rig tools, so every verb writes files the same way:
+//! atomic writes (a failed run never destroys an existing file), numbers printed as a person
+//! writes them, and the SVG figures of the reports.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use thiserror::Error;
+
+pub mod plot;
+
+/// What can go wrong while writing a report.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum ReportError {
+    /// A file or folder that cannot be read or written.
+    #[error("cannot {action} {path}: {source}")]
+    File {
+        /// What was tried ("read", "write", "create folder").
+        action: &'static str,
+        /// The path.
+        path: String,
+        /// The operating system's reason.
+        source: std::io::Error,
+    },
+    /// A plot that cannot be drawn.
+    #[error("cannot draw {path}: {why}")]
+    Plot {
+        /// The plot file.
+        path: String,
+        /// The drawing backend's reason.
+        why: String,
+    },
+}
+
+/// The temporary sibling `path` is written to before the rename: same folder (so the rename
+/// stays on one file system), hidden, and named after the process so parallel runs differ.
+fn temporary_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "output".into());
+    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+/// Writes a file atomically: `write` fills a temporary file beside `path`, which is synced
+/// and renamed over `path` only when `write` succeeded. A failed run leaves an existing
+/// `path` untouched and no temporary file behind.
+pub fn write_atomic_with<E>(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<(), E>
+where
+    E: From<ReportError>,
+{
+    let tmp = temporary_path(path);
+    let file_err = |action: &'static str, source: std::io::Error| ReportError::File {
+        action,
+        path: path.display().to_string(),
+        source,
+    };
+    if let Err(e) = write(&tmp) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    let synced = std::fs::File::open(&tmp).and_then(|f| f.sync_all());
+    let renamed = synced.and_then(|()| std::fs::rename(&tmp, path));
+    if let Err(source) = renamed {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(file_err("write", source).into());
+    }
+    Ok(())
+}
+
+/// Writes `bytes` to `path` atomically (see [`write_atomic_with`]).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
+    write_atomic_with(path, |tmp| {
+        std::fs::File::create(tmp)
+            .and_then(|mut f| f.write_all(bytes))
+            .map_err(|source| ReportError::File {
+                action: "write",
+                path: path.display().to_string(),
+                source,
+            })
+    })
+}
+
+/// A float as a person writes it: the shortest decimal that reads back to the same `f32`
+/// when `value` came from one (62.1, not 62.099998474121094), else the shortest for `f64`.
+pub fn human_f64(value: f64) -> f64 {
+    let single = value as f32;
+    if f64::from(single) == value {
+        // Shortest decimal of the f32, parsed as f64: 62.1f32 -> 62.1.
+        single.to_string().parse().unwrap_or(value)
+    } else {
+        value
+    }
+}
+
+/// A JSON value with every float passed through [`human_f64`].
+pub fn human_json(value: serde_json::Value) -> serde_json::Value {
+    use serde_json::Value;
+    match value {
+        Value::Number(n) => match (n.is_f64(), n.as_f64()) {
+            (true, Some(f)) => serde_json::Number::from_f64(human_f64(f))
+                .map(Value::Number)
+                .unwrap_or(Value::Number(n)),
+            _ => Value::Number(n),
+        },
+        Value::Array(items) => Value::Array(items.into_iter().map(human_json).collect()),
+        Value::Object(map) => {
+            Value::Object(map.into_iter().map(|(k, v)| (k, human_json(v))).collect())
+        }
+        other => other,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_write_leaves_the_old_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.toml");
+        std::fs::write(&path, "old").unwrap();
+        let r: Result<(), ReportError> = write_atomic_with(&path, |tmp| {
+            std::fs::write(tmp, "half").unwrap();
+            Err(ReportError::Plot {
+                path: "x".into(),
+                why: "failed half-way".into(),
+            })
+        });
+        assert!(r.is_err());
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            1,
+            "no temporary left"
+        );
+        write_atomic(&path, b"new").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "new");
+    }
+
+    #[test]
+    fn floats_print_as_written() {
+        assert_eq!(human_f64(f64::from(62.1f32)).to_string(), "62.1");
+        assert_eq!(human_f64(f64::from(-0.00378f32)).to_string(), "-0.00378");
+        // A true f64 keeps its digits.
+        assert_eq!(human_f64(0.1 + 0.2), 0.1 + 0.2);
+        let v = human_json(serde_json::json!({"c1": f64::from(62.1f32), "z": [49, 51]}));
+        assert_eq!(v.to_string(), r#"{"c1":62.1,"z":[49,51]}"#);
+    }
+}

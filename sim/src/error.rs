@@ -1,0 +1,28 @@
+//! The virtual rig's error type.
+
+use thiserror::Error;
+
+/// What can go wrong on the virtual rig or in a scenario.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum SimError {
+    /// Gear parameters that do not make a 2K-H gear.
+    #[error("invalid gear set {z:?}: {source}")]
+    Gear {
+        /// The tooth counts given.
+        z: [u32; 4],
+        /// Why they were rejected.
+        source: model::GearError,
+    },
+    /// A scenario option outside its meaningful range.
+    #[error("{what}: {why}")]
+    BadValue {
+        /// Which value.
+        what: String,
+        /// What is wrong with it and what to give instead.
+        why: String,
+    },
+    /// The rig (simulated or real) broke the protocol, refused or did not answer.
+    #[error("device protocol: {0}")]
+    Protocol(String),
+}

@@ -1,0 +1,18 @@
+//! The closed-loop virtual rig: the firmware's control core and the plant in closed loop
+//! ([`SimRig`], virtual time), a host session over the real wire format ([`SimLink`]),
+//! the scenarios that reproduce the paper (`rig sim <scenario>`), and the shared scenarios
+//! written against [`RigLink`] that run on the virtual rig and on a real one.
+//!
+//! One harness: the firmware core's closed-loop tests, the host's `--sim`, `rig sim`, and
+//! `hil-tests` all drive this crate.
+
+mod error;
+mod link;
+mod rig;
+pub mod riglink;
+pub mod scenarios;
+
+pub use error::SimError;
+pub use link::SimLink;
+pub use rig::{Injections, PLANT_HZ, SimConfig, SimRig};
+pub use riglink::RigLink;
