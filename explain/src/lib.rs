@@ -8,9 +8,9 @@
 //! 3. Selection: forward selection by BIC, guarded by a parametric bootstrap of the best
 //!    improvement under the current model and confirmed on held-out blocks of test points
 //!    ([`select`]); candidates within 2 of the best BIC are `ambiguous`.
-//! 4. Add: the augmented model as a rig file ([`crate::rigfile`]).
+//! 4. Add: the augmented model as a rig file ([`rigfile`]).
 //! 5. Show: a report folder with residual plots, the candidate table and the finding
-//!    ([`report`]).
+//!    ([`report_files`]).
 //!
 //! The entry point for plain rows (files, the simulator, tests) is [`explain`].
 

@@ -1,8 +1,8 @@
 //! Firmware binary of the backdrive rig (Nucleo-G474RE, STM32G474RE).
 //!
-//! Thin on purpose: bring up the clocks and [`board`] drivers in their safe state (vibration
+//! Thin on purpose: bring up the clocks and `board` drivers in their safe state (vibration
 //! off), load the calibration from flash, then run tasks that only move data between the
-//! peripherals and the control core ([`firmware_core::Core`]):
+//! peripherals and the control core (`firmware_core::Core`):
 //!
 //! | task            | executor                 | does                                                    |
 //! |-----------------|--------------------------|---------------------------------------------------------|

@@ -205,7 +205,7 @@ impl Default for FaultConfig {
 pub struct EstimatorConfig {
     /// The bridge takes the carrier's inertial power back (synchronous rectification), so
     /// True: the drive takes power back, Eq. (9)'s inertia term averages to zero over a
-    /// revolution. False (default, as the paper's bench supply and ref. [18]): the drive
+    /// revolution. False (default, as the paper's bench supply and ref. \[18\]): the drive
     /// cannot take the carrier's power back, so the revolution mean carries the rectified
     /// inertia term M w^2 e^2 / (2 pi). Either way the rest of Eq. (10)'s inertia term is
     /// added back before Eq. (10) is inverted for the load.

@@ -47,7 +47,7 @@ pub struct ExplainArgs {
     /// Print one JSON object on stdout instead of text.
     #[arg(long)]
     pub json: bool,
-    /// Report folder (residual plots before and after, candidate table, finding) [default: <data name>-explain beside the measured file; none for --synthetic].
+    /// Report folder (residual plots before and after, candidate table, finding) [default: NAME-explain (NAME: the data file's stem) beside the measured file; none for --synthetic].
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
     /// Write no report folder.
