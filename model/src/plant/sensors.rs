@@ -2,6 +2,7 @@
 //! divider into a 12-bit ADC, and a quadrature encoder (CUI AMT102-V) on the cam shaft.
 
 use super::rng::NoiseSource;
+use crate::hardware::{acs714, adc, amt102, divider};
 
 /// Sensor parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,16 +29,14 @@ pub struct SensorParams {
 impl Default for SensorParams {
     fn default() -> Self {
         Self {
-            acs_sensitivity: 0.185,
-            acs_supply: 5.0,
+            acs_sensitivity: acs714::SENSITIVITY_V_PER_A,
+            acs_supply: acs714::SUPPLY_NOMINAL_V,
             acs_zero_error: 0.0,
-            // Datasheet: 21 mV peak-to-peak noise at full bandwidth, ~5 mV RMS.
-            acs_noise: 0.005,
-            // 10 k over 20 k: the 0.5-4.5 V output range fits the 3.3 V ADC.
-            divider: 2.0 / 3.0,
-            adc_reference: 3.3,
-            adc_bits: 12,
-            encoder_ppr: 2048,
+            acs_noise: acs714::NOISE_RMS_V,
+            divider: divider::RATIO,
+            adc_reference: adc::VREF_V,
+            adc_bits: adc::BITS,
+            encoder_ppr: amt102::PPR,
         }
     }
 }
