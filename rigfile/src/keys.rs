@@ -143,7 +143,7 @@ pub const KEYS: &[KeySpec] = &[
         "positive",
         "62.1",
         Some("c1_nmm_per_a"),
-        "C1 of |tau_cam| = C1 i_in + C2 (Eq. 15)",
+        "C1 of Eq. (15): cam torque = C1 i_in + C2",
     ),
     key(
         "calibration",
@@ -161,7 +161,7 @@ pub const KEYS: &[KeySpec] = &[
         "zero or positive",
         "0.235",
         Some("c3_nmm_s_per_rad"),
-        "C3 of |tau_loss| = C3 w_n + C4 (Eq. 16)",
+        "C3 of Eq. (16): vibrator loss torque = C3 w_n + C4",
     ),
     key(
         "calibration",
@@ -179,7 +179,7 @@ pub const KEYS: &[KeySpec] = &[
         "zero or positive",
         "0.00378",
         Some("c5_a_s_per_rad"),
-        "C5 of |i_loss| = C5 w_n + C6 (Eq. 17)",
+        "C5 of Eq. (17): no-load current = C5 w_n + C6",
     ),
     key(
         "calibration",
@@ -374,7 +374,7 @@ pub const KEYS: &[KeySpec] = &[
         "model",
         "effects",
         "-",
-        "an array of [[model.effects]] tables",
+        "an array of `[[model.effects]]` tables",
         "[]",
         None,
         "the effects on top of the paper's model, strongest first",
