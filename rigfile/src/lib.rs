@@ -147,6 +147,12 @@ impl RigFile {
             why: format!("cannot be written as TOML: {e}"),
         };
         let mut text = toml::to_string(self).map_err(cannot)?;
+        if let Some((name, _)) = self.extra.iter().find(|(_, v)| !parse::is_section(v)) {
+            return Err(RigFileError::BadValue {
+                what: format!("kept section `{name}`"),
+                why: "is not a table: only whole sections are kept".into(),
+            });
+        }
         if !self.extra.is_empty() {
             text.push('\n');
             text.push_str(&toml::to_string(&self.extra).map_err(cannot)?);

@@ -34,7 +34,7 @@ pub struct Loaded {
 impl Loaded {
     /// Whether the file set `key`.
     pub fn has(&self, key: &KeySpec) -> bool {
-        self.present.iter().any(|k| *k == key)
+        self.present.contains(&key)
     }
 
     /// The keys the device's record carries that the file left out (they take the defaults
@@ -101,7 +101,8 @@ fn describe(text: &str, e: &toml::de::Error) -> String {
     }
 }
 
-fn is_section(v: &Value) -> bool {
+/// Whether `v` is a section: a table or an array of tables.
+pub(crate) fn is_section(v: &Value) -> bool {
     match v {
         Value::Table(_) => true,
         Value::Array(items) => !items.is_empty() && items.iter().all(Value::is_table),

@@ -17,7 +17,7 @@ fn decimal(v: f32) -> f64 {
 
 /// C1-C6 of the device's record in SI.
 pub fn constants(record: &protocol::Calibration) -> model::Calibration {
-    paper_units::from_paper(record.constants().map(|c| reporting::human_f64(c)))
+    paper_units::from_paper(record.constants().map(reporting::human_f64))
 }
 
 /// `base` with C1-C6 replaced by `c`.

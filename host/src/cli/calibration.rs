@@ -11,6 +11,7 @@ use clap::{Args, Subcommand};
 use super::connect::{DeviceOpts, confirm};
 use crate::RigError;
 use crate::calibrate::file::{self, Target};
+use rigfile::{FileFormat, Loaded};
 
 /// Arguments of `rig calibration`.
 #[derive(Debug, Args)]
@@ -99,16 +100,14 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             let changes: Vec<String> = diff(&current, &new);
             let mut out = std::io::stdout().lock();
             if !json && !defaulted.is_empty() {
-                let listed: Vec<String> = defaulted
-                    .iter()
-                    .map(|k| format!("{} = {}", loaded.name_of(k), k.default))
-                    .collect();
                 writeln!(
                     out,
-                    "not in {}, so the paper's values (docs/rig-file.md): {}",
-                    path.display(),
-                    listed.join(", ")
+                    "not in {}, so the paper's values (docs/rig-file.md):",
+                    path.display()
                 )?;
+                for line in defaulted_lines(&loaded) {
+                    writeln!(out, "  {line}")?;
+                }
             }
             if changes.is_empty() {
                 if json {
@@ -161,6 +160,34 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// The keys `loaded` left at their defaults, one line per section, named as the file names
+/// them (`[gear] z = [49, 51, 50, 50], module_mm = 1.0`; flat keys for the older file).
+fn defaulted_lines(loaded: &Loaded) -> Vec<String> {
+    let flat = loaded.format == FileFormat::CalibrationFile;
+    let mut lines: Vec<(&str, Vec<String>)> = Vec::new();
+    for k in loaded.defaulted() {
+        let name = match k.wire {
+            Some(wire) if flat => wire,
+            _ => k.key,
+        };
+        let item = format!("{name} = {}", k.default);
+        match lines.last_mut() {
+            Some((section, items)) if *section == k.section => items.push(item),
+            _ => lines.push((k.section, vec![item])),
+        }
+    }
+    lines
+        .into_iter()
+        .map(|(section, items)| {
+            if flat {
+                items.join(", ")
+            } else {
+                format!("[{section}] {}", items.join(", "))
+            }
+        })
+        .collect()
 }
 
 /// `field: old -> new` for every field that differs (numbers as a person writes them).
