@@ -276,11 +276,18 @@ fn calibrate_reproduces_table2() {
     assert_eq!(folders.len(), 1, "{folders:?}");
     let out = folders[0].clone();
     let name = out.file_name().unwrap().to_string_lossy().into_owned();
-    assert!(name.starts_with("calibrate-") && name.ends_with('Z'), "{name}");
+    assert!(
+        name.starts_with("calibrate-") && name.ends_with('Z'),
+        "{name}"
+    );
     assert!(!dir.path().join("calibration").exists());
     assert_eq!(
         v["files"]["calibration"].as_str().unwrap(),
-        Path::new("report").join(&name).join("calibration.toml").to_str().unwrap()
+        Path::new("report")
+            .join(&name)
+            .join("calibration.toml")
+            .to_str()
+            .unwrap()
     );
     for f in [
         "calibration.toml",

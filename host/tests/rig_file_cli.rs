@@ -123,7 +123,10 @@ fn explains_model_file_is_accepted_by_calibration_set_and_keeps_the_rest() {
         c
     });
     let text = std::fs::read_to_string(&model).unwrap();
-    assert!(text.contains("[model]") && text.contains("thermal-drift"), "{text}");
+    assert!(
+        text.contains("[model]") && text.contains("thermal-drift"),
+        "{text}"
+    );
     assert!(text.contains("max_freq_hz = 12.0"), "{text}");
     assert!(
         text.contains("[bench]") && text.contains("operator = \"A. N. Other\""),
@@ -181,7 +184,9 @@ fn calibration_set_says_which_keys_took_the_papers_values() {
     assert!(
         text.contains("not in")
             && text.contains("[cam] eccentricity_mm = 1.0, carrier_mass_kg = 3.82\n")
-            && text.contains("[limits] max_release_load_nm = 3.68, max_current_a = 4.5, max_freq_hz = 15.0\n")
+            && text.contains(
+                "[limits] max_release_load_nm = 3.68, max_current_a = 4.5, max_freq_hz = 15.0\n"
+            )
             && !text.contains("c1 = "),
         "{text}"
     );
@@ -332,5 +337,8 @@ fn a_failed_write_model_run_leaves_the_file_untouched() {
         c
     });
     let after = std::fs::read_to_string(&model).unwrap();
-    assert!(after.contains("[calibration]") && after.contains("[model]"), "{after}");
+    assert!(
+        after.contains("[calibration]") && after.contains("[model]"),
+        "{after}"
+    );
 }

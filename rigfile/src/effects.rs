@@ -103,7 +103,6 @@ impl RigFile {
             not_in_plant: missing,
         })
     }
-
 }
 
 /// Sets the effect's parameters in `p` from reported (rig-file) names; unknown names are an

@@ -62,8 +62,8 @@ use serde::{Deserialize, Serialize};
 mod effects;
 mod error;
 pub mod keys;
-mod parse;
 pub mod paper_units;
+mod parse;
 mod sections;
 pub mod wire;
 
@@ -97,7 +97,8 @@ pub struct RigFile {
     /// The fitted model, when `rig explain` wrote one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelSection>,
-    /// Sections this version does not read, kept as they were when the file is rewritten.
+    /// Sections this version does not read (tables or arrays of tables, by name), kept as
+    /// they were when the file is rewritten.
     #[serde(skip)]
     pub extra: toml::Table,
 }

@@ -317,7 +317,10 @@ fn check(loaded: &Loaded, name: &str) -> Result<(), RigFileError> {
     let wire = crate::wire::record_unchecked(rig);
     if let Err(protocol::Error::InvalidCalibration { field }) = wire.validate() {
         let spec = keys::by_wire(field).ok_or_else(|| {
-            bad(name, format!("the device record's `{field}` is out of range"))
+            bad(
+                name,
+                format!("the device record's `{field}` is out of range"),
+            )
         })?;
         let too_big = value_text(rig, spec)
             .parse::<f64>()

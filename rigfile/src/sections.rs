@@ -170,40 +170,164 @@ impl<'de> Deserialize<'de> for CalibrationSection {
 }
 
 /// `[calibration.fit]`: the statistics of `rig calibrate`'s fits, in the paper's units
-/// (informational: no reader uses them).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// (informational: no reader uses them). Every key is required when the section is there.
+#[derive(Debug, Clone, PartialEq)]
 pub struct FitSection {
-    /// Torque steps in the fit of C1, C2.
+    /// Torque steps in the fit of C1, C2 (`torque_points`).
     pub torque_points: u32,
-    /// R^2 of the torque-current fit.
+    /// R^2 of the torque-current fit (`torque_r_squared`).
     pub torque_r_squared: f64,
-    /// Residual standard deviation of the torque-current fit, N mm.
+    /// Residual standard deviation of the torque-current fit, N mm (`torque_residual_sd_nmm`).
     pub torque_residual_sd_nmm: f64,
-    /// 95 % interval of C1, N mm/A.
-    pub c1_ci95: [f64; 2],
-    /// 95 % interval of C2, N mm.
-    pub c2_ci95: [f64; 2],
-    /// No-load steps in the fit of C5, C6.
+    /// No-load steps in the fit of C5, C6 (`no_load_points`).
     pub no_load_points: u32,
-    /// R^2 of the no-load fit.
+    /// R^2 of the no-load fit (`no_load_r_squared`).
     pub no_load_r_squared: f64,
-    /// Residual standard deviation of the no-load fit, A.
+    /// Residual standard deviation of the no-load fit, A (`no_load_residual_sd_a`).
     pub no_load_residual_sd_a: f64,
-    /// 95 % interval of C5, A s/rad.
-    pub c5_ci95: [f64; 2],
-    /// 95 % interval of C6, A.
-    pub c6_ci95: [f64; 2],
-    /// 95 % interval of C3 = C1 C5, N mm s/rad.
-    pub c3_ci95: [f64; 2],
-    /// 95 % interval of C4 = C1 C6 + C2, N mm.
-    pub c4_ci95: [f64; 2],
-    /// Slope of the direct fit of the loss torque, N mm s/rad.
-    pub c3_direct: f64,
-    /// Intercept of the direct fit of the loss torque, N mm.
-    pub c4_direct: f64,
-    /// Whether the direct fit agrees with C1 C5 and C1 C6 + C2.
+    /// 95 % intervals `[low, high]` of C1..C6 in the paper's units (`c1_ci95`..`c6_ci95`;
+    /// those of C3 and C4 propagated from C1 C5 and C1 C6 + C2).
+    pub ci95: [[f64; 2]; 6],
+    /// The direct fit of the loss torque against cam speed: slope (C3, N mm s/rad) and
+    /// intercept (C4, N mm) (`c3_direct`, `c4_direct`).
+    pub loss_direct: [f64; 2],
+    /// Whether the direct fit agrees with C1 C5 and C1 C6 + C2 (`consistent`).
     pub consistent: bool,
+}
+
+/// The keys of `[calibration.fit]`, in the order written (that of the older `[fit]`).
+const FIT_KEYS: [&str; 15] = [
+    "torque_points",
+    "torque_r_squared",
+    "torque_residual_sd_nmm",
+    "c1_ci95",
+    "c2_ci95",
+    "no_load_points",
+    "no_load_r_squared",
+    "no_load_residual_sd_a",
+    "c5_ci95",
+    "c6_ci95",
+    "c3_ci95",
+    "c4_ci95",
+    "c3_direct",
+    "c4_direct",
+    "consistent",
+];
+
+/// A key of `[calibration.fit]`, in [`FIT_KEYS`] order.
+#[derive(Deserialize, Clone, Copy)]
+#[serde(field_identifier, rename_all = "snake_case")]
+enum FitKey {
+    TorquePoints,
+    TorqueRSquared,
+    TorqueResidualSdNmm,
+    C1Ci95,
+    C2Ci95,
+    NoLoadPoints,
+    NoLoadRSquared,
+    NoLoadResidualSdA,
+    C5Ci95,
+    C6Ci95,
+    C3Ci95,
+    C4Ci95,
+    C3Direct,
+    C4Direct,
+    Consistent,
+}
+
+impl FitKey {
+    /// Which constant's interval (0-based C index) the key is, if it is one.
+    fn interval_of(self) -> Option<usize> {
+        match self {
+            FitKey::C1Ci95 => Some(0),
+            FitKey::C2Ci95 => Some(1),
+            FitKey::C3Ci95 => Some(2),
+            FitKey::C4Ci95 => Some(3),
+            FitKey::C5Ci95 => Some(4),
+            FitKey::C6Ci95 => Some(5),
+            _ => None,
+        }
+    }
+}
+
+impl Serialize for FitSection {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut st = s.serialize_struct("FitSection", FIT_KEYS.len())?;
+        st.serialize_field("torque_points", &self.torque_points)?;
+        st.serialize_field("torque_r_squared", &self.torque_r_squared)?;
+        st.serialize_field("torque_residual_sd_nmm", &self.torque_residual_sd_nmm)?;
+        st.serialize_field("c1_ci95", &self.ci95[0])?;
+        st.serialize_field("c2_ci95", &self.ci95[1])?;
+        st.serialize_field("no_load_points", &self.no_load_points)?;
+        st.serialize_field("no_load_r_squared", &self.no_load_r_squared)?;
+        st.serialize_field("no_load_residual_sd_a", &self.no_load_residual_sd_a)?;
+        st.serialize_field("c5_ci95", &self.ci95[4])?;
+        st.serialize_field("c6_ci95", &self.ci95[5])?;
+        st.serialize_field("c3_ci95", &self.ci95[2])?;
+        st.serialize_field("c4_ci95", &self.ci95[3])?;
+        st.serialize_field("c3_direct", &self.loss_direct[0])?;
+        st.serialize_field("c4_direct", &self.loss_direct[1])?;
+        st.serialize_field("consistent", &self.consistent)?;
+        st.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for FitSection {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Section;
+        impl<'de> Visitor<'de> for Section {
+            type Value = FitSection;
+
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("the [calibration.fit] table")
+            }
+
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let mut seen = [false; FIT_KEYS.len()];
+                let mut points = [0u32; 2];
+                let mut stats = [0.0f64; 4];
+                let mut ci95 = [[0.0f64; 2]; 6];
+                let mut loss_direct = [0.0f64; 2];
+                let mut consistent = false;
+                while let Some(key) = map.next_key::<FitKey>()? {
+                    let i = key as usize;
+                    if std::mem::replace(&mut seen[i], true) {
+                        return Err(de::Error::duplicate_field(FIT_KEYS[i]));
+                    }
+                    if let Some(c) = key.interval_of() {
+                        ci95[c] = map.next_value()?;
+                        continue;
+                    }
+                    match key {
+                        FitKey::TorquePoints => points[0] = map.next_value()?,
+                        FitKey::NoLoadPoints => points[1] = map.next_value()?,
+                        FitKey::TorqueRSquared => stats[0] = map.next_value()?,
+                        FitKey::TorqueResidualSdNmm => stats[1] = map.next_value()?,
+                        FitKey::NoLoadRSquared => stats[2] = map.next_value()?,
+                        FitKey::NoLoadResidualSdA => stats[3] = map.next_value()?,
+                        FitKey::C3Direct => loss_direct[0] = map.next_value()?,
+                        FitKey::C4Direct => loss_direct[1] = map.next_value()?,
+                        _ => consistent = map.next_value()?,
+                    }
+                }
+                if let Some(i) = seen.iter().position(|s| !s) {
+                    return Err(de::Error::missing_field(FIT_KEYS[i]));
+                }
+                Ok(FitSection {
+                    torque_points: points[0],
+                    torque_r_squared: stats[0],
+                    torque_residual_sd_nmm: stats[1],
+                    no_load_points: points[1],
+                    no_load_r_squared: stats[2],
+                    no_load_residual_sd_a: stats[3],
+                    ci95,
+                    loss_direct,
+                    consistent,
+                })
+            }
+        }
+        d.deserialize_struct("FitSection", &FIT_KEYS, Section)
+    }
 }
 
 /// `[limits]`: what the firmware enforces.

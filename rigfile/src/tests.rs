@@ -10,17 +10,18 @@ pub(crate) fn a_fit() -> FitSection {
         torque_points: 9,
         torque_r_squared: 0.9999,
         torque_residual_sd_nmm: 0.02,
-        c1_ci95: [62.0, 62.2],
-        c2_ci95: [-138.2, -137.9],
         no_load_points: 10,
         no_load_r_squared: 0.999,
         no_load_residual_sd_a: 0.0004,
-        c5_ci95: [0.0037, 0.0039],
-        c6_ci95: [2.249, 2.251],
-        c3_ci95: [0.23, 0.24],
-        c4_ci95: [1.63, 1.73],
-        c3_direct: 0.2346,
-        c4_direct: 1.68,
+        ci95: [
+            [62.0, 62.2],
+            [-138.2, -137.9],
+            [0.23, 0.24],
+            [1.63, 1.73],
+            [0.0037, 0.0039],
+            [2.249, 2.251],
+        ],
+        loss_direct: [0.2346, 1.68],
         consistent: true,
     }
 }
@@ -89,6 +90,12 @@ fn unknown_keys_in_every_known_section_name_key_and_section() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("r2") && e.contains("[calibration.fit]"), "{e}");
+    // The fit is written whole: a missing key is named.
+    let mut r = RigFile::paper();
+    r.calibration.fit = Some(a_fit());
+    let text = r.to_toml().unwrap().replace("c4_direct = 1.68\n", "");
+    let e = RigFile::parse(&text, "rig.toml").unwrap_err().to_string();
+    assert!(e.contains("missing field `c4_direct`"), "{e}");
     let e = RigFile::parse("[model]\nmu = 0.2\nnu = 0.1\n", "rig.toml")
         .unwrap_err()
         .to_string();
@@ -112,7 +119,10 @@ fn unknown_sections_are_kept_when_the_file_is_rewritten() {
     let back = RigFile::parse(&rewritten, "rig.toml").unwrap();
     assert_eq!(back.extra, r.extra);
     assert!(rewritten.contains("who = \"bench 2\""), "{rewritten}");
-    assert!(rewritten.contains("when = 2024-05-01T10:00:00Z"), "{rewritten}");
+    assert!(
+        rewritten.contains("when = 2024-05-01T10:00:00Z"),
+        "{rewritten}"
+    );
     assert!(rewritten.contains("[[runs]]"), "{rewritten}");
     assert_eq!(back.calibration.constants.c1, 61.0e-3);
 }
@@ -173,8 +183,7 @@ fn out_of_range_values_name_the_key_the_value_and_the_range() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("[friction] `mu_d` is out of range: 0.5 given")
-            && e.contains("not above mu_s"),
+        e.contains("[friction] `mu_d` is out of range: 0.5 given") && e.contains("not above mu_s"),
         "{e}"
     );
     // A default that does not fit the file's other values says so.
@@ -210,8 +219,8 @@ fn fixture(name: &str) -> String {
 
 #[test]
 fn the_older_calibration_file_loads() {
-    let loaded = RigFile::parse_detailed(&fixture("legacy-calibration-get.toml"), "old.toml")
-        .unwrap();
+    let loaded =
+        RigFile::parse_detailed(&fixture("legacy-calibration-get.toml"), "old.toml").unwrap();
     assert_eq!(loaded.format, FileFormat::CalibrationFile);
     assert_eq!(loaded.rig, RigFile::paper());
     assert_eq!(loaded.set_on_device().len(), 16);
@@ -221,15 +230,22 @@ fn the_older_calibration_file_loads() {
         protocol::Calibration::paper()
     );
 
-    let loaded =
-        RigFile::parse_detailed(&fixture("legacy-calibrate.toml"), "old.toml").unwrap();
+    let loaded = RigFile::parse_detailed(&fixture("legacy-calibrate.toml"), "old.toml").unwrap();
     assert_eq!(loaded.format, FileFormat::CalibrationFile);
     let c = paper_units::to_paper(&loaded.rig.calibration());
     assert_eq!(c[0], 62.090202);
     assert_eq!(c[5], 2.250479);
-    let fit = loaded.rig.calibration.fit.as_ref().expect("[fit] became [calibration.fit]");
+    let fit = loaded
+        .rig
+        .calibration
+        .fit
+        .as_ref()
+        .expect("[fit] became [calibration.fit]");
     assert_eq!(fit.torque_points, 9);
-    assert_eq!(fit.c1_ci95, [62.058329, 62.122075]);
+    assert_eq!(fit.ci95[0], [62.058329, 62.122075]);
+    assert_eq!(fit.ci95[4], [0.003688, 0.003867]);
+    assert_eq!(fit.ci95[2], [0.229849, 0.239296]);
+    assert_eq!(fit.loss_direct, [0.234573, 1.681421]);
     assert!(fit.consistent);
     assert!(loaded.rig.extra.is_empty());
     // Rewritten, it is a rig file that reads back the same.
@@ -248,18 +264,17 @@ fn the_older_calibration_file_partial_and_malformed() {
     assert_eq!(set, [Some("c1_nmm_per_a")]);
     assert_eq!(loaded.name_of(keys::by_wire("mu_d").unwrap()), "`mu_d`");
 
-    let err = |text: &str| {
-        RigFile::parse(text, "bad.toml")
-            .unwrap_err()
-            .to_string()
-    };
+    let err = |text: &str| RigFile::parse(text, "bad.toml").unwrap_err().to_string();
     let e = err("c1_nmm_per_a = \"lots\"\n");
     assert!(
         e.contains("bad.toml") && e.contains("line 1") && e.contains("invalid type"),
         "{e}"
     );
     let e = err("c1_nmm_per_a = 62.1\nc7 = 1.0\n");
-    assert!(e.contains("unknown field `c7`") && e.contains("line 2"), "{e}");
+    assert!(
+        e.contains("unknown field `c7`") && e.contains("line 2"),
+        "{e}"
+    );
     let e = err("c1_nmm_per_a = -62.1\n");
     assert!(e.contains("`c1_nmm_per_a` is out of range"), "{e}");
     let e = err("c1_nmm_per_a = [1\n");

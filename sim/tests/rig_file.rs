@@ -22,12 +22,18 @@ fn a_files_rig_reaches_the_plant_and_the_firmware() {
     let c = SimConfig::from_rig_file(&rig).unwrap();
     assert_eq!(c.plant.drive.gear.z(), [52, 48, 50, 50]);
     assert!((c.plant.drive.eccentricity - 0.8e-3).abs() < 1e-15);
-    assert_eq!((c.plant.mu_s, c.plant.mu_d, c.plant.mu_ax), (0.25, 0.16, 0.22));
+    assert_eq!(
+        (c.plant.mu_s, c.plant.mu_d, c.plant.mu_ax),
+        (0.25, 0.16, 0.22)
+    );
     // The motor is built around C1 (N m/A at the cam shaft) at the calibration temperature.
     assert!((c.plant.motor.torque_per_amp - 0.060).abs() < 1e-12);
     assert_eq!(c.plant.motor.ambient_c, 30.0);
     assert_eq!(c.plant.effects.current_offset, 0.03);
-    assert!(c.plant.regeneration, "kappa = -1: the drive takes the power back");
+    assert!(
+        c.plant.regeneration,
+        "kappa = -1: the drive takes the power back"
+    );
     // The firmware boots with exactly what `rig calibration set` would send.
     assert_eq!(c.calibration, rig.to_wire().unwrap());
     assert_eq!(c.calibration.max_freq_hz, 12.0);

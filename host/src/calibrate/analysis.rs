@@ -84,17 +84,19 @@ impl CalibrationResult {
             torque_points: self.torque_fit.n as u32,
             torque_r_squared: r(self.torque_fit.r_squared),
             torque_residual_sd_nmm: r(self.torque_fit.residual_sd),
-            c1_ci95: ci(self.torque_fit.slope_ci95),
-            c2_ci95: ci(self.torque_fit.intercept_ci95),
             no_load_points: self.no_load_fit.n as u32,
             no_load_r_squared: r(self.no_load_fit.r_squared),
             no_load_residual_sd_a: r(self.no_load_fit.residual_sd),
-            c5_ci95: ci(self.no_load_fit.slope_ci95),
-            c6_ci95: ci(self.no_load_fit.intercept_ci95),
-            c3_ci95: ci(self.consistency.c3_derived.ci95),
-            c4_ci95: ci(self.consistency.c4_derived.ci95),
-            c3_direct: r(self.consistency.c3_direct),
-            c4_direct: r(self.consistency.c4_direct),
+            ci95: [
+                self.torque_fit.slope_ci95,
+                self.torque_fit.intercept_ci95,
+                self.consistency.c3_derived.ci95,
+                self.consistency.c4_derived.ci95,
+                self.no_load_fit.slope_ci95,
+                self.no_load_fit.intercept_ci95,
+            ]
+            .map(ci),
+            loss_direct: [self.consistency.c3_direct, self.consistency.c4_direct].map(r),
             consistent: self.consistency.agree,
         }
     }

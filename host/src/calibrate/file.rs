@@ -86,7 +86,9 @@ mod tests {
     fn round_trip_keeps_every_field() {
         let mut cal = Calibration::paper();
         cal.c4_nmm = -0.5;
-        let text = RigFile::from_wire(&cal).to_toml_with_comment("test").unwrap();
+        let text = RigFile::from_wire(&cal)
+            .to_toml_with_comment("test")
+            .unwrap();
         let parsed = parse(&text, "t.toml").unwrap();
         assert_eq!(parsed.rig.to_wire().unwrap(), cal);
         assert_eq!(parsed.set_on_device().len(), 16);
@@ -102,7 +104,11 @@ mod tests {
         let set: Vec<_> = p.set_on_device().iter().map(|k| k.wire).collect();
         assert_eq!(set, [Some("c1_nmm_per_a")]);
         assert_eq!(p.defaulted().len(), 15);
-        let p = parse("[calibration]\nc1 = 60\n[limits]\nmax_freq_hz = 12\n", "t.toml").unwrap();
+        let p = parse(
+            "[calibration]\nc1 = 60\n[limits]\nmax_freq_hz = 12\n",
+            "t.toml",
+        )
+        .unwrap();
         let set: Vec<String> = p.set_on_device().iter().map(|k| k.path()).collect();
         assert_eq!(set, ["[calibration] c1", "[limits] max_freq_hz"]);
     }

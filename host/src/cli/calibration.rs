@@ -80,7 +80,9 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                 None => write!(
                     out,
                     "{}",
-                    file::for_record(&cal, None).0.to_toml_with_comment(&comment)?
+                    file::for_record(&cal, None)
+                        .0
+                        .to_toml_with_comment(&comment)?
                 )?,
             }
             Ok(ExitCode::SUCCESS)

@@ -211,7 +211,10 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
     outcome.explanation.synthetic = truth;
     // The model file is written last, when everything else worked: a failed run leaves an
     // existing FILE as it was. Named in the report before it exists.
-    let model_file = args.write_model.as_ref().map(|p| (p, outcome.augmented_rig()));
+    let model_file = args
+        .write_model
+        .as_ref()
+        .map(|p| (p, outcome.augmented_rig()));
     if let Some((p, _)) = &model_file {
         outcome.explanation.model_written = Some(p.display().to_string());
     }
