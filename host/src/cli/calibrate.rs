@@ -23,7 +23,7 @@ use rigfile::{RigFile, paper_units};
 /// Arguments of `rig calibrate`.
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
-    /// Folder for calibration.toml (the rig file, docs/rig-file.md), the two fit plots (SVG) and the measured points (CSV) [default: report/calibrate-<UTC time>].
+    /// Folder for calibration.toml (the rig file, docs/rig-file.md), the two fit plots (SVG) and the measured points (CSV) [default: report/calibrate-YYYYMMDDTHHMMSSZ, the start time in UTC].
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// Gauge torques (N mm) from this CSV (a `gauge_nmm` column, one row per torque step)
