@@ -4,8 +4,11 @@
 //! task feeds it; host bytes go through the core's real protocol server.
 
 use firmware_core::{BootInfo, Core, CoreConfig, Inputs};
-use model::plant::{Drive, Plant, PlantParams};
+use model::plant::{Drive, MotorParams, Plant, PlantParams};
 use model::{GearSet, plant::Load};
+use rigfile::RigFile;
+
+use crate::SimError;
 
 /// Plant (and ADC) rate, Hz.
 pub const PLANT_HZ: u32 = 10_000;
@@ -50,6 +53,45 @@ impl SimConfig {
         calibration.z = z.map(|v| v as u16);
         Ok(Self {
             plant: PlantParams::paper(gear, load),
+            core: CoreConfig::default(),
+            calibration,
+            calibration_status: protocol::CalibrationStatus::Valid,
+            watchdog_reset: false,
+            seed: 1,
+        })
+    }
+
+    /// The rig a rig file describes, with no load, booting with the file's calibration
+    /// record stored (what `rig calibration set FILE` would have sent).
+    ///
+    /// The plant takes the file's gear set, e and M_hat, mu_s and mu_d, a vibrator motor
+    /// built around its C1-C4 (C5 and C6 follow from them, Eqs. 16-17) at the calibration
+    /// temperature, and, when the file has a fitted `[model]`, its mu as the cam's axial
+    /// friction and the effects the plant can represent (`RigFile::plant_effects`; the rest
+    /// are left out). Without `[model]` the plant keeps its own drive (no regeneration),
+    /// as [`SimConfig::paper`].
+    pub fn from_rig_file(rig: &RigFile) -> Result<Self, SimError> {
+        let bad = |e: rigfile::RigFileError| SimError::BadValue {
+            what: "rig file".into(),
+            why: e.to_string(),
+        };
+        let calibration = rig.to_wire().map_err(bad)?;
+        let drive = rig.drive().map_err(bad)?;
+        let mut plant = PlantParams::paper(drive.gear, Load::Torque(0.0));
+        plant.drive = drive;
+        plant.mu_s = rig.friction.mu_s;
+        plant.mu_d = rig.friction.mu_d;
+        plant.mu_ax = rig.friction.mu_s;
+        plant.motor = MotorParams::rs735(&rig.calibration());
+        plant.motor.ambient_c = rig.calibration.temperature_c;
+        if let Some(m) = &rig.model {
+            let setup = rig.plant_effects().map_err(bad)?;
+            plant.mu_ax = m.mu;
+            plant.effects = setup.effects;
+            plant.regeneration = setup.regeneration;
+        }
+        Ok(Self {
+            plant,
             core: CoreConfig::default(),
             calibration,
             calibration_status: protocol::CalibrationStatus::Valid,
