@@ -58,7 +58,8 @@ impl SimLink {
             }
         }
         Err(SimError::Protocol(format!(
-            "the simulated device did not answer {req:?} within {REPLY_TIMEOUT_S} s"
+            "the simulated device did not answer {} within {REPLY_TIMEOUT_S} s",
+            crate::names::request_name(req)
         )))
     }
 
