@@ -278,13 +278,14 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             })?;
             let mut w = csv::Writer::from_writer(file);
             w.write_record(CSV_HEADER).map_err(csv_error(path))?;
-            let watched = watch(&a, dev, Some((&mut w, path)));
+            let mut logged = 0;
+            let watched = watch(&a, dev, Some((&mut w, path)), &mut logged);
             let flushed = w.flush().map_err(RigError::Output);
             drop(w);
             if let Err(e) = watched.and(flushed) {
                 let mut partial = path.as_os_str().to_owned();
                 partial.push(".partial");
-                if std::fs::rename(tmp, &partial).is_ok() {
+                if logged > 0 && std::fs::rename(tmp, &partial).is_ok() {
                     eprintln!(
                         "note: what was logged before the error is in {}; {} was left as it was",
                         std::path::Path::new(&partial).display(),
@@ -295,16 +296,18 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             }
             Ok(())
         })?,
-        None => watch(&a, dev, None)?,
+        None => watch(&a, dev, None, &mut 0)?,
     }
     Ok(ExitCode::SUCCESS)
 }
 
-/// The monitor itself: connects, streams telemetry until done, logs every sample to `csv`.
+/// The monitor itself: connects, streams telemetry until done, logs every sample to `csv`
+/// (counting them in `logged`).
 fn watch(
     a: &MonitorArgs,
     dev: &DeviceOpts,
     mut csv: Option<(&mut csv::Writer<File>, &Path)>,
+    logged: &mut u64,
 ) -> Result<(), RigError> {
     let stop = interrupt_flag();
     let mut s = dev.connect()?;
@@ -362,6 +365,7 @@ fn watch(
                 let start = *first.get_or_insert(t.device_time_us);
                 if let Some((w, path)) = csv.as_mut() {
                     w.write_record(csv_row(&t)).map_err(csv_error(path))?;
+                    *logged += 1;
                 }
                 if a.json {
                     super::print_json_line(&mut out, &sample_json(&t))?;
@@ -418,7 +422,7 @@ fn csv_error(path: &Path) -> impl Fn(csv::Error) -> RigError + '_ {
 /// A telemetry sample as a JSON object (SI units, names as in the CSV).
 pub fn sample_json(t: &TelemetrySample) -> serde_json::Value {
     serde_json::json!({
-        "device_time_s": t.device_time_us as f64 * 1e-6,
+        "device_time_s": t.device_time_us as f64 / 1e6,
         "seq": t.seq,
         "state": t.state.name(),
         "cam_speed_rad_s": t.cam_speed_rad_s,

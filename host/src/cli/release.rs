@@ -119,7 +119,7 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             continue;
         };
         let start = *t0.get_or_insert(t.device_time_us);
-        let since = (t.device_time_us - start) as f64 * 1e-6;
+        let since = (t.device_time_us - start) as f64 / 1e6;
         report.held_s = since;
         if report.states.last() != Some(&t.state.name()) {
             report.states.push(t.state.name());
