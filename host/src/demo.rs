@@ -174,6 +174,7 @@ pub fn run_simulated(
         }
     } else {
         sweep::SweepOptions {
+            loads: crate::sweep_report::sweep_loads(10),
             seed: opts.seed,
             ..Default::default()
         }

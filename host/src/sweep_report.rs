@@ -10,6 +10,19 @@ use reporting::plot::{self, Legend, PALETTE, Series, XyPanel};
 use crate::RigError;
 use sim::scenarios::sweep::SweepPoint;
 
+/// Lightest and heaviest load of the paper's sweep, N m (Figs. 8-9).
+pub const SWEEP_LOADS_NM: (f64, f64) = (0.368, 3.68);
+
+/// `levels` loads evenly from the lightest to the heaviest of [`SWEEP_LOADS_NM`], as a
+/// person writes them (to the micro-newton-metre: 1.104, not 1.1039999999999999).
+pub fn sweep_loads(levels: u32) -> Vec<f64> {
+    let (lo, hi) = SWEEP_LOADS_NM;
+    let steps = f64::from(levels.max(2) - 1);
+    (0..levels.max(2))
+        .map(|k| ((lo + (hi - lo) * f64::from(k) / steps) * 1e6).round() / 1e6)
+        .collect()
+}
+
 /// The supply voltages of the sweep, ascending.
 fn voltages(points: &[SweepPoint]) -> Vec<f64> {
     let mut v: Vec<f64> = points.iter().map(|p| p.v_in_v).collect();
@@ -109,6 +122,16 @@ mod tests {
             tau_cam_eq10_nm: 0.011 * load,
             backdriven: 1,
         }
+    }
+
+    #[test]
+    fn loads_are_as_written() {
+        let loads = sweep_loads(10);
+        assert_eq!(loads.len(), 10);
+        assert_eq!(loads[0].to_string(), "0.368");
+        assert_eq!(loads[2].to_string(), "1.104");
+        assert_eq!(loads[9].to_string(), "3.68");
+        assert_eq!(sweep_loads(3), [0.368, 2.024, 3.68]);
     }
 
     #[test]

@@ -184,11 +184,8 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
         Scenario::TorqueSweep(a) => {
-            let n = a.levels as f64;
             let opts = sweep::SweepOptions {
-                loads: (0..a.levels)
-                    .map(|k| 0.368 + (3.68 - 0.368) * k as f64 / (n - 1.0))
-                    .collect(),
+                loads: crate::sweep_report::sweep_loads(a.levels),
                 repeats: a.repeats,
                 rest_s: a.rest,
                 seed: a.seed,
