@@ -217,7 +217,13 @@ const FUZZ_SECONDS: u32 = 10;
 fn rustup_cargo() -> Command {
     let mut c = Command::new("cargo");
     c.current_dir(root());
-    for var in ["CARGO", "RUSTUP_TOOLCHAIN", "RUSTC", "RUSTDOC", "CARGO_TARGET_DIR"] {
+    for var in [
+        "CARGO",
+        "RUSTUP_TOOLCHAIN",
+        "RUSTC",
+        "RUSTDOC",
+        "CARGO_TARGET_DIR",
+    ] {
         c.env_remove(var);
     }
     c
