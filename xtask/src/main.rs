@@ -22,9 +22,10 @@ fn main() -> ExitCode {
         Some("test") => test(),
         Some("firmware") => firmware().map(|_| ()),
         Some("setup") => setup(),
+        Some("fuzz") => fuzz_smoke(),
         _ => {
             eprintln!(
-                "usage: cargo xtask <task>\n\n  test      every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware  cross-build the release firmware and print its flash/RAM use\n  setup     install the thumb target and the rustfmt/clippy components when missing"
+                "usage: cargo xtask <task>\n\n  test      every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware  cross-build the release firmware and print its flash/RAM use\n  setup     install the thumb target and the rustfmt/clippy components when missing\n  fuzz      the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)"
             );
             Err("no task given".into())
         }
