@@ -20,10 +20,10 @@ pub const DEVICE_VERBS: &str =
 /// before the verb (not global, so a verb without a device does not take them after its
 /// name) and on each device verb (global below it, so `rig calibration get --sim` works).
 macro_rules! device_args {
-    ($(#[$meta:meta])* $name:ident, global = $global:literal) => {
+    ($(#[$meta:meta])* $name:ident, global = $global:literal, heading = $heading:literal) => {
         $(#[$meta])*
         #[derive(Debug, Clone, Default, Args)]
-        #[command(next_help_heading = "Device options")]
+        #[command(next_help_heading = $heading)]
         pub struct $name {
             /// Serial port of the rig, e.g. /dev/ttyACM0 (`rig ports` lists them). Without it:
             /// $RIG_PORT, else the only ST-LINK port plugged in.
@@ -60,12 +60,14 @@ macro_rules! device_args {
 device_args!(
     /// Device options before the verb: `rig --sim info`. Device verbs only.
     DeviceArgs,
-    global = false
+    global = false,
+    heading = "Device options (for info, faults, clear, release, monitor, capture, calibrate, calibration, demo; also after the verb)"
 );
 device_args!(
     /// Device options after a device verb: `rig info --sim`.
     VerbDeviceArgs,
-    global = true
+    global = true,
+    heading = "Device options"
 );
 
 impl DeviceArgs {
