@@ -7,7 +7,7 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum RigError {
     /// Gear parameters that do not make a 2K-H gear.
-    #[error("invalid gear set {z:?}: {source}")]
+    #[error("invalid gear set {}: {source}", sim::names::teeth(z))]
     Gear {
         /// The tooth counts given.
         z: [u32; 4],
@@ -139,7 +139,7 @@ pub enum RigError {
         hint: String,
     },
     /// The device refused a request.
-    #[error("the device refused {request} ({code:?}): {advice}")]
+    #[error("the device refused {request} ({}): {advice}", sim::names::nack_name(*code))]
     Refused {
         /// The request.
         request: &'static str,
@@ -225,5 +225,31 @@ fn version_mismatch_text(device: Option<u16>, host: u16, advice: &str) -> String
         None => format!(
             "the device refused this rig tool's protocol v{host} and did not say its own: {advice}"
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_name_things_in_words() {
+        let e = RigError::Refused {
+            request: "Release(on)",
+            code: protocol::NackCode::BadArgument,
+            advice: "use a smaller value".into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "the device refused Release(on) (argument out of range): use a smaller value"
+        );
+        let e = RigError::Gear {
+            z: [49, 51, 50, 51],
+            source: model::GearSet::new([49, 51, 50, 51], 1e-3, 0.35).unwrap_err(),
+        };
+        assert!(
+            e.to_string().starts_with("invalid gear set 49,51,50,51: "),
+            "{e}"
+        );
     }
 }

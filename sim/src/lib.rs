@@ -8,6 +8,7 @@
 
 mod error;
 mod link;
+pub mod names;
 mod rig;
 pub mod riglink;
 pub mod scenarios;

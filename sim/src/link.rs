@@ -27,6 +27,17 @@ pub struct SimLink {
     since_heartbeat: f64,
 }
 
+/// `steps` of `step_s` in seconds as a person writes them: 304 steps of 1 ms are 0.304 s,
+/// not the 0.3040000000000002 that adding 0.001 up gives.
+fn steps_to_s(steps: u32, step_s: f64) -> f64 {
+    let per_s = 1.0 / step_s;
+    if (per_s - per_s.round()).abs() < 1e-9 {
+        f64::from(steps) / per_s.round()
+    } else {
+        f64::from(steps) * step_s
+    }
+}
+
 impl SimLink {
     /// Opens a session on `rig`.
     pub fn new(rig: SimRig) -> Self {
@@ -58,7 +69,8 @@ impl SimLink {
             }
         }
         Err(SimError::Protocol(format!(
-            "the simulated device did not answer {req:?} within {REPLY_TIMEOUT_S} s"
+            "the simulated device did not answer {} within {REPLY_TIMEOUT_S} s",
+            crate::names::request_name(req)
         )))
     }
 
@@ -99,12 +111,14 @@ impl SimLink {
         mut done: impl FnMut(&SimLink) -> bool,
     ) -> Option<f64> {
         let mut waited = 0.0;
+        let mut steps = 0u32;
         while waited <= limit_s {
             if done(self) {
-                return Some(waited);
+                return Some(steps_to_s(steps, step_s));
             }
             self.wait(step_s);
             waited += step_s;
+            steps += 1;
         }
         None
     }

@@ -48,16 +48,22 @@ pub trait RigLink {
     fn latched_faults(&mut self) -> Result<FaultFlags, Self::Error> {
         match self.request(&Request::GetFaults)? {
             DeviceMessage::Faults { latched, .. } => Ok(latched),
-            other => {
-                Err(SimError::Protocol(format!("GetFaults was answered with {other:?}")).into())
-            }
+            other => Err(SimError::Protocol(format!(
+                "GetFaults was answered with {}",
+                crate::names::message_name(&other)
+            ))
+            .into()),
         }
     }
 }
 
 /// The error for a request answered with something else than its reply.
 pub fn refused(req: &Request, other: &DeviceMessage) -> SimError {
-    SimError::Protocol(format!("{req:?} was answered with {other:?}"))
+    SimError::Protocol(format!(
+        "{} was answered with {}",
+        crate::names::request_name(req),
+        crate::names::message_name(other)
+    ))
 }
 
 impl RigLink for SimLink {

@@ -72,8 +72,7 @@ pub fn run(a: InfoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let report = InfoReport::new(&info, s.port(), s.device.is_some());
     let mut out = std::io::stdout().lock();
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
+        super::print_json(&mut out, &report)?;
     } else {
         writeln!(out, "device     {} on {}", report.board, report.port)?;
         writeln!(out, "firmware   {}", report.firmware_version)?;

@@ -21,9 +21,7 @@ pub const MOTION_RAD: f64 = 0.1e-3 / model::paper::R_OUT;
 pub fn expect_ack(link: &mut SimLink, req: &Request) -> Result<(), SimError> {
     match link.request(req)? {
         DeviceMessage::Ack { .. } => Ok(()),
-        other => Err(SimError::Protocol(format!(
-            "{req:?} was answered with {other:?}"
-        ))),
+        other => Err(crate::riglink::refused(req, &other)),
     }
 }
 
@@ -36,7 +34,8 @@ pub fn hello(link: &mut SimLink) -> Result<(), SimError> {
     match reply {
         DeviceMessage::Info(_) => Ok(()),
         other => Err(SimError::Protocol(format!(
-            "hello was answered with {other:?}"
+            "Hello was answered with {}",
+            crate::names::message_name(&other)
         ))),
     }
 }
