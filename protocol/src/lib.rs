@@ -84,6 +84,13 @@
 //! feeds arbitrary bytes to the deframers and the peer identification:
 //! `cd protocol/fuzz && cargo +nightly fuzz run deframer -- -max_total_time=60`.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
+// No silent numeric narrowing on the target: every cast that can truncate, lose a sign or
+// wrap is written so it cannot, or carries an `allow` with its reason.
+#![deny(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap
+)]
 
 mod capture;
 pub mod compat;

@@ -1,4 +1,9 @@
 //! Plant behaviour against the paper's numbers and first principles.
+#![allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "test step counts from positive durations"
+)]
 
 use super::*;
 use crate::{Calibration, TABLE1, paper};
