@@ -238,6 +238,10 @@ pub struct CoreConfig {
     pub comms_timeout_us: u64,
     /// Board name reported in `Info` (at most 16 bytes are sent).
     pub board_name: &'static str,
+    /// Optional hardware fitted, reported in `Info`; telemetry and health report NaN for
+    /// what is missing. The real board has none of them yet; the virtual rig adds
+    /// `SIMULATION`.
+    pub capabilities: protocol::Capabilities,
     /// Current sensor.
     pub current: CurrentSensorConfig,
     /// Motor model and drive limits.
@@ -278,6 +282,7 @@ impl Default for CoreConfig {
             supply_v: 12.0,
             comms_timeout_us: protocol::COMMS_TIMEOUT_MS as u64 * 1000,
             board_name: "nucleo-g474re",
+            capabilities: protocol::Capabilities::empty(),
             current: CurrentSensorConfig::default(),
             motor: MotorConfig::default(),
             speed_loop: SpeedLoopConfig::default(),
