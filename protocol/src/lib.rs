@@ -18,6 +18,9 @@
 //!   [`DeframerStats`]. A delimiter opens and closes every frame, so a stray byte on the
 //!   line costs at most the frame it touches; empty frames are ignored.
 //! * [`SeqTracker`] tells the host how many device frames were lost.
+//! * `session::Session` (feature `std`) is the host's sans-IO session: request matching
+//!   by `seq`, retries of retry-safe requests, heartbeats, peer-version recognition, with
+//!   time passed in; the serial client and the simulator's link both drive it.
 //!
 //! # Replies
 //! Each side numbers its own frames. Every request gets exactly one
@@ -101,6 +104,8 @@ mod parameters;
 mod request;
 pub mod schema;
 mod sequence;
+#[cfg(any(test, feature = "std"))]
+pub mod session;
 mod sizes;
 mod telemetry;
 
