@@ -312,9 +312,14 @@ impl Session {
     }
 
     /// Sends a `Heartbeat` every `interval` from `now` on (`None` stops them, as a host
-    /// that lets a release lapse).
+    /// that lets a release lapse). While heartbeats already go out, a new interval applies
+    /// from the last one sent.
     pub fn keep_alive(&mut self, interval: Option<Duration>, now: Duration) {
-        self.keep_alive = interval.map(|every| (every, now));
+        self.keep_alive = match (interval, self.keep_alive) {
+            (None, _) => None,
+            (Some(every), Some((_, last))) => Some((every, last)),
+            (Some(every), None) => Some((every, now)),
+        };
     }
 
     /// Whether heartbeats are being sent.
@@ -678,6 +683,10 @@ mod tests {
         let stats = s.stats();
         assert_eq!((stats.heartbeats, stats.heartbeats_refused), (6, 3));
         assert_eq!(stats.stale_replies, 0);
+        // A shorter interval applies from the last heartbeat.
+        s.keep_alive(Some(ms(50)), ms(1000));
+        assert!(s.poll_transmit(ms(949)).is_none());
+        assert!(s.poll_transmit(ms(950)).is_some());
         s.keep_alive(None, ms(1000));
         assert!(s.poll_transmit(ms(5000)).is_none());
     }

@@ -78,8 +78,8 @@ impl CalibrationResult {
     }
 
     /// `base` with C1..C6 replaced by these.
-    pub fn apply_to(&self, base: &protocol::Calibration) -> protocol::Calibration {
-        protocol::Calibration {
+    pub fn apply_to(&self, base: &protocol::RigParameters) -> protocol::RigParameters {
+        protocol::RigParameters {
             c1_nmm_per_a: self.c1 as f32,
             c2_nmm: self.c2 as f32,
             c3_nmm_s_per_rad: self.c3 as f32,
@@ -250,7 +250,7 @@ mod tests {
         assert!(r.consistency.agree);
         assert!((r.torque_fit.r_squared - 1.0).abs() < 1e-12);
         assert_eq!(r.stalled_points, 0);
-        let cal = r.apply_to(&protocol::Calibration::paper());
+        let cal = r.apply_to(&protocol::RigParameters::paper());
         assert_eq!(cal.validate(), Ok(()));
     }
 

@@ -1,5 +1,5 @@
 //! The calibration file: TOML with the device's calibration record in the paper's units
-//! (the field names of [`protocol::Calibration`]), written by `rig calibrate` and
+//! (the field names of [`protocol::RigParameters`]), written by `rig calibrate` and
 //! `rig calibration get`, read by `rig calibration set`.
 //!
 //! Every field is optional when reading: a missing one keeps the device's value. Unknown
@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use protocol::Calibration;
+use protocol::RigParameters as Calibration;
 use serde::Deserialize;
 
 use crate::RigError;
@@ -120,7 +120,8 @@ pub fn parse(text: &str, file: &str, base: &Calibration) -> Result<ParsedCalibra
             "it sets no calibration field (expected keys such as c1_nmm_per_a = 62.1; `rig calibration get FILE` writes a complete example)".into(),
         ));
     }
-    if let Err(protocol::Error::InvalidCalibration { field }) = cal.validate() {
+    if let Err(rejection) = cal.validate() {
+        let field = rejection.field.name();
         let value = if set.contains(&field) {
             "is out of range"
         } else {

@@ -211,7 +211,7 @@ pub fn write_files(
     dir: &Path,
     r: &CalibrationResult,
     m: &Measurements,
-    base: &protocol::Calibration,
+    base: &protocol::RigParameters,
     port: &str,
 ) -> Result<CalibrationFiles, RigError> {
     let write = |path: &Path, bytes: &[u8]| {

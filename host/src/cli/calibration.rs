@@ -85,7 +85,7 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                 why: format!("cannot read it ({e})"),
             })?;
             let name = path.display().to_string();
-            file::parse(&text, &name, &protocol::Calibration::paper())?;
+            file::parse(&text, &name, &protocol::RigParameters::paper())?;
             let mut s = dev.connect()?;
             let current = s.client.calibration()?;
             let parsed = file::parse(&text, &name, &current)?;
@@ -141,7 +141,7 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
 }
 
 /// `field: old -> new` for every field that differs.
-fn diff(old: &protocol::Calibration, new: &protocol::Calibration) -> Vec<String> {
+fn diff(old: &protocol::RigParameters, new: &protocol::RigParameters) -> Vec<String> {
     let a = serde_json::to_value(old).unwrap_or_default();
     let b = serde_json::to_value(new).unwrap_or_default();
     let (Some(a), Some(b)) = (a.as_object(), b.as_object()) else {
