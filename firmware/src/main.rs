@@ -284,7 +284,7 @@ mod app {
     }
 
     /// Writes calibrations to flash (blocking; only while the motor is off, as the core
-    /// refuses `SetCalibration` otherwise) and reports the outcome to the core.
+    /// refuses `SetParameters` otherwise) and reports the outcome to the core.
     #[embassy_executor::task]
     async fn persist(core: &'static SharedCore, mut store: CalibrationStore<CalibrationFlash>) {
         loop {
