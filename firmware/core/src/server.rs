@@ -275,12 +275,13 @@ impl Core {
 
 /// `text` cut to the string's capacity at a character boundary.
 fn truncated<const N: usize>(text: &str) -> heapless::String<N> {
-    let mut out = heapless::String::new();
-    for c in text.chars() {
-        if out.push(c).is_err() {
-            break;
-        }
+    let mut cut = text.len().min(N);
+    while !text.is_char_boundary(cut) {
+        cut -= 1;
     }
+    let mut out = heapless::String::new();
+    // Cannot fail: `cut` bytes fit the capacity.
+    let _ = out.push_str(&text[..cut]);
     out
 }
 

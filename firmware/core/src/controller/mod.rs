@@ -80,8 +80,10 @@ impl Core {
             }
             _ => {
                 let paper = RigParameters::paper();
-                let d = Derived::new(&paper, &config)
-                    .expect("the paper's parameters are valid (tested)");
+                // Not `expect`: formatting the rejection would pull `Debug` into the image.
+                let Ok(d) = Derived::new(&paper, &config) else {
+                    panic!("the paper's parameters are valid (tested)");
+                };
                 (paper, ParametersStatus::Invalid, d)
             }
         };
