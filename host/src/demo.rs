@@ -110,7 +110,7 @@ pub type CalibrationWriter<'a> = &'a dyn Fn(
     &Path,
     &CalibrationResult,
     &Measurements,
-    &protocol::Calibration,
+    &protocol::RigParameters,
     &str,
 ) -> Result<Vec<String>, RigError>;
 

@@ -139,36 +139,21 @@ pub enum RigError {
         hint: String,
     },
     /// The device refused a request.
-    #[error("the device refused {request} ({}): {advice}", sim::names::nack_name(*code))]
+    #[error("the device refused {request}: {code}; {advice}")]
     Refused {
         /// The request.
         request: &'static str,
         /// The device's reason.
         code: protocol::NackCode,
-        /// What to do.
+        /// What the device said and what to do.
         advice: String,
     },
-    /// Host tool and firmware speak different protocol versions.
-    #[error("{}", version_mismatch_text(*device, *host, advice))]
+    /// Host tool and firmware speak different protocol versions or message layouts; the
+    /// message says which side to update ([`protocol::check_peer`]).
+    #[error("{source}")]
     VersionMismatch {
-        /// The device's protocol version, when it said.
-        device: Option<u16>,
-        /// This tool's protocol version.
-        host: u16,
-        /// Which side to update, and how.
-        advice: String,
-    },
-    /// Same protocol version, different message layouts (development builds).
-    #[error(
-        "device and rig tool both speak protocol v{version} but their schemas differ (device {device_hash:#010x}, tool {host_hash:#010x}): build both from the same checkout (cargo fw-flash; cargo install --path host --locked)"
-    )]
-    SchemaMismatch {
-        /// The shared protocol version.
-        version: u16,
-        /// The device's schema hash.
-        device_hash: u32,
-        /// This tool's schema hash.
-        host_hash: u32,
+        /// The protocol's verdict, with its advice.
+        source: protocol::Error,
     },
     /// Reading or writing the port failed after it was open.
     #[error("lost the link to {port}: {source}; check the cable and that the board is powered")]
@@ -218,16 +203,6 @@ pub enum RigError {
     #[error("cannot start the virtual device: {0}")]
     VirtualDevice(String),
 }
-
-fn version_mismatch_text(device: Option<u16>, host: u16, advice: &str) -> String {
-    match device {
-        Some(d) => format!("device speaks protocol v{d}, this rig tool v{host}: {advice}"),
-        None => format!(
-            "the device refused this rig tool's protocol v{host} and did not say its own: {advice}"
-        ),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -241,7 +216,7 @@ mod tests {
         };
         assert_eq!(
             e.to_string(),
-            "the device refused Release(on) (argument out of range): use a smaller value"
+            "the device refused Release(on): an argument is outside the device's range; use a smaller value"
         );
         let e = RigError::Gear {
             z: [49, 51, 50, 51],

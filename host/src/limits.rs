@@ -14,7 +14,7 @@ use crate::RigError;
 /// Release frequencies the device drives as asked, Hz: from the supervisor's lowest to the
 /// lower of its highest and the calibration's `max_freq_hz` (above that the firmware
 /// would silently drive at `max_freq_hz`).
-pub fn release_freq_range(calibration: &protocol::Calibration) -> (f32, f32) {
+pub fn release_freq_range(calibration: &protocol::RigParameters) -> (f32, f32) {
     let s = CoreConfig::default().supervisor;
     (s.min_freq_hz, s.max_freq_hz.min(calibration.max_freq_hz))
 }
@@ -23,7 +23,7 @@ pub fn release_freq_range(calibration: &protocol::Calibration) -> (f32, f32) {
 pub fn check_release_freq(
     option: &str,
     hz: f64,
-    calibration: &protocol::Calibration,
+    calibration: &protocol::RigParameters,
 ) -> Result<f32, RigError> {
     let (lo, hi) = release_freq_range(calibration);
     let sent = hz as f32;
@@ -140,7 +140,7 @@ mod tests {
 
     #[test]
     fn release_range_is_the_calibrations() {
-        let paper = protocol::Calibration::paper();
+        let paper = protocol::RigParameters::paper();
         assert_eq!(release_freq_range(&paper), (1.0, 15.0));
         assert_eq!(check_release_freq("--freq", 10.0, &paper).unwrap(), 10.0);
         let e = check_release_freq("--freq", 18.0, &paper)

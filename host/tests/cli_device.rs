@@ -102,7 +102,8 @@ fn info_json_has_the_contract_keys() {
     assert_eq!(v["sim"], true);
     let text = stdout_of(sim(&["info"]));
     assert!(
-        text.contains("firmware") && text.contains("protocol   v1"),
+        text.contains("firmware")
+            && text.contains(&format!("protocol   v{}", protocol::PROTOCOL_VERSION)),
         "{text}"
     );
 }

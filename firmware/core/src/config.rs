@@ -242,6 +242,10 @@ pub struct CoreConfig {
     pub comms_timeout_us: u64,
     /// Board name reported in `Info` (at most 16 bytes are sent).
     pub board_name: &'static str,
+    /// Optional hardware fitted, reported in `Info`; telemetry and health report NaN for
+    /// what is missing. The real board has none of them yet; the virtual rig adds
+    /// `SIMULATION`.
+    pub capabilities: protocol::Capabilities,
     /// Current sensor.
     pub current: CurrentSensorConfig,
     /// Motor model and drive limits.
@@ -285,6 +289,7 @@ impl Default for CoreConfig {
             supply_v: board::BRIDGE_SUPPLY_V as f32,
             comms_timeout_us: protocol::COMMS_TIMEOUT_MS as u64 * 1000,
             board_name: "nucleo-g474re",
+            capabilities: protocol::Capabilities::empty(),
             current: CurrentSensorConfig::default(),
             motor: MotorConfig::default(),
             speed_loop: SpeedLoopConfig::default(),

@@ -71,7 +71,7 @@ impl CalibrationResult {
     }
 
     /// `base` with C1..C6 replaced by these.
-    pub fn apply_to(&self, base: &protocol::Calibration) -> protocol::Calibration {
+    pub fn apply_to(&self, base: &protocol::RigParameters) -> protocol::RigParameters {
         rigfile::wire::with_constants(base, &self.calibration)
     }
 
@@ -268,7 +268,7 @@ mod tests {
         assert!(r.consistency.agree);
         assert!((r.torque_fit.r_squared - 1.0).abs() < 1e-12);
         assert_eq!(r.stalled_points, 0);
-        let cal = r.apply_to(&protocol::Calibration::paper());
+        let cal = r.apply_to(&protocol::RigParameters::paper());
         assert_eq!(cal.validate(), Ok(()));
     }
 

@@ -66,7 +66,7 @@ pub enum Target {
 /// The rig file to write for the device's record `record` at `path`: the rig file already
 /// there (its calibration temperature, `[model]` and other sections kept) with everything
 /// the record carries replaced, or a new one.
-pub fn for_record(record: &protocol::Calibration, path: Option<&Path>) -> (RigFile, Target) {
+pub fn for_record(record: &protocol::RigParameters, path: Option<&Path>) -> (RigFile, Target) {
     match path.filter(|p| p.exists()).map(RigFile::load) {
         Some(Ok(existing)) => (existing.with_wire(record), Target::Updated),
         Some(Err(e)) => (
@@ -80,7 +80,7 @@ pub fn for_record(record: &protocol::Calibration, path: Option<&Path>) -> (RigFi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::Calibration;
+    use protocol::RigParameters as Calibration;
 
     #[test]
     fn round_trip_keeps_every_field() {

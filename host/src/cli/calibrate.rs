@@ -248,7 +248,7 @@ pub fn write_files(
     dir: &Path,
     r: &CalibrationResult,
     m: &Measurements,
-    base: &protocol::Calibration,
+    base: &protocol::RigParameters,
     port: &str,
 ) -> Result<CalibrationFiles, RigError> {
     let toml_path = dir.join("calibration.toml");

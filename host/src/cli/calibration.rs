@@ -193,7 +193,7 @@ fn defaulted_lines(loaded: &Loaded) -> Vec<String> {
 }
 
 /// `field: old -> new` for every field that differs (numbers as a person writes them).
-fn diff(old: &protocol::Calibration, new: &protocol::Calibration) -> Vec<String> {
+fn diff(old: &protocol::RigParameters, new: &protocol::RigParameters) -> Vec<String> {
     let a = reporting::human_json(serde_json::to_value(old).unwrap_or_default());
     let b = reporting::human_json(serde_json::to_value(new).unwrap_or_default());
     let (Some(a), Some(b)) = (a.as_object(), b.as_object()) else {

@@ -78,7 +78,7 @@ fn write_calibration(
     dir: &std::path::Path,
     result: &crate::calibrate::CalibrationResult,
     measurements: &crate::calibrate::Measurements,
-    base: &protocol::Calibration,
+    base: &protocol::RigParameters,
     port: &str,
 ) -> Result<Vec<String>, RigError> {
     let w = super::calibrate::write_files(dir, result, measurements, base, port)?;

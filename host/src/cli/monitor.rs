@@ -475,6 +475,8 @@ mod tests {
             state,
             faults: FaultFlags::empty(),
             status: StatusFlags::HOST_RELEASE,
+            output_angle_rad: f32::NAN,
+            output_speed_rad_s: f32::NAN,
         }
     }
 

@@ -102,7 +102,7 @@ pub struct FaultArgs {
 /// A release frequency the simulated rig drives as asked: its calibration is the paper's
 /// (at most 15 Hz); above that the firmware would silently drive at 15 Hz.
 fn check_freq(hz: f64) -> Result<f32, RigError> {
-    let paper = protocol::Calibration::paper();
+    let paper = protocol::RigParameters::paper();
     crate::limits::check_release_freq("--freq", hz, &paper).map_err(|_| {
         let (lo, hi) = crate::limits::release_freq_range(&paper);
         RigError::BadValue {

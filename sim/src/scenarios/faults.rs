@@ -3,7 +3,7 @@
 //! per drill.
 
 use model::plant::{CamSetup, Load};
-use protocol::{DeviceMessage, FaultFlags, Request};
+use protocol::{FaultFlags, Reply, Request};
 use serde::Serialize;
 
 use super::{hello, release};
@@ -98,7 +98,7 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
         "bad-calibration" => {
             let link = rig(seed, |c| {
                 c.calibration.c1_nmm_per_a = f32::NAN;
-                c.calibration_status = protocol::CalibrationStatus::Invalid;
+                c.calibration_status = protocol::ParametersStatus::Invalid;
             })?;
             (link, false)
         }
@@ -121,7 +121,7 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
             on: true,
             target_hz: 10.0
         })?,
-        DeviceMessage::Ack { .. }
+        Reply::Ack
     );
     link.wait(0.2);
     let latched = crate::RigLink::latched_faults(&mut link)?;
