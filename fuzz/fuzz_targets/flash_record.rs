@@ -11,7 +11,7 @@ use embedded_storage::nor_flash::{
 };
 use firmware_core::storage::{CalibrationStore, STORAGE_SCHEMA};
 use libfuzzer_sys::fuzz_target;
-use protocol::CalibrationStatus;
+use protocol::ParametersStatus as CalibrationStatus;
 
 /// One slot: a record is 112 bytes (see the layout in `firmware_core::storage`).
 const SLOT: usize = 128;
@@ -88,7 +88,7 @@ fn check(flash: MemFlash) {
     let mut store = CalibrationStore::new(flash);
     let loaded = store.load();
     if loaded.status != CalibrationStatus::Valid {
-        assert_eq!(loaded.calibration, protocol::Calibration::paper());
+        assert_eq!(loaded.calibration, protocol::RigParameters::paper());
         return;
     }
     assert!(loaded.calibration.validate().is_ok());
@@ -98,8 +98,8 @@ fn check(flash: MemFlash) {
     let again = CalibrationStore::new(store.into_inner()).load();
     assert_eq!(again.status, CalibrationStatus::Valid);
     // Compare bits: a valid calibration has no NaN, but bits say exactly "the same".
-    let bits = |c: &protocol::Calibration| {
-        protocol::encode_frame_vec(0, &protocol::Request::SetCalibration(*c)).unwrap()
+    let bits = |c: &protocol::RigParameters| {
+        protocol::encode_frame_vec(0, &protocol::Request::SetParameters(*c)).unwrap()
     };
     assert_eq!(bits(&again.calibration), bits(&loaded.calibration));
 }

@@ -84,9 +84,9 @@
 //! (N mm, mm), as in its Table 2. Quantities a board does not sense are NaN.
 //!
 //! # Fuzzing
-//! `protocol/fuzz` is a cargo-fuzz crate (not a workspace member) with one target that
-//! feeds arbitrary bytes to the deframers and the peer identification:
-//! `cd protocol/fuzz && cargo +nightly fuzz run deframer -- -max_total_time=60`.
+//! The top-level `fuzz/` crate (cargo-fuzz, its own workspace) holds one target per decoder;
+//! `frame` feeds arbitrary bytes to the deframers: `cargo xtask fuzz`, or
+//! `cd fuzz && cargo +nightly fuzz run frame -- -max_total_time=60`.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 // No silent numeric narrowing on the target: every cast that can truncate, lose a sign or
 // wrap is written so it cannot, or carries an `allow` with its reason.

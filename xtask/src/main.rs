@@ -233,6 +233,17 @@ fn rustup_cargo() -> Command {
 /// A short run of every fuzz target (`cargo +nightly fuzz`), when a nightly toolchain and
 /// cargo-fuzz are installed; CI without them skips it.
 fn fuzz_smoke() -> Result {
+    // The fuzz crate is its own workspace: type-check its targets on the stable toolchain so an
+    // API change in the crates they drive fails here, nightly or not.
+    run("fuzz targets type-check (stable)", {
+        let mut c = cargo();
+        c.args(["check", "--manifest-path", "fuzz/Cargo.toml", "--bins"]);
+        let target = std::env::var("CARGO_TARGET_DIR")
+            .map(PathBuf::from)
+            .unwrap_or_else(|_| root().join("target"));
+        c.env("CARGO_TARGET_DIR", target.join("fuzz-check"));
+        c
+    })?;
     let works = |args: &[&str]| {
         rustup_cargo()
             .args(args)
