@@ -22,15 +22,52 @@
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 /// Firmware version, reported at boot (and to the host in `Info`).
+#[allow(dead_code)] // the firmware reports it through IDENTITY; the host stub prints it
 const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// Firmware build: the git commit it was built from (short hash, `-dirty` when the work tree
+/// had uncommitted changes) or `unknown`; computed by `build.rs`.
+#[allow(dead_code)] // read by the host's `Info` once the protocol carries it
+const BUILD: &str = env!("RIG_FIRMWARE_BUILD");
+
+/// Version and build as one record, `rig firmware <version> build <build>`.
+const IDENTITY: &str = concat!(
+    "rig firmware ",
+    env!("CARGO_PKG_VERSION"),
+    " build ",
+    env!("RIG_FIRMWARE_BUILD")
+);
+
+/// [`IDENTITY`] in the image under a fixed symbol: `rig flash` reads it from the ELF (and
+/// `rig log` from the running chip) to tell which firmware a file or a board holds.
+#[cfg(target_os = "none")]
+#[used]
+#[allow(unsafe_code)] // `no_mangle`: a fixed name for the host to look up; nothing else uses it.
+#[unsafe(no_mangle)]
+static RIG_FIRMWARE_ID: [u8; IDENTITY.len()] = identity_bytes();
+
+/// [`IDENTITY`] as an array (a `const fn`: the record is fixed at compile time).
+#[cfg(target_os = "none")]
+const fn identity_bytes() -> [u8; IDENTITY.len()] {
+    let mut out = [0u8; IDENTITY.len()];
+    let src = IDENTITY.as_bytes();
+    let mut i = 0;
+    while i < out.len() {
+        out[i] = src[i];
+        i += 1;
+    }
+    out
+}
 
 #[cfg(not(target_os = "none"))]
 fn main() {
     println!(
         "rig firmware {VERSION} runs on the Nucleo-G474RE (STM32G474RE); this host build is a stub.\n\
          build:  cargo fw-build   (cargo build -p firmware --release --target thumbv7em-none-eabihf)\n\
-         flash:  cargo fw-flash   (probe-rs run --chip STM32G474RETx; `cargo install probe-rs-tools`)\n\
-         target: rustup target add thumbv7em-none-eabihf"
+         flash:  rig flash        (builds it, checks the image and flashes through the probe)\n\
+         logs:   rig log          (the defmt log over the probe)\n\
+         target: rustup target add thumbv7em-none-eabihf\n\
+         identity: {IDENTITY}"
     );
 }
 
@@ -106,9 +143,10 @@ mod app {
             storage,
         } = board::Board::new(p);
 
+        // Through `black_box` so the identity record stays in the image for the host.
         info!(
-            "rig firmware v{} booted; last reset by the watchdog: {}",
-            crate::VERSION,
+            "{=[u8]:a} booted; last reset by the watchdog: {}",
+            core::hint::black_box(&crate::RIG_FIRMWARE_ID)[..],
             reset.watchdog
         );
         if reset.watchdog {
