@@ -9,6 +9,7 @@ pub mod demo;
 pub mod design;
 pub mod device;
 pub mod error;
+pub mod flash;
 pub mod ports;
 pub mod scenario;
 pub mod sweep_report;

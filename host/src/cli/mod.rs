@@ -12,7 +12,9 @@ pub mod demo;
 pub mod design;
 pub mod explain;
 pub mod faults;
+pub mod flash;
 pub mod info;
+pub mod log;
 pub mod monitor;
 pub mod ports;
 pub mod release;
@@ -59,6 +61,10 @@ pub enum Command {
     Calibrate(calibrate::CalibrateArgs),
     /// Read (get) or write (set) the device's calibration as a TOML file.
     Calibration(calibration::CalibrationArgs),
+    /// Check and flash the firmware through the debug probe (keeps the stored calibration).
+    Flash(flash::FlashArgs),
+    /// The firmware's defmt log through the debug probe, or decoded from a saved stream.
+    Log(log::LogArgs),
 }
 
 impl Cli {
@@ -78,6 +84,8 @@ impl Cli {
             Command::Capture(a) => capture::run(a, &self.device),
             Command::Calibrate(a) => calibrate::run(a, &self.device),
             Command::Calibration(a) => calibration::run(a, &self.device),
+            Command::Flash(a) => flash::run(a, &self.device),
+            Command::Log(a) => log::run(a, &self.device),
         }
     }
 }
