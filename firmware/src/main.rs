@@ -44,15 +44,15 @@ const IDENTITY: &str = concat!(
 #[used]
 #[allow(unsafe_code)] // `no_mangle`: a fixed name for the host to look up; nothing else uses it.
 #[unsafe(no_mangle)]
-static RIG_FIRMWARE_ID: [u8; IDENTITY.len()] = identity_bytes();
+static RIG_FIRMWARE_ID: [u8; IDENTITY.len() + 1] = identity_bytes();
 
-/// [`IDENTITY`] as an array (a `const fn`: the record is fixed at compile time).
+/// [`IDENTITY`] as a NUL-terminated array (a `const fn`: fixed at compile time).
 #[cfg(target_os = "none")]
-const fn identity_bytes() -> [u8; IDENTITY.len()] {
-    let mut out = [0u8; IDENTITY.len()];
+const fn identity_bytes() -> [u8; IDENTITY.len() + 1] {
+    let mut out = [0u8; IDENTITY.len() + 1];
     let src = IDENTITY.as_bytes();
     let mut i = 0;
-    while i < out.len() {
+    while i < src.len() {
         out[i] = src[i];
         i += 1;
     }
@@ -143,10 +143,11 @@ mod app {
             storage,
         } = board::Board::new(p);
 
-        // Through `black_box` so the identity record stays in the image for the host.
+        // Read through `black_box` so the identity record stays in the image for the host.
+        let id = core::hint::black_box(&crate::RIG_FIRMWARE_ID);
         info!(
-            "{=[u8]:a} booted; last reset by the watchdog: {}",
-            core::hint::black_box(&crate::RIG_FIRMWARE_ID)[..],
+            "{=str} booted; last reset by the watchdog: {}",
+            core::str::from_utf8(&id[..crate::IDENTITY.len()]).unwrap_or("rig firmware"),
             reset.watchdog
         );
         if reset.watchdog {

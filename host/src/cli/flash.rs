@@ -231,7 +231,11 @@ fn print_report(out: &mut impl Write, r: &FlashReport, json: bool) -> Result<(),
         )?;
     }
     if r.dry_run {
-        writeln!(out, "dry run: nothing was touched; rig flash would, on {}:", r.chip)?;
+        writeln!(
+            out,
+            "dry run: nothing was touched; rig flash would, on {}:",
+            r.chip
+        )?;
         for (i, s) in r.steps.iter().enumerate() {
             writeln!(out, "  {}. {s}", i + 1)?;
         }
@@ -308,7 +312,9 @@ fn flash_board(
     drop(guard);
     let outcome = match (&port, &image.identity) {
         (None, _) => {
-            say("confirm    skipped: no serial port (give --port or RIG_PORT to check the board runs the new image)");
+            say(
+                "confirm    skipped: no serial port (give --port or RIG_PORT to check the board runs the new image)",
+            );
             Ok(())
         }
         (Some(_), None) => {
@@ -417,7 +423,9 @@ mod lock {
                 // cannot hold a release without a host's heartbeat, and we hold the port.
                 let held = open_serial(&port, dev.baud).map_err(|oe| RigError::BadValue {
                     what: "rig flash".into(),
-                    why: format!("{oe}; rig flash will not flash while it cannot hold the rig's port"),
+                    why: format!(
+                        "{oe}; rig flash will not flash while it cannot hold the rig's port"
+                    ),
                 })?;
                 let wait = Duration::from_millis(u64::from(protocol::COMMS_TIMEOUT_MS) + 200);
                 std::thread::sleep(wait);
@@ -442,7 +450,10 @@ mod lock {
         while Instant::now() < deadline {
             if let Some(t) = s.client.next_telemetry(Duration::from_millis(100))? {
                 last = Some(t.state);
-                if !matches!(t.state, SupervisorState::SpinUp | SupervisorState::Vibrating) {
+                if !matches!(
+                    t.state,
+                    SupervisorState::SpinUp | SupervisorState::Vibrating
+                ) {
                     break;
                 }
             }

@@ -142,15 +142,20 @@ mod imp {
         let mut session = probe::attach(found, &a.chip, &probe_name)?;
         check_running_image(&mut session, &bytes, &image, &name)?;
         let mut save = match &a.save {
-            Some(path) => Some(std::fs::File::create(path).map_err(|source| RigError::File {
-                action: "create",
-                path: path.display().to_string(),
-                source,
-            })?),
+            Some(path) => Some(
+                std::fs::File::create(path).map_err(|source| RigError::File {
+                    action: "create",
+                    path: path.display().to_string(),
+                    source,
+                })?,
+            ),
             None => None,
         };
         let stop = interrupt_flag();
-        eprintln!("reading the defmt log of {} through {probe_name} (Ctrl-C ends)", a.chip);
+        eprintln!(
+            "reading the defmt log of {} through {probe_name} (Ctrl-C ends)",
+            a.chip
+        );
         let stats = {
             let mut sinks = LogSinks {
                 out: &mut stdout,

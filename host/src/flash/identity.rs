@@ -10,6 +10,9 @@ pub const IDENTITY_SYMBOL: &str = "RIG_FIRMWARE_ID";
 /// Start of the identity record.
 pub const IDENTITY_PREFIX: &str = "rig firmware ";
 
+/// Longest build string (the device reports it in a 20-byte field; `firmware/build.rs` clips).
+pub const MAX_BUILD_LEN: usize = 20;
+
 /// Separator between version and build in the record.
 const BUILD_SEPARATOR: &str = " build ";
 
@@ -30,7 +33,7 @@ impl BuildIdentity {
         let rest = text.strip_prefix(IDENTITY_PREFIX)?;
         let (version, build) = rest.split_once(BUILD_SEPARATOR)?;
         let ok = |s: &str| !s.is_empty() && s.chars().all(|c| c.is_ascii_graphic());
-        (ok(version) && ok(build)).then(|| Self {
+        (ok(version) && ok(build) && build.len() <= MAX_BUILD_LEN).then(|| Self {
             version: version.to_owned(),
             build: build.to_owned(),
         })
@@ -106,7 +109,10 @@ pub struct IdentityMismatch {
 /// The version must match; the build must match when the board reports one and both
 /// name a commit. Without a reported build only the version is compared, and the
 /// confirmation says so.
-pub fn confirm(image: &BuildIdentity, device: Reported<'_>) -> Result<Confirmation, IdentityMismatch> {
+pub fn confirm(
+    image: &BuildIdentity,
+    device: Reported<'_>,
+) -> Result<Confirmation, IdentityMismatch> {
     let reported_text = match device.build {
         Some(b) => format!("{} (build {b})", device.version),
         None => device.version.to_owned(),
@@ -130,9 +136,7 @@ pub fn confirm(image: &BuildIdentity, device: Reported<'_>) -> Result<Confirmati
     if !image.is_known() || build == "unknown" {
         return Ok(Confirmation {
             build_compared: false,
-            note: Some(
-                "built without git (build `unknown`): only the version was compared".into(),
-            ),
+            note: Some("built without git (build `unknown`): only the version was compared".into()),
         });
     }
     if build != image.build {
@@ -171,6 +175,11 @@ mod tests {
         assert_eq!(BuildIdentity::parse(b"rig firmware  build x"), None);
         assert_eq!(BuildIdentity::parse(b"other 0.1.0 build x"), None);
         assert_eq!(BuildIdentity::parse(&[0xff, 0xfe]), None);
+        // Longer than the device's field: not a record (e.g. neighbouring text in a scan).
+        assert_eq!(
+            BuildIdentity::parse(b"rig firmware 0.1.0 build fixturevibratingfault"),
+            None
+        );
     }
 
     #[test]
@@ -184,7 +193,14 @@ mod tests {
     #[test]
     fn same_version_and_build_confirm() {
         let image = id("0.1.0", "5b6e2ae664");
-        let c = confirm(&image, Reported { version: "0.1.0", build: Some("5b6e2ae664") }).unwrap();
+        let c = confirm(
+            &image,
+            Reported {
+                version: "0.1.0",
+                build: Some("5b6e2ae664"),
+            },
+        )
+        .unwrap();
         assert!(c.build_compared);
         assert_eq!(c.note, None);
     }
@@ -192,10 +208,24 @@ mod tests {
     #[test]
     fn without_a_reported_build_only_the_version_counts() {
         let image = id("0.1.0", "5b6e2ae664");
-        let c = confirm(&image, Reported { version: "0.1.0", build: None }).unwrap();
+        let c = confirm(
+            &image,
+            Reported {
+                version: "0.1.0",
+                build: None,
+            },
+        )
+        .unwrap();
         assert!(!c.build_compared);
         assert!(c.note.unwrap().contains("only the version"));
-        let e = confirm(&image, Reported { version: "0.0.9", build: None }).unwrap_err();
+        let e = confirm(
+            &image,
+            Reported {
+                version: "0.0.9",
+                build: None,
+            },
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("0.0.9"), "{e}");
         assert!(e.to_string().contains("0.1.0 (build 5b6e2ae664)"), "{e}");
     }
@@ -203,8 +233,14 @@ mod tests {
     #[test]
     fn another_build_of_the_same_version_is_a_mismatch() {
         let image = id("0.1.0", "5b6e2ae664");
-        let e = confirm(&image, Reported { version: "0.1.0", build: Some("1111111111") })
-            .unwrap_err();
+        let e = confirm(
+            &image,
+            Reported {
+                version: "0.1.0",
+                build: Some("1111111111"),
+            },
+        )
+        .unwrap_err();
         assert_eq!(e.reported, "0.1.0 (build 1111111111)");
         assert!(e.to_string().contains("not running"));
     }
@@ -212,12 +248,25 @@ mod tests {
     #[test]
     fn dirty_and_unknown_builds_confirm_with_a_note() {
         let dirty = id("0.1.0", "5b6e2ae664-dirty");
-        let c = confirm(&dirty, Reported { version: "0.1.0", build: Some("5b6e2ae664-dirty") })
-            .unwrap();
+        let c = confirm(
+            &dirty,
+            Reported {
+                version: "0.1.0",
+                build: Some("5b6e2ae664-dirty"),
+            },
+        )
+        .unwrap();
         assert!(c.build_compared);
         assert!(c.note.unwrap().contains("uncommitted"));
         let unknown = id("0.1.0", "unknown");
-        let c = confirm(&unknown, Reported { version: "0.1.0", build: Some("unknown") }).unwrap();
+        let c = confirm(
+            &unknown,
+            Reported {
+                version: "0.1.0",
+                build: Some("unknown"),
+            },
+        )
+        .unwrap();
         assert!(!c.build_compared);
     }
 }

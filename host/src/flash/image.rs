@@ -165,10 +165,9 @@ impl fmt::Display for ElfError {
                 f,
                 "a {what} program, not the firmware for the STM32G474 (an ARM Cortex-M4): {FIX}"
             ),
-            Self::NotExecutable => write!(
-                f,
-                "an ELF object or library, not a linked program: {FIX}"
-            ),
+            Self::NotExecutable => {
+                write!(f, "an ELF object or library, not a linked program: {FIX}")
+            }
             Self::WrongArchitecture { cpu_arch } => write!(
                 f,
                 "an ARM image for another CPU (Tag_CPU_arch {cpu_arch}, {}): the STM32G474 needs ARMv7E-M (thumbv7em-none-eabihf); {FIX}",
@@ -180,7 +179,11 @@ impl fmt::Display for ElfError {
                 "entry point {entry:#010x} is not a Thumb address in flash (a Cortex-M program's is odd and in flash): {FIX}"
             ),
             Self::NoLoadableData => write!(f, "the ELF has nothing to program: {FIX}"),
-            Self::OverlapsStorage { start, end, storage } => write!(
+            Self::OverlapsStorage {
+                start,
+                end,
+                storage,
+            } => write!(
                 f,
                 "the image's data at {start:#010x}..{end:#010x} reaches into the calibration store {storage}: flashing it would erase the stored calibration; make the firmware smaller (see `cargo xtask firmware`) or check memory.x"
             ),
@@ -232,7 +235,9 @@ fn looks_like(bytes: &[u8]) -> &'static str {
         "the file is empty"
     } else if bytes.starts_with(b"MZ") {
         "a Windows program"
-    } else if bytes.starts_with(&[0xcf, 0xfa, 0xed, 0xfe]) || bytes.starts_with(&[0xca, 0xfe, 0xba, 0xbe]) {
+    } else if bytes.starts_with(&[0xcf, 0xfa, 0xed, 0xfe])
+        || bytes.starts_with(&[0xca, 0xfe, 0xba, 0xbe])
+    {
         "a macOS program"
     } else if bytes.starts_with(b":") {
         "looks like Intel HEX"
@@ -255,14 +260,22 @@ pub fn validate(bytes: &[u8], map: &MemoryMap) -> Result<FirmwareImage, ElfError
         let arch = object::File::parse(bytes)
             .map(|f| format!("{:?}", f.architecture()))
             .unwrap_or_else(|_| "unknown".into());
-        let bits = if class == elf::ELFCLASS64 { "64-bit" } else { "32-bit" };
-        let endian = if data == elf::ELFDATA2MSB { "big-endian" } else { "little-endian" };
+        let bits = if class == elf::ELFCLASS64 {
+            "64-bit"
+        } else {
+            "32-bit"
+        };
+        let endian = if data == elf::ELFDATA2MSB {
+            "big-endian"
+        } else {
+            "little-endian"
+        };
         return Err(ElfError::WrongMachine {
             what: format!("{bits} {endian} {} ELF", arch_name(&arch)),
         });
     }
-    let file = ElfFile32::<Endianness>::parse(bytes)
-        .map_err(|e| ElfError::Malformed(e.to_string()))?;
+    let file =
+        ElfFile32::<Endianness>::parse(bytes).map_err(|e| ElfError::Malformed(e.to_string()))?;
     let endian = file.endian();
     let header = file.elf_header();
     let machine = header.e_machine(endian);
@@ -298,9 +311,9 @@ pub fn validate(bytes: &[u8], map: &MemoryMap) -> Result<FirmwareImage, ElfError
         let vaddr = u64::from(ph.p_vaddr(endian));
         if filesz > 0 {
             check_flash(map, paddr, paddr + filesz)?;
-            let data = ph
-                .data(endian, bytes)
-                .map_err(|()| ElfError::Malformed("a segment's data lies past the end of the file".into()))?;
+            let data = ph.data(endian, bytes).map_err(|()| {
+                ElfError::Malformed("a segment's data lies past the end of the file".into())
+            })?;
             segments.push(Segment {
                 address: ph.p_paddr(endian),
                 data: data.to_vec(),
@@ -345,9 +358,11 @@ pub fn validate(bytes: &[u8], map: &MemoryMap) -> Result<FirmwareImage, ElfError
         .ok_or(ElfError::NoVectorTable {
             flash_start: map.flash.origin,
         })?;
-    let word = |i: usize| u32::from_le_bytes([vectors[i], vectors[i + 1], vectors[i + 2], vectors[i + 3]]);
+    let word =
+        |i: usize| u32::from_le_bytes([vectors[i], vectors[i + 1], vectors[i + 2], vectors[i + 3]]);
     let (sp, reset) = (word(0), word(4));
-    let sp_ok = u64::from(sp) > u64::from(map.ram.origin) && u64::from(sp) <= map.ram.end() && sp % 4 == 0;
+    let sp_ok =
+        u64::from(sp) > u64::from(map.ram.origin) && u64::from(sp) <= map.ram.end() && sp % 4 == 0;
     if !sp_ok {
         return Err(ElfError::BadStackPointer {
             sp,
@@ -488,4 +503,158 @@ fn uleb(bytes: &mut &[u8]) -> Option<u64> {
         }
     }
     None
+}
+
+#[cfg(test)]
+#[path = "../../tests/support/tiny_elf.rs"]
+mod tiny_elf;
+
+#[cfg(test)]
+mod tests {
+    use super::tiny_elf::{self, EM_ARM, FLASH, STACK_TOP, STORAGE, Seg};
+    use super::*;
+
+    fn map() -> MemoryMap {
+        MemoryMap::board().unwrap()
+    }
+
+    fn vectors(sp: u32, reset: u32) -> Vec<u8> {
+        let mut v = sp.to_le_bytes().to_vec();
+        v.extend_from_slice(&reset.to_le_bytes());
+        v.resize(0x40, 0);
+        v
+    }
+
+    #[test]
+    fn a_cortex_m_image_passes_and_is_described() {
+        let image = validate(&tiny_elf::cortex_m(1000), &map()).unwrap();
+        assert_eq!(image.initial_sp, STACK_TOP);
+        assert_eq!(image.reset_vector, FLASH + 0x1d9);
+        assert_eq!(image.entry, image.reset_vector);
+        assert_eq!(image.start(), FLASH);
+        // vectors + code + .data's initial values (loaded in flash, copied to RAM at boot)
+        assert_eq!(image.size(), 0x1d8 + 1000 + 4);
+        assert_eq!(image.segments.len(), 3);
+        let id = image.identity.unwrap();
+        assert_eq!(
+            (id.version.as_str(), id.build.as_str()),
+            ("9.8.7", "tiny000001")
+        );
+        assert!(!image.has_defmt && image.rtt_address.is_none());
+    }
+
+    #[test]
+    fn a_host_program_is_refused_by_name() {
+        let me = std::fs::read(std::env::current_exe().unwrap()).unwrap();
+        let e = validate(&me, &map()).unwrap_err();
+        assert!(matches!(e, ElfError::WrongMachine { .. }), "{e}");
+        let text = e.to_string();
+        assert!(
+            text.contains("64-bit") && text.contains("not the firmware"),
+            "{text}"
+        );
+        let x86 = tiny_elf::build(3, 0x1000, &[Seg::flash(0x1000, vec![0; 8])], None);
+        assert!(
+            validate(&x86, &map())
+                .unwrap_err()
+                .to_string()
+                .contains("e_machine 3")
+        );
+    }
+
+    #[test]
+    fn non_elf_files_say_what_they_look_like() {
+        let e = validate(b"#!/bin/sh\necho hi\n", &map()).unwrap_err();
+        assert!(e.to_string().contains("text"), "{e}");
+        let e = validate(&[], &map()).unwrap_err();
+        assert!(e.to_string().contains("empty"), "{e}");
+        let e = validate(&[0x00, 0x80, 0x01, 0x20, 0xd9, 0x01, 0x00, 0x08], &map()).unwrap_err();
+        assert!(e.to_string().contains(".bin"), "{e}");
+    }
+
+    #[test]
+    fn an_image_reaching_into_the_calibration_store_is_refused() {
+        let e = validate(&tiny_elf::cortex_m_into_storage(256), &map()).unwrap_err();
+        match &e {
+            ElfError::OverlapsStorage { start, end, .. } => {
+                assert_eq!(*start, u64::from(FLASH + 0x1d8));
+                assert_eq!(*end, u64::from(STORAGE) + 256);
+            }
+            other => panic!("{other}"),
+        }
+        assert!(
+            e.to_string()
+                .contains("calibration store 0x0807c000..0x08080000")
+        );
+    }
+
+    #[test]
+    fn an_image_ending_exactly_at_the_store_passes() {
+        // Code up to STORAGE - 8 leaves room for the 4 bytes of .data (8-aligned).
+        let reset = FLASH + 0x1d8;
+        let bytes = tiny_elf::cortex_m((STORAGE - 8 - reset) as usize);
+        let image = validate(&bytes, &map()).unwrap();
+        assert!(image.end() <= u64::from(STORAGE));
+    }
+
+    #[test]
+    fn data_outside_flash_or_ram_is_refused() {
+        let segs = [
+            Seg::flash(FLASH, vectors(STACK_TOP, FLASH + 0x41)),
+            Seg::flash(0x0900_0000, vec![0; 16]),
+        ];
+        let e = validate(
+            &tiny_elf::build(EM_ARM, FLASH + 0x41, &segs, Some(13)),
+            &map(),
+        )
+        .unwrap_err();
+        assert!(matches!(e, ElfError::OutsideFlash { .. }), "{e}");
+        let segs = [
+            Seg::flash(FLASH, vectors(STACK_TOP, FLASH + 0x41)),
+            Seg {
+                paddr: 0x3000_0000,
+                vaddr: 0x3000_0000,
+                data: Vec::new(),
+                memsz: 64,
+            },
+        ];
+        let e = validate(
+            &tiny_elf::build(EM_ARM, FLASH + 0x41, &segs, Some(13)),
+            &map(),
+        )
+        .unwrap_err();
+        assert!(matches!(e, ElfError::OutsideRam { .. }), "{e}");
+    }
+
+    #[test]
+    fn entry_vector_table_and_architecture_are_checked() {
+        let ok = |sp, reset, entry, arch| {
+            let segs = [Seg::flash(FLASH, vectors(sp, reset))];
+            validate(&tiny_elf::build(EM_ARM, entry, &segs, arch), &map())
+        };
+        assert!(ok(STACK_TOP, FLASH + 0x41, FLASH + 0x41, Some(13)).is_ok());
+        // No attributes section: the other checks still apply.
+        assert!(ok(STACK_TOP, FLASH + 0x41, FLASH + 0x41, None).is_ok());
+        let e = ok(STACK_TOP, FLASH + 0x41, FLASH + 0x40, Some(13)).unwrap_err();
+        assert!(matches!(e, ElfError::BadEntry { .. }), "{e}");
+        let e = ok(0x0800_1000, FLASH + 0x41, FLASH + 0x41, Some(13)).unwrap_err();
+        assert!(matches!(e, ElfError::BadStackPointer { .. }), "{e}");
+        let e = ok(STACK_TOP, FLASH + 0x40, FLASH + 0x41, Some(13)).unwrap_err();
+        assert!(matches!(e, ElfError::BadResetVector { .. }), "{e}");
+        let e = ok(STACK_TOP, 0x2000_0001, FLASH + 0x41, Some(13)).unwrap_err();
+        assert!(matches!(e, ElfError::BadResetVector { .. }), "{e}");
+        let e = ok(STACK_TOP, FLASH + 0x41, FLASH + 0x41, Some(11)).unwrap_err();
+        assert!(e.to_string().contains("ARMv6-M"), "{e}");
+        // A table elsewhere than the start of flash does not boot.
+        let segs = [Seg::flash(
+            FLASH + 0x1000,
+            vectors(STACK_TOP, FLASH + 0x1041),
+        )];
+        let e = validate(
+            &tiny_elf::build(EM_ARM, FLASH + 0x1041, &segs, Some(13)),
+            &map(),
+        )
+        .unwrap_err();
+        assert!(matches!(e, ElfError::NoVectorTable { .. }), "{e}");
+    }
 }

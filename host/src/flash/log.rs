@@ -223,10 +223,15 @@ pub fn follow(
         let Some(up) = rtt.up_channels().get_mut(channel) else {
             break;
         };
-        let n = up.read(&mut core, &mut buf).map_err(|e| RigError::BadValue {
-            what: "rig log".into(),
-            why: format!("reading the RTT buffer failed: {}; check the probe's cable", chain(&e)),
-        })?;
+        let n = up
+            .read(&mut core, &mut buf)
+            .map_err(|e| RigError::BadValue {
+                what: "rig log".into(),
+                why: format!(
+                    "reading the RTT buffer failed: {}; check the probe's cable",
+                    chain(&e)
+                ),
+            })?;
         if n == 0 {
             std::thread::sleep(RTT_POLL);
             continue;

@@ -87,10 +87,10 @@ impl MemoryMap {
             storage: find("STORAGE")?,
             ram: find("RAM")?,
         };
-        if map.flash.overlaps(
-            u64::from(map.storage.origin),
-            map.storage.end(),
-        ) {
+        if map
+            .flash
+            .overlaps(u64::from(map.storage.origin), map.storage.end())
+        {
             return Err(format!(
                 "FLASH {} overlaps STORAGE {}: the calibration store must lie outside the program flash",
                 map.flash, map.storage
@@ -167,7 +167,8 @@ fn parse_number(s: &str) -> Result<u64, String> {
         digits.parse()
     }
     .map_err(|_| format!("`{s}` is not a number (hex 0x..., decimal, optional K or M)"))?;
-    v.checked_mul(scale).ok_or_else(|| format!("`{s}` is too large"))
+    v.checked_mul(scale)
+        .ok_or_else(|| format!("`{s}` is too large"))
 }
 
 #[cfg(test)]
@@ -177,9 +178,27 @@ mod tests {
     #[test]
     fn the_workspace_memory_x_is_the_g474re() {
         let m = MemoryMap::board().unwrap();
-        assert_eq!(m.flash, Region { origin: 0x0800_0000, length: 496 * 1024 });
-        assert_eq!(m.storage, Region { origin: 0x0807_C000, length: 16 * 1024 });
-        assert_eq!(m.ram, Region { origin: 0x2000_0000, length: 96 * 1024 });
+        assert_eq!(
+            m.flash,
+            Region {
+                origin: 0x0800_0000,
+                length: 496 * 1024
+            }
+        );
+        assert_eq!(
+            m.storage,
+            Region {
+                origin: 0x0807_C000,
+                length: 16 * 1024
+            }
+        );
+        assert_eq!(
+            m.ram,
+            Region {
+                origin: 0x2000_0000,
+                length: 96 * 1024
+            }
+        );
         // The store is the last 16 KiB of the 512 KiB part, right after the program flash.
         assert_eq!(m.flash.end(), u64::from(m.storage.origin));
         assert_eq!(m.storage.end(), 0x0808_0000);

@@ -12,9 +12,9 @@ use probe_rs::probe::list::{Accessibility, Lister};
 use probe_rs::probe::{DebugProbeSelector, Probe};
 use probe_rs::{MemoryInterface, Permissions, Session};
 
-use super::{DEFAULT_CHIP, help};
 use super::image::FirmwareImage;
 use super::memory::MemoryMap;
+use super::{DEFAULT_CHIP, help};
 use crate::RigError;
 
 /// `what` of the errors about the probe.
@@ -214,7 +214,11 @@ pub fn open(selector: Option<&str>) -> Result<(Probe, String), RigError> {
         let why = match &selector {
             Some(sel) => format!(
                 "no debug probe matches --probe {sel}; plugged in: {}",
-                if all.is_empty() { "none".into() } else { all.join(", ") }
+                if all.is_empty() {
+                    "none".into()
+                } else {
+                    all.join(", ")
+                }
             ),
             None => help::no_probe(&all),
         };
@@ -445,10 +449,105 @@ pub fn read_memory(session: &mut Session, address: u64, len: usize) -> Result<Ve
         .and_then(|mut core| core.read(address, &mut buf))
         .map_err(|e| RigError::BadValue {
             what: PROBE.into(),
-            why: format!("cannot read the chip's memory at {address:#010x}: {}", chain(&e)),
+            why: format!(
+                "cannot read the chip's memory at {address:#010x}: {}",
+                chain(&e)
+            ),
         })?;
     Ok(buf)
 }
 
 /// Time to wait before reading an idle RTT buffer again.
 pub const RTT_POLL: Duration = Duration::from_millis(10);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::flash::image::Segment;
+
+    fn image(segments: Vec<Segment>) -> FirmwareImage {
+        FirmwareImage {
+            entry: 0x0800_01d9,
+            initial_sp: 0x2001_8000,
+            reset_vector: 0x0800_01d9,
+            segments,
+            identity: None,
+            rtt_address: None,
+            has_defmt: false,
+        }
+    }
+
+    #[test]
+    fn the_g474re_is_known_and_typos_get_suggestions() {
+        let t = target(DEFAULT_CHIP).unwrap();
+        assert_eq!(t.name, DEFAULT_CHIP);
+        let e = target("STM32G474XYZ").unwrap_err().to_string();
+        assert!(e.contains("--chip STM32G474XYZ"), "{e}");
+    }
+
+    #[test]
+    fn only_the_2_kib_pages_under_the_image_are_erased() {
+        let t = target(DEFAULT_CHIP).unwrap();
+        let map = MemoryMap::board().unwrap();
+        // 0x0800_0000..0x0800_0801 spans two pages; 0x0800_4000..0x0800_4010 one more.
+        let img = image(vec![
+            Segment {
+                address: 0x0800_0000,
+                data: vec![0; 0x801],
+            },
+            Segment {
+                address: 0x0800_4000,
+                data: vec![0; 16],
+            },
+        ]);
+        let plan = erase_plan(&t, &img, &map).unwrap();
+        assert_eq!(plan.sectors, 3);
+        assert_eq!(plan.bytes, 3 * 2048);
+        assert_eq!(
+            plan.ranges,
+            vec![(0x0800_0000, 0x0800_1000), (0x0800_4000, 0x0800_4800)]
+        );
+    }
+
+    #[test]
+    fn a_plan_touching_the_calibration_store_is_refused() {
+        let t = target(DEFAULT_CHIP).unwrap();
+        let map = MemoryMap::board().unwrap();
+        let img = image(vec![Segment {
+            address: 0x0807_BFF0,
+            data: vec![0; 0x20],
+        }]);
+        let e = erase_plan(&t, &img, &map).unwrap_err().to_string();
+        assert!(e.contains("calibration store"), "{e}");
+        // The last page before the store is fine.
+        let img = image(vec![Segment {
+            address: 0x0807_B800,
+            data: vec![0; 0x800],
+        }]);
+        assert_eq!(
+            erase_plan(&t, &img, &map).unwrap().ranges,
+            vec![(0x0807_B800, 0x0807_C000)]
+        );
+    }
+
+    #[test]
+    fn permission_errors_are_recognised_through_causes() {
+        #[derive(Debug)]
+        struct Outer(std::io::Error);
+        impl std::fmt::Display for Outer {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("cannot open the USB device")
+            }
+        }
+        impl StdError for Outer {
+            fn source(&self) -> Option<&(dyn StdError + 'static)> {
+                Some(&self.0)
+            }
+        }
+        let e = Outer(std::io::Error::from(std::io::ErrorKind::PermissionDenied));
+        assert!(is_permission_denied(&e));
+        assert!(chain(&e).starts_with("cannot open the USB device: "));
+        let e = Outer(std::io::Error::from(std::io::ErrorKind::NotFound));
+        assert!(!is_permission_denied(&e));
+    }
+}

@@ -42,7 +42,13 @@ fn cargo() -> Command {
 /// `CARGO_TARGET_DIR` and the configuration); without cargo, `$CARGO_TARGET_DIR` or `target`.
 pub fn target_dir(root: &Path) -> PathBuf {
     let from_metadata = cargo()
-        .args(["metadata", "--no-deps", "--format-version", "1", "--offline"])
+        .args([
+            "metadata",
+            "--no-deps",
+            "--format-version",
+            "1",
+            "--offline",
+        ])
         .current_dir(root)
         .stderr(std::process::Stdio::null())
         .output()
@@ -65,7 +71,10 @@ pub fn target_dir(root: &Path) -> PathBuf {
 
 /// Where the release firmware ELF of the workspace at `root` is (built or not).
 pub fn release_elf(root: &Path) -> PathBuf {
-    target_dir(root).join(THUMB).join("release").join("firmware")
+    target_dir(root)
+        .join(THUMB)
+        .join("release")
+        .join("firmware")
 }
 
 /// Builds the release firmware of the workspace at `root` (cargo's progress on stderr) and
