@@ -106,6 +106,12 @@ pub fn run(a: FlashArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             why: "rig flash programs a real board through a debug probe; the virtual device already runs the firmware core built into rig".into(),
         });
     }
+    if !a.dry_run && !cfg!(feature = "probe") {
+        return Err(RigError::BadValue {
+            what: "rig flash".into(),
+            why: format!("{} (`--dry-run` works without it)", help::FEATURE_MISSING),
+        });
+    }
     let map = flash::board_map()?;
     let elf = match &a.elf {
         Some(p) => p.clone(),
@@ -265,7 +271,7 @@ fn flash_board(
 ) -> Result<ExitCode, RigError> {
     Err(RigError::BadValue {
         what: "rig flash".into(),
-        why: format!("{} (`--dry-run` works without it)", help::FEATURE_MISSING),
+        why: help::FEATURE_MISSING.into(),
     })
 }
 
