@@ -53,9 +53,25 @@ fn is_permission_denied(e: &(dyn StdError + 'static)) -> bool {
     false
 }
 
-/// The chip's description from probe-rs's built-in targets.
+/// probe-rs's description of the STM32G4 family (its `targets/STM32G4_Series.yaml`): the
+/// chips this rig can have, instead of the built-in targets of every family (3.8 MB).
+const STM32G4_FAMILY: &str = include_str!("STM32G4_Series.yaml");
+
+/// The chip descriptions `rig` knows: the STM32G4 family.
+pub fn registry() -> Result<Registry, RigError> {
+    let mut registry = Registry::new();
+    registry
+        .add_target_family_from_yaml(STM32G4_FAMILY)
+        .map_err(|e| RigError::BadValue {
+            what: "rig".into(),
+            why: format!("the STM32G4 description built into rig does not load: {}", chain(&e)),
+        })?;
+    Ok(registry)
+}
+
+/// The chip's description.
 pub fn target(chip: &str) -> Result<Target, RigError> {
-    let registry = Registry::from_builtin_families();
+    let registry = registry()?;
     registry.get_target_by_name(chip).map_err(|e| {
         let stem: String = chip.chars().take(9).collect();
         let similar = registry.search_chips(&stem);
@@ -70,7 +86,7 @@ pub fn target(chip: &str) -> Result<Target, RigError> {
         RigError::BadValue {
             what: format!("--chip {chip}"),
             why: format!(
-                "{}{similar} (the rig's Nucleo-G474RE is {DEFAULT_CHIP})",
+                "{}{similar} (rig knows the STM32G4 family; the rig's Nucleo-G474RE is {DEFAULT_CHIP})",
                 chain(&e)
             ),
         }
@@ -273,8 +289,10 @@ pub fn open(selector: Option<&str>) -> Result<(Probe, String), RigError> {
 
 /// Attaches to the chip without resetting it (a running firmware keeps running).
 pub fn attach(probe: Probe, chip: &str, probe_name: &str) -> Result<Session, RigError> {
+    let registry = registry()?;
+    target(chip)?;
     probe
-        .attach(chip, Permissions::default())
+        .attach_with_registry(chip, Permissions::default(), &registry)
         .map_err(|e| RigError::BadValue {
             what: PROBE.into(),
             why: format!(
@@ -483,6 +501,9 @@ mod tests {
         assert_eq!(t.name, DEFAULT_CHIP);
         let e = target("STM32G474XYZ").unwrap_err().to_string();
         assert!(e.contains("--chip STM32G474XYZ"), "{e}");
+        assert!(e.contains("STM32G474RETx"), "{e}");
+        // The whole family is there (the rig could be rebuilt on another G4 Nucleo).
+        assert!(target("STM32G431RBTx").is_ok());
     }
 
     #[test]
