@@ -64,7 +64,10 @@ pub fn registry() -> Result<Registry, RigError> {
         .add_target_family_from_yaml(STM32G4_FAMILY)
         .map_err(|e| RigError::BadValue {
             what: "rig".into(),
-            why: format!("the STM32G4 description built into rig does not load: {}", chain(&e)),
+            why: format!(
+                "the STM32G4 description built into rig does not load: {}",
+                chain(&e)
+            ),
         })?;
     Ok(registry)
 }
