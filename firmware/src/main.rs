@@ -22,12 +22,11 @@
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 /// Firmware version, reported at boot (and to the host in `Info`).
-#[allow(dead_code)] // the firmware reports it through IDENTITY; the host stub prints it
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 
 /// Firmware build: the git commit it was built from (short hash, `-dirty` when the work tree
 /// had uncommitted changes) or `unknown`; computed by `build.rs`.
-#[allow(dead_code)] // read by the host's `Info` once the protocol carries it
+#[cfg_attr(not(target_os = "none"), allow(dead_code))]
 const BUILD: &str = env!("RIG_FIRMWARE_BUILD");
 
 /// Version and build as one record, `rig firmware <version> build <build>`.
@@ -143,11 +142,12 @@ mod app {
             storage,
         } = board::Board::new(p);
 
-        // Read through `black_box` so the identity record stays in the image for the host.
-        let id = core::hint::black_box(&crate::RIG_FIRMWARE_ID);
+        // Keeps the identity record in the image for the host (the linker would drop it).
+        core::hint::black_box(&crate::RIG_FIRMWARE_ID);
         info!(
-            "{=str} booted; last reset by the watchdog: {}",
-            core::str::from_utf8(&id[..crate::IDENTITY.len()]).unwrap_or("rig firmware"),
+            "rig firmware {=str} build {=str} booted; last reset by the watchdog: {}",
+            crate::VERSION,
+            crate::BUILD,
             reset.watchdog
         );
         if reset.watchdog {
