@@ -24,13 +24,49 @@
 /// Firmware version, reported at boot (and to the host in `Info`).
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 
+/// Firmware build: the git commit it was built from (short hash, `-dirty` when the work tree
+/// had uncommitted changes) or `unknown`; computed by `build.rs`.
+#[cfg_attr(not(target_os = "none"), allow(dead_code))]
+const BUILD: &str = env!("RIG_FIRMWARE_BUILD");
+
+/// Version and build as one record, `rig firmware <version> build <build>`.
+const IDENTITY: &str = concat!(
+    "rig firmware ",
+    env!("CARGO_PKG_VERSION"),
+    " build ",
+    env!("RIG_FIRMWARE_BUILD")
+);
+
+/// [`IDENTITY`] in the image under a fixed symbol: `rig flash` reads it from the ELF (and
+/// `rig log` from the running chip) to tell which firmware a file or a board holds.
+#[cfg(target_os = "none")]
+#[used]
+#[allow(unsafe_code)] // `no_mangle`: a fixed name for the host to look up; nothing else uses it.
+#[unsafe(no_mangle)]
+static RIG_FIRMWARE_ID: [u8; IDENTITY.len() + 1] = identity_bytes();
+
+/// [`IDENTITY`] as a NUL-terminated array (a `const fn`: fixed at compile time).
+#[cfg(target_os = "none")]
+const fn identity_bytes() -> [u8; IDENTITY.len() + 1] {
+    let mut out = [0u8; IDENTITY.len() + 1];
+    let src = IDENTITY.as_bytes();
+    let mut i = 0;
+    while i < src.len() {
+        out[i] = src[i];
+        i += 1;
+    }
+    out
+}
+
 #[cfg(not(target_os = "none"))]
 fn main() {
     println!(
         "rig firmware {VERSION} runs on the Nucleo-G474RE (STM32G474RE); this host build is a stub.\n\
          build:  cargo fw-build   (cargo build -p firmware --release --target thumbv7em-none-eabihf)\n\
-         flash:  cargo fw-flash   (probe-rs run --chip STM32G474RETx; `cargo install probe-rs-tools`)\n\
-         target: rustup target add thumbv7em-none-eabihf"
+         flash:  rig flash        (builds it, checks the image and flashes through the probe)\n\
+         logs:   rig log          (the defmt log over the probe)\n\
+         target: rustup target add thumbv7em-none-eabihf\n\
+         identity: {IDENTITY}"
     );
 }
 
@@ -138,9 +174,12 @@ mod app {
             storage,
         } = board::Board::new(p);
 
+        // Keeps the identity record in the image for the host (the linker would drop it).
+        core::hint::black_box(&crate::RIG_FIRMWARE_ID);
         info!(
-            "rig firmware v{} booted; last reset by the watchdog: {}",
+            "rig firmware {=str} build {=str} booted; last reset by the watchdog: {}",
             crate::VERSION,
+            crate::BUILD,
             reset.watchdog
         );
         if reset.watchdog {

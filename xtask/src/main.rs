@@ -107,6 +107,14 @@ fn setup() -> Result {
     Ok(())
 }
 
+/// Where the release firmware ELF is built.
+fn firmware_elf() -> PathBuf {
+    let target_dir = std::env::var("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| root().join("target"));
+    target_dir.join(THUMB).join("release").join("firmware")
+}
+
 /// Builds the release firmware and prints (and checks) its flash and RAM use.
 fn firmware() -> Result<size::Usage> {
     run("firmware release build (thumbv7em-none-eabihf)", {
@@ -121,10 +129,7 @@ fn firmware() -> Result<size::Usage> {
         ]);
         c
     })?;
-    let target_dir = std::env::var("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| root().join("target"));
-    let elf = target_dir.join(THUMB).join("release").join("firmware");
+    let elf = firmware_elf();
     let usage = size::measure(&elf)?;
     println!(
         "firmware size: flash {} B ({:.1} KiB of {} KiB budget), static RAM {} B ({:.1} KiB of {} KiB budget)",
@@ -203,6 +208,8 @@ fn test() -> Result {
     run("tests", {
         let mut c = cargo();
         c.args(["test", "--workspace"]);
+        // The host's `rig flash` tests check the image built above.
+        c.env("RIG_FIRMWARE_ELF", firmware_elf());
         c
     })?;
     fuzz_smoke()

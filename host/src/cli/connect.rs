@@ -14,7 +14,7 @@ pub use crate::connection::{DeviceOpts, Session};
 
 /// The verbs that use a device, for messages.
 pub const DEVICE_VERBS: &str =
-    "info, faults, clear, release, monitor, capture, calibrate, calibration and demo";
+    "info, faults, clear, release, monitor, capture, calibrate, calibration, flash and demo";
 
 /// The device options as given on the command line (nothing defaulted), declared twice:
 /// before the verb (not global, so a verb without a device does not take them after its

@@ -18,7 +18,9 @@ pub mod demo;
 pub mod design;
 pub mod explain;
 pub mod faults;
+pub mod flash;
 pub mod info;
+pub mod log;
 pub mod monitor;
 pub mod ports;
 pub mod release;
@@ -130,6 +132,17 @@ pub enum Command {
         #[command(flatten)]
         device: VerbDeviceArgs,
     },
+    /// Check and flash the firmware through the debug probe (keeps the stored calibration).
+    Flash {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: flash::FlashArgs,
+        /// Device options after the verb (the serial port of the rig to lock first).
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
+    /// The firmware's defmt log through the debug probe, or decoded from a saved stream.
+    Log(log::LogArgs),
 }
 
 impl Cli {
@@ -168,6 +181,8 @@ impl Cli {
             Command::Calibration { args, device } => {
                 calibration::run(args, &before.resolve(&device)?)
             }
+            Command::Flash { args, device } => flash::run(args, &before.resolve(&device)?),
+            Command::Log(a) => log::run(a, &before.resolve(&VerbDeviceArgs::default())?),
         }
     }
 }
