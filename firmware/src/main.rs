@@ -294,9 +294,11 @@ mod app {
             max: 0,
             steps: 0,
         };
-        let mut stall_armed = false;
         let mut health = Health::default();
         let mut zero_bits = 0u32;
+        // The first block is due 1 ms after the first read starts the ADC: inside the 2 ms
+        // deadline, which so also covers a PWM timer or ADC that never starts.
+        io.stall.start();
         loop {
             let block = match io.sense.read_block(&mut raw).await {
                 Ok(()) => Some(analog::split(&raw)),
@@ -308,13 +310,8 @@ mod app {
                 }
             };
             let start = DWT::cycle_count();
-            // The loop came round: reload the 2 ms deadline (started with the first data).
-            if stall_armed {
-                io.stall.feed();
-            } else {
-                io.stall.start();
-                stall_armed = true;
-            }
+            // The loop came round: reload the 2 ms deadline.
+            io.stall.feed();
 
             let hw_trip = io.motor.poll_break();
             if let Some(b) = &block {

@@ -303,8 +303,8 @@ impl StallWatchdog {
         Self { _wwdg: wwdg }
     }
 
-    /// Starts the deadline (once; the WWDG cannot be stopped until reset). Call at the
-    /// first control step.
+    /// Starts the deadline (once; the WWDG cannot be stopped until reset). Call right
+    /// before the control loop's first wait for data.
     pub fn start(&mut self) {
         pac::WWDG.cfr().write(|w| {
             w.set_w(0x7F);
