@@ -61,7 +61,10 @@
 //! (⁵) `model::hardware::bus_divider`. 9.1 kΩ source with 100 nF: the sampling capacitor is
 //! charged from the 100 nF, the 0.9 ms time constant averages the bridge's ripple.
 //! (⁶) `model::hardware::ntc`; ratiometric to VDDA, so VDDA drops out. Readings within 2 % of
-//! either rail mean not fitted (open) or shorted, and no temperature is reported.
+//! either rail mean not fitted (open) or shorted, and no temperature is reported. PB0 (an
+//! ADC1 input) rather than PA4 (ADC2 only): one scan of one ADC carries every analog input,
+//! in step with the PWM. Header names of PA1 (A1) and PB0 (A3) per UM2505's Arduino table:
+//! confirm against the board's solder-bridge settings before wiring.
 //! (⁷) The sampling instant, argued: in centre-aligned PWM the on-time is centred on the
 //! counter's zero and the off-time on its top. The motor current (L/R = 0.45 ms, ten PWM
 //! periods) is a triangle of straight segments, and the value of a straight segment at its
