@@ -106,6 +106,35 @@ pub mod divider {
     }
 }
 
+/// The divider from the H-bridge supply to the bus-voltage pin (PA1): 100 k over 10 k with
+/// 100 nF at the pin. 12-24 V supplies read 1.09-2.18 V; the ADC's 3.3 V full scale is 36 V,
+/// headroom for a regenerating bridge pumping a supply that cannot sink.
+pub mod bus_divider {
+    /// Upper resistor, ohm.
+    pub const R_TOP_OHM: f64 = 100.0e3;
+    /// Lower resistor, ohm.
+    pub const R_BOTTOM_OHM: f64 = 10.0e3;
+    /// Ratio, pin volts per bus volt (1/11).
+    pub const RATIO: f64 = R_BOTTOM_OHM / (R_TOP_OHM + R_BOTTOM_OHM);
+    /// Filter capacitor at the pin, F: 0.9 ms with the divider's 9.1 k, averages the
+    /// 20 kHz supply ripple and feeds the ADC's sampling capacitor.
+    pub const FILTER_CAPACITANCE_F: f64 = 100.0e-9;
+}
+
+/// The optional motor thermistor (PB0): a 10 k NTC on the motor can (B25/85 = 3977 K, e.g.
+/// Vishay NTCLE100E3103) to ground, a 10 k pull-up to VDDA, so the reading is a ratio of
+/// VDDA whatever VDDA is. Beta equation: 1/T = 1/T25 + ln(R/R25)/B.
+pub mod ntc {
+    /// Resistance at 25 deg C, ohm.
+    pub const R25_OHM: f64 = 10.0e3;
+    /// 25 deg C in kelvin.
+    pub const T25_K: f64 = 298.15;
+    /// B constant (25/85 deg C), K.
+    pub const BETA_K: f64 = 3977.0;
+    /// Pull-up from the pin to VDDA, ohm.
+    pub const PULL_UP_OHM: f64 = 10.0e3;
+}
+
 /// The STM32G474's 12-bit ADC and its references.
 pub mod adc {
     /// Resolution, bits.
