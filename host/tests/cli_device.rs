@@ -100,6 +100,11 @@ fn info_json_has_the_contract_keys() {
     );
     assert_eq!(v["board"], "virtual");
     assert_eq!(v["sim"], true);
+    // Identity (issue 13): the build, why it last reset, and how long ago.
+    assert_eq!(v["firmware_build"], "virtual", "{v}");
+    assert_eq!(v["reset_cause"], "power-on", "{v}");
+    assert!(v["uptime_s"].as_u64().is_some(), "{v}");
+    assert_eq!(v["capabilities"], serde_json::json!(["SIMULATION"]), "{v}");
     let text = stdout_of(sim(&["info"]));
     assert!(
         text.contains("firmware")

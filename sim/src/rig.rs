@@ -110,6 +110,10 @@ impl SimConfig {
     }
 }
 
+/// The build the virtual rig reports in `Info`: it runs the firmware core compiled into
+/// the host tool, so there is no separate firmware build to name.
+pub const VIRTUAL_BUILD: &str = "virtual";
+
 /// The bench around the virtual rig, as `Request::Simulation` commands set it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimBench {
@@ -149,7 +153,7 @@ impl SimRig {
             } else {
                 ResetCause::PowerOn
             },
-            firmware_build: BootInfo::UNKNOWN_BUILD,
+            firmware_build: VIRTUAL_BUILD,
             parameters: config.calibration,
             parameters_status: config.calibration_status,
         };

@@ -251,13 +251,13 @@ fn print_report(out: &mut impl Write, r: &FlashReport, json: bool) -> Result<(),
 
 /// What the running firmware reports about itself, as `(version, build)`.
 ///
-/// This is the one place where the build comparison plugs in: today's [`DeviceInfo`] has
-/// only `firmware_version`; once the protocol's `Info` carries `firmware_build`, return
-/// `Some(info.firmware_build.to_string())` as the build and
-/// [`crate::flash::identity::confirm`] compares
-/// it too.
+/// The version and the build (the git commit `firmware/build.rs` stamped) of `Info`;
+/// [`crate::flash::identity::confirm`] compares both with the ELF's.
 pub fn reported_identity(info: &DeviceInfo) -> (String, Option<String>) {
-    (info.firmware_version.to_string(), None)
+    (
+        info.firmware_version.to_string(),
+        Some(info.firmware_build.to_string()),
+    )
 }
 
 #[cfg(not(feature = "probe"))]

@@ -37,6 +37,17 @@ pub struct InfoReport {
     pub board: String,
     /// Where the active calibration came from: `valid`, `defaults` or `invalid`.
     pub calibration_status: &'static str,
+    /// The firmware's build: the git commit it was built from (`-dirty` when the tree had
+    /// uncommitted changes, `unknown` without git).
+    pub firmware_build: String,
+    /// Why the device last reset: `power-on`, `pin`, `software`, `watchdog`, `brown-out`,
+    /// `lockup` or `other`.
+    pub reset_cause: &'static str,
+    /// Time since that reset, s.
+    pub uptime_s: u32,
+    /// Optional hardware the device reports (`OUTPUT_ENCODER`, `BUS_VOLTAGE`, `MOTOR_TEMP`,
+    /// `SIMULATION`: the virtual rig).
+    pub capabilities: Vec<&'static str>,
 }
 
 /// Lower-case name of a calibration status.
@@ -61,6 +72,14 @@ impl InfoReport {
             host_protocol_version: protocol::PROTOCOL_VERSION,
             board: info.board.to_string(),
             calibration_status: calibration_status_name(info.parameters_status),
+            firmware_build: info.firmware_build.to_string(),
+            reset_cause: info.reset_cause.name(),
+            uptime_s: info.uptime_s,
+            capabilities: protocol::Capabilities::NAMED
+                .iter()
+                .filter(|(_, flag)| info.capabilities.contains(*flag))
+                .map(|(name, _)| *name)
+                .collect(),
         }
     }
 }
@@ -75,7 +94,19 @@ pub fn run(a: InfoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         super::print_json(&mut out, &report)?;
     } else {
         writeln!(out, "device     {} on {}", report.board, report.port)?;
-        writeln!(out, "firmware   {}", report.firmware_version)?;
+        writeln!(
+            out,
+            "firmware   {} (build {})",
+            report.firmware_version, report.firmware_build
+        )?;
+        writeln!(
+            out,
+            "up         {} s since the last reset ({})",
+            report.uptime_s, report.reset_cause
+        )?;
+        if !report.capabilities.is_empty() {
+            writeln!(out, "fitted     {}", report.capabilities.join(", "))?;
+        }
         writeln!(
             out,
             "protocol   v{} (schema {}), same as this tool",
