@@ -71,6 +71,9 @@ pub struct MotorConfig {
     pub duty_slew_per_s: f32,
     /// Drive the cam with a negative duty (direction pin high) instead.
     pub reverse: bool,
+    /// The motor's own constants, against which a new calibration's C1-C6 are judged
+    /// ([`model::Calibration::check`]).
+    pub constants: model::MotorConstants,
 }
 
 impl Default for MotorConfig {
@@ -83,6 +86,7 @@ impl Default for MotorConfig {
             // current, which itself is 2.3-2.7 A (C6 = 2.25 A) under a 4.5 A limit.
             duty_slew_per_s: 0.5,
             reverse: false,
+            constants: model::MotorConstants::RS735,
         }
     }
 }
@@ -125,6 +129,15 @@ pub struct SupervisorConfig {
     pub min_freq_hz: f32,
     /// Highest frequency a release may ask for, Hz (the calibration may lower it).
     pub max_freq_hz: f32,
+    /// Largest load on the output while released, N m: the gear's tooth-strength limit
+    /// (3.68 N m for the paper's gear, [`model::BoardLimits::PAPER`]). The calibration's
+    /// `max_release_load_nm` may lower it, never raise it; a load estimate above it while
+    /// released latches `LOAD_LIMIT`.
+    pub max_release_load_nm: f32,
+    /// Relative allowance for the load estimate's error above `max_release_load_nm`
+    /// before `LOAD_LIMIT` latches (the estimate is good to about 2 % at the cap, see the
+    /// closed-loop tests; 0.05 keeps a load at the cap itself from tripping on noise).
+    pub load_cap_tolerance: f32,
     /// Relative speed error within which the cam counts as at speed.
     pub at_speed_tolerance: f32,
     /// How long the cam must stay at speed before `Vibrating`, us.
@@ -145,6 +158,9 @@ pub struct SupervisorConfig {
     pub settle_revolutions: u8,
     /// Consecutive revolutions above `max_release_load_nm` before `OVERLOAD`.
     pub overload_revolutions: u8,
+    /// Consecutive revolutions above the board's load cap (`max_release_load_nm` and its
+    /// tolerance) before `LOAD_LIMIT`.
+    pub load_limit_revolutions: u8,
     /// `JAM` when tau_cam exceeds this multiple of Eq. (10) at the largest release load.
     pub jam_ratio: f32,
     /// Requests other than status and clear are refused this long after a fault, us.
@@ -157,6 +173,8 @@ impl Default for SupervisorConfig {
             default_freq_hz: 10.0,
             min_freq_hz: 1.0,
             max_freq_hz: board::MAX_FREQ_HZ as f32,
+            max_release_load_nm: model::BoardLimits::PAPER.max_release_load_nm as f32,
+            load_cap_tolerance: 0.05,
             at_speed_tolerance: 0.1,
             at_speed_time_us: 100_000,
             spin_up_timeout_us: 3_000_000,
@@ -167,6 +185,7 @@ impl Default for SupervisorConfig {
             weak_revolutions: 3,
             settle_revolutions: 1,
             overload_revolutions: 1,
+            load_limit_revolutions: 3,
             jam_ratio: 2.0,
             fault_hold_us: 500_000,
         }
@@ -274,6 +293,18 @@ impl CoreConfig {
     /// Quadrature counts per cam revolution.
     pub fn counts_per_rev(&self) -> u32 {
         4 * self.encoder_ppr
+    }
+
+    /// The caps this board puts on a calibration's limits: the release load at
+    /// `supervisor.max_release_load_nm`, the current at the overcurrent trip
+    /// `faults.overcurrent_a`, the frequency at `supervisor.max_freq_hz`. A record asking
+    /// for more is refused ([`model::BoardLimits::check`]); the host checks the same caps.
+    pub fn board_limits(&self) -> model::BoardLimits {
+        model::BoardLimits {
+            max_release_load_nm: f64::from(self.supervisor.max_release_load_nm),
+            max_current_a: f64::from(self.faults.overcurrent_a),
+            max_freq_hz: f64::from(self.supervisor.max_freq_hz),
+        }
     }
 }
 

@@ -25,6 +25,7 @@ use crate::speed_loop::SpeedLoop;
 use crate::supervisor::Supervisor;
 use crate::tx_queue::{CAPTURE_IN_FLIGHT, REPLY_RESERVE, TxQueue};
 
+pub use derived::check_rules;
 pub(crate) use derived::{Derived, check_board_caps};
 pub use io::{BootInfo, Inputs, Outputs, Status};
 pub(crate) use persist::Persist;

@@ -101,6 +101,8 @@ impl Core {
                     f64::from(e.cam_speed_rad_s),
                 ) as f32,
                 max_load: self.derived.max_load_nm,
+                load_cap: self.config.supervisor.max_release_load_nm
+                    * (1.0 + self.config.supervisor.load_cap_tolerance),
             };
             let raised = self.supervisor.on_revolution(&check, now);
             self.raise(raised);

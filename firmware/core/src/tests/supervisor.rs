@@ -222,6 +222,23 @@ fn spin_up_that_never_reaches_speed_cannot_release() {
 }
 
 #[test]
+fn load_above_the_gears_strength_is_load_limit() {
+    // A stored record from before the caps, asking for 1e30 N m: the cap still holds.
+    let cal = RigParameters {
+        max_release_load_nm: 1e30,
+        max_current_a: 4.8,
+        ..RigParameters::paper()
+    };
+    let mut rig = Rig::with(boot_with(cal), 3.95, |_| {});
+    rig.run_ms(150);
+    rig.ack(&release(10.0)).unwrap();
+    rig.run_until(4000, true, |s| s.state == SupervisorState::Fault)
+        .unwrap();
+    assert_eq!(rig.latched(), FaultFlags::LOAD_LIMIT, "{:?}", rig.core.status());
+    assert!(!rig.step().enable);
+}
+
+#[test]
 fn overload_stops_the_release() {
     let cal = RigParameters {
         max_release_load_nm: 2.0,
@@ -302,7 +319,7 @@ fn load_estimate_tracks_the_plant_across_the_papers_range() {
         rig.vibrate(hz);
         rig.run_ms_alive(1500);
         let s = rig.core.status();
-        assert!(s.latched_faults.is_empty(), "{}", s.latched_faults);
+        assert!(s.latched_faults.is_empty(), "{} {load} {hz} {}", s.latched_faults, s.tau_rot_nm);
         // The plant is the paper's model with the calibration's constants: within 2 %.
         let err = (f64::from(s.tau_rot_nm) - load) / load;
         assert!(
