@@ -208,6 +208,9 @@ pub struct FaultConfig {
     pub stall_min_counts: u32,
     /// A step later than this many control periods is `CONTROL_OVERRUN`.
     pub overrun_periods: u32,
+    /// How long the encoder's speed may run against the drive's sign (above the stop
+    /// speed) before `REVERSED_ENCODER`, us.
+    pub reversed_time_us: u64,
 }
 
 impl Default for FaultConfig {
@@ -219,6 +222,7 @@ impl Default for FaultConfig {
             stall_window_us: 200_000,
             stall_min_counts: 64,
             overrun_periods: 2,
+            reversed_time_us: 100_000,
         }
     }
 }

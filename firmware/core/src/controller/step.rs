@@ -164,6 +164,18 @@ impl Core {
         {
             self.raise(FaultFlags::OVERCURRENT);
         }
+        // The encoder's own sign (before the drive direction) against the duty's: a
+        // reversed or miswired encoder would make the speed loop run away.
+        if self.faults.reversed(
+            now,
+            self.enable,
+            self.duty,
+            self.encoder.speed_rad_s(),
+            self.config.supervisor.stop_speed_rad_s,
+            f.reversed_time_us,
+        ) {
+            self.raise(FaultFlags::REVERSED_ENCODER);
+        }
         // The duty of the last step is the one that drove the bridge since then.
         let driven = self.enable && self.duty.abs() > f.stall_duty;
         if self

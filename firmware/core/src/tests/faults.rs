@@ -329,3 +329,35 @@ fn button_must_be_let_go_after_a_fault() {
     rig.run_until(2000, false, |s| s.state == SupervisorState::SpinUp)
         .unwrap();
 }
+
+#[test]
+fn reversed_encoder_latches_and_stops() {
+    let mut rig = Rig::new(0.0);
+    rig.encoder_reversed = true;
+    rig.run_ms(150);
+    rig.ack(&Request::Release {
+        on: true,
+        target_hz: 10.0,
+    })
+    .unwrap();
+    let t = rig.run_until(3000, true, |s| !s.latched_faults.is_empty());
+    assert!(t.is_some(), "{:?}", rig.core.status());
+    assert_eq!(rig.latched(), FaultFlags::REVERSED_ENCODER);
+    assert!(!rig.step().enable);
+}
+
+#[test]
+fn a_normal_release_never_sees_a_reversed_encoder() {
+    let mut rig = Rig::new(1.0);
+    rig.vibrate(10.0);
+    rig.run_ms_alive(1000);
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: false,
+            target_hz: 10.0
+        }),
+        Ok(())
+    );
+    rig.run_ms(2000);
+    assert!(rig.latched().is_empty(), "{}", rig.latched());
+}
