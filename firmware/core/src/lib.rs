@@ -61,7 +61,7 @@ pub use config::{
     CoreConfig, CurrentSensorConfig, EstimatorConfig, FaultConfig, MotorConfig, SpeedLoopConfig,
     SupervisorConfig,
 };
-pub use controller::{BootInfo, Core, Inputs, Outputs, Status, check_rules};
+pub use controller::{BoardInputs, BootInfo, Core, Inputs, Outputs, Status, check_rules};
 pub use estimator::{EstimatorModel, RevolutionEstimate};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;

@@ -64,6 +64,12 @@ impl SensorParams {
         code
     }
 
+    /// Noise-free voltage at the ADC pin (and the comparator's input) for `current`, V.
+    pub fn pin_voltage(&self, current: f64) -> f64 {
+        (self.acs_supply / 2.0 + self.acs_zero_error + self.acs_sensitivity * current)
+            * self.divider
+    }
+
     /// Current (A) an ideal zeroed reading of `code` stands for (the firmware's inverse).
     pub fn adc_to_current(&self, code: u16) -> f64 {
         let v_pin = code as f64 / self.adc_full_scale() as f64 * self.adc_reference;

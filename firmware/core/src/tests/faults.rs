@@ -361,3 +361,23 @@ fn a_normal_release_never_sees_a_reversed_encoder() {
     rig.run_ms(2000);
     assert!(rig.latched().is_empty(), "{}", rig.latched());
 }
+
+#[test]
+fn hardware_break_latches_hw_overcurrent_until_cleared() {
+    let mut rig = Rig::new(1.0);
+    rig.vibrate(10.0);
+    rig.core.set_board_inputs(crate::BoardInputs {
+        hw_break: true,
+        ..Default::default()
+    });
+    assert!(!rig.step().enable, "off at the first step after the break");
+    assert!(rig.latched().contains(FaultFlags::HW_OVERCURRENT));
+    assert!(rig.core.break_latched());
+    // The binary keeps the break until the fault is cleared; the flag itself is a latch
+    // in the timer, so clearing works once the current is back to zero.
+    rig.core.set_board_inputs(crate::BoardInputs::default());
+    rig.run_ms(600);
+    let (_, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert!(!latched.contains(FaultFlags::HW_OVERCURRENT), "{latched}");
+    assert!(!rig.core.break_latched());
+}

@@ -806,3 +806,30 @@ fn health_comes_once_a_second_while_telemetry_runs() {
             .any(|m| matches!(m, DeviceMessage::Health(_)))
     );
 }
+
+#[test]
+fn measured_bus_voltage_sets_the_open_loop_duty_and_is_reported() {
+    let mut rig = Rig::new(0.0);
+    rig.core.set_board_inputs(crate::BoardInputs {
+        bus_voltage_v: 10.0,
+        motor_temp_c: 31.5,
+        ..Default::default()
+    });
+    rig.run_ms(1200);
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    rig.run_ms_alive(2500);
+    // duty = volts / Vbus: 0.62 on a 10 V bus, not 6.2 / 12.
+    let s = rig.core.status();
+    assert!((s.duty - 0.62).abs() < 1e-3, "{}", s.duty);
+    assert_eq!(rig.ack(&Request::StartTelemetry { rate_hz: 10 }), Ok(()));
+    rig.run_ms_alive(20);
+    let health = rig
+        .received
+        .iter()
+        .find_map(|m| match m {
+            DeviceMessage::Health(h) => Some(*h),
+            _ => None,
+        })
+        .expect("a health sample");
+    assert_eq!((health.bus_voltage_v, health.motor_temp_c), (10.0, 31.5));
+}
