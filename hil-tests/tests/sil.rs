@@ -79,6 +79,13 @@ fn every_fault_drill_ends_safe_and_latched() {
         let t = o.time_to_safe_s.expect("reached the safe state");
         assert!(t < 1.0, "{o:?}");
     }
+    let row = |name: &str| outcomes.iter().find(|o| o.name == name).unwrap();
+    // The comparator's break, not the 10 ms software check: within 1 ms.
+    let oc = row("overcurrent");
+    assert!(oc.time_to_safe_s.unwrap() <= 0.001, "{oc:?}");
+    assert!(oc.faults.iter().any(|f| f == "HW_OVERCURRENT"), "{oc:?}");
+    assert_eq!(row("reversed-encoder").faults, ["REVERSED_ENCODER"]);
+    assert_eq!(row("load-limit").faults, ["LOAD_LIMIT"]);
 }
 
 #[test]
