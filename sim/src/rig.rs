@@ -228,6 +228,8 @@ impl SimRig {
         // The timer's break flag (SR.BIF).
         self.core.set_board_inputs(BoardInputs {
             hw_break: self.plant.break_tripped(),
+            // VDDA as the binary measures it through VREFINT.
+            vdda_v: self.plant.params().sensors.adc_reference as f32,
             ..BoardInputs::default()
         });
         let inputs = Inputs {

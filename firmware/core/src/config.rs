@@ -20,8 +20,14 @@ pub struct CurrentSensorConfig {
     pub adc_reference_v: f32,
     /// ADC resolution, bits.
     pub adc_bits: u32,
-    /// Largest plausible distance of the measured zero from Vcc/2, in amperes.
+    /// Largest plausible offset of the sensor's own zero from Vcc/2, in amperes (on top
+    /// of the supply and divider tolerances below).
     pub zero_tolerance_a: f32,
+    /// Lowest and highest sensor supply the board may give the ACS714, V (4.5-5.5 V: the
+    /// zero window is sized from them, the sensor being ratiometric).
+    pub supply_range_v: (f32, f32),
+    /// Lowest and highest divider ratio with its resistors' tolerance.
+    pub divider_range: (f32, f32),
     /// Samples averaged for a zero measurement (motor off).
     pub zero_samples: u32,
     /// Time constant of the displayed (telemetry) current's low-pass, s.
@@ -33,6 +39,24 @@ impl CurrentSensorConfig {
     pub fn amps_per_count(&self) -> f32 {
         let full_scale = ((1u32 << self.adc_bits) - 1) as f32;
         self.adc_reference_v / full_scale / self.divider / self.sensitivity_v_per_a
+    }
+
+    /// The plausible window of the zero-current pin voltage, V: Vcc/2 over the supply
+    /// range through the divider's range, widened by the sensor's own offset.
+    pub fn zero_window_v(&self) -> (f32, f32) {
+        let offset = self.zero_tolerance_a * self.sensitivity_v_per_a * self.divider;
+        (
+            self.supply_range_v.0 / 2.0 * self.divider_range.0 - offset,
+            self.supply_range_v.1 / 2.0 * self.divider_range.1 + offset,
+        )
+    }
+
+    /// Amperes per ADC count of a ratiometric sensor whose zero reads `zero_counts`: the
+    /// zero is Vcc/2 and the sensitivity scales with Vcc, so the sensor supply follows
+    /// from the zero and the divider and the ADC reference cancel out.
+    pub fn ratiometric_amps_per_count(&self, zero_counts: f32) -> f32 {
+        // sensitivity(Vcc) * divider / (vref / full) = S_nom / V_nom * 2 * zero_counts.
+        self.supply_v / (2.0 * self.sensitivity_v_per_a * zero_counts)
     }
 
     /// ADC reading of zero current for an ideal sensor (Vcc/2 through the divider), counts.
@@ -51,6 +75,11 @@ impl Default for CurrentSensorConfig {
             adc_reference_v: adc::VREF_V as f32,
             adc_bits: adc::BITS,
             zero_tolerance_a: 0.3,
+            supply_range_v: (acs714::SUPPLY_MIN_V as f32, acs714::SUPPLY_MAX_V as f32),
+            divider_range: (
+                divider::ratio_bounds().0 as f32,
+                divider::ratio_bounds().1 as f32,
+            ),
             zero_samples: 1000,
             display_time_constant_s: 0.02,
         }

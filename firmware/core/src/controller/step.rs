@@ -29,7 +29,8 @@ impl Core {
         // A late step must not kick the integrator.
         let dt = elapsed.max(1).min(4 * period) as f32 * 1e-6;
 
-        if self.current.update(inputs.current_adc) == Some(ZeroResult::OutOfRange) {
+        let vdda = self.board.vdda_v;
+        if self.current.update_with_vdda(inputs.current_adc, vdda) == Some(ZeroResult::OutOfRange) {
             self.raise(FaultFlags::CURRENT_ZERO_RANGE);
         }
         let prev_position = self.encoder.position();

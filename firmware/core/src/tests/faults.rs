@@ -118,7 +118,9 @@ fn frozen_encoder_is_encoder_loss() {
 #[test]
 fn implausible_current_zero_at_boot_and_rezero() {
     let mut rig = Rig::new(0.0);
-    rig.adc_offset = COUNTS_PER_AMP / 2; // 0.5 A-equivalent off Vcc/2
+    // 2 A-equivalent off Vcc/2: beyond any sensor supply in 4.5-5.5 V (the window is
+    // about +-1.7 A wide since the zero follows the ratiometric sensor's supply).
+    rig.adc_offset = 2 * COUNTS_PER_AMP;
     rig.run_ms(150);
     assert_eq!(rig.latched(), FaultFlags::CURRENT_ZERO_RANGE);
     rig.run_ms(500);

@@ -335,3 +335,19 @@ fn load_estimate_tracks_the_plant_across_the_papers_range() {
         );
     }
 }
+
+#[test]
+fn the_rig_works_across_the_sensor_supply_tolerance() {
+    // A ratiometric ACS714 on 4.75 V or 5.25 V: the zero moves by 0.7 A-equivalent (the
+    // old +-0.3 A window latched CURRENT_ZERO_RANGE) and the sensitivity by 5 %; the core
+    // reads the supply from the zero, so the load estimate stays within 2 %.
+    for supply in [4.75, 5.25] {
+        let mut rig = Rig::with(BootInfo::default(), 1.84, |p| p.sensors.acs_supply = supply);
+        rig.vibrate(10.0);
+        rig.run_ms_alive(1500);
+        let s = rig.core.status();
+        assert!(s.latched_faults.is_empty(), "{supply} V: {}", s.latched_faults);
+        let err = (f64::from(s.tau_rot_nm) - 1.84) / 1.84;
+        assert!(err.abs() < 0.02, "{supply} V: {} N m", s.tau_rot_nm);
+    }
+}
