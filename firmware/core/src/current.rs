@@ -20,7 +20,6 @@ pub enum ZeroResult {
 pub struct CurrentSense {
     config: CurrentSensorConfig,
     amps_per_count: f32,
-    nominal_zero: f32,
     zero_samples: u32,
     alpha_per_step: f32,
     zero_counts: f32,
@@ -39,7 +38,6 @@ impl CurrentSense {
         Self {
             config: *config,
             amps_per_count,
-            nominal_zero: config.nominal_zero_counts(),
             zero_samples: config.zero_samples.max(1),
             alpha_per_step: step_s / tau,
             zero_counts: config.nominal_zero_counts(),
@@ -89,6 +87,7 @@ impl CurrentSense {
 
     /// Takes one step's samples: updates the mean and the display filter, and advances a
     /// running zero measurement. Returns the zero's verdict when the measurement completes.
+    #[cfg(test)]
     pub fn update(&mut self, samples: &[u16]) -> Option<ZeroResult> {
         self.update_with_vdda(samples, f32::NAN)
     }
