@@ -141,6 +141,13 @@ pub mod board {
     pub const CURRENT_SAMPLE_RATE_HZ: f64 = 10_000.0;
     /// Highest vibration frequency the board's controller accepts, Hz.
     pub const MAX_FREQ_HZ: f64 = 20.0;
+    /// The H-bridge's decay mode: `true` for synchronous (regenerating) decay, where the
+    /// bridge takes the carrier's inertial power back into the supply; `false` for the
+    /// recommended board driven sign-magnitude with diode (non-regenerating) decay on a
+    /// supply that cannot sink current, as the paper's bench supply. The plant
+    /// ([`crate::plant::PlantParams::regeneration`]) and the firmware's estimator read this
+    /// one setting, so they agree.
+    pub const REGENERATIVE_DECAY: bool = false;
 }
 
 /// The hardware overcurrent trip: COMP3 on the current-sense pin (PA0) against an internal

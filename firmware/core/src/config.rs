@@ -273,7 +273,8 @@ pub struct EstimatorConfig {
 impl Default for EstimatorConfig {
     fn default() -> Self {
         Self {
-            carrier_power_returned: false,
+            // The board's decay mode, the one setting the plant reads too.
+            carrier_power_returned: board::REGENERATIVE_DECAY,
             max_revolution_us: 2_000_000,
         }
     }
@@ -386,6 +387,17 @@ mod tests {
             (c.motor.resistance_ohm, c.motor.ke_cam_v_s_per_rad),
             (0.44, 0.078)
         );
+    }
+
+    #[test]
+    fn estimator_and_plant_agree_on_the_decay_mode() {
+        let gear = model::GearSet::paper(model::paper::RIG_Z).unwrap();
+        let plant = model::plant::PlantParams::paper(gear, model::plant::Load::Torque(0.0));
+        assert_eq!(
+            CoreConfig::default().estimator.carrier_power_returned,
+            plant.regeneration
+        );
+        assert_eq!(plant.regeneration, board::REGENERATIVE_DECAY);
     }
 
     #[test]

@@ -128,7 +128,7 @@ impl PlantParams {
             supply: board::BRIDGE_SUPPLY_V,
             // The paper's bench supply cannot sink current, and actuators in general do not
             // return negative power (the paper's ref. [18]).
-            regeneration: false,
+            regeneration: board::REGENERATIVE_DECAY,
             friction_split: false,
             cam: CamSetup::Coupled,
             sensors: SensorParams::default(),
