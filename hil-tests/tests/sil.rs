@@ -138,7 +138,10 @@ fn fig5_and_the_sweep_work_across_the_sensor_supply_tolerance() {
             ..Default::default()
         })
         .expect("fig5 runs without a fault");
-        assert!(r.release_to_motion_s.is_some(), "{sensor_supply_v} V: {r:?}");
+        assert!(
+            r.release_to_motion_s.is_some(),
+            "{sensor_supply_v} V: {r:?}"
+        );
         let opts = sweep::SweepOptions {
             loads: vec![0.368, 3.68],
             voltages: vec![6.2],
@@ -149,6 +152,9 @@ fn fig5_and_the_sweep_work_across_the_sensor_supply_tolerance() {
         };
         let points = sweep::run(&opts).expect("the sweep runs without a fault");
         let s = sweep::summarise(&points, &opts);
-        assert!(s.rmse_estimate_vs_measured_nm < 0.0015, "{sensor_supply_v} V: {s:?}");
+        assert!(
+            s.rmse_estimate_vs_measured_nm < 0.0015,
+            "{sensor_supply_v} V: {s:?}"
+        );
     }
 }

@@ -288,7 +288,11 @@ fn limits_and_constants_beyond_the_board_are_refused() {
             "[limits]\nmax_release_load_nm = 1e30\n",
             &["max_release_load_nm", "3.68 N m"],
         ),
-        ("c1.toml", "[calibration]\nc1 = 2258.0\n", &["c1", "plausible range"]),
+        (
+            "c1.toml",
+            "[calibration]\nc1 = 2258.0\n",
+            &["c1", "plausible range"],
+        ),
     ];
     for (name, text, wants) in cases {
         let path = dir.path().join(name);

@@ -170,7 +170,10 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
 /// against its motor), run before the device is opened, so a limit the board cannot honour
 /// or constants 36 times off Table 2 are refused here with the field named (the device
 /// refuses them too).
-fn board_precheck(record: &protocol::RigParameters, path: &std::path::Path) -> Result<(), RigError> {
+fn board_precheck(
+    record: &protocol::RigParameters,
+    path: &std::path::Path,
+) -> Result<(), RigError> {
     let config = firmware_core::CoreConfig::default();
     let (caps, motor) = (config.board_limits(), config.motor.constants);
     let Err(rejection) = firmware_core::check_rules(record, &caps, &motor) else {

@@ -234,7 +234,12 @@ fn load_above_the_gears_strength_is_load_limit() {
     rig.ack(&release(10.0)).unwrap();
     rig.run_until(4000, true, |s| s.state == SupervisorState::Fault)
         .unwrap();
-    assert_eq!(rig.latched(), FaultFlags::LOAD_LIMIT, "{:?}", rig.core.status());
+    assert_eq!(
+        rig.latched(),
+        FaultFlags::LOAD_LIMIT,
+        "{:?}",
+        rig.core.status()
+    );
     assert!(!rig.step().enable);
 }
 
@@ -319,7 +324,7 @@ fn load_estimate_tracks_the_plant_across_the_papers_range() {
         rig.vibrate(hz);
         rig.run_ms_alive(1500);
         let s = rig.core.status();
-        assert!(s.latched_faults.is_empty(), "{} {load} {hz} {}", s.latched_faults, s.tau_rot_nm);
+        assert!(s.latched_faults.is_empty(), "{}", s.latched_faults);
         // The plant is the paper's model with the calibration's constants: within 2 %.
         let err = (f64::from(s.tau_rot_nm) - load) / load;
         assert!(
@@ -346,7 +351,11 @@ fn the_rig_works_across_the_sensor_supply_tolerance() {
         rig.vibrate(10.0);
         rig.run_ms_alive(1500);
         let s = rig.core.status();
-        assert!(s.latched_faults.is_empty(), "{supply} V: {}", s.latched_faults);
+        assert!(
+            s.latched_faults.is_empty(),
+            "{supply} V: {}",
+            s.latched_faults
+        );
         let err = (f64::from(s.tau_rot_nm) - 1.84) / 1.84;
         assert!(err.abs() < 0.02, "{supply} V: {} N m", s.tau_rot_nm);
     }
