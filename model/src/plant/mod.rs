@@ -492,10 +492,10 @@ impl Plant {
         self.state.current = i1;
         // The comparator watches the pin continuously: past its threshold the break cuts
         // the bridge within microseconds, modelled as from the end of this step.
-        if let Some(threshold) = self.params.break_threshold_v {
-            if self.params.sensors.pin_voltage(i1) > threshold {
-                self.break_tripped = true;
-            }
+        if let Some(threshold) = self.params.break_threshold_v
+            && self.params.sensors.pin_voltage(i1) > threshold
+        {
+            self.break_tripped = true;
         }
         self.state.cam_speed = new_omega;
         self.state.cam_angle += dtheta;
