@@ -109,7 +109,7 @@ mod app {
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use firmware_core::storage::{CalibrationStore, StorageError};
-    use firmware_core::{BootInfo, Core, Inputs, Outputs};
+    use firmware_core::{BoardInputs, BootInfo, Core, Inputs, Outputs};
     use protocol::{ParametersStatus, ResetCause, RigParameters, SupervisorState};
 
     use crate::analog;
@@ -346,12 +346,10 @@ mod app {
     /// so in step with the PWM) is one step of the core, whose outputs go straight to the
     /// H-bridge.
     ///
-    /// Core inputs still to wire (issue 10; the core's `Inputs` has no fields for them yet):
-    /// `hw_trip` = `motor.poll_break()` (TIM1 SR.BIF; latch HW_OVERCURRENT), `vdda_v` =
-    /// `analog::vdda_v(..)` (scale the current counts), `bus_v` = `analog::bus_v(..)`
-    /// (feed-forward, open-loop volts), `motor_temp_c` = `analog::motor_temperature_c(..)`
-    /// (telemetry when `Some`), and the per-second `step_cycles_mean` / `_max` (Health).
-    /// Until then they go to the health log, and a trip holds the bridge off in the binary.
+    /// Before each step the core gets the board's other measurements (`BoardInputs`): the
+    /// break flag (`motor.poll_break()`, TIM1 SR.BIF: the core latches HW_OVERCURRENT), VDDA
+    /// from VREFINT (scales the current counts), the bus voltage (feed-forward, open-loop
+    /// volts) and the motor NTC (Health); the step's DWT cycles go to `record_step_cycles`.
     #[embassy_executor::task]
     async fn control(core: &'static SharedCore, mut io: ControlIo) {
         let mut raw = [0u16; analog::BLOCK_LEN];
@@ -395,16 +393,35 @@ mod app {
                 encoder_count: io.encoder.count(),
                 release_button: io.button.is_held(),
             };
+            let board_inputs = BoardInputs {
+                hw_break: hw_trip,
+                vdda_v: if health.vdda_v > 0.0 {
+                    health.vdda_v
+                } else {
+                    f32::NAN
+                },
+                bus_voltage_v: if health.vdda_v > 0.0 {
+                    health.bus_v
+                } else {
+                    f32::NAN
+                },
+                motor_temp_c: health.motor_temp_c.unwrap_or(f32::NAN),
+                // Storage reads go through `EccChecked`, which turns an ECC NMI into a read
+                // error the store already counts as a corrupt slot.
+                flash_ecc_error: false,
+            };
             let out = core.lock(|c| {
                 let mut c = c.borrow_mut();
+                c.set_board_inputs(board_inputs);
                 let start = DWT::cycle_count();
                 let out = c.step(&inputs);
                 c.record_step_cycles(DWT::cycle_count().wrapping_sub(start));
                 out
             });
             if hw_trip && !out.enable {
-                // The core stopped driving; once it holds a latched fault (the trip itself,
-                // once wired, or what the stopped cam caused), the break may be cleared.
+                // The core stopped driving and latched HW_OVERCURRENT from the break flag:
+                // the break may be cleared once the current is back under the threshold,
+                // after which ClearFaults can clear the fault (its condition is gone).
                 let faulted = core.lock(|c| !c.borrow().status().latched_faults.is_empty());
                 if faulted && io.motor.rearm(&io.trip) {
                     warn!("overcurrent trip cleared: the core holds a latched fault");

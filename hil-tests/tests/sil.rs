@@ -79,6 +79,13 @@ fn every_fault_drill_ends_safe_and_latched() {
         let t = o.time_to_safe_s.expect("reached the safe state");
         assert!(t < 1.0, "{o:?}");
     }
+    let row = |name: &str| outcomes.iter().find(|o| o.name == name).unwrap();
+    // The comparator's break, not the 10 ms software check: within 1 ms.
+    let oc = row("overcurrent");
+    assert!(oc.time_to_safe_s.unwrap() <= 0.001, "{oc:?}");
+    assert!(oc.faults.iter().any(|f| f == "HW_OVERCURRENT"), "{oc:?}");
+    assert_eq!(row("reversed-encoder").faults, ["REVERSED_ENCODER"]);
+    assert_eq!(row("load-limit").faults, ["LOAD_LIMIT"]);
 }
 
 #[test]
@@ -117,5 +124,37 @@ fn a_release_cycle_survives_noise_bytes_between_frames() {
         assert!(device.errors() > 0, "{device:?}");
         // Nothing was lost that mattered: no request went unanswered.
         assert_eq!(host.frames_lost, 0, "{host:?}");
+    }
+}
+
+#[test]
+fn fig5_and_the_sweep_work_across_the_sensor_supply_tolerance() {
+    // A ratiometric ACS714 on 4.75 or 5.25 V: no fault (the zero window is sized from the
+    // 4.5-5.5 V supply) and the same estimate quality as at 5.0 V.
+    for sensor_supply_v in [4.75, 5.25] {
+        let r = fig5::run(&fig5::Fig5Options {
+            hold_s: 2.0,
+            sensor_supply_v,
+            ..Default::default()
+        })
+        .expect("fig5 runs without a fault");
+        assert!(
+            r.release_to_motion_s.is_some(),
+            "{sensor_supply_v} V: {r:?}"
+        );
+        let opts = sweep::SweepOptions {
+            loads: vec![0.368, 3.68],
+            voltages: vec![6.2],
+            repeats: 1,
+            rest_s: 0.0,
+            sensor_supply_v,
+            ..Default::default()
+        };
+        let points = sweep::run(&opts).expect("the sweep runs without a fault");
+        let s = sweep::summarise(&points, &opts);
+        assert!(
+            s.rmse_estimate_vs_measured_nm < 0.0015,
+            "{sensor_supply_v} V: {s:?}"
+        );
     }
 }

@@ -278,6 +278,38 @@ fn malformed_calibration_files_change_nothing() {
 }
 
 #[test]
+fn limits_and_constants_beyond_the_board_are_refused() {
+    // The firmware's rule (model::BoardLimits and model::Calibration::check), run before
+    // sending: a load cap of 1e30 would switch OVERLOAD off, C1 = 2258 is 36 times Table 2.
+    let dir = tempfile::tempdir().unwrap();
+    let cases: &[(&str, &str, &[&str])] = &[
+        (
+            "load.toml",
+            "[limits]\nmax_release_load_nm = 1e30\n",
+            &["max_release_load_nm", "3.68 N m"],
+        ),
+        (
+            "c1.toml",
+            "[calibration]\nc1 = 2258.0\n",
+            &["c1", "plausible range"],
+        ),
+    ];
+    for (name, text, wants) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let e = fails(&[
+            "--sim",
+            "calibration",
+            "set",
+            path.to_str().unwrap(),
+            "--yes",
+        ]);
+        assert_says(&e, wants);
+        assert_says(&e, &["nothing was written to the device"]);
+    }
+}
+
+#[test]
 fn bad_gauge_file_is_refused_before_the_rig_moves() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("gauge.csv");

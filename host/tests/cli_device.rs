@@ -373,7 +373,8 @@ fn calibration_get_and_set_round_trip() {
     ]));
     assert!(same.contains("already has this calibration"), "{same}");
     // A partial file changes only its keys.
-    std::fs::write(&file, "c1_nmm_per_a = 60.5\nmax_freq_hz = 12.0\n").unwrap();
+    // C1 alone moved within C4 = C1 C6 + C2's tolerance (the firmware's rule).
+    std::fs::write(&file, "c1_nmm_per_a = 62.0\nmax_freq_hz = 12.0\n").unwrap();
     let v = json_of(sim(&[
         "calibration",
         "set",
@@ -383,7 +384,7 @@ fn calibration_get_and_set_round_trip() {
     ]));
     assert_eq!(v["written"], true);
     assert_eq!(v["changed"].as_array().unwrap().len(), 2, "{v}");
-    assert!((v["calibration"]["c1_nmm_per_a"].as_f64().unwrap() - 60.5).abs() < 1e-4);
+    assert!((v["calibration"]["c1_nmm_per_a"].as_f64().unwrap() - 62.0).abs() < 1e-4);
     assert!((v["calibration"]["c2_nmm"].as_f64().unwrap() + 138.0).abs() < 1e-4);
     // Without --yes and without a terminal it refuses.
     let out = sim(&["calibration", "set", file.to_str().unwrap()])

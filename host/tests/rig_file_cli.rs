@@ -179,7 +179,7 @@ fn calibration_get_updates_a_rig_file_in_place() {
 fn calibration_set_says_which_keys_took_the_papers_values() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("part.toml");
-    std::fs::write(&file, "[calibration]\nc1 = 60.5\n").unwrap();
+    std::fs::write(&file, "[calibration]\nc1 = 62.0\n").unwrap();
     let text = ok(sim(&["calibration", "set", s(&file), "--yes"]));
     assert!(
         text.contains("not in")
@@ -190,7 +190,7 @@ fn calibration_set_says_which_keys_took_the_papers_values() {
             && !text.contains("c1 = "),
         "{text}"
     );
-    assert!(text.contains("c1_nmm_per_a: 62.1 -> 60.5"), "{text}");
+    assert!(text.contains("c1_nmm_per_a: 62.1 -> 62"), "{text}");
     let v = json(sim(&["calibration", "set", s(&file), "--yes", "--json"]));
     let defaulted = v["defaulted"].as_array().unwrap();
     assert_eq!(defaulted.len(), 15, "{v}");

@@ -170,6 +170,35 @@ pub mod board {
     pub const CURRENT_SAMPLE_RATE_HZ: f64 = 10_000.0;
     /// Highest vibration frequency the board's controller accepts, Hz.
     pub const MAX_FREQ_HZ: f64 = 20.0;
+    /// The H-bridge's decay mode: `true` for synchronous (regenerating) decay, where the
+    /// bridge takes the carrier's inertial power back into the supply; `false` for the
+    /// recommended board driven sign-magnitude with diode (non-regenerating) decay on a
+    /// supply that cannot sink current, as the paper's bench supply. The plant
+    /// ([`crate::plant::PlantParams::regeneration`]) and the firmware's estimator read this
+    /// one setting, so they agree.
+    pub const REGENERATIVE_DECAY: bool = false;
+}
+
+/// The hardware overcurrent trip: COMP3 on the current-sense pin (PA0) against an internal
+/// DAC threshold, routed to TIM1's break input, so the bridge switches off within
+/// microseconds with no software involved (the firmware's 1 ms mean check stays as the
+/// second layer).
+pub mod comparator {
+    use super::{acs714, divider};
+
+    /// Instantaneous motor current at which the comparator trips, A: 25 % above the
+    /// board's 4.8 A software limit, so start-up peaks and the PWM ripple (about
+    /// +-0.4 A) never reach it while a jam (a stall current of 10-27 A) does within a
+    /// fraction of the winding's 0.45 ms time constant.
+    pub const TRIP_A: f64 = 6.0;
+
+    /// Pin voltage of `trip_a` through the nominal sensor transfer (ACS714 at 5.0 V,
+    /// the 2/3 divider): the DAC's threshold, V (2.41 V for 6 A).
+    pub const fn threshold_v(trip_a: f64) -> f64 {
+        let supply = acs714::SUPPLY_NOMINAL_V;
+        (acs714::zero_output_v(supply) + acs714::sensitivity_v_per_a(supply) * trip_a)
+            * divider::RATIO
+    }
 }
 
 /// A vibrator motor's own constants, against which a calibration is judged
@@ -229,6 +258,13 @@ mod tests {
         );
         // The paper: the vibrator does not turn below 1.0 V.
         const { assert!(rs735::BREAKAWAY_V > 0.9 && rs735::BREAKAWAY_V < 1.0) };
+    }
+
+    #[test]
+    fn comparator_threshold_is_the_trip_current_at_the_pin() {
+        // (2.5 V + 0.185 V/A x 6 A) x 2/3 = 2.407 V, inside the 3.3 V DAC range.
+        let v = comparator::threshold_v(comparator::TRIP_A);
+        assert!((v - 2.4067).abs() < 1e-3, "{v}");
     }
 
     #[test]

@@ -39,7 +39,7 @@ pub mod plant;
 
 pub use calibration::{
     BoardLimits, Calibration, CalibrationConsistency, CalibrationField, CalibrationIssue,
-    LimitIssue,
+    IssueKind, LimitField, LimitIssue, LimitIssueKind,
 };
 pub use dynamics::{Inertias, OutputShaft};
 pub use excitation::CamDrive;

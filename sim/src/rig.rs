@@ -11,7 +11,7 @@
 //! `SensorParams::acs_supply`): it has no way yet to change them while it runs, which
 //! another issue adds to `model`.
 
-use firmware_core::{BootInfo, Core, CoreConfig, Inputs};
+use firmware_core::{BoardInputs, BootInfo, Core, CoreConfig, Inputs};
 use model::plant::{Drive, MotorParams, Plant, PlantParams};
 use model::{GearSet, plant::Load};
 use rigfile::RigFile;
@@ -29,6 +29,8 @@ pub struct Injections {
     pub encoder_frozen: bool,
     /// The ACS714 output is stuck at this ADC code.
     pub current_adc_stuck: Option<u16>,
+    /// The encoder counts backwards (A and B swapped, or the motor wired backwards).
+    pub encoder_reversed: bool,
 }
 
 /// Everything that defines a simulated session.
@@ -61,7 +63,7 @@ impl SimConfig {
         let mut calibration = RigParameters::paper();
         calibration.z = z.map(|v| v as u16);
         Ok(Self {
-            plant: PlantParams::paper(gear, load),
+            plant: board_plant(PlantParams::paper(gear, load)),
             core: CoreConfig::default(),
             calibration,
             calibration_status: ParametersStatus::Valid,
@@ -86,7 +88,7 @@ impl SimConfig {
         };
         let calibration = rig.to_wire().map_err(bad)?;
         let drive = rig.drive().map_err(bad)?;
-        let mut plant = PlantParams::paper(drive.gear, Load::Torque(0.0));
+        let mut plant = board_plant(PlantParams::paper(drive.gear, Load::Torque(0.0)));
         plant.drive = drive;
         plant.mu_s = rig.friction.mu_s;
         plant.mu_d = rig.friction.mu_d;
@@ -113,6 +115,14 @@ impl SimConfig {
 /// The build the virtual rig reports in `Info`: it runs the firmware core compiled into
 /// the host tool, so there is no separate firmware build to name.
 pub const VIRTUAL_BUILD: &str = "virtual";
+
+/// The paper's plant on this board: the hardware overcurrent trip (comparator into the
+/// timer's break) at [`model::hardware::comparator::TRIP_A`].
+fn board_plant(mut plant: PlantParams) -> PlantParams {
+    use model::hardware::comparator;
+    plant.break_threshold_v = Some(comparator::threshold_v(comparator::TRIP_A));
+    plant
+}
 
 /// The bench around the virtual rig, as `Request::Simulation` commands set it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -214,6 +224,18 @@ impl SimRig {
             self.frozen_count = self.plant.encoder_count();
             self.frozen_count
         };
+        let encoder_count = if self.injections.encoder_reversed {
+            encoder_count.wrapping_neg()
+        } else {
+            encoder_count
+        };
+        // The timer's break flag (SR.BIF).
+        self.core.set_board_inputs(BoardInputs {
+            hw_break: self.plant.break_tripped(),
+            // VDDA as the binary measures it through VREFINT.
+            vdda_v: self.plant.params().sensors.adc_reference as f32,
+            ..BoardInputs::default()
+        });
         let inputs = Inputs {
             now_us: self.now_us(),
             current_adc: &self.adc,
@@ -221,6 +243,10 @@ impl SimRig {
             release_button: self.button,
         };
         let out = self.core.step(&inputs);
+        if self.plant.break_tripped() && !self.core.break_latched() {
+            // ClearFaults cleared HW_OVERCURRENT: the binary sets MOE again.
+            self.plant.rearm_break();
+        }
         self.adc.clear();
         self.drive = Drive {
             duty: out.duty as f64,
@@ -283,6 +309,12 @@ impl SimRig {
     /// The firmware core.
     pub fn core(&self) -> &Core {
         &self.core
+    }
+
+    /// Whether the bridge drives the motor now: the firmware enables it and the hardware
+    /// overcurrent trip has not broken it off.
+    pub fn bridge_on(&self) -> bool {
+        self.drive.enabled && !self.plant.break_tripped()
     }
 
     /// The H-bridge command the firmware applies now.

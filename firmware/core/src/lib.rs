@@ -25,6 +25,19 @@
 //! Per-sample work is integer sums and f32 arithmetic (the Cortex-M4F has a single-precision
 //! FPU); the model's f64 functions run once per revolution or when the calibration changes.
 //!
+//! # Board inputs (issue 10)
+//! Besides [`Inputs`], the binary hands over what else the board measures with
+//! [`Core::set_board_inputs`] before a step ([`BoardInputs`]; kept out of [`Inputs`] so a
+//! binary that does not read them yet keeps building): TIM1's break flag after the COMP3
+//! overcurrent trip (`hw_break`, latches `HW_OVERCURRENT`; re-arm MOE only while
+//! [`Core::break_latched`] is false), VDDA from VREFINT (`vdda_v`, the current-sensor zero
+//! window), the bridge bus voltage (`bus_voltage_v`, feed-forward and open-loop duty =
+//! volts / Vbus, Health), the motor NTC (`motor_temp_c`, Health) and a flash ECC error
+//! flag. The step's DWT cycle count goes to [`Core::record_step_cycles`]; the storage
+//! layer's ECC hook is [`storage::CalibrationStore::with_ecc_check`]. NaN means "not
+//! measured" throughout. The host's calibration check and `SetParameters` share
+//! [`check_rules`] (the model's `BoardLimits::check` and `Calibration::check`).
+//!
 //! # Safety policy
 //! The motor runs only in `SpinUp` and `Vibrating`, only while a release is live (a host
 //! `Release` kept alive by any accepted request within `comms_timeout_us`, or the held
@@ -61,7 +74,7 @@ pub use config::{
     CoreConfig, CurrentSensorConfig, EstimatorConfig, FaultConfig, MotorConfig, SpeedLoopConfig,
     SupervisorConfig,
 };
-pub use controller::{BootInfo, Core, Inputs, Outputs, Status};
+pub use controller::{BoardInputs, BootInfo, Core, Inputs, Outputs, Status, check_rules};
 pub use estimator::{EstimatorModel, RevolutionEstimate};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;

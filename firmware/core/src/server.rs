@@ -252,7 +252,9 @@ impl Core {
 
     fn release(&mut self, on: bool, target_hz: f32) -> Answer {
         if !on {
+            // Off stops every drive, an open-loop one included.
             self.host_release = false;
+            self.open_loop_volts = None;
             return Answer::Now(Reply::Ack);
         }
         let s = self.config.supervisor;

@@ -74,14 +74,31 @@ enum Slot {
 pub struct CalibrationStore<F> {
     flash: F,
     newest: Option<(usize, u32)>,
+    ecc_error: fn() -> bool,
+}
+
+/// No ECC reporting: reads never raise ECC errors.
+fn no_ecc_error() -> bool {
+    false
 }
 
 impl<F: NorFlash> CalibrationStore<F> {
     /// A store on `flash` (offset 0 is the region's start).
     pub fn new(flash: F) -> Self {
+        Self::with_ecc_check(flash, no_ecc_error)
+    }
+
+    /// A store whose reads are checked for flash ECC errors: `ecc_error` returns (and
+    /// clears) whether a double-ECC error was raised since it was last called. On the
+    /// STM32G4 a double error in a torn program unit raises the NMI; the binary's NMI
+    /// handler recognises FLASH_ECCR.ECCD in the storage region, records it in a flag this
+    /// function takes, and returns, so boot does not hang: the slot being read counts as
+    /// corrupt and the other slot (or the defaults) is used.
+    pub fn with_ecc_check(flash: F, ecc_error: fn() -> bool) -> Self {
         Self {
             flash,
             newest: None,
+            ecc_error,
         }
     }
 
@@ -104,11 +121,10 @@ impl<F: NorFlash> CalibrationStore<F> {
 
     fn read_slot(&mut self, slot: usize) -> Slot {
         let mut record = [0u8; RECORD_LEN];
-        if self
-            .flash
-            .read(Self::slot_offset(slot), &mut record)
-            .is_err()
-        {
+        // A stale flag from before this read is not this slot's.
+        let _ = (self.ecc_error)();
+        let read = self.flash.read(Self::slot_offset(slot), &mut record);
+        if read.is_err() || (self.ecc_error)() {
             return Slot::Corrupt;
         }
         if record[COMMIT_AT..] != COMMIT {

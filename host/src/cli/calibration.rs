@@ -95,6 +95,7 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             // A file that cannot be used is refused before the device is opened.
             let loaded = file::read(&path)?;
             let new = loaded.rig.to_wire()?;
+            board_precheck(&new, &path)?;
             let defaulted = loaded.defaulted();
             let defaulted_fields: Vec<&str> = defaulted.iter().filter_map(|k| k.wire).collect();
             let mut s = dev.connect()?;
@@ -162,6 +163,39 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// The firmware's own rule for a new record (`firmware_core::check_rules`: the model's
+/// [`model::BoardLimits::check`] against the board's caps and [`model::Calibration::check`]
+/// against its motor), run before the device is opened, so a limit the board cannot honour
+/// or constants 36 times off Table 2 are refused here with the field named (the device
+/// refuses them too).
+fn board_precheck(
+    record: &protocol::RigParameters,
+    path: &std::path::Path,
+) -> Result<(), RigError> {
+    let config = firmware_core::CoreConfig::default();
+    let (caps, motor) = (config.board_limits(), config.motor.constants);
+    let Err(rejection) = firmware_core::check_rules(record, &caps, &motor) else {
+        return Ok(());
+    };
+    // The model's own wording: the value, the cap or plausible range, in the file's units.
+    let requested = model::BoardLimits {
+        max_release_load_nm: f64::from(record.max_release_load_nm),
+        max_current_a: f64::from(record.max_current_a),
+        max_freq_hz: f64::from(record.max_freq_hz),
+    };
+    let detail = match caps.check(&requested) {
+        Err(issue) => issue.to_string(),
+        Ok(()) => match model::Calibration::from_paper_units(record.constants()).check(&motor) {
+            Err(issue) => format!("{} ({issue})", rejection.field.name()),
+            Ok(()) => format!("{} {}", rejection.field.name(), rejection.reason.describe()),
+        },
+    };
+    Err(RigError::CalibrationFile {
+        file: path.display().to_string(),
+        why: format!("{detail}; the board's firmware refuses it"),
+    })
 }
 
 /// The keys `loaded` left at their defaults, one line per section, named as the file names

@@ -43,6 +43,9 @@ pub struct Fig5Args {
     /// Sensor-noise seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The current sensor's (ACS714) supply, V: 4.5 to 5.5 (the sensor is ratiometric).
+    #[arg(long, default_value_t = 5.0, value_parser = sensor_supply)]
+    pub sensor_supply_v: f64,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -77,6 +80,9 @@ pub struct SweepArgs {
     /// Seed of the noise and the test order.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The current sensor's (ACS714) supply, V: 4.5 to 5.5 (the sensor is ratiometric).
+    #[arg(long, default_value_t = 5.0, value_parser = sensor_supply)]
+    pub sensor_supply_v: f64,
     /// Write one row per test point to this CSV file.
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -123,6 +129,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 hold_s: a.hold,
                 vibration_hz: check_freq(a.freq)?,
                 seed: a.seed,
+                sensor_supply_v: a.sensor_supply_v,
                 ..Default::default()
             };
             let r = fig5::run(&opts)?;
@@ -189,6 +196,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 repeats: a.repeats,
                 rest_s: a.rest,
                 seed: a.seed,
+                sensor_supply_v: a.sensor_supply_v,
                 ..Default::default()
             };
             let points = sweep::run(&opts)?;
@@ -247,5 +255,23 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 ExitCode::FAILURE
             })
         }
+    }
+}
+
+/// `--sensor-supply-v`: the ACS714's specified supply range, 4.5 to 5.5 V.
+fn sensor_supply(text: &str) -> Result<f64, String> {
+    let v: f64 = text
+        .parse()
+        .map_err(|_| format!("'{text}' is not a number of volts"))?;
+    let (low, high) = (
+        model::hardware::acs714::SUPPLY_MIN_V,
+        model::hardware::acs714::SUPPLY_MAX_V,
+    );
+    if (low..=high).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{v} V is outside the ACS714's supply range {low} to {high} V"
+        ))
     }
 }

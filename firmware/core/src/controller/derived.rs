@@ -21,8 +21,10 @@ pub(crate) struct Derived {
 impl Derived {
     /// The derived quantities, or the first field the record's checks
     /// ([`RigParameters::validate`]) or the model (gear geometry, vibrator constants)
-    /// refuse. Limits above the board's are clamped to it here (a stored record from before
-    /// keeps working); a new record asking for more is refused by [`check_board_caps`].
+    /// refuse. Current and frequency limits above the board's are clamped to it here (a
+    /// stored record from before keeps working), a release load above the cap is caught by
+    /// `LOAD_LIMIT` at the cap; a new record asking for more is refused by
+    /// [`check_board_caps`].
     pub(crate) fn new(p: &RigParameters, config: &CoreConfig) -> Result<Self, ParameterRejection> {
         p.validate()?;
         let z = p.z.map(u32::from);
@@ -83,29 +85,62 @@ fn gear_rejection(e: model::GearError) -> ParameterRejection {
     ParameterRejection::new(field, reason)
 }
 
-/// A new record may not ask for more than the board allows: a current limit above the
-/// board's overcurrent trip or a frequency above the supervisor's highest would be
-/// silently lowered, so `SetParameters` refuses them naming the field.
+/// A new record may not ask for more than the board allows, and its vibrator constants
+/// must be plausible for the board's motor: the model's two checks, the ones the host runs
+/// before sending ([`model::BoardLimits::check`] against [`CoreConfig::board_limits`],
+/// [`model::Calibration::check`] against [`crate::MotorConfig::constants`]). A limit above
+/// its cap would be silently lowered, and a fit 36 times off Table 2 would be stored
+/// without a word, so `SetParameters` refuses them naming the field.
 pub(crate) fn check_board_caps(
     p: &RigParameters,
     config: &CoreConfig,
 ) -> Result<(), ParameterRejection> {
-    let caps = [
-        (
-            ParameterField::MaxCurrent,
-            p.max_current_a,
-            config.faults.overcurrent_a,
-        ),
-        (
-            ParameterField::MaxFreq,
-            p.max_freq_hz,
-            config.supervisor.max_freq_hz,
-        ),
-    ];
-    for (field, value, cap) in caps {
-        if value > cap {
-            return Err(ParameterRejection::new(field, RejectReason::AboveBoardCap));
-        }
+    check_rules(p, &config.board_limits(), &config.motor.constants)
+}
+
+/// The record's limits against `caps` and its constants against `motor`: the first field
+/// refused, as the wire names it.
+pub fn check_rules(
+    p: &RigParameters,
+    caps: &model::BoardLimits,
+    motor: &model::hardware::MotorConstants,
+) -> Result<(), ParameterRejection> {
+    use model::{CalibrationField as C, LimitField as L, LimitIssueKind};
+    let requested = model::BoardLimits {
+        max_release_load_nm: f64::from(p.max_release_load_nm),
+        max_current_a: f64::from(p.max_current_a),
+        max_freq_hz: f64::from(p.max_freq_hz),
+    };
+    if let Err(issue) = caps.check(&requested) {
+        let field = match issue.field {
+            L::MaxReleaseLoad => ParameterField::MaxReleaseLoad,
+            L::MaxCurrent => ParameterField::MaxCurrent,
+            L::MaxFreq => ParameterField::MaxFreq,
+        };
+        let reason = match issue.kind {
+            LimitIssueKind::NotFinite => RejectReason::NotFinite,
+            LimitIssueKind::NotPositive => RejectReason::OutOfRange,
+            LimitIssueKind::AboveCap => RejectReason::AboveBoardCap,
+        };
+        return Err(ParameterRejection::new(field, reason));
+    }
+    let vibrator = model::Calibration::from_paper_units(p.constants());
+    if let Err(issue) = vibrator.check(motor) {
+        let field = match issue.field {
+            C::C1 => ParameterField::C1,
+            C::C2 => ParameterField::C2,
+            C::C3 => ParameterField::C3,
+            C::C4 => ParameterField::C4,
+            C::C5 => ParameterField::C5,
+            C::C6 => ParameterField::C6,
+        };
+        let reason = match issue.kind {
+            model::IssueKind::NotFinite => RejectReason::NotFinite,
+            model::IssueKind::WrongSign { .. } => RejectReason::OutOfRange,
+            model::IssueKind::Implausible { .. } => RejectReason::Implausible,
+            model::IssueKind::Inconsistent { .. } => RejectReason::Inconsistent,
+        };
+        return Err(ParameterRejection::new(field, reason));
     }
     Ok(())
 }

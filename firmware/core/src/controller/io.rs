@@ -54,6 +54,49 @@ pub struct Inputs<'a> {
     pub release_button: bool,
 }
 
+/// The board's other measurements, handed over before each step with
+/// [`crate::Core::set_board_inputs`] (kept apart from [`Inputs`] so a binary that does not
+/// read them yet keeps building). [`Default`] is "nothing measured": no break, NaN for the
+/// analog readings, no ECC error.
+///
+/// What the binary feeds (STM32G474, see the README's pin table):
+/// - `hw_break`: TIM1's break flag (SR.BIF) after COMP3 on PA0 tripped; the core latches
+///   `HW_OVERCURRENT`. The binary re-arms the break (BDTR.MOE) only while
+///   [`crate::Core::break_latched`] is false, i.e. after `ClearFaults`.
+/// - `vdda_v`: VDDA from VREFINT (VREFINT_CAL x 3.0 V / reading), V, NaN if not measured.
+/// - `bus_voltage_v`: the bridge supply through its divider, V, NaN if not fitted; used by
+///   the speed loop's feed-forward and the open-loop volts, reported in Health.
+/// - `motor_temp_c`: the motor NTC, deg C, NaN if not fitted; reported in Health.
+/// - `flash_ecc_error`: a double-ECC error (NMI, FLASH_ECCR.ECCD) was raised during the last
+///   read of the storage region: for [`crate::storage`], the slot being read is corrupt.
+///
+/// The step's CPU cycles (DWT CYCCNT) go through [`crate::Core::record_step_cycles`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoardInputs {
+    /// The hardware overcurrent trip (comparator into the timer's break) has fired.
+    pub hw_break: bool,
+    /// Measured analog supply and ADC reference VDDA, V (NaN: not measured, 3.3 V used).
+    pub vdda_v: f32,
+    /// Measured bridge supply, V (NaN: not measured, the configured supply is used).
+    pub bus_voltage_v: f32,
+    /// Motor temperature, deg C (NaN: no thermistor).
+    pub motor_temp_c: f32,
+    /// A flash ECC error was raised during the last storage read.
+    pub flash_ecc_error: bool,
+}
+
+impl Default for BoardInputs {
+    fn default() -> Self {
+        Self {
+            hw_break: false,
+            vdda_v: f32::NAN,
+            bus_voltage_v: f32::NAN,
+            motor_temp_c: f32::NAN,
+            flash_ecc_error: false,
+        }
+    }
+}
+
 /// One control step's commands to the hardware.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Outputs {

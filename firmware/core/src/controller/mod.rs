@@ -25,8 +25,9 @@ use crate::speed_loop::SpeedLoop;
 use crate::supervisor::Supervisor;
 use crate::tx_queue::{CAPTURE_IN_FLIGHT, REPLY_RESERVE, TxQueue};
 
+pub use derived::check_rules;
 pub(crate) use derived::{Derived, check_board_caps};
-pub use io::{BootInfo, Inputs, Outputs, Status};
+pub use io::{BoardInputs, BootInfo, Inputs, Outputs, Status};
 pub(crate) use persist::Persist;
 use streams::StepTiming;
 pub(crate) use streams::Streams;
@@ -66,6 +67,7 @@ pub struct Core {
     step_timing: StepTiming,
     overruns: u32,
     pub(crate) capture: Capture,
+    pub(crate) board: BoardInputs,
     pub(crate) reset_cause: ResetCause,
     pub(crate) firmware_build: &'static str,
 }
@@ -117,6 +119,7 @@ impl Core {
             step_timing: StepTiming::default(),
             overruns: 0,
             capture: Capture::new(),
+            board: BoardInputs::default(),
             reset_cause: boot.reset_cause,
             firmware_build: boot.firmware_build,
             config,
@@ -133,6 +136,19 @@ impl Core {
         );
         core.raise(boot_faults);
         core
+    }
+
+    /// The board's measurements for the next [`Core::step`] (see [`BoardInputs`]); they
+    /// stay until set again.
+    pub fn set_board_inputs(&mut self, board: BoardInputs) {
+        self.board = board;
+    }
+
+    /// Whether `HW_OVERCURRENT` is latched: while it is, the binary keeps the timer's break
+    /// (the bridge stays off even if the break flag clears); once `ClearFaults` clears it,
+    /// the binary may re-arm the break.
+    pub fn break_latched(&self) -> bool {
+        self.faults.latched().contains(FaultFlags::HW_OVERCURRENT)
     }
 
     /// The configuration.

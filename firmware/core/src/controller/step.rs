@@ -29,7 +29,8 @@ impl Core {
         // A late step must not kick the integrator.
         let dt = elapsed.max(1).min(4 * period) as f32 * 1e-6;
 
-        if self.current.update(inputs.current_adc) == Some(ZeroResult::OutOfRange) {
+        let vdda = self.board.vdda_v;
+        if self.current.update_with_vdda(inputs.current_adc, vdda) == Some(ZeroResult::OutOfRange) {
             self.raise(FaultFlags::CURRENT_ZERO_RANGE);
         }
         let prev_position = self.encoder.position();
@@ -40,6 +41,8 @@ impl Core {
         self.capture
             .record_step(inputs.current_adc, prev_position as u16, position as u16);
 
+        let supply = self.bus_supply_v();
+        self.speed_loop.set_supply_v(supply);
         self.update_release(now, inputs.release_button);
         self.check_hardware(now, position);
 
@@ -101,6 +104,8 @@ impl Core {
                     f64::from(e.cam_speed_rad_s),
                 ) as f32,
                 max_load: self.derived.max_load_nm,
+                load_cap: self.config.supervisor.max_release_load_nm
+                    * (1.0 + self.config.supervisor.load_cap_tolerance),
             };
             let raised = self.supervisor.on_revolution(&check, now);
             self.raise(raised);
@@ -121,7 +126,7 @@ impl Core {
         let m = self.config.motor;
         // max/min, not clamp: clamp's NaN assertion would pull float formatting into the
         // image.
-        let goal = (volts / self.config.supply_v)
+        let goal = (volts / self.bus_supply_v())
             .max(-m.max_duty)
             .min(m.max_duty)
             * dir;
@@ -154,6 +159,11 @@ impl Core {
     }
 
     fn check_hardware(&mut self, now: u64, position: i64) {
+        // The first layer: the comparator has already cut the bridge through the timer's
+        // break; the core learns it here and keeps the motor off.
+        if self.board.hw_break {
+            self.raise(FaultFlags::HW_OVERCURRENT);
+        }
         let f = self.config.faults;
         let i = self.current.step_mean_a();
         if self
@@ -161,6 +171,18 @@ impl Core {
             .overcurrent(now, i, self.derived.current_limit_a, f.overcurrent_time_us)
         {
             self.raise(FaultFlags::OVERCURRENT);
+        }
+        // The encoder's own sign (before the drive direction) against the duty's: a
+        // reversed or miswired encoder would make the speed loop run away.
+        if self.faults.reversed(
+            now,
+            self.enable,
+            self.duty,
+            self.encoder.speed_rad_s(),
+            self.config.supervisor.stop_speed_rad_s,
+            f.reversed_time_us,
+        ) {
+            self.raise(FaultFlags::REVERSED_ENCODER);
         }
         // The duty of the last step is the one that drove the bridge since then.
         let driven = self.enable && self.duty.abs() > f.stall_duty;
@@ -171,7 +193,7 @@ impl Core {
             // Not turning by the encoder. If the back-EMF implied by V = R i + ke w says
             // the motor does turn, the encoder is lost; otherwise the cam is stalled.
             let m = self.config.motor;
-            let v = self.duty.abs() * self.config.supply_v;
+            let v = self.duty.abs() * self.bus_supply_v();
             let i = self.current.filtered_a().abs();
             let w_implied = (v - m.resistance_ohm * i) / m.ke_cam_v_s_per_rad;
             let w_free = v / m.ke_cam_v_s_per_rad;
@@ -182,6 +204,17 @@ impl Core {
                 FaultFlags::STALL
             };
             self.raise(flag);
+        }
+    }
+
+    /// The bridge supply: the measured bus voltage when the board measures one (and it is
+    /// plausible, above 1 V), the configured `supply_v` otherwise, V.
+    pub(crate) fn bus_supply_v(&self) -> f32 {
+        let v = self.board.bus_voltage_v;
+        if v.is_finite() && v > 1.0 {
+            v
+        } else {
+            self.config.supply_v
         }
     }
 
@@ -230,7 +263,7 @@ impl Core {
     /// Open-loop drive: the voltage ramp is done and two consecutive cam revolutions took
     /// the same time within 2 % (a revolution mean: the cam's speed ripples within a turn).
     fn open_loop_settled(&mut self, now: u64, position: i64) -> bool {
-        let goal = self.open_loop_volts.unwrap_or(0.0) / self.config.supply_v * self.direction();
+        let goal = self.open_loop_volts.unwrap_or(0.0) / self.bus_supply_v() * self.direction();
         let ramp_done = (self.duty - goal).abs() < 1e-3;
         let per_rev = i64::from(self.config.counts_per_rev());
         let (start_pos, start_us, last_period) = self.open_loop_rev;

@@ -134,10 +134,9 @@ impl Core {
         let (step_cycles_mean, step_cycles_max) = self.step_timing.last;
         HealthSample {
             device_time_us: now,
-            // Neither a bus-voltage divider nor a motor thermistor is read yet
-            // (Capabilities::BUS_VOLTAGE and MOTOR_TEMP are not set).
-            bus_voltage_v: f32::NAN,
-            motor_temp_c: f32::NAN,
+            // What the binary measures (BoardInputs); NaN where not fitted.
+            bus_voltage_v: self.board.bus_voltage_v,
+            motor_temp_c: self.board.motor_temp_c,
             step_cycles_mean,
             step_cycles_max,
             rx_frame_errors: self.deframer.stats().errors(),

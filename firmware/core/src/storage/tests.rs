@@ -34,6 +34,20 @@ struct MemFlash {
     data: Vec<u8>,
     steps: usize,
     cut_at: Option<usize>,
+    /// Offsets of program units left half programmed (their ECC does not match).
+    torn: Vec<usize>,
+    /// Reading a torn unit raises a double-ECC error (the STM32G4's NMI), reported through
+    /// [`take_ecc_error`].
+    ecc_on_torn: bool,
+}
+
+std::thread_local! {
+    static ECC_ERROR: core::cell::Cell<bool> = const { core::cell::Cell::new(false) };
+}
+
+/// The test's stand-in for the binary's NMI flag.
+fn take_ecc_error() -> bool {
+    ECC_ERROR.with(|f| f.replace(false))
 }
 
 impl MemFlash {
@@ -42,6 +56,8 @@ impl MemFlash {
             data: vec![0xFF; REGION],
             steps: 0,
             cut_at: None,
+            torn: Vec::new(),
+            ecc_on_torn: false,
         }
     }
 
@@ -51,6 +67,8 @@ impl MemFlash {
             data: self.data.clone(),
             steps: 0,
             cut_at: None,
+            torn: self.torn.clone(),
+            ecc_on_torn: self.ecc_on_torn,
         }
     }
 
@@ -80,6 +98,10 @@ impl ReadNorFlash for MemFlash {
             .get(at..at + bytes.len())
             .ok_or(MemError::OutOfBounds)?;
         bytes.copy_from_slice(src);
+        let end = at + bytes.len();
+        if self.ecc_on_torn && self.torn.iter().any(|&u| u < end && u + WRITE > at) {
+            ECC_ERROR.with(|f| f.set(true));
+        }
         Ok(())
     }
 
@@ -102,7 +124,10 @@ impl NorFlash for MemFlash {
         }
         for page in (from..to).step_by(PAGE) {
             match self.step() {
-                Ok(()) => self.data[page..page + PAGE].fill(0xFF),
+                Ok(()) => {
+                    self.data[page..page + PAGE].fill(0xFF);
+                    self.torn.retain(|&u| u < page || u >= page + PAGE);
+                }
                 Err(cut_here) => {
                     if cut_here {
                         // Half erased: the rest keeps scrambled bits of the old contents.
@@ -138,6 +163,7 @@ impl NorFlash for MemFlash {
                         for (d, &s) in self.data[dst..dst + WRITE].iter_mut().zip(chunk) {
                             *d = s | 0x0F;
                         }
+                        self.torn.push(dst);
                     }
                     return Err(MemError::PowerLost);
                 }
@@ -312,4 +338,55 @@ fn too_small_a_region_refuses() {
         store.save(&calibration(1)),
         Err(StorageError::RegionTooSmall)
     );
+}
+
+#[test]
+fn torn_units_raising_ecc_errors_count_as_corrupt() {
+    // A cut at every program step of the second generation's save, on a chip whose torn
+    // units raise a double-ECC error when read: the torn slot counts as corrupt, and the
+    // other slot's record is used.
+    let mut flash = MemFlash::new();
+    flash.ecc_on_torn = true;
+    let mut store = CalibrationStore::with_ecc_check(flash, take_ecc_error);
+    store.load();
+    store.save(&calibration(1)).unwrap();
+    let flash = store.into_inner();
+    let mut ecc_seen = 0;
+    for cut in 0..15 {
+        let mut trial = flash.rebooted();
+        trial.cut_at = Some(cut);
+        let mut store = CalibrationStore::with_ecc_check(trial, take_ecc_error);
+        store.load();
+        assert!(store.save(&calibration(2)).is_err());
+        let after = store.into_inner();
+        if !after.torn.is_empty() {
+            ecc_seen += 1;
+        }
+        let mut reader = CalibrationStore::with_ecc_check(after.rebooted(), take_ecc_error);
+        let loaded = reader.load();
+        assert_eq!(loaded.status, ParametersStatus::Valid, "cut at {cut}");
+        assert_eq!(loaded.calibration, calibration(1), "cut at {cut}");
+        // A retry rewrites the torn slot (erase first) and wins.
+        reader.save(&calibration(2)).unwrap();
+        let mut again = CalibrationStore::with_ecc_check(reader.into_inner(), take_ecc_error);
+        assert_eq!(again.load().calibration, calibration(2), "cut at {cut}");
+    }
+    // Every program cut (14 of the 15 steps; the first is the erase) left a torn unit.
+    assert_eq!(ecc_seen, 14);
+
+    // Nothing valid anywhere but an unreadable slot: the defaults, flagged invalid.
+    let mut flash = MemFlash::new();
+    flash.ecc_on_torn = true;
+    flash.cut_at = Some(1);
+    let mut store = CalibrationStore::with_ecc_check(flash, take_ecc_error);
+    store.load();
+    assert!(store.save(&calibration(1)).is_err());
+    let mut flash = store.into_inner().rebooted();
+    // Tear the commit marker's unit too, as a cut during it would.
+    let commit_unit = COMMIT_AT;
+    flash.data[commit_unit..commit_unit + 16].copy_from_slice(&COMMIT);
+    flash.torn.push(commit_unit);
+    let loaded = CalibrationStore::with_ecc_check(flash, take_ecc_error).load();
+    assert_eq!(loaded.status, ParametersStatus::Invalid);
+    assert_eq!(loaded.calibration, RigParameters::paper());
 }

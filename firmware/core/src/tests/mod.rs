@@ -40,6 +40,8 @@ pub(crate) struct Rig {
     pub adc_offset: i32,
     /// Report the encoder count frozen at this value (encoder lost).
     pub encoder_frozen: Option<u16>,
+    /// Report the encoder counting backwards (A and B swapped).
+    pub encoder_reversed: bool,
     /// How the "binary" answers a flash write (None: never answers).
     pub persist_answer: Option<bool>,
     /// Parameter records handed out for writing.
@@ -79,6 +81,7 @@ impl Rig {
             button: false,
             adc_offset: 0,
             encoder_frozen: None,
+            encoder_reversed: false,
             persist_answer: Some(true),
             persisted: Vec::new(),
             link_budget: None,
@@ -104,9 +107,12 @@ impl Rig {
 
     /// Steps the core only, with these samples, at the rig's current time.
     pub fn step_with(&mut self, adc: &[u16]) -> Outputs {
-        let encoder_count = self
+        let mut encoder_count = self
             .encoder_frozen
             .unwrap_or_else(|| self.plant.encoder_count());
+        if self.encoder_reversed {
+            encoder_count = encoder_count.wrapping_neg();
+        }
         let out = self.core.step(&Inputs {
             now_us: self.now_us,
             current_adc: adc,

@@ -201,7 +201,8 @@ fn set_calibration_persists_then_activates() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(150);
     let new = RigParameters {
-        c1_nmm_per_a: 60.0,
+        // C1 changed alone stays within C4 = C1 C6 + C2's tolerance (model's check).
+        c1_nmm_per_a: 62.0,
         max_freq_hz: 18.0,
         ..RigParameters::paper()
     };
@@ -259,12 +260,97 @@ fn set_calibration_persists_then_activates() {
 }
 
 #[test]
+fn limits_and_constants_the_host_cannot_lift() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    let rejected = |field, reason| {
+        Err(NackCode::ParametersRejected(ParameterRejection::new(
+            field, reason,
+        )))
+    };
+    // 3.4e38 would switch OVERLOAD off; the gear's teeth hold 3.68 N m.
+    for load in [1e30, 3.4e38, 3.7] {
+        let bad = RigParameters {
+            max_release_load_nm: load,
+            ..RigParameters::paper()
+        };
+        assert_eq!(
+            rig.ack(&Request::SetParameters(bad)),
+            rejected(ParameterField::MaxReleaseLoad, RejectReason::AboveBoardCap),
+            "{load}"
+        );
+    }
+    // A fit 36 times off Table 2 is implausible for the RS-735.
+    let bad = RigParameters {
+        c1_nmm_per_a: 2258.0,
+        ..RigParameters::paper()
+    };
+    assert_eq!(
+        rig.ack(&Request::SetParameters(bad)),
+        rejected(ParameterField::C1, RejectReason::Implausible)
+    );
+    // C3 = C1 C5 (0.235 N mm s/rad) within 10 %.
+    let bad = RigParameters {
+        c3_nmm_s_per_rad: 0.5,
+        ..RigParameters::paper()
+    };
+    assert_eq!(
+        rig.ack(&Request::SetParameters(bad)),
+        rejected(ParameterField::C3, RejectReason::Inconsistent)
+    );
+    rig.step();
+    assert!(rig.persisted.is_empty());
+    // The same rule, the model's, is what the host runs before sending.
+    let bad = RigParameters {
+        max_release_load_nm: 1e30,
+        ..RigParameters::paper()
+    };
+    let config = crate::CoreConfig::default();
+    assert_eq!(
+        crate::check_rules(&bad, &config.board_limits(), &config.motor.constants)
+            .map_err(|r| r.field),
+        Err(ParameterField::MaxReleaseLoad)
+    );
+    // At the caps is fine.
+    let ok = RigParameters {
+        max_release_load_nm: 3.68,
+        max_current_a: 4.8,
+        max_freq_hz: 20.0,
+        ..RigParameters::paper()
+    };
+    let seq = rig.send(&Request::SetParameters(ok));
+    rig.step();
+    assert!(rig.answered(seq, |r| *r == Reply::Ack));
+    assert_eq!(rig.persisted, [ok]);
+}
+
+#[test]
+fn release_off_stops_an_open_loop_drive() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(1200);
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    rig.run_ms_alive(800);
+    assert!(rig.core.status().enabled);
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: false,
+            target_hz: 10.0
+        }),
+        Ok(())
+    );
+    let s = rig.core.status();
+    assert_eq!(s.open_loop_volts, None);
+    assert!(!rig.step().enable, "the bridge is off at the next step");
+    assert!(rig.core.status().latched_faults.is_empty());
+}
+
+#[test]
 fn failed_flash_write_keeps_the_old_calibration() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(150);
     rig.persist_answer = Some(false);
     let new = RigParameters {
-        c1_nmm_per_a: 60.0,
+        c1_nmm_per_a: 62.0,
         ..RigParameters::paper()
     };
     let seq = rig.send(&Request::SetParameters(new));
@@ -719,4 +805,31 @@ fn health_comes_once_a_second_while_telemetry_runs() {
             .iter()
             .any(|m| matches!(m, DeviceMessage::Health(_)))
     );
+}
+
+#[test]
+fn measured_bus_voltage_sets_the_open_loop_duty_and_is_reported() {
+    let mut rig = Rig::new(0.0);
+    rig.core.set_board_inputs(crate::BoardInputs {
+        bus_voltage_v: 10.0,
+        motor_temp_c: 31.5,
+        ..Default::default()
+    });
+    rig.run_ms(1200);
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    rig.run_ms_alive(2500);
+    // duty = volts / Vbus: 0.62 on a 10 V bus, not 6.2 / 12.
+    let s = rig.core.status();
+    assert!((s.duty - 0.62).abs() < 1e-3, "{}", s.duty);
+    assert_eq!(rig.ack(&Request::StartTelemetry { rate_hz: 10 }), Ok(()));
+    rig.run_ms_alive(20);
+    let health = rig
+        .received
+        .iter()
+        .find_map(|m| match m {
+            DeviceMessage::Health(h) => Some(*h),
+            _ => None,
+        })
+        .expect("a health sample");
+    assert_eq!((health.bus_voltage_v, health.motor_temp_c), (10.0, 31.5));
 }

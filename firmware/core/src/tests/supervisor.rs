@@ -222,6 +222,28 @@ fn spin_up_that_never_reaches_speed_cannot_release() {
 }
 
 #[test]
+fn load_above_the_gears_strength_is_load_limit() {
+    // A stored record from before the caps, asking for 1e30 N m: the cap still holds.
+    let cal = RigParameters {
+        max_release_load_nm: 1e30,
+        max_current_a: 4.8,
+        ..RigParameters::paper()
+    };
+    let mut rig = Rig::with(boot_with(cal), 3.95, |_| {});
+    rig.run_ms(150);
+    rig.ack(&release(10.0)).unwrap();
+    rig.run_until(4000, true, |s| s.state == SupervisorState::Fault)
+        .unwrap();
+    assert_eq!(
+        rig.latched(),
+        FaultFlags::LOAD_LIMIT,
+        "{:?}",
+        rig.core.status()
+    );
+    assert!(!rig.step().enable);
+}
+
+#[test]
 fn overload_stops_the_release() {
     let cal = RigParameters {
         max_release_load_nm: 2.0,
@@ -316,5 +338,25 @@ fn load_estimate_tracks_the_plant_across_the_papers_range() {
             "{hz} Hz: {}",
             s.cam_speed_rad_s
         );
+    }
+}
+
+#[test]
+fn the_rig_works_across_the_sensor_supply_tolerance() {
+    // A ratiometric ACS714 on 4.75 V or 5.25 V: the zero moves by 0.7 A-equivalent (the
+    // old +-0.3 A window latched CURRENT_ZERO_RANGE) and the sensitivity by 5 %; the core
+    // reads the supply from the zero, so the load estimate stays within 2 %.
+    for supply in [4.75, 5.25] {
+        let mut rig = Rig::with(BootInfo::default(), 1.84, |p| p.sensors.acs_supply = supply);
+        rig.vibrate(10.0);
+        rig.run_ms_alive(1500);
+        let s = rig.core.status();
+        assert!(
+            s.latched_faults.is_empty(),
+            "{supply} V: {}",
+            s.latched_faults
+        );
+        let err = (f64::from(s.tau_rot_nm) - 1.84) / 1.84;
+        assert!(err.abs() < 0.02, "{supply} V: {} N m", s.tau_rot_nm);
     }
 }
