@@ -64,6 +64,7 @@ STR/STM with SP writeback); at the entry of a block that lowers SP the driver re
 A call's stack is its SP at the begin marker minus the lowest SP seen during it.
 """
 
+from array import array
 import ctypes
 from importlib.metadata import version
 import json
@@ -551,7 +552,7 @@ class Driver:
         while self.stack:
             self._returned()
         stack = sp0 - min(self.sp_low if self.sp_low is not None else sp0, sp0)
-        return self.cycles, self.insns, stack, (self.profile, self.calls), lr, sp0
+        return self.cycles, self.insns, stack, pack(self.profile, self.calls), lr, sp0
 
     def session(self):
         """Runs the image to its end; returns the calls and their profiles."""
@@ -624,14 +625,28 @@ def describe(call):
     return d
 
 
+def pack(blocks, calls):
+    """A call's profile in flat arrays (thousands of calls are kept until the end)."""
+    b = array("q")
+    for a, (c, n) in blocks.items():
+        b.extend((a, c, n))
+    k = array("q")
+    for a, c in calls.items():
+        k.extend((a, c))
+    return b, k
+
+
 def profile_blocks(profile):
     """[[address, cycles, instructions], ...], most cycles first."""
-    return sorted(([a, c, n] for a, (c, n) in profile[0].items()), key=lambda r: -r[1])
+    b = profile[0]
+    rows = [[b[j], b[j + 1], b[j + 2]] for j in range(0, len(b), 3)]
+    return sorted(rows, key=lambda r: -r[1])
 
 
 def profile_calls(profile):
     """[[call address, cycles inside the calls made there], ...], most cycles first."""
-    return sorted(([a, c] for a, c in profile[1].items()), key=lambda r: -r[1])
+    k = profile[1]
+    return sorted(([k[j], k[j + 1]] for j in range(0, len(k), 2)), key=lambda r: -r[1])
 
 
 def summarise(calls, overhead, image_stack, costing, elapsed):
