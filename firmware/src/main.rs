@@ -43,6 +43,8 @@ mod app {
     use core::mem::MaybeUninit;
     use core::sync::atomic::{AtomicU8, Ordering};
 
+    use cortex_m::peripheral::DWT;
+
     use defmt::{error, info, unwrap, warn};
     use embassy_executor::{InterruptExecutor, Spawner};
     use embassy_futures::select::{Either, select};
@@ -59,7 +61,7 @@ mod app {
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use firmware_core::storage::{CalibrationStore, StorageError};
     use firmware_core::{BootInfo, Core, CoreConfig, Inputs, Outputs};
-    use protocol::{Calibration, CalibrationStatus, SupervisorState};
+    use protocol::{ParametersStatus, ResetCause, RigParameters, SupervisorState};
     use {defmt_rtt as _, panic_probe as _};
 
     use crate::board::{self, CalibrationFlash, CamEncoder, CamMotor, CurrentSense, Direction};
@@ -78,7 +80,31 @@ mod app {
     const WATCHDOG_FEED_PERIOD: Duration = Duration::from_millis(100);
 
     /// A calibration the core wants written to flash.
-    static PERSIST: Signal<CriticalSectionRawMutex, Calibration> = Signal::new();
+    static PERSIST: Signal<CriticalSectionRawMutex, RigParameters> = Signal::new();
+
+    /// The build identifier `Info` reports: `RIG_FIRMWARE_BUILD` when the build script
+    /// provides it (the git short hash, `-dirty` for a changed tree), else `unknown`.
+    const BUILD_ID: &str = match option_env!("RIG_FIRMWARE_BUILD") {
+        Some(build) => build,
+        None => BootInfo::UNKNOWN_BUILD,
+    };
+
+    /// The reset flags as the protocol names the cause. The G4 sets BORRSTF at power-on
+    /// as well as after a brown-out, and every internal reset also pulls NRST, so the
+    /// flags are read from the most specific down.
+    fn reset_cause(reset: &board::ResetCause) -> ResetCause {
+        if reset.watchdog {
+            ResetCause::Watchdog
+        } else if reset.software {
+            ResetCause::Software
+        } else if reset.brown_out {
+            ResetCause::PowerOn
+        } else if reset.pin {
+            ResetCause::Pin
+        } else {
+            ResetCause::Other
+        }
+    }
 
     /// Runs the control task above the thread-mode tasks.
     static CONTROL_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
@@ -95,6 +121,12 @@ mod app {
         // Before anything else can reset or clear them.
         let reset = board::ResetCause::take();
         let p = embassy_stm32::init(board::config());
+        // The cycle counter times each control step for the health sample (it reads 0,
+        // "not measured", if the core peripherals were already taken).
+        if let Some(mut cp) = cortex_m::Peripherals::take() {
+            cp.DCB.enable_trace();
+            cp.DWT.enable_cycle_counter();
+        }
         let board::Board {
             motor,
             encoder,
@@ -119,14 +151,15 @@ mod app {
         let mut store = CalibrationStore::new(storage);
         let loaded = store.load();
         match loaded.status {
-            CalibrationStatus::Valid => info!("calibration loaded from flash"),
-            CalibrationStatus::Defaults => info!("no calibration stored: the paper's values"),
+            ParametersStatus::Valid => info!("calibration loaded from flash"),
+            ParametersStatus::Defaults => info!("no calibration stored: the paper's values"),
             _ => error!("stored calibration is invalid: the paper's values, motor locked"),
         }
         let boot = BootInfo {
-            watchdog_reset: reset.watchdog,
-            calibration: loaded.calibration,
-            calibration_status: loaded.status,
+            reset_cause: reset_cause(&reset),
+            firmware_build: BUILD_ID,
+            parameters: loaded.calibration,
+            parameters_status: loaded.status,
         };
         // The core (~43 KiB, mostly the capture buffer) is built straight into its static
         // slot (no stack temporary); the tasks share a reference to it through the mutex.
@@ -186,7 +219,13 @@ mod app {
                 encoder_count: encoder.count(),
                 release_button: button.is_held(),
             };
-            let out = core.lock(|c| c.borrow_mut().step(&inputs));
+            let out = core.lock(|c| {
+                let mut c = c.borrow_mut();
+                let start = DWT::cycle_count();
+                let out = c.step(&inputs);
+                c.record_step_cycles(DWT::cycle_count().wrapping_sub(start));
+                out
+            });
             drive(&mut motor, &out, full_scale);
             if let Some(calibration) = out.persist {
                 PERSIST.signal(calibration);
@@ -245,7 +284,7 @@ mod app {
     }
 
     /// Writes calibrations to flash (blocking; only while the motor is off, as the core
-    /// refuses `SetCalibration` otherwise) and reports the outcome to the core.
+    /// refuses `SetParameters` otherwise) and reports the outcome to the core.
     #[embassy_executor::task]
     async fn persist(core: &'static SharedCore, mut store: CalibrationStore<CalibrationFlash>) {
         loop {
@@ -268,14 +307,14 @@ mod app {
     async fn status_led(core: &'static SharedCore, mut led: Output<'static>) {
         let mut ticker = Ticker::every(Duration::from_millis(100));
         let mut tick = 0u32;
-        let mut last = (SupervisorState::Locked, 0u16);
+        let mut last = (SupervisorState::Locked, 0u32);
         loop {
             let (state, faults) = core.lock(|c| {
                 let s = c.borrow().status();
                 (s.state, s.latched_faults.bits())
             });
             if (state, faults) != last {
-                info!("supervisor: {} (faults {:#06x})", state.name(), faults);
+                info!("supervisor: {} (faults {:#010x})", state.name(), faults);
                 last = (state, faults);
             }
             let on = match state {

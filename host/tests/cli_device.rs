@@ -3,6 +3,7 @@
 //! real time.
 
 use std::borrow::BorrowMut;
+use std::path::Path;
 use std::time::Duration;
 
 use assert_cmd::Command;
@@ -101,7 +102,8 @@ fn info_json_has_the_contract_keys() {
     assert_eq!(v["sim"], true);
     let text = stdout_of(sim(&["info"]));
     assert!(
-        text.contains("firmware") && text.contains("protocol   v1"),
+        text.contains("firmware")
+            && text.contains(&format!("protocol   v{}", protocol::PROTOCOL_VERSION)),
         "{text}"
     );
 }
@@ -267,7 +269,27 @@ fn calibrate_reproduces_table2() {
     assert_eq!(v["consistency"]["agree"], true);
     assert!(v["torque_fit"]["r_squared"].as_f64().unwrap() > 0.999);
     assert!(v["no_load_fit"]["r_squared"].as_f64().unwrap() > 0.99);
-    let out = dir.path().join("calibration");
+    // The default folder is under report/, named by the time.
+    let folders: Vec<_> = std::fs::read_dir(dir.path().join("report"))
+        .expect("rig calibrate wrote under report/")
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(folders.len(), 1, "{folders:?}");
+    let out = folders[0].clone();
+    let name = out.file_name().unwrap().to_string_lossy().into_owned();
+    assert!(
+        name.starts_with("calibrate-") && name.ends_with('Z'),
+        "{name}"
+    );
+    assert!(!dir.path().join("calibration").exists());
+    assert_eq!(
+        v["files"]["calibration"].as_str().unwrap(),
+        Path::new("report")
+            .join(&name)
+            .join("calibration.toml")
+            .to_str()
+            .unwrap()
+    );
     for f in [
         "calibration.toml",
         "torque_current.svg",
@@ -295,9 +317,11 @@ fn calibrate_dry_run_writes_nothing_and_takes_gauge_readings_from_csv() {
     let dir = tempfile::tempdir().unwrap();
     // The paper's torque line at the currents a blocked RS-735 draws (V / 0.44 ohm).
     let mut gauge = String::from("volts,gauge_nmm\n");
+    let [c1, c2, ..] = model::paper::TABLE2;
+    let ohm = model::hardware::rs735::RESISTANCE_OHM;
     for k in 0..9 {
         let volts = 1.05 + 0.1 * f64::from(k);
-        gauge.push_str(&format!("{volts:.2},{:.3}\n", 62.1 * volts / 0.44 - 138.0));
+        gauge.push_str(&format!("{volts:.2},{:.3}\n", c1 * volts / ohm + c2));
     }
     let path = dir.path().join("gauge.csv");
     std::fs::write(&path, gauge).unwrap();
@@ -315,6 +339,7 @@ fn calibrate_dry_run_writes_nothing_and_takes_gauge_readings_from_csv() {
     assert_eq!(v["written_to_device"], false);
     assert!(v["files"].is_null());
     assert!(!dir.path().join("calibration").exists());
+    assert!(!dir.path().join("report").exists());
     let c1 = v["c1"].as_f64().unwrap();
     assert!((c1 / 62.1 - 1.0).abs() < 0.05, "{c1}");
     let text = stdout_of(sim(&["calibrate", "--dry-run"]).current_dir(dir.path()));
@@ -327,10 +352,11 @@ fn calibration_get_and_set_round_trip() {
     let file = dir.path().join("cal.toml");
     let text = stdout_of(sim(&["calibration", "get", file.to_str().unwrap()]));
     assert!(text.contains("wrote"), "{text}");
+    // A rig file: C1 in [calibration] in the paper's units.
     let toml = std::fs::read_to_string(&file).unwrap();
-    assert!(toml.contains("c1_nmm_per_a = 62.1"), "{toml}");
+    assert!(toml.contains("[calibration]\nc1 = 62.1\n"), "{toml}");
     let printed = stdout_of(sim(&["calibration", "get"]));
-    assert!(printed.contains("c6_a = 2.25"));
+    assert!(printed.contains("c6 = 2.25"), "{printed}");
     let v = json_of(sim(&["calibration", "get", "--json"]));
     assert!((v["c1_nmm_per_a"].as_f64().unwrap() - 62.1).abs() < 1e-4);
     // Unchanged: nothing to write.

@@ -107,16 +107,16 @@ mod tests {
         let g = GearSet::paper(z).unwrap();
         OutputShaft::new(
             &g,
-            1e-3,
-            crate::I_HAT_PAPER,
-            crate::MU_S_PAPER,
-            crate::MU_D_PAPER,
+            crate::paper::ECCENTRICITY,
+            crate::paper::I_HAT,
+            crate::paper::MU_S,
+            crate::paper::MU_D,
         )
     }
 
     #[test]
     fn n1_holds_its_load_without_vibration() {
-        let s = shaft([50, 50, 51, 49]);
+        let s = shaft(crate::paper::FIG5_Z);
         assert!(s.holds_at_rest());
         assert_eq!(s.acceleration(0.736, 0.0, 0.0), 0.0);
         assert_eq!(s.acceleration(-3.68, 0.0, 0.0), 0.0);
@@ -124,18 +124,19 @@ mod tests {
 
     #[test]
     fn n2_backdrives_without_vibration() {
-        let s = shaft([52, 48, 50, 50]);
+        let s = shaft(crate::paper::TABLE1[3]);
         assert!(!s.holds_at_rest());
-        let a = s.acceleration(3.68, 0.0, 0.0);
-        let expected = 3.68 * (1.0 - 0.271 * s.big_lambda) / crate::I_HAT_PAPER;
+        let tau = crate::paper::TAU_ROT_MAX;
+        let a = s.acceleration(tau, 0.0, 0.0);
+        let expected = tau * (1.0 - crate::paper::MU_S * s.big_lambda) / crate::paper::I_HAT;
         assert!((a - expected).abs() < 1e-12);
     }
 
     #[test]
     fn vibration_releases_a_held_load() {
-        let s = shaft([50, 50, 51, 49]);
+        let s = shaft(crate::paper::FIG5_Z);
         let a = s.acceleration(0.736, 0.0, 2.0 * core::f64::consts::PI * 5.0);
-        assert!((a - 0.736 / crate::I_HAT_PAPER).abs() < 1e-12);
+        assert!((a - 0.736 / crate::paper::I_HAT).abs() < 1e-12);
         // While moving slowly under vibration the radial friction is a small fraction of mu.
         let f = s.radial_friction(0.174, 0.01, 31.4);
         assert!(f < 0.174 * 0.1, "{f}");
@@ -144,10 +145,10 @@ mod tests {
     #[test]
     fn motion_after_vibration_stops_follows_mu_d_lambda() {
         // n = 1: mu_d Lambda = 0.858 < 1, the paper saw the load keep falling.
-        let s = shaft([50, 50, 51, 49]);
+        let s = shaft(crate::paper::FIG5_Z);
         assert!(s.keeps_moving_after_stop());
         let a = s.acceleration(0.736, 0.5, 0.0);
-        let expected = 0.736 * (1.0 - 0.174 * s.big_lambda) / crate::I_HAT_PAPER;
+        let expected = 0.736 * (1.0 - crate::paper::MU_D * s.big_lambda) / crate::paper::I_HAT;
         assert!((a - expected).abs() < 1e-12 && a > 0.0);
     }
 }

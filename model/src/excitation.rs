@@ -23,8 +23,8 @@ impl CamDrive {
     pub fn paper(gear: GearSet) -> Self {
         Self {
             gear,
-            eccentricity: crate::ECCENTRICITY_PAPER,
-            carrier_mass: crate::CARRIER_MASS_PAPER,
+            eccentricity: crate::paper::ECCENTRICITY,
+            carrier_mass: crate::paper::CARRIER_MASS,
         }
     }
 
@@ -76,7 +76,7 @@ mod tests {
     use super::*;
 
     fn drive() -> CamDrive {
-        CamDrive::paper(GearSet::paper([49, 51, 50, 50]).unwrap())
+        CamDrive::paper(crate::paper::RIG_GEARS)
     }
 
     #[test]
@@ -84,7 +84,7 @@ mod tests {
         // 4 * 0.271 * 3.68 * (1 + 50/51) * 1e-3 / (pi * 1e-3 * 50 * cos 20deg) = 53.5 N mm,
         // plus 3.82 * (2 pi 5)^2 * 1e-6 / pi = 1.20 N mm at 5 Hz.
         let w = 2.0 * PI * 5.0;
-        let tau = drive().required_cam_torque(0.271, 3.68, w);
+        let tau = drive().required_cam_torque(crate::paper::MU_S, crate::paper::TAU_ROT_MAX, w);
         assert!(
             (tau * 1e3 - (53.52 + 1.200)).abs() < 0.05,
             "{} N mm",
@@ -126,8 +126,9 @@ mod tests {
         for tau_rot in [0.368, 1.0, 3.68] {
             for hz in [5.0, 10.0, 15.0] {
                 let w = 2.0 * PI * hz;
-                let tau_cam = d.required_cam_torque(0.271, tau_rot, w);
-                let back = d.load_from_cam_torque(0.271, tau_cam, w);
+                let mu = crate::paper::MU_S;
+                let tau_cam = d.required_cam_torque(mu, tau_rot, w);
+                let back = d.load_from_cam_torque(mu, tau_cam, w);
                 assert!((back - tau_rot).abs() < 1e-9);
             }
         }
@@ -137,8 +138,10 @@ mod tests {
     fn excitation_force_peak_is_friction_plus_inertia() {
         let d = drive();
         let w = 2.0 * PI * 10.0;
-        let f0 = d.excitation_force(0.271, 3.68, w, 0.0);
-        let expected = d.friction_force(0.271, 3.68) + 3.82 * w * w * 1e-3;
+        let (mu, tau) = (crate::paper::MU_S, crate::paper::TAU_ROT_MAX);
+        let f0 = d.excitation_force(mu, tau, w, 0.0);
+        let expected =
+            d.friction_force(mu, tau) + crate::paper::CARRIER_MASS * w * w * d.eccentricity;
         assert!((f0 - expected).abs() < 1e-9);
     }
 }

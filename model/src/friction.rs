@@ -44,15 +44,17 @@ pub fn eta_gross_from_masses(gear: &GearSet, m_out: f64, r_out: f64, m_in: f64, 
 mod tests {
     use super::*;
 
+    use crate::paper;
+
     fn gear_50_49() -> GearSet {
-        GearSet::paper([50, 50, 51, 49]).unwrap()
+        paper::FIG5_GEARS
     }
 
     #[test]
     fn paper_friction_coefficients_from_eta_gross() {
         let g = gear_50_49();
-        let mu_s = mu_from_eta_gross(&g, 0.423);
-        let mu_d = mu_from_eta_gross(&g, 0.533);
+        let mu_s = mu_from_eta_gross(&g, paper::ETA_GROSS_STATIC);
+        let mu_d = mu_from_eta_gross(&g, paper::ETA_GROSS_DYNAMIC);
         assert!((mu_s - 0.271).abs() < 0.001, "mu_s {mu_s}");
         assert!((mu_d - 0.174).abs() < 0.001, "mu_d {mu_d}");
         // rig-facts quotes four digits.
@@ -61,7 +63,7 @@ mod tests {
 
     #[test]
     fn eq12_inverts_eq11_to_first_order() {
-        for z in crate::TABLE1 {
+        for z in crate::paper::TABLE1 {
             let g = GearSet::paper(z).unwrap();
             for mu in [0.02, 0.05, 0.1] {
                 let back = mu_from_eta_gross(&g, eta_gross(&g, mu));
@@ -81,8 +83,9 @@ mod tests {
     fn weight_test_gives_the_efficiency() {
         let g = gear_50_49();
         // 3.0 kg on 75 mm lifted at eta 0.423 needs m_in = 3 * 0.075 / (24.5 * 0.423 * 0.1).
-        let m_in = 3.0 * 0.075 / (24.5 * 0.423 * 0.100);
-        let eta = eta_gross_from_masses(&g, 3.0, 0.075, m_in, 0.100);
+        let (r_in, r_out) = (paper::R_IN, paper::R_OUT);
+        let m_in = 3.0 * r_out / (24.5 * 0.423 * r_in);
+        let eta = eta_gross_from_masses(&g, 3.0, r_out, m_in, r_in);
         assert!((eta - 0.423).abs() < 1e-9);
     }
 }

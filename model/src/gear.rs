@@ -66,28 +66,21 @@ pub struct GearSet {
     pressure_angle: f64,
 }
 
-/// The paper's Table 1 gear sets `[Z1, Z2, Z3, Z4]`, in the table's order.
-pub const TABLE1: [[u32; 4]; 6] = [
-    [49, 51, 50, 50],
-    [50, 50, 51, 49],
-    [50, 50, 48, 52],
-    [52, 48, 50, 50],
-    [49, 51, 48, 52],
-    [52, 48, 51, 49],
-];
-
 impl GearSet {
-    /// Module of the paper's gears, m.
-    pub const MODULE_PAPER: f64 = 1.0e-3;
-    /// Pressure angle of standard gears, rad (20 degrees).
-    pub const PRESSURE_ANGLE_STANDARD: f64 = 20.0 * PI / 180.0;
+    /// Module of the paper's gears, m ([`crate::paper::MODULE`]).
+    pub const MODULE_PAPER: f64 = crate::paper::MODULE;
+    /// Pressure angle of standard gears, rad (20 degrees, [`crate::paper::PRESSURE_ANGLE`]).
+    pub const PRESSURE_ANGLE_STANDARD: f64 = crate::paper::PRESSURE_ANGLE;
 
     /// A gear set with tooth counts `z = [Z1, Z2, Z3, Z4]`, module in m and pressure angle in rad.
-    pub fn new(z: [u32; 4], module: f64, pressure_angle: f64) -> Result<Self, GearError> {
-        for (i, &zi) in z.iter().enumerate() {
-            if zi == 0 {
+    pub const fn new(z: [u32; 4], module: f64, pressure_angle: f64) -> Result<Self, GearError> {
+        let mut i = 0;
+        while i < 4 {
+            if z[i] == 0 {
+                #[allow(clippy::cast_possible_truncation, reason = "i < 4")]
                 return Err(GearError::ZeroTeeth { gear: i as u8 + 1 });
             }
+            i += 1;
         }
         if z[0] == z[3] {
             return Err(GearError::NoToothDifference);
@@ -110,7 +103,7 @@ impl GearSet {
     }
 
     /// The paper's gears: module 1 mm, pressure angle 20 degrees.
-    pub fn paper(z: [u32; 4]) -> Result<Self, GearError> {
+    pub const fn paper(z: [u32; 4]) -> Result<Self, GearError> {
         Self::new(z, Self::MODULE_PAPER, Self::PRESSURE_ANGLE_STANDARD)
     }
 
@@ -228,6 +221,7 @@ impl GearSet {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::paper::{self, TABLE1};
 
     /// Table 1 of the paper: z, rho, mu_s Lambda (mu_s = 0.271), non-backdriven point.
     const TABLE1_EXPECTED: [([u32; 4], f64, f64, bool); 6] = [
@@ -244,9 +238,9 @@ mod tests {
         for (z, rho, mu_lambda, holds) in TABLE1_EXPECTED {
             let g = GearSet::paper(z).unwrap();
             assert!((g.rho() - rho).abs() < 0.01, "{z:?}: rho {}", g.rho());
-            let ml = crate::MU_S_PAPER * g.big_lambda();
+            let ml = paper::MU_S * g.big_lambda();
             assert!((ml - mu_lambda).abs() < 0.001, "{z:?}: mu_s Lambda {ml}");
-            assert_eq!(g.holds(crate::MU_S_PAPER), holds, "{z:?}");
+            assert_eq!(g.holds(paper::MU_S), holds, "{z:?}");
         }
         assert_eq!(TABLE1.map(|z| z), TABLE1_EXPECTED.map(|r| r.0));
     }
@@ -256,17 +250,13 @@ mod tests {
         // Path of approach of a standard 20-degree gear pair with one addendum: for Z = 50,
         // (sqrt(52^2 - (50 cos a)^2) - 50 sin a) / (2 pi cos a) = 0.8773
         // (hand calculation: sqrt(2704 - 2207.555) = 22.281, 22.281 / 46.985 - 0.36397 = 0.11025, x 50 / 2 pi).
-        let g = GearSet::paper([50, 50, 51, 49]).unwrap();
+        let g = paper::FIG5_GEARS;
         assert!(
             (g.contact_ratio(1) - 0.8773).abs() < 1e-4,
             "{}",
             g.contact_ratio(1)
         );
-        let sum: f64 = GearSet::paper([49, 51, 50, 50])
-            .unwrap()
-            .contact_ratios()
-            .iter()
-            .sum();
+        let sum: f64 = paper::RIG_GEARS.contact_ratios().iter().sum();
         assert!(
             sum > 3.4 && sum < 3.7,
             "total contact ratio of two meshes ~1.7 each: {sum}"
@@ -275,8 +265,8 @@ mod tests {
 
     #[test]
     fn lambda_scales_with_one_over_n() {
-        let n1 = GearSet::paper([50, 50, 51, 49]).unwrap().big_lambda();
-        let n2 = GearSet::paper([52, 48, 50, 50]).unwrap().big_lambda();
+        let n1 = paper::FIG5_GEARS.big_lambda();
+        let n2 = GearSet::paper(TABLE1[3]).unwrap().big_lambda();
         assert!((n1 / n2 - 2.0).abs() < 0.01);
     }
 
@@ -298,22 +288,22 @@ mod tests {
             })
         );
         assert_eq!(
-            GearSet::new([49, 51, 50, 50], -1.0, 0.3),
+            GearSet::new(paper::RIG_Z, -1.0, 0.3),
             Err(GearError::BadModule)
         );
         assert_eq!(
-            GearSet::new([49, 51, 50, 50], 1e-3, 1.0),
+            GearSet::new(paper::RIG_Z, 1e-3, 1.0),
             Err(GearError::BadPressureAngle)
         );
     }
 
     #[test]
     fn slip_distance_and_small_lambda_are_consistent_with_eq41() {
-        let g = GearSet::paper([49, 51, 50, 50]).unwrap();
-        let e = crate::ECCENTRICITY_PAPER;
+        let g = paper::RIG_GEARS;
+        let e = paper::ECCENTRICITY;
         // Eq. (41) middle form: lambda = v_ax |w_t| / (v_rad |w_n|) with Eqs. (37), (38).
         let v_ax_per_wn = 2.0 * e / PI;
-        let (z1, z2, z3, z4) = (49.0, 51.0, 50.0, 50.0);
+        let [z1, z2, z3, z4] = g.z().map(f64::from);
         let v_rad_per_wt =
             g.p() * (z4 / z3 + z2 * z4 / (2.0 * z1 * z3) + 0.5) * (g.rho() - 1.0).abs();
         let lambda = v_ax_per_wn / v_rad_per_wt;
@@ -325,14 +315,14 @@ mod tests {
     #[test]
     fn mesh_efficiency_is_high_for_a_single_pair() {
         // The paper notes eta_ij >= 0.9 for one pair.
-        let g = GearSet::paper([50, 50, 51, 49]).unwrap();
-        let eta = g.mesh_efficiency(1, 2, crate::MU_S_PAPER);
+        let g = paper::FIG5_GEARS;
+        let eta = g.mesh_efficiency(1, 2, paper::MU_S);
         assert!(eta > 0.9 && eta < 1.0, "{eta}");
     }
 
     #[test]
     fn equivalent_inertia_of_eq7() {
-        let g = GearSet::paper([49, 51, 50, 50]).unwrap();
+        let g = paper::RIG_GEARS;
         let only_output = crate::Inertias {
             i1: 0.0,
             m23: 0.0,

@@ -6,7 +6,25 @@
 //! [`calibration`] and at the edges of the host tools.
 //!
 //! `no_std` + `libm`, so the firmware runs exactly the code the host and the tests use.
+//!
+//! One home for each fact:
+//!
+//! - [`paper`]: the paper's numbers (Tables 1 and 2, mu_s, mu_d, e, M_hat, I_hat, L, the
+//!   test conditions, Fig. 5's load);
+//! - [`hardware`]: the rig's hardware constants (RS-735, ACS714 and its divider, ADC,
+//!   AMT102, the board);
+//! - [`effects`]: every effect law beyond the paper, the table describing them
+//!   ([`effects::EFFECTS`]) and the augmented current model;
+//! - [`calibration`]: C1-C6 in SI, their plausibility ([`Calibration::check`]) and the
+//!   board's caps ([`BoardLimits`]).
 #![cfg_attr(not(test), no_std)]
+// No silent numeric narrowing on the target: every cast that can truncate, lose a sign or
+// wrap is written so it cannot, or carries an `allow` with its reason.
+#![deny(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap
+)]
 
 pub mod calibration;
 pub mod dynamics;
@@ -14,28 +32,27 @@ pub mod effects;
 pub mod excitation;
 pub mod friction;
 pub mod gear;
+pub mod hardware;
 mod math;
+pub mod paper;
 pub mod plant;
 
-pub use calibration::{Calibration, CalibrationConsistency};
+pub use calibration::{
+    BoardLimits, Calibration, CalibrationConsistency, CalibrationField, CalibrationIssue,
+    LimitIssue,
+};
 pub use dynamics::{Inertias, OutputShaft};
 pub use excitation::CamDrive;
-pub use gear::{GearError, GearSet, TABLE1};
+pub use gear::{GearError, GearSet};
+pub use hardware::MotorConstants;
+pub use paper::TABLE1;
 
 /// Standard gravity, m/s^2.
 pub const G: f64 = 9.80665;
 
-/// Static friction coefficient of the paper's gears (from eta_gross = 0.423).
-pub const MU_S_PAPER: f64 = 0.271;
-/// Dynamic friction coefficient of the paper's gears (from eta_gross = 0.533).
-pub const MU_D_PAPER: f64 = 0.174;
-/// Cam eccentricity (vibration amplitude) of the paper's rig, m.
-pub const ECCENTRICITY_PAPER: f64 = 1.0e-3;
-/// Carrier mass M_hat = M1 + M23 of the paper's rig, kg.
-pub const CARRIER_MASS_PAPER: f64 = 3.82;
-/// Equivalent output inertia I_hat of the paper's (49, 50) rig from CAD, kg m^2.
-pub const I_HAT_PAPER: f64 = 2.79;
-/// Carrier radius L of the paper's rig, m.
-pub const CARRIER_RADIUS_PAPER: f64 = 0.100;
-/// Largest load torque on the output the paper's gear teeth take, N m.
-pub const TAU_ROT_MAX_PAPER: f64 = 3.68;
+// The paper's constants under their older names; their one home is [`paper`].
+pub use paper::{
+    CARRIER_MASS as CARRIER_MASS_PAPER, CARRIER_RADIUS as CARRIER_RADIUS_PAPER,
+    ECCENTRICITY as ECCENTRICITY_PAPER, I_HAT as I_HAT_PAPER, MU_D as MU_D_PAPER,
+    MU_S as MU_S_PAPER, TAU_ROT_MAX as TAU_ROT_MAX_PAPER,
+};

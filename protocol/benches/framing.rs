@@ -22,6 +22,8 @@ fn telemetry() -> DeviceMessage {
         state: SupervisorState::Vibrating,
         faults: FaultFlags::empty(),
         status: StatusFlags::HOST_RELEASE,
+        output_angle_rad: 0.31,
+        output_speed_rad_s: 0.0,
     })
 }
 

@@ -1,8 +1,10 @@
 //! Project automation. `cargo xtask test` runs every check CI runs:
 //! installs the thumb target when missing, cross-builds the firmware and prints its flash
 //! and RAM use, checks `model` and `protocol` for the target, then fmt, clippy (warnings
-//! denied) and every host test. `cargo xtask target-bench` counts the control core's
-//! cycles in an emulated Cortex-M4F (see `target_bench`).
+//! denied), docs (warnings denied), every host test, and a 10 s smoke run of each fuzz target
+//! in `fuzz/` when a nightly toolchain and cargo-fuzz are installed. `cargo xtask
+//! target-bench` counts the control core's cycles in an emulated Cortex-M4F (see
+//! `target_bench`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -23,10 +25,11 @@ fn main() -> ExitCode {
         Some("test") => test(),
         Some("firmware") => firmware().map(|_| ()),
         Some("setup") => setup(),
+        Some("fuzz") => fuzz_smoke(),
         Some("target-bench") => target_bench(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, tests)\n  firmware      cross-build the release firmware and print its flash/RAM use\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]"
+                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]"
             );
             Err("no task given".into())
         }
@@ -243,5 +246,62 @@ fn test() -> Result {
         let mut c = cargo();
         c.args(["test", "--workspace"]);
         c
-    })
+    })?;
+    fuzz_smoke()
+}
+
+/// The fuzz targets in `fuzz/`, one per decoder.
+const FUZZ_TARGETS: [&str; 4] = ["frame", "flash_record", "rig_file", "measured_csv"];
+/// How long the smoke run fuzzes each target, s.
+const FUZZ_SECONDS: u32 = 10;
+
+/// `cargo` through the rustup proxy (so `+nightly` works), without the variables the outer
+/// stable cargo set for this process (`$CARGO` names the stable binary itself).
+fn rustup_cargo() -> Command {
+    let mut c = Command::new("cargo");
+    c.current_dir(root());
+    for var in [
+        "CARGO",
+        "RUSTUP_TOOLCHAIN",
+        "RUSTC",
+        "RUSTDOC",
+        "CARGO_TARGET_DIR",
+    ] {
+        c.env_remove(var);
+    }
+    c
+}
+
+/// A short run of every fuzz target (`cargo +nightly fuzz`), when a nightly toolchain and
+/// cargo-fuzz are installed; CI without them skips it.
+fn fuzz_smoke() -> Result {
+    let works = |args: &[&str]| {
+        rustup_cargo()
+            .args(args)
+            .output()
+            .map(|o| o.status.success())
+            .unwrap_or(false)
+    };
+    if !(works(&["+nightly", "--version"]) && works(&["+nightly", "fuzz", "--version"])) {
+        println!("fuzz smoke: skipped (no nightly toolchain / cargo-fuzz)");
+        return Ok(());
+    }
+    for target in FUZZ_TARGETS {
+        // New inputs go to the (ignored) corpus folder; the checked-in seeds are read only.
+        let corpus = root().join("fuzz").join("corpus").join(target);
+        std::fs::create_dir_all(&corpus)
+            .map_err(|e| format!("cannot create {}: {e}", corpus.display()))?;
+        run(&format!("fuzz smoke: {target}, {FUZZ_SECONDS} s"), {
+            let mut c = rustup_cargo();
+            c.args(["+nightly", "fuzz", "run", "-O", target]);
+            c.arg(&corpus);
+            let seeds = root().join("fuzz").join("seeds").join(target);
+            if seeds.is_dir() {
+                c.arg(seeds);
+            }
+            c.args(["--", &format!("-max_total_time={FUZZ_SECONDS}")]);
+            c
+        })?;
+    }
+    Ok(())
 }

@@ -87,7 +87,7 @@ PHASES = {1: "locked", 2: "spin_up", 3: "vibrating", 4: "capture", 5: "stopping"
 TYPICAL_PHASES = ("locked", "spin_up", "vibrating", "capture")
 STATES = {0: "locked", 1: "spin_up", 2: "vibrating", 3: "stopping", 4: "fault"}
 REQUESTS = {1: "Hello", 2: "StartTelemetry", 3: "Release", 4: "Heartbeat", 5: "StartCapture",
-            6: "SetCalibration"}
+            6: "SetParameters"}
 FAILURES = {
     1: "a fault latched (fault bits {detail:#x})",
     2: "the supervisor did not reach Vibrating in time (target {detail} Hz)",

@@ -7,8 +7,8 @@ use firmware_core::{BootInfo, Core, CoreConfig, Inputs, Outputs};
 use model::GearSet;
 use model::plant::{Drive, Load, Plant, PlantParams};
 use protocol::{
-    Calibration, CalibrationStatus, MAX_REQUEST_FRAME_SIZE, PROTOCOL_VERSION, Request, SCHEMA_HASH,
-    SupervisorState,
+    MAX_REQUEST_FRAME_SIZE, PROTOCOL_VERSION, ParametersStatus, Request, ResetCause, RigParameters,
+    SCHEMA_HASH, SupervisorState,
 };
 
 /// Marker codes, read by the emulator driver from `r0` (keep in step with `driver.py`).
@@ -336,10 +336,10 @@ fn session(b: &mut Bench) -> Result<(), Failed> {
     b.until_state(SupervisorState::Locked, 3000)?;
     b.run_ms(100)?;
 
-    let mut calibration = Calibration::paper();
+    let mut calibration = RigParameters::paper();
     calibration.z = GEAR.map(|z| z as u16);
     b.request(
-        &Request::SetCalibration(calibration),
+        &Request::SetParameters(calibration),
         request_kind::SET_CALIBRATION,
     )?;
     b.run_ms(10)?;
@@ -352,12 +352,13 @@ fn session(b: &mut Bench) -> Result<(), Failed> {
 #[entry]
 fn main() -> ! {
     measured_empty();
-    let mut calibration = Calibration::paper();
-    calibration.z = GEAR.map(|z| z as u16);
+    let mut parameters = RigParameters::paper();
+    parameters.z = GEAR.map(|z| z as u16);
     let boot = BootInfo {
-        watchdog_reset: false,
-        calibration,
-        calibration_status: CalibrationStatus::Valid,
+        reset_cause: ResetCause::PowerOn,
+        firmware_build: BootInfo::UNKNOWN_BUILD,
+        parameters,
+        parameters_status: ParametersStatus::Valid,
     };
     // As the firmware does: the core (~43 KiB) straight into a static slot.
     let slot = cortex_m::singleton!(: MaybeUninit<Core> = MaybeUninit::uninit());

@@ -27,15 +27,15 @@
 //!
 //! # Safety policy
 //! The motor runs only in `SpinUp` and `Vibrating`, only while a release is live (a host
-//! `Release` kept alive by any request within `comms_timeout_us`, or the held button),
-//! and never while a fault is latched. Faults latch until `ClearFaults`, which clears
+//! `Release` kept alive by any accepted request within `comms_timeout_us`, or the held
+//! button), and never while a fault is latched. Faults latch until `ClearFaults`, which clears
 //! only those whose condition is gone; for `fault_hold_us` after a fault every request
 //! other than `Hello`, `GetInfo`, `GetFaults` and `ClearFaults` is refused.
 //!
 //! # Memory
 //! [`Core`] holds the capture buffer ([`CAPTURE_CAPACITY`] samples of 4 bytes, 40 000
 //! bytes, 1.0 s at 10 kHz) and is 43 000 bytes in all on the target; the release image
-//! uses ~45 KiB of static RAM and ~60.5 KiB of flash (`cargo xtask firmware`). Build it
+//! uses ~45 KiB of static RAM and ~63.2 KiB of flash (`cargo xtask firmware`). Build it
 //! in place (`MaybeUninit::write(Core::new(..))` into a static slot, as the binary does)
 //! rather than on the stack.
 #![cfg_attr(not(test), no_std)]

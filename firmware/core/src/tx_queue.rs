@@ -5,7 +5,8 @@
 //! leaves [`REPLY_RESERVE`] free, capture chunks also stop at [`CAPTURE_IN_FLIGHT`] bytes
 //! queued so telemetry and replies wait behind at most that much.
 
-use protocol::{DeviceMessage, MAX_DEVICE_FRAME_SIZE, encode_frame};
+use protocol::{MAX_DEVICE_FRAME_SIZE, encode_frame};
+use serde::Serialize;
 
 /// Queue size, bytes.
 pub const TX_QUEUE_LEN: usize = 1024;
@@ -58,8 +59,9 @@ impl TxQueue {
         self.dropped
     }
 
-    /// Encodes `msg` and queues it if it fits with `reserve` bytes to spare.
-    pub fn push(&mut self, msg: &DeviceMessage, reserve: usize) -> bool {
+    /// Encodes `msg` (a [`protocol::DeviceMessage`], or a legacy message such as
+    /// [`protocol::LegacyV1Nack`]) and queues it if it fits with `reserve` bytes to spare.
+    pub fn push<M: Serialize + ?Sized>(&mut self, msg: &M, reserve: usize) -> bool {
         let seq = self.next_seq;
         self.next_seq = self.next_seq.wrapping_add(1);
         let mut scratch = [0u8; MAX_DEVICE_FRAME_SIZE];
@@ -100,7 +102,7 @@ impl Default for TxQueue {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::{DeviceDeframer, Frame};
+    use protocol::{DeviceDeframer, DeviceMessage, Frame};
 
     #[test]
     fn frames_wrap_around_and_decode_in_order() {
@@ -109,7 +111,7 @@ mod tests {
         let mut got = Vec::new();
         let mut out = [0u8; 7];
         for round in 0..200u16 {
-            assert!(q.push(&DeviceMessage::Ack { seq: round }, 0));
+            assert!(q.push(&DeviceMessage::ack(round), 0));
             while q.len() > 20 {
                 let n = q.drain(&mut out);
                 d.push(&out[..n], |f| got.push(f.unwrap()));
@@ -122,7 +124,7 @@ mod tests {
         assert_eq!(got.len(), 200);
         for (k, Frame { seq, msg }) in got.into_iter().enumerate() {
             assert_eq!(seq, k as u16);
-            assert_eq!(msg, DeviceMessage::Ack { seq: k as u16 });
+            assert_eq!(msg, DeviceMessage::ack(k as u16));
         }
     }
 
@@ -130,7 +132,7 @@ mod tests {
     fn full_queue_drops_whole_frames_and_skips_their_seq() {
         let mut q = TxQueue::new();
         let mut pushed = 0;
-        while q.push(&DeviceMessage::Ack { seq: 1 }, 0) {
+        while q.push(&DeviceMessage::ack(1), 0) {
             pushed += 1;
         }
         assert_eq!(q.dropped(), 1);
@@ -141,7 +143,7 @@ mod tests {
         let mut seqs = Vec::new();
         d.push(&out[..n], |f| seqs.push(f.unwrap().seq));
         assert_eq!(seqs.len(), pushed);
-        assert!(q.push(&DeviceMessage::Ack { seq: 1 }, 0));
+        assert!(q.push(&DeviceMessage::ack(1), 0));
         let n = q.drain(&mut out);
         let mut last = None;
         d.push(&out[..n], |f| last = f.ok().map(|f| f.seq));

@@ -4,7 +4,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 use clap::Args;
-use protocol::{CalibrationStatus, DeviceInfo};
+use protocol::{DeviceInfo, ParametersStatus as CalibrationStatus};
 use serde::Serialize;
 
 use super::connect::DeviceOpts;
@@ -60,7 +60,7 @@ impl InfoReport {
             schema_hash: format!("{:#010x}", info.schema_hash),
             host_protocol_version: protocol::PROTOCOL_VERSION,
             board: info.board.to_string(),
-            calibration_status: calibration_status_name(info.calibration_status),
+            calibration_status: calibration_status_name(info.parameters_status),
         }
     }
 }
@@ -72,8 +72,7 @@ pub fn run(a: InfoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let report = InfoReport::new(&info, s.port(), s.device.is_some());
     let mut out = std::io::stdout().lock();
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
+        super::print_json(&mut out, &report)?;
     } else {
         writeln!(out, "device     {} on {}", report.board, report.port)?;
         writeln!(out, "firmware   {}", report.firmware_version)?;
@@ -82,7 +81,7 @@ pub fn run(a: InfoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             "protocol   v{} (schema {}), same as this tool",
             report.protocol_version, report.schema_hash
         )?;
-        let note = match info.calibration_status {
+        let note = match info.parameters_status {
             CalibrationStatus::Valid => "stored calibration in use",
             CalibrationStatus::Defaults => {
                 "nothing stored: the paper's Table 2 values are in use (rig calibrate)"

@@ -37,7 +37,7 @@ pub struct Fig5Args {
     /// Hold phase without vibration, s (the paper held 14.5 s).
     #[arg(long, default_value_t = 14.5, value_parser = crate::args::positive)]
     pub hold: f64,
-    /// Vibration frequency of the release, Hz (3.6 V gave about 5 Hz).
+    /// Vibration frequency of the release, Hz (3.6 V gave about 5 Hz; 1 to 15).
     #[arg(long, default_value_t = 5.0, value_parser = crate::args::positive)]
     pub freq: f64,
     /// Sensor-noise seed.
@@ -51,7 +51,7 @@ pub struct Fig5Args {
 /// Arguments of `rig sim table1`.
 #[derive(Debug, Args)]
 pub struct Table1Args {
-    /// Vibration frequency of the release, Hz.
+    /// Vibration frequency of the release, Hz (1 to 15).
     #[arg(long, default_value_t = 10.0, value_parser = crate::args::positive)]
     pub freq: f64,
     /// Sensor-noise seed.
@@ -99,6 +99,21 @@ pub struct FaultArgs {
     pub json: bool,
 }
 
+/// A release frequency the simulated rig drives as asked: its calibration is the paper's
+/// (at most 15 Hz); above that the firmware would silently drive at 15 Hz.
+fn check_freq(hz: f64) -> Result<f32, RigError> {
+    let paper = protocol::RigParameters::paper();
+    crate::limits::check_release_freq("--freq", hz, &paper).map_err(|_| {
+        let (lo, hi) = crate::limits::release_freq_range(&paper);
+        RigError::BadValue {
+            what: format!("--freq {hz}"),
+            why: format!(
+                "the simulated rig drives {lo} to {hi} Hz (the paper's calibration, max_freq_hz = {hi}): give a frequency in that range"
+            ),
+        }
+    })
+}
+
 /// Runs `rig sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
     let mut out = std::io::stdout().lock();
@@ -106,14 +121,13 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
         Scenario::Fig5(a) => {
             let opts = fig5::Fig5Options {
                 hold_s: a.hold,
-                vibration_hz: a.freq as f32,
+                vibration_hz: check_freq(a.freq)?,
                 seed: a.seed,
                 ..Default::default()
             };
             let r = fig5::run(&opts)?;
             if a.json {
-                serde_json::to_writer_pretty(&mut out, &r)?;
-                writeln!(out)?;
+                super::print_json(&mut out, &r)?;
             } else {
                 writeln!(out, "fig5, (Z1, Z4) = (50, 49), 1.0 kg on 75 mm:")?;
                 writeln!(
@@ -134,17 +148,20 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
         Scenario::Table1(a) => {
-            let rows = table1::run(&model::TABLE1, a.freq as f32, a.seed)?;
+            let rows = table1::run(&model::TABLE1, check_freq(a.freq)?, a.seed)?;
             if a.json {
-                serde_json::to_writer_pretty(&mut out, &rows)?;
-                writeln!(out)?;
+                super::print_json(&mut out, &rows)?;
             } else {
-                writeln!(out, "table1 at tau_rot = {} N m:", table1::TAU_ROT)?;
+                writeln!(
+                    out,
+                    "table1 at tau_rot = {} N m, Z1,Z2,Z3,Z4:",
+                    reporting::human(table1::TAU_ROT)
+                )?;
                 for r in &rows {
                     writeln!(
                         out,
-                        "  {:?} n={} without vibration: {:<11} with vibration: {:<11} {}",
-                        r.z,
+                        "  {:<12} n={} without vibration: {:<11} with vibration: {:<11} {}",
+                        r.z.map(|v| v.to_string()).join(","),
                         r.n,
                         if r.backdriven_without_vibration {
                             "backdriven"
@@ -167,11 +184,8 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
         Scenario::TorqueSweep(a) => {
-            let n = a.levels as f64;
             let opts = sweep::SweepOptions {
-                loads: (0..a.levels)
-                    .map(|k| 0.368 + (3.68 - 0.368) * k as f64 / (n - 1.0))
-                    .collect(),
+                loads: crate::sweep_report::sweep_loads(a.levels),
                 repeats: a.repeats,
                 rest_s: a.rest,
                 seed: a.seed,
@@ -183,8 +197,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             }
             let summary = sweep::summarise(&points, &opts);
             if a.json {
-                serde_json::to_writer_pretty(&mut out, &summary)?;
-                writeln!(out)?;
+                super::print_json(&mut out, &summary)?;
             } else {
                 writeln!(out, "torque sweep: {} points", summary.points)?;
                 for (v, hz) in &summary.mean_hz_per_voltage {
@@ -211,8 +224,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
         Scenario::Faults(a) => {
             let outcomes = faults::run(&a.drills, a.seed)?;
             if a.json {
-                serde_json::to_writer_pretty(&mut out, &outcomes)?;
-                writeln!(out)?;
+                super::print_json(&mut out, &outcomes)?;
             } else {
                 for o in &outcomes {
                     writeln!(

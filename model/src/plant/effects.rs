@@ -1,21 +1,27 @@
 //! Physical effects the paper's model leaves out, which the plant can switch on so the
 //! discrepancy workflow (`rig explain`) can be tested on simulated data. Each is off by
-//! default; each enters at its physical place.
+//! default; each enters at its physical place through the law of [`crate::effects`] (the
+//! table [`crate::effects::EFFECTS`] says how the plant takes each one).
 
-use core::f64::consts::PI;
+use crate::effects::{
+    AxialSpeedLaw, bush_cam_torque, bush_holding_torque, load_friction_factor_at,
+    torque_constant_factor,
+};
 
 /// Switchable effects (all off in [`Default`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct PlantEffects {
-    /// `speed-dependent-axial-friction`: mu_ax(w) = mu (1 - depth exp(-w / omega0)); the
-    /// paper's explanation for the low torque at 3.6 V. `(depth, omega0 rad/s)`.
+    /// `speed-dependent-axial-friction`: mu_ax(w) = mu (1 - depth exp(-w / omega0)), the
+    /// [`AxialSpeedLaw::ExponentialDip`] variant; the paper's explanation for the low torque
+    /// at 3.6 V. Deliberately not the Eq. (40) shape `rig explain` fits: the tests show it
+    /// finding the effect from a law it does not contain. `(depth, omega0 rad/s)`.
     pub axial_friction_speed: Option<(f64, f64)>,
     /// `load-dependent-friction`: mu(tau) = mu (tau_rot / tau_ref)^exponent, the tooth-load
     /// dependence of an average friction coefficient. `(exponent, tau_ref N m)`.
     pub load_friction: Option<(f64, f64)>,
-    /// `thermal-drift`: the magnets weaken as the winding warms, C1(T) = C1 (1 - k (T - T0)).
-    /// `k` in 1/K.
+    /// `thermal-drift`: the magnets weaken as the winding warms, C1(T) = C1 (1 - k (T - T0)),
+    /// floored as the library's law. `k` in 1/K.
     pub thermal_drift: Option<f64>,
     /// `current-sensor-offset`: the logger's current reads this much too high, A.
     pub current_offset: f64,
@@ -32,16 +38,22 @@ pub struct PlantEffects {
 }
 
 impl PlantEffects {
+    /// The speed law of the axial friction, when switched on.
+    pub fn axial_speed_law(&self) -> Option<AxialSpeedLaw> {
+        self.axial_friction_speed
+            .map(|(depth, omega0)| AxialSpeedLaw::ExponentialDip { depth, omega0 })
+    }
+
     /// Axial friction coefficient at cam speed `omega_n` and load `tau_rot`, from `mu`.
     pub fn axial_mu(&self, mu: f64, omega_n: f64, tau_rot: f64) -> f64 {
         let mut m = mu;
-        if let Some((depth, omega0)) = self.axial_friction_speed {
-            m *= 1.0 - depth * libm::exp(-omega_n.abs() / omega0);
+        if let Some(law) = self.axial_speed_law() {
+            m *= law.factor(omega_n);
         }
         if let Some((exponent, tau_ref)) = self.load_friction
             && tau_rot.abs() > 0.0
         {
-            m *= libm::pow(tau_rot.abs() / tau_ref, exponent);
+            m *= load_friction_factor_at(tau_rot, exponent, tau_ref);
         }
         m
     }
@@ -49,7 +61,7 @@ impl PlantEffects {
     /// Factor on the torque constant at winding temperature `temp_c` (reference `ambient_c`).
     pub fn torque_constant_factor(&self, temp_c: f64, ambient_c: f64) -> f64 {
         match self.thermal_drift {
-            Some(k) => 1.0 - k * (temp_c - ambient_c),
+            Some(k) => torque_constant_factor(k, temp_c - ambient_c),
             None => 1.0,
         }
     }
@@ -59,23 +71,28 @@ impl PlantEffects {
         if self.bush_friction <= 0.0 {
             return 0.0;
         }
-        self.bush_friction * self.bush_hold_arm / (1.0 + omega_n.abs() / self.bush_omega.max(1e-9))
+        bush_holding_torque(
+            self.bush_friction * self.bush_hold_arm,
+            omega_n,
+            self.bush_omega,
+        )
     }
 
     /// Mean cam torque the bush adds over a turn, N m: (2 / pi) F_b e.
     pub fn bush_mean_cam_torque(&self, eccentricity: f64) -> f64 {
-        2.0 / PI * self.bush_friction * eccentricity
+        bush_cam_torque(self.bush_friction, eccentricity)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::paper;
 
     #[test]
     fn effects_are_off_by_default() {
         let e = PlantEffects::default();
-        assert_eq!(e.axial_mu(0.271, 10.0, 1.0), 0.271);
+        assert_eq!(e.axial_mu(paper::MU_S, 10.0, 1.0), paper::MU_S);
         assert_eq!(e.torque_constant_factor(60.0, 25.0), 1.0);
         assert_eq!(e.bush_hold_torque(0.0), 0.0);
     }
@@ -86,8 +103,9 @@ mod tests {
             axial_friction_speed: Some((0.5, 20.0)),
             ..Default::default()
         };
-        assert!(e.axial_mu(0.271, 31.4, 1.0) < e.axial_mu(0.271, 94.2, 1.0));
-        assert!((e.axial_mu(0.271, 1e6, 1.0) - 0.271).abs() < 1e-9);
+        let mu = paper::MU_S;
+        assert!(e.axial_mu(mu, 31.4, 1.0) < e.axial_mu(mu, 94.2, 1.0));
+        assert!((e.axial_mu(mu, 1e6, 1.0) - mu).abs() < 1e-9);
     }
 
     #[test]
@@ -100,5 +118,23 @@ mod tests {
         };
         assert!((e.bush_hold_torque(0.0) - 1.0).abs() < 1e-12);
         assert!((e.bush_hold_torque(30.0) - 0.5).abs() < 1e-12);
+        // Without a corner speed the bush holds at rest only.
+        let at_once = PlantEffects {
+            bush_omega: 0.0,
+            ..e
+        };
+        assert!((at_once.bush_hold_torque(0.0) - 1.0).abs() < 1e-12);
+        assert_eq!(at_once.bush_hold_torque(1.0), 0.0);
+    }
+
+    #[test]
+    fn thermal_drift_has_the_librarys_floor() {
+        let e = PlantEffects {
+            thermal_drift: Some(0.05),
+            ..Default::default()
+        };
+        assert!((e.torque_constant_factor(35.0, 25.0) - 0.5).abs() < 1e-12);
+        // 1 - 0.05 x 100 = -4 would reverse the motor's torque; the law floors it at 0.1.
+        assert_eq!(e.torque_constant_factor(125.0, 25.0), 0.1);
     }
 }

@@ -16,11 +16,14 @@ pub use motor::MotorParams;
 pub use rng::NoiseSource;
 pub use sensors::SensorParams;
 
+use crate::effects::{
+    axial_corner_speed, axial_friction_speed_factor, carrier_inertia_torque,
+    carrier_inertia_torque_taken, offset_current, viscous_loss_torque,
+};
+use crate::hardware::{board, rs735};
 use crate::math::{cos, sin};
-use crate::{CamDrive, GearSet, OutputShaft};
+use crate::{CamDrive, GearSet, OutputShaft, paper};
 
-/// Copper's temperature coefficient of resistance, 1/K.
-const COPPER_TEMPCO: f64 = 0.0039;
 /// Below this speed (rad/s) a shaft counts as standing still.
 const STANDSTILL: f64 = 1e-6;
 
@@ -93,7 +96,8 @@ pub struct PlantParams {
     /// Without it the current cannot reverse and the carrier's inertial power is lost, so the
     /// inertia term of Eq. (9) no longer averages out (`inertia-rectification`).
     pub regeneration: bool,
-    /// Apply Eq. (40): the axial friction share falls as the output speeds up.
+    /// Apply Eq. (40): the axial friction share falls as the output speeds up,
+    /// mu_ax = mu w_n / sqrt(w_n^2 + (w_t / lambda)^2) with the simulated output speed w_t.
     pub friction_split: bool,
     /// How the cam is set up.
     pub cam: CamSetup,
@@ -104,17 +108,18 @@ pub struct PlantParams {
 }
 
 impl PlantParams {
-    /// The paper's rig with gear set `z`, the load `load` and Table 2's vibrator.
+    /// The paper's rig with gear set `z`, the load `load` and Table 2's vibrator, on the
+    /// board's bridge supply ([`crate::paper`], [`crate::hardware`]).
     pub fn paper(gear: GearSet, load: Load) -> Self {
         Self {
             motor: MotorParams::default(),
             drive: CamDrive::paper(gear),
-            mu_s: crate::MU_S_PAPER,
-            mu_d: crate::MU_D_PAPER,
-            mu_ax: crate::MU_S_PAPER,
-            i_hat: crate::I_HAT_PAPER,
+            mu_s: paper::MU_S,
+            mu_d: paper::MU_D,
+            mu_ax: paper::MU_S,
+            i_hat: paper::I_HAT,
             load,
-            supply: 12.0,
+            supply: board::BRIDGE_SUPPLY_V,
             // The paper's bench supply cannot sink current, and actuators in general do not
             // return negative power (the paper's ref. [18]).
             regeneration: false,
@@ -331,7 +336,7 @@ impl Plant {
     pub fn logged_current(&mut self) -> f64 {
         let noise =
             self.params.sensors.acs_noise / self.params.sensors.acs_sensitivity * self.rng.normal();
-        self.state.current + self.params.effects.current_offset + noise
+        offset_current(self.state.current, self.params.effects.current_offset) + noise
     }
 
     /// Encoder counter (16-bit, wrapping) now.
@@ -343,7 +348,7 @@ impl Plant {
     pub fn step(&mut self, dt: f64, drive: Drive) {
         let temp = self.state.temperature;
         let resistance = self.params.motor.resistance
-            * (1.0 + COPPER_TEMPCO * (temp - self.params.motor.ambient_c));
+            * (1.0 + rs735::COPPER_TEMPCO_PER_K * (temp - self.params.motor.ambient_c));
         let winding = self.winding(dt, resistance);
         let (s, c) = self.cam_trig();
         // Borrowed, not copied: the parameters are a few hundred bytes and this runs at 10 kHz.
@@ -379,28 +384,23 @@ impl Plant {
         let axial_force = if coupled {
             let mut mu_ax = p.effects.axial_mu(p.mu_ax, omega, tau_rot);
             if p.friction_split {
-                mu_ax = self.shaft.radial_friction(
-                    mu_ax,
-                    self.shaft.small_lambda * omega,
-                    self.state.output_speed,
-                );
+                let corner = axial_corner_speed(self.state.output_speed, self.shaft.small_lambda);
+                mu_ax *= axial_friction_speed_factor(omega, corner);
             }
             mu_ax * tau_rot.abs() * self.axial_per_torque + p.effects.bush_friction
         } else {
             0.0
         };
         let t_axial = axial_force * e * s.abs();
-        let viscous = m.viscous + p.effects.extra_viscous;
         let kinetic = m.coulomb + m.running_loss;
+        // The vibrator's viscous loss: C3's and the `vibrator-viscous-loss` effect's.
+        let viscous_torque =
+            |w: f64| m.viscous * w.abs() + viscous_loss_torque(p.effects.extra_viscous, w);
         let inertia = m.inertia + mass * e * e * s * s;
-        let t_carrier_full = mass * e * e * s * c * omega * omega;
+        let t_carrier_full = carrier_inertia_torque(mass, e, s, c, omega);
         // Without regeneration the drive cannot take back the carrier's inertial power: the
         // part of the cycle where the carrier pushes the cam is lost, not returned.
-        let t_carrier = if !p.regeneration && t_carrier_full * omega < 0.0 {
-            0.0
-        } else {
-            t_carrier_full
-        };
+        let t_carrier = carrier_inertia_torque_taken(t_carrier_full, omega, p.regeneration);
         let new_omega = if p.cam == CamSetup::Blocked {
             self.state.gauge_torque = if t_motor.abs() > m.coulomb {
                 t_motor - m.coulomb * t_motor.signum()
@@ -418,7 +418,7 @@ impl Plant {
                 net / inertia * dt
             }
         } else {
-            let friction = omega.signum() * (kinetic + viscous * omega.abs() + t_axial);
+            let friction = omega.signum() * (kinetic + viscous_torque(omega) + t_axial);
             let accel = (t_motor - t_carrier - friction) / inertia;
             let w = omega + accel * dt;
             if w.signum() != omega.signum() && (t_motor - t_carrier).abs() <= kinetic + t_axial {
@@ -460,7 +460,7 @@ impl Plant {
         led.resistive += resistance * i_mean * i_mean * dt;
         led.gearhead += (m.ke_cam() - m.torque_per_amp * ktf) * i_mean * omega_mean * dt;
         if p.cam != CamSetup::Blocked && new_omega != 0.0 {
-            led.vibrator_friction += (kinetic + viscous * omega_mean.abs()) * omega_mean.abs() * dt;
+            led.vibrator_friction += (kinetic + viscous_torque(omega_mean)) * omega_mean.abs() * dt;
             led.axial_friction += t_axial * omega_mean.abs() * dt;
             led.unreturned += (t_carrier - t_carrier_full) * omega_mean * dt;
         }

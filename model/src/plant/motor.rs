@@ -9,6 +9,7 @@
 //!   R (-C2) / C1 = 0.98 V: it does not turn below 1.0 V.
 
 use crate::Calibration;
+use crate::hardware::rs735;
 
 /// Electrical, mechanical and thermal parameters of the vibrator (SI, cam-shaft side unless
 /// noted).
@@ -42,23 +43,25 @@ pub struct MotorParams {
 }
 
 impl MotorParams {
-    /// The paper's vibrator, built around the calibration `cal` (Table 2 by default).
+    /// The paper's vibrator ([`crate::hardware::rs735`]), built around the calibration
+    /// `cal` (Table 2 by default).
     pub fn rs735(cal: &Calibration) -> Self {
-        let gear_ratio = 8.5;
+        let gear_ratio = rs735::GEAR_RATIO;
         Self {
-            resistance: 0.44,
-            inductance: 0.2e-3,
-            ke_motor: 0.078 / gear_ratio,
+            resistance: rs735::RESISTANCE_OHM,
+            inductance: rs735::INDUCTANCE_H,
+            ke_motor: rs735::KE_CAM_V_S_PER_RAD / gear_ratio,
             gear_ratio,
             torque_per_amp: cal.c1,
             coulomb: -cal.c2,
             running_loss: cal.c4,
             viscous: cal.c3,
-            // RS-735 rotor ~1.0e-5 kg m^2 times N^2, plus the cam and its shaft.
-            inertia: 1.0e-5 * gear_ratio * gear_ratio + 1.0e-4,
-            thermal_capacity: 40.0,
-            thermal_resistance: 6.0,
-            ambient_c: 25.0,
+            // The rotor's inertia times N^2, plus the cam and its shaft.
+            inertia: rs735::ROTOR_INERTIA_KG_M2 * gear_ratio * gear_ratio
+                + rs735::CAM_INERTIA_KG_M2,
+            thermal_capacity: rs735::THERMAL_CAPACITY_J_PER_K,
+            thermal_resistance: rs735::THERMAL_RESISTANCE_K_PER_W,
+            ambient_c: rs735::AMBIENT_C,
         }
     }
 
@@ -97,7 +100,7 @@ mod tests {
     fn motor_reproduces_table2_and_the_start_voltage() {
         let m = MotorParams::default();
         let c = m.calibration().to_paper_units();
-        let paper = [62.1, -138.0, 0.235, 1.69, 0.00378, 2.25];
+        let paper = crate::paper::TABLE2;
         for (k, (got, want)) in c.iter().zip(paper).enumerate() {
             let tol = if k == 3 { 0.5 } else { 0.05 };
             assert!(
@@ -108,5 +111,6 @@ mod tests {
         }
         let v = m.breakaway_voltage();
         assert!(v < 1.0 && v > 0.9, "{v}");
+        assert!((v - rs735::BREAKAWAY_V).abs() < 1e-12);
     }
 }

@@ -2,6 +2,7 @@
 //! divider into a 12-bit ADC, and a quadrature encoder (CUI AMT102-V) on the cam shaft.
 
 use super::rng::NoiseSource;
+use crate::hardware::{acs714, adc, amt102, divider};
 
 /// Sensor parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,16 +29,14 @@ pub struct SensorParams {
 impl Default for SensorParams {
     fn default() -> Self {
         Self {
-            acs_sensitivity: 0.185,
-            acs_supply: 5.0,
+            acs_sensitivity: acs714::SENSITIVITY_V_PER_A,
+            acs_supply: acs714::SUPPLY_NOMINAL_V,
             acs_zero_error: 0.0,
-            // Datasheet: 21 mV peak-to-peak noise at full bandwidth, ~5 mV RMS.
-            acs_noise: 0.005,
-            // 10 k over 20 k: the 0.5-4.5 V output range fits the 3.3 V ADC.
-            divider: 2.0 / 3.0,
-            adc_reference: 3.3,
-            adc_bits: 12,
-            encoder_ppr: 2048,
+            acs_noise: acs714::NOISE_RMS_V,
+            divider: divider::RATIO,
+            adc_reference: adc::VREF_V,
+            adc_bits: adc::BITS,
+            encoder_ppr: amt102::PPR,
         }
     }
 }
@@ -45,7 +44,7 @@ impl Default for SensorParams {
 impl SensorParams {
     /// Largest ADC code.
     pub fn adc_full_scale(&self) -> u16 {
-        ((1u32 << self.adc_bits) - 1) as u16
+        u16::try_from((1u32 << self.adc_bits.min(16)) - 1).unwrap_or(u16::MAX)
     }
 
     /// ADC code for motor current `current` (A), with noise from `rng` and quantisation.
@@ -56,7 +55,13 @@ impl SensorParams {
             + self.acs_noise * rng.normal_fast();
         let v_pin = (v_sensor * self.divider).clamp(0.0, self.adc_reference);
         let full = self.adc_full_scale() as f64;
-        libm::round(v_pin / self.adc_reference * full).clamp(0.0, full) as u16
+        #[allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "clamped to 0..=full, a u16"
+        )]
+        let code = libm::round(v_pin / self.adc_reference * full).clamp(0.0, full) as u16;
+        code
     }
 
     /// Current (A) an ideal zeroed reading of `code` stands for (the firmware's inverse).
@@ -75,7 +80,14 @@ impl SensorParams {
     pub fn encoder_count(&self, angle: f64) -> u16 {
         let counts =
             libm::floor(angle / (2.0 * core::f64::consts::PI) * self.counts_per_rev() as f64);
-        (counts as i64) as u16
+        // The timer is a 16-bit up/down counter: it wraps, and so does this.
+        #[allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "a 16-bit hardware counter wraps modulo 2^16"
+        )]
+        let count = (counts as i64) as u16;
+        count
     }
 }
 

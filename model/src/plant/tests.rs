@@ -1,7 +1,12 @@
 //! Plant behaviour against the paper's numbers and first principles.
+#![allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "test step counts from positive durations"
+)]
 
 use super::*;
-use crate::{Calibration, TABLE1};
+use crate::{Calibration, TABLE1, paper};
 
 const DT: f64 = 1e-4;
 
@@ -39,9 +44,9 @@ fn mean_speed(plant: &mut Plant, volts: f64, settle: f64, seconds: f64) -> (f64,
 
 #[test]
 fn paper_voltages_give_5_10_15_hz_under_load() {
-    for tau in [0.368, 1.84, 3.68] {
-        for (volts, hz) in [(3.6, 5.0), (6.2, 10.0), (8.8, 15.0)] {
-            let mut p = paper_plant([49, 51, 50, 50], Load::Torque(tau));
+    for tau in [paper::TAU_ROT_MIN_TESTED, 1.84, paper::TAU_ROT_MAX] {
+        for (volts, hz) in paper::SUPPLY_VOLTAGES.into_iter().zip(paper::VIBRATION_HZ) {
+            let mut p = paper_plant(paper::RIG_Z, Load::Torque(tau));
             let (w, _) = mean_speed(&mut p, volts, 1.0, 1.0);
             let f = w / (2.0 * core::f64::consts::PI);
             assert!(
@@ -55,7 +60,7 @@ fn paper_voltages_give_5_10_15_hz_under_load() {
 #[test]
 fn vibrator_does_not_turn_below_one_volt() {
     for cam in [CamSetup::Uncoupled, CamSetup::Coupled] {
-        let mut p = paper_plant([49, 51, 50, 50], Load::Torque(0.0));
+        let mut p = paper_plant(paper::RIG_Z, Load::Torque(0.0));
         p.set_cam(cam);
         run(&mut p, 0.95, 1.0);
         assert_eq!(p.state().cam_speed, 0.0, "{cam:?}");
@@ -80,7 +85,7 @@ fn line_fit(x: &[f64], y: &[f64]) -> (f64, f64) {
 #[test]
 fn papers_calibration_procedure_returns_table2() {
     // Torque-current: shaft blocked on the gauge arm, voltage steps.
-    let mut p = paper_plant([49, 51, 50, 50], Load::Torque(0.0));
+    let mut p = paper_plant(paper::RIG_Z, Load::Torque(0.0));
     p.set_cam(CamSetup::Blocked);
     let (mut currents, mut torques) = (Vec::new(), Vec::new());
     for k in 0..8 {
@@ -98,7 +103,7 @@ fn papers_calibration_procedure_returns_table2() {
     }
     let (c1, c2) = line_fit(&currents, &torques);
     // No-load current sweep, 1.0-1.9 V.
-    let mut p = paper_plant([49, 51, 50, 50], Load::Torque(0.0));
+    let mut p = paper_plant(paper::RIG_Z, Load::Torque(0.0));
     p.set_cam(CamSetup::Uncoupled);
     let (mut speeds, mut currents) = (Vec::new(), Vec::new());
     for k in 0..10 {
@@ -130,7 +135,7 @@ fn energy_balances() {
 }
 
 fn energy_balances_with(regeneration: bool) {
-    let mut p = paper_plant([49, 51, 50, 50], Load::Torque(2.0));
+    let mut p = paper_plant(paper::RIG_Z, Load::Torque(2.0));
     let mut params = *p.params();
     params.regeneration = regeneration;
     p = Plant::new(params, 1);
@@ -158,20 +163,14 @@ fn energy_balances_with(regeneration: bool) {
 
 #[test]
 fn fig5_held_without_vibration_falls_with_it() {
-    let mut p = paper_plant(
-        [50, 50, 51, 49],
-        Load::Mass {
-            mass: 1.0,
-            radius: 0.075,
-        },
-    );
+    let mut p = paper_plant(paper::FIG5_Z, paper::FIG5_LOAD);
     p.step(DT, Drive::default());
     for _ in 0..20_000 {
         p.step(DT, Drive::default());
     }
     assert_eq!(p.state().output_speed, 0.0);
     assert_eq!(p.state().output_angle, 0.0);
-    run(&mut p, 3.6, 1.0);
+    run(&mut p, paper::FIG5_VOLTS, 1.0);
     assert!(p.state().output_speed > 0.1, "{}", p.state().output_speed);
     // mu_d Lambda < 1: after the vibration stops the load keeps going.
     let w = p.state().output_speed;
@@ -195,8 +194,8 @@ fn table1_backdrive_without_vibration_only_for_n_ge_2() {
 
 #[test]
 fn runs_repeat_exactly_with_a_seed() {
-    let mut a = paper_plant([49, 51, 50, 50], Load::Torque(1.0));
-    let mut b = paper_plant([49, 51, 50, 50], Load::Torque(1.0));
+    let mut a = paper_plant(paper::RIG_Z, Load::Torque(1.0));
+    let mut b = paper_plant(paper::RIG_Z, Load::Torque(1.0));
     run(&mut a, 6.2, 0.2);
     run(&mut b, 6.2, 0.2);
     for _ in 0..100 {
@@ -207,14 +206,16 @@ fn runs_repeat_exactly_with_a_seed() {
 
 #[test]
 fn without_regeneration_the_inertia_term_costs_current() {
-    let mut without = paper_plant([49, 51, 50, 50], Load::Torque(0.368));
+    let mut without = paper_plant(paper::RIG_Z, Load::Torque(0.368));
     let mut params = *without.params();
     params.regeneration = true;
     let mut with = Plant::new(params, 42);
     let (w, i_with) = mean_speed(&mut with, 8.8, 1.0, 1.0);
     let (_, i_without) = mean_speed(&mut without, 8.8, 1.0, 1.0);
     // The rectified inertia torque averages M w^2 e^2 / (2 pi) over a turn.
-    let expected = 3.82 * w * w * 1e-6 / (2.0 * core::f64::consts::PI) / Calibration::PAPER.c1;
+    let e = paper::ECCENTRICITY;
+    let expected =
+        paper::CARRIER_MASS * w * w * e * e / (2.0 * core::f64::consts::PI) / Calibration::PAPER.c1;
     let extra = i_without - i_with;
     assert!(
         (extra / expected - 1.0).abs() < 0.3,
@@ -226,11 +227,35 @@ fn without_regeneration_the_inertia_term_costs_current() {
 fn measured_current_follows_eq10_and_the_calibration() {
     // Steady state at 10 Hz: mean current = (Eq. 10 friction part + rectified inertia part
     // M w^2 e^2 / (2 pi) + C3 w + C4 - C2) / C1: the drive does not take power back.
-    let mut p = paper_plant([49, 51, 50, 50], Load::Torque(3.68));
+    let mut p = paper_plant(paper::RIG_Z, Load::Torque(3.68));
     let (w, i) = mean_speed(&mut p, 6.2, 1.0, 1.0);
     let drive = p.params().drive;
     let tau_cam = drive.required_cam_torque(p.params().mu_ax, 3.68, w)
         - 0.5 * drive.required_inertia_torque(w);
     let expected = Calibration::PAPER.current_for(tau_cam, w);
     assert!((i - expected).abs() < 0.01, "{i} vs {expected}");
+}
+
+#[test]
+fn the_plants_bush_costs_the_librarys_mean_cam_torque() {
+    // The plant adds the bush's force to Eq. (9)'s axial Coulomb force (F e |sin|); over a
+    // turn that is the library's (2/pi) F e, so the mean current rises by it over C1 (and a
+    // little C3 / C1 for the speed the extra load costs).
+    let none = paper_plant(paper::RIG_Z, Load::Torque(1.0));
+    let mut params = *none.params();
+    params.effects.bush_friction = 20.0;
+    let mut with = Plant::new(params, 42);
+    let mut none = none;
+    let (w0, i0) = mean_speed(&mut none, 6.2, 1.0, 1.0);
+    let (w1, i1) = mean_speed(&mut with, 6.2, 1.0, 1.0);
+    let c = Calibration::PAPER;
+    let e = params.drive.eccentricity;
+    let law = crate::effects::bush_cam_torque(20.0, e);
+    assert_eq!(law, params.effects.bush_mean_cam_torque(e));
+    let expected = (law + c.c3 * (w1 - w0)) / c.c1;
+    assert!(
+        ((i1 - i0) / expected - 1.0).abs() < 0.03,
+        "{} A extra, expected {expected}",
+        i1 - i0
+    );
 }

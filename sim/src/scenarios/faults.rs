@@ -3,7 +3,7 @@
 //! per drill.
 
 use model::plant::{CamSetup, Load};
-use protocol::{DeviceMessage, FaultFlags, Request};
+use protocol::{FaultFlags, Reply, Request};
 use serde::Serialize;
 
 use super::{hello, release};
@@ -50,9 +50,9 @@ pub fn run(names: &[String], seed: u64) -> Result<Vec<FaultOutcome>, SimError> {
 
 fn rig(seed: u64, setup: impl FnOnce(&mut SimConfig)) -> Result<SimLink, SimError> {
     let mut config =
-        SimConfig::for_gear([49, 51, 50, 50], Load::Torque(1.0)).map_err(|source| {
+        SimConfig::for_gear(model::paper::RIG_Z, Load::Torque(1.0)).map_err(|source| {
             SimError::Gear {
-                z: [49, 51, 50, 50],
+                z: model::paper::RIG_Z,
                 source,
             }
         })?;
@@ -98,7 +98,7 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
         "bad-calibration" => {
             let link = rig(seed, |c| {
                 c.calibration.c1_nmm_per_a = f32::NAN;
-                c.calibration_status = protocol::CalibrationStatus::Invalid;
+                c.calibration_status = protocol::ParametersStatus::Invalid;
             })?;
             (link, false)
         }
@@ -121,7 +121,7 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
             on: true,
             target_hz: 10.0
         })?,
-        DeviceMessage::Ack { .. }
+        Reply::Ack
     );
     link.wait(0.2);
     let latched = crate::RigLink::latched_faults(&mut link)?;

@@ -6,37 +6,33 @@ pub mod fig5;
 pub mod sweep;
 pub mod table1;
 
-use protocol::{DeviceMessage, Request};
+use protocol::{Reply, Request};
 
 use crate::SimError;
 use crate::SimLink;
 
 pub use crate::riglink::HEARTBEAT_S;
 
-/// Output rotation (rad) that counts as "the load moved": 0.1 mm of rope on a 75 mm pulley.
-pub const MOTION_RAD: f64 = 0.1e-3 / 0.075;
+/// Output rotation (rad) that counts as "the load moved": 0.1 mm of rope on the paper's
+/// 75 mm pulley.
+pub const MOTION_RAD: f64 = 0.1e-3 / model::paper::R_OUT;
 
 /// Sends `req` and requires an `Ack`.
 pub fn expect_ack(link: &mut SimLink, req: &Request) -> Result<(), SimError> {
     match link.request(req)? {
-        DeviceMessage::Ack { .. } => Ok(()),
-        other => Err(SimError::Protocol(format!(
-            "{req:?} was answered with {other:?}"
-        ))),
+        Reply::Ack => Ok(()),
+        other => Err(crate::riglink::unexpected(req, &other)),
     }
 }
 
-/// Opens the session (hello) as the host tool does.
+/// Opens the session (hello) as the host tool does, checking the device's version.
 pub fn hello(link: &mut SimLink) -> Result<(), SimError> {
-    let reply = link.request(&Request::Hello {
-        protocol_version: protocol::PROTOCOL_VERSION,
-        schema_hash: protocol::SCHEMA_HASH,
-    })?;
-    match reply {
-        DeviceMessage::Info(_) => Ok(()),
-        other => Err(SimError::Protocol(format!(
-            "hello was answered with {other:?}"
-        ))),
+    let hello = protocol::session::Session::hello();
+    let reply = link.request(&hello)?;
+    match protocol::session::hello_outcome(&reply) {
+        Some(Ok(_)) => Ok(()),
+        Some(Err(e)) => Err(SimError::Protocol(e.to_string())),
+        None => Err(crate::riglink::unexpected(&hello, &reply)),
     }
 }
 

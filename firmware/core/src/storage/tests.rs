@@ -147,11 +147,11 @@ impl NorFlash for MemFlash {
     }
 }
 
-fn calibration(k: u16) -> Calibration {
-    Calibration {
+fn calibration(k: u16) -> RigParameters {
+    RigParameters {
         c1_nmm_per_a: 60.0 + f32::from(k),
         max_release_load_nm: 1.0 + f32::from(k) * 0.1,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     }
 }
 
@@ -162,8 +162,8 @@ fn load(flash: &MemFlash) -> Loaded {
 #[test]
 fn blank_flash_gives_defaults() {
     let loaded = load(&MemFlash::new());
-    assert_eq!(loaded.status, CalibrationStatus::Defaults);
-    assert_eq!(loaded.calibration, Calibration::paper());
+    assert_eq!(loaded.status, ParametersStatus::Defaults);
+    assert_eq!(loaded.calibration, RigParameters::paper());
 }
 
 #[test]
@@ -174,7 +174,7 @@ fn saves_alternate_slots_and_the_newest_wins() {
         store.save(&calibration(k)).unwrap();
         let flash = store.into_inner();
         let loaded = load(&flash);
-        assert_eq!(loaded.status, CalibrationStatus::Valid);
+        assert_eq!(loaded.status, ParametersStatus::Valid);
         assert_eq!(loaded.calibration, calibration(k));
         // Record k went to slot k % 2 with sequence k + 1.
         let slot = (k as usize % 2) * PAGE;
@@ -200,7 +200,7 @@ fn sequence_compare_survives_wrapping() {
 fn power_cut_at_every_step_keeps_the_previous_calibration() {
     // Three generations, so both slots get overwritten once with a cut at every step.
     let mut flash = MemFlash::new();
-    let mut previous: Option<Calibration> = None;
+    let mut previous: Option<RigParameters> = None;
     for generation in 0..3u16 {
         let next = calibration(generation);
         let mut cuts = 0;
@@ -220,11 +220,11 @@ fn power_cut_at_every_step_keeps_the_previous_calibration() {
             }
             match previous {
                 Some(prev) => {
-                    assert_eq!(loaded.status, CalibrationStatus::Valid, "cut at {cuts}");
+                    assert_eq!(loaded.status, ParametersStatus::Valid, "cut at {cuts}");
                     assert_eq!(loaded.calibration, prev, "cut at {cuts}");
                 }
                 // Nothing stored before: a torn first save is not a calibration.
-                None => assert_eq!(loaded.status, CalibrationStatus::Defaults, "cut at {cuts}"),
+                None => assert_eq!(loaded.status, ParametersStatus::Defaults, "cut at {cuts}"),
             }
             // After the cut, a full save from the torn state still works.
             let mut retry = CalibrationStore::new(after.rebooted());
@@ -247,15 +247,15 @@ fn corrupt_record_is_invalid_unless_the_other_slot_is_good() {
     let mut flash = store.into_inner();
     flash.data[20] ^= 0x01; // a bit of C1 rots
     let loaded = load(&flash);
-    assert_eq!(loaded.status, CalibrationStatus::Invalid);
-    assert_eq!(loaded.calibration, Calibration::paper());
+    assert_eq!(loaded.status, ParametersStatus::Invalid);
+    assert_eq!(loaded.calibration, RigParameters::paper());
 
     // A second, good record in the other slot is used.
     let mut store = CalibrationStore::new(flash);
     store.load();
     store.save(&calibration(2)).unwrap();
     let loaded = load(&store.into_inner());
-    assert_eq!(loaded.status, CalibrationStatus::Valid);
+    assert_eq!(loaded.status, ParametersStatus::Valid);
     assert_eq!(loaded.calibration, calibration(2));
 }
 
@@ -269,17 +269,17 @@ fn other_schema_or_invalid_values_are_invalid() {
     flash.data[4] = 2;
     let crc = CRC32.checksum(&flash.data[..BODY_LEN]);
     flash.data[BODY_LEN..CRC_END].copy_from_slice(&crc.to_le_bytes());
-    assert_eq!(load(&flash).status, CalibrationStatus::Invalid);
+    assert_eq!(load(&flash).status, ParametersStatus::Invalid);
 
     // A well-formed record whose values fail validation (mu_d > mu_s).
     let mut store = CalibrationStore::new(MemFlash::new());
     store.load();
-    let bad = Calibration {
+    let bad = RigParameters {
         mu_d: 0.5,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     store.save(&bad).unwrap();
-    assert_eq!(load(&store.into_inner()).status, CalibrationStatus::Invalid);
+    assert_eq!(load(&store.into_inner()).status, ParametersStatus::Invalid);
 }
 
 #[test]
@@ -307,7 +307,7 @@ fn partition_offsets_and_bounds() {
 fn too_small_a_region_refuses() {
     let p = Partition::new(MemFlash::new(), 0, PAGE as u32);
     let mut store = CalibrationStore::new(p);
-    assert_eq!(store.load().status, CalibrationStatus::Invalid);
+    assert_eq!(store.load().status, ParametersStatus::Invalid);
     assert_eq!(
         store.save(&calibration(1)),
         Err(StorageError::RegionTooSmall)

@@ -8,8 +8,8 @@ mod supervisor;
 use model::GearSet;
 use model::plant::{Drive, Load, Plant, PlantParams};
 use protocol::{
-    Calibration, DeviceDeframer, DeviceMessage, FaultFlags, MAX_FRAME_SIZE, NackCode, Request,
-    SupervisorState, encode_frame,
+    DeviceDeframer, DeviceMessage, FaultFlags, MAX_FRAME_SIZE, NackCode, Reply, Request,
+    RigParameters, SupervisorState, encode_frame,
 };
 
 use crate::{BootInfo, Core, CoreConfig, Inputs, Outputs, Status};
@@ -22,7 +22,7 @@ fn core_fits_its_ram_share() {
 }
 
 /// The paper's (49, 51, 50, 50) gear set.
-pub(crate) const PAPER_Z: [u32; 4] = [49, 51, 50, 50];
+pub(crate) const PAPER_Z: [u32; 4] = model::paper::RIG_Z;
 
 /// Core + plant + a host end of the link, in virtual time (1 ms steps).
 pub(crate) struct Rig {
@@ -42,8 +42,8 @@ pub(crate) struct Rig {
     pub encoder_frozen: Option<u16>,
     /// How the "binary" answers a flash write (None: never answers).
     pub persist_answer: Option<bool>,
-    /// Calibrations handed out for writing.
-    pub persisted: Vec<Calibration>,
+    /// Parameter records handed out for writing.
+    pub persisted: Vec<RigParameters>,
     /// Most bytes the link moves per step, a UART's pace (None: everything at once).
     pub link_budget: Option<usize>,
 }
@@ -90,7 +90,8 @@ impl Rig {
         let mut adc = [0u16; 10];
         for a in adc.iter_mut() {
             self.plant.step(1e-4, self.drive);
-            *a = (i32::from(self.plant.current_adc()) + self.adc_offset).clamp(0, 4095) as u16;
+            *a = (i32::from(self.plant.current_adc()) + self.adc_offset)
+                .clamp(0, i32::from(model::hardware::adc::FULL_SCALE)) as u16;
         }
         self.now_us += 1000;
         let out = self.step_with(&adc);
@@ -206,20 +207,37 @@ impl Rig {
         self.received[before..].to_vec()
     }
 
-    /// The single `Ack`/`Nack` answer to `request`: `Ok(())` or the Nack code.
-    pub fn ack(&mut self, request: &Request) -> Result<(), NackCode> {
+    /// The single reply to `request`, matched by its seq.
+    pub fn reply(&mut self, request: &Request) -> Reply {
         let seq = self.host_seq;
         let replies = self.request(request);
         let answers: Vec<_> = replies
             .iter()
-            .filter_map(|m| match m {
-                DeviceMessage::Ack { seq: s } if *s == seq => Some(Ok(())),
-                DeviceMessage::Nack { seq: s, code } if *s == seq => Some(Err(*code)),
-                _ => None,
-            })
+            .filter(|m| m.reply_to() == Some(seq))
+            .filter_map(DeviceMessage::as_reply)
             .collect();
         assert_eq!(answers.len(), 1, "{request:?}: {replies:?}");
-        answers[0]
+        answers[0].clone()
+    }
+
+    /// The single `Ack`/`Nack` answer to `request`: `Ok(())` or the Nack code.
+    pub fn ack(&mut self, request: &Request) -> Result<(), NackCode> {
+        match self.reply(request) {
+            Reply::Ack => Ok(()),
+            Reply::Nack(code) => Err(code),
+            other => panic!(
+                "{} answered {}, not Ack or Nack",
+                request.name(),
+                other.name()
+            ),
+        }
+    }
+
+    /// Whether a reply to request `seq` with `pred` has arrived.
+    pub fn answered(&self, seq: u16, pred: impl Fn(&Reply) -> bool) -> bool {
+        self.received
+            .iter()
+            .any(|m| m.reply_to() == Some(seq) && m.as_reply().is_some_and(&pred))
     }
 
     pub fn state(&self) -> SupervisorState {

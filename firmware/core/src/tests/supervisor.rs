@@ -2,9 +2,11 @@
 
 use core::f32::consts::TAU;
 
-use protocol::{Calibration, CalibrationStatus, FaultFlags, Request, StatusFlags, SupervisorState};
+use protocol::{
+    FaultFlags, ParametersStatus, Request, RigParameters, StatusFlags, SupervisorState,
+};
 
-use super::Rig;
+use super::{PAPER_Z, Rig};
 use crate::BootInfo;
 
 fn release(hz: f32) -> Request {
@@ -19,10 +21,10 @@ const STOP: Request = Request::Release {
     target_hz: 0.0,
 };
 
-fn boot_with(calibration: Calibration) -> BootInfo {
+fn boot_with(calibration: RigParameters) -> BootInfo {
     BootInfo {
-        calibration,
-        calibration_status: CalibrationStatus::Valid,
+        parameters: calibration,
+        parameters_status: ParametersStatus::Valid,
         ..BootInfo::default()
     }
 }
@@ -181,9 +183,9 @@ fn fault_clears_to_locked_or_stopping() {
 #[test]
 fn weak_cam_torque_raises_the_frequency_then_cannot_release() {
     // C2 too low by 20 N mm: the measured tau_cam stays ~20 N mm below Eq. (10)'s need.
-    let cal = Calibration {
+    let cal = RigParameters {
         c2_nmm: -158.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     let mut rig = Rig::with(boot_with(cal), 0.3, |_| {});
     rig.vibrate(10.0);
@@ -221,9 +223,9 @@ fn spin_up_that_never_reaches_speed_cannot_release() {
 
 #[test]
 fn overload_stops_the_release() {
-    let cal = Calibration {
+    let cal = RigParameters {
         max_release_load_nm: 2.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     let mut rig = Rig::with(boot_with(cal), 3.0, |_| {});
     rig.run_ms(150);
@@ -243,9 +245,9 @@ fn overload_stops_the_release() {
 #[test]
 fn jam_when_the_cam_torque_is_far_above_expectation() {
     // Eq. (10) at the 1 N m limit is ~14.5 N mm; a 3.5 N m load needs ~51 N mm > 2x.
-    let cal = Calibration {
+    let cal = RigParameters {
         max_release_load_nm: 1.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     let mut rig = Rig::with(boot_with(cal), 3.5, |_| {});
     rig.run_ms(150);
@@ -258,34 +260,36 @@ fn jam_when_the_cam_torque_is_far_above_expectation() {
 #[test]
 fn coasting_and_self_locking_flags_follow_the_gear_set() {
     let flags = |z: [u16; 4], mu_d: f32| {
-        let cal = Calibration {
+        let cal = RigParameters {
             z,
             mu_d,
-            ..Calibration::paper()
+            ..RigParameters::paper()
         };
         let rig = Rig::with(boot_with(cal), 0.0, |_| {});
         let s = rig.core.status();
         (s.keeps_moving_after_stop, s.holds_at_rest, s.flags)
     };
+    let rig_z = PAPER_Z.map(|z| z as u16);
+    let (mu_s, mu_d) = (model::paper::MU_S as f32, model::paper::MU_D as f32);
     // (49, 50): mu_s Lambda = 1.34 holds; mu_d Lambda = 0.86 < 1 keeps moving.
-    let (moving, holds, f) = flags([49, 51, 50, 50], 0.174);
+    let (moving, holds, f) = flags(rig_z, mu_d);
     assert!(moving && holds);
     assert!(f.contains(StatusFlags::COASTS_AFTER_STOP));
     assert!(!f.contains(StatusFlags::NOT_SELF_LOCKING));
     // With mu_d = mu_s it stops with the vibration.
-    let (moving, _, f) = flags([49, 51, 50, 50], 0.271);
+    let (moving, _, f) = flags(rig_z, mu_s);
     assert!(!moving && !f.contains(StatusFlags::COASTS_AFTER_STOP));
     // n = 2: never self-locking.
-    let (moving, holds, f) = flags([50, 50, 48, 52], 0.174);
+    let (moving, holds, f) = flags(model::paper::TABLE1[2].map(|z| z as u16), mu_d);
     assert!(moving && !holds && f.contains(StatusFlags::NOT_SELF_LOCKING));
 }
 
 #[test]
 fn load_estimate_tracks_the_plant_across_the_papers_range() {
-    let cal = Calibration {
+    let cal = RigParameters {
         max_release_load_nm: 5.0,
         max_freq_hz: 20.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     for (load, hz) in [
         (0.368, 5.0),

@@ -1,0 +1,221 @@
+//! The rig's hardware, written once: the vibrator motor, the current sensor and its divider,
+//! the ADC, the encoder and the H-bridge board.
+//!
+//! This module is the one home of the data-sheet and board constants. The plant's defaults
+//! ([`crate::plant::MotorParams`], [`crate::plant::SensorParams`],
+//! [`crate::plant::PlantParams::paper`]) and the firmware's configuration defaults read them
+//! from here. The paper's own numbers (gears, Table 2, test conditions) live in
+//! [`crate::paper`].
+//!
+//! Units are SI (ohm, H, V, A, s, rad, Hz) unless a name says otherwise.
+
+use crate::paper;
+
+/// The vibrator: a Mabuchi RS-735 DC motor with an 8.5:1 gearhead driving the cam.
+///
+/// Chosen so the paper's calibration (Table 2) is what a calibration of this motor returns
+/// and the paper's voltage-speed points hold: N Ke = 0.078 V s/rad and R = 0.44 ohm give
+/// about 5 / 10 / 15 Hz at 3.6 / 6.2 / 8.8 V under the paper's loads.
+pub mod rs735 {
+    use super::paper;
+
+    /// Winding resistance at [`AMBIENT_C`], ohm.
+    pub const RESISTANCE_OHM: f64 = 0.44;
+    /// Winding inductance, H.
+    pub const INDUCTANCE_H: f64 = 0.2e-3;
+    /// Gearhead reduction N (motor turns per cam turn).
+    pub const GEAR_RATIO: f64 = 8.5;
+    /// Back-EMF constant seen at the cam shaft, N Ke, V s/rad.
+    pub const KE_CAM_V_S_PER_RAD: f64 = 0.078;
+    /// Back-EMF constant at the motor shaft, Ke (= torque constant Kt), V s/rad.
+    pub const KE_MOTOR_V_S_PER_RAD: f64 = KE_CAM_V_S_PER_RAD / GEAR_RATIO;
+    /// Efficiency eta of the gearhead (a two-stage spur gearhead: about 0.8), so that the
+    /// torque per ampere at the cam is C1 = eta N Kt = 62.4 N mm/A (Table 2: 62.1).
+    pub const GEARHEAD_EFFICIENCY: f64 = 0.8;
+    /// Rotor inertia at the motor shaft, kg m^2.
+    pub const ROTOR_INERTIA_KG_M2: f64 = 1.0e-5;
+    /// Inertia of the cam and its shaft at the cam shaft, kg m^2.
+    pub const CAM_INERTIA_KG_M2: f64 = 1.0e-4;
+    /// Heat capacity of the winding, J/K.
+    pub const THERMAL_CAPACITY_J_PER_K: f64 = 40.0;
+    /// Thermal resistance winding to ambient, K/W.
+    pub const THERMAL_RESISTANCE_K_PER_W: f64 = 6.0;
+    /// Ambient (and reference) temperature of the winding, deg C.
+    pub const AMBIENT_C: f64 = 25.0;
+    /// Temperature coefficient of the copper winding's resistance, 1/K.
+    pub const COPPER_TEMPCO_PER_K: f64 = 0.0039;
+    /// Cam speed of [`NO_LOAD_CURRENT_A`], rad/s (10 Hz).
+    pub const NO_LOAD_SPEED_RAD_S: f64 = 2.0 * core::f64::consts::PI * 10.0;
+    /// No-load current of the vibrator (motor, gearhead and cam shaft, uncoupled) at
+    /// [`NO_LOAD_SPEED_RAD_S`], A: what the paper's no-load test measured, Table 2's
+    /// C5 w + C6 (2.49 A at 10 Hz).
+    pub const NO_LOAD_CURRENT_A: f64 =
+        paper::CALIBRATION.c5 * NO_LOAD_SPEED_RAD_S + paper::CALIBRATION.c6;
+    /// Lowest voltage that starts the vibrator from rest, V: R (-C2) / C1 with Table 2's C1
+    /// and C2 (0.98 V; the paper: "below 1.0 V it does not turn").
+    pub const BREAKAWAY_V: f64 = RESISTANCE_OHM * -paper::CALIBRATION.c2 / paper::CALIBRATION.c1;
+}
+
+/// The current sensor: a Pololu ACS714 hall sensor, +-5 A version.
+pub mod acs714 {
+    /// Sensitivity at the nominal supply, V/A (185 mV/A).
+    pub const SENSITIVITY_V_PER_A: f64 = 0.185;
+    /// Measuring range, +-A.
+    pub const RANGE_A: f64 = 5.0;
+    /// Nominal supply, V.
+    pub const SUPPLY_NOMINAL_V: f64 = 5.0;
+    /// Lowest supply the sensor is specified for, V.
+    pub const SUPPLY_MIN_V: f64 = 4.5;
+    /// Highest supply the sensor is specified for, V.
+    pub const SUPPLY_MAX_V: f64 = 5.5;
+    /// Zero-current output as a fraction of the supply (Vcc / 2).
+    pub const ZERO_FRACTION: f64 = 0.5;
+    /// RMS output noise at the ADC's bandwidth, V (data sheet: 21 mV peak to peak at full
+    /// bandwidth, about 5 mV RMS).
+    pub const NOISE_RMS_V: f64 = 0.005;
+
+    /// Zero-current output at sensor supply `supply_v`, V (ratiometric: Vcc / 2).
+    pub const fn zero_output_v(supply_v: f64) -> f64 {
+        ZERO_FRACTION * supply_v
+    }
+
+    /// Sensitivity at sensor supply `supply_v`, V/A (ratiometric: proportional to Vcc).
+    pub const fn sensitivity_v_per_a(supply_v: f64) -> f64 {
+        SENSITIVITY_V_PER_A * supply_v / SUPPLY_NOMINAL_V
+    }
+}
+
+/// The divider from the ACS714's output to the ADC pin (10 k over 20 k): the 0.5-4.5 V
+/// output range fits the 3.3 V ADC.
+pub mod divider {
+    /// Upper resistor, ohm.
+    pub const R_TOP_OHM: f64 = 10.0e3;
+    /// Lower resistor, ohm.
+    pub const R_BOTTOM_OHM: f64 = 20.0e3;
+    /// Nominal ratio, ADC volts per sensor volt (2/3).
+    pub const RATIO: f64 = 2.0 / 3.0;
+    /// Tolerance of each resistor (1 % parts), relative.
+    pub const RESISTOR_TOLERANCE: f64 = 0.01;
+
+    /// Lowest and highest ratio with both resistors at the ends of their tolerance.
+    pub const fn ratio_bounds() -> (f64, f64) {
+        let t = RESISTOR_TOLERANCE;
+        let lo = R_BOTTOM_OHM * (1.0 - t) / (R_BOTTOM_OHM * (1.0 - t) + R_TOP_OHM * (1.0 + t));
+        let hi = R_BOTTOM_OHM * (1.0 + t) / (R_BOTTOM_OHM * (1.0 + t) + R_TOP_OHM * (1.0 - t));
+        (lo, hi)
+    }
+}
+
+/// The STM32G474's 12-bit ADC and its references.
+pub mod adc {
+    /// Resolution, bits.
+    pub const BITS: u32 = 12;
+    /// Largest code.
+    pub const FULL_SCALE: u16 = (1 << BITS) - 1;
+    /// Nominal reference VREF+ = VDDA on the Nucleo-G474RE, V.
+    pub const VREF_V: f64 = 3.3;
+    /// Internal reference VREFINT, typical, V (STM32G474 data sheet).
+    pub const VREFINT_TYP_V: f64 = 1.212;
+    /// VREFINT, minimum, V.
+    pub const VREFINT_MIN_V: f64 = 1.182;
+    /// VREFINT, maximum, V.
+    pub const VREFINT_MAX_V: f64 = 1.232;
+}
+
+/// The encoder: a CUI AMT102-V on the cam shaft, quadrature.
+pub mod amt102 {
+    /// Pulses per revolution per channel, as the rig sets the encoder's DIP switches (the
+    /// largest setting).
+    pub const PPR: u32 = 2048;
+    /// Counts per revolution with x4 decoding.
+    pub const COUNTS_PER_REV: u32 = 4 * PPR;
+}
+
+/// The controller board: a Nucleo-G474RE driving an H-bridge.
+pub mod board {
+    /// PWM frequency of the H-bridge (TIM1 CH1), Hz.
+    pub const PWM_FREQUENCY_HZ: f64 = 20_000.0;
+    /// H-bridge supply, V.
+    pub const BRIDGE_SUPPLY_V: f64 = 12.0;
+    /// Current-sensor sample rate, Hz (the paper logged at the same rate).
+    pub const CURRENT_SAMPLE_RATE_HZ: f64 = 10_000.0;
+    /// Highest vibration frequency the board's controller accepts, Hz.
+    pub const MAX_FREQ_HZ: f64 = 20.0;
+}
+
+/// A vibrator motor's own constants, against which a calibration is judged
+/// ([`crate::Calibration::check`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct MotorConstants {
+    /// Torque (= back-EMF) constant at the motor shaft Kt, N m/A.
+    pub kt_motor: f64,
+    /// Gearhead reduction N.
+    pub gear_ratio: f64,
+    /// Gearhead efficiency eta.
+    pub gearhead_efficiency: f64,
+    /// No-load current at [`MotorConstants::no_load_speed`], A.
+    pub no_load_current: f64,
+    /// Cam speed of [`MotorConstants::no_load_current`], rad/s.
+    pub no_load_speed: f64,
+}
+
+impl MotorConstants {
+    /// The rig's RS-735 with its 8.5:1 gearhead ([`rs735`]).
+    pub const RS735: MotorConstants = MotorConstants {
+        kt_motor: rs735::KE_MOTOR_V_S_PER_RAD,
+        gear_ratio: rs735::GEAR_RATIO,
+        gearhead_efficiency: rs735::GEARHEAD_EFFICIENCY,
+        no_load_current: rs735::NO_LOAD_CURRENT_A,
+        no_load_speed: rs735::NO_LOAD_SPEED_RAD_S,
+    };
+
+    /// Torque per ampere the motor delivers at the cam shaft, eta N Kt, N m/A (what C1
+    /// should be).
+    pub fn cam_torque_constant(&self) -> f64 {
+        self.gearhead_efficiency * self.gear_ratio * self.kt_motor
+    }
+}
+
+impl Default for MotorConstants {
+    fn default() -> Self {
+        Self::RS735
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn motor_constants_match_table2() {
+        let m = MotorConstants::RS735;
+        // eta N Kt = 0.8 x 0.078 = 62.4 N mm/A against Table 2's 62.1.
+        assert!((m.cam_torque_constant() * 1e3 - 62.4).abs() < 1e-9);
+        // C5 w + C6 at 10 Hz: 0.00378 x 62.83 + 2.25 = 2.4875 A.
+        assert!(
+            (m.no_load_current - 2.4875).abs() < 1e-3,
+            "{}",
+            m.no_load_current
+        );
+        // The paper: the vibrator does not turn below 1.0 V.
+        const { assert!(rs735::BREAKAWAY_V > 0.9 && rs735::BREAKAWAY_V < 1.0) };
+    }
+
+    #[test]
+    fn sensor_chain_numbers() {
+        assert_eq!(adc::FULL_SCALE, 4095);
+        assert_eq!(amt102::COUNTS_PER_REV, 8192);
+        assert!((acs714::zero_output_v(4.75) - 2.375).abs() < 1e-12);
+        assert!((acs714::sensitivity_v_per_a(5.0) - 0.185).abs() < 1e-15);
+        let (lo, hi) = divider::ratio_bounds();
+        // 1 % resistors move a 2/3 divider by about +-0.67 %.
+        assert!(lo < divider::RATIO && hi > divider::RATIO);
+        assert!(((hi / divider::RATIO - 1.0) - 0.0067).abs() < 2e-4, "{hi}");
+        assert!(
+            (divider::R_BOTTOM_OHM / (divider::R_BOTTOM_OHM + divider::R_TOP_OHM) - divider::RATIO)
+                .abs()
+                < 1e-15
+        );
+    }
+}
