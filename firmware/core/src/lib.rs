@@ -62,7 +62,7 @@ pub use config::{
     SupervisorConfig,
 };
 pub use controller::{BootInfo, Core, Inputs, Outputs, Status};
-pub use estimator::{EstimatorModel, RevolutionEstimate};
+pub use estimator::{Coefficients, EstimatorModel, RevolutionEstimate};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;
 pub use tx_queue::TX_QUEUE_LEN;
