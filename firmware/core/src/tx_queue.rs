@@ -59,6 +59,11 @@ impl TxQueue {
         self.dropped
     }
 
+    /// Counts a frame that was never offered (a stream sample superseded before framing).
+    pub fn note_dropped(&mut self) {
+        self.dropped = self.dropped.saturating_add(1);
+    }
+
     /// Encodes `msg` (a [`protocol::DeviceMessage`], or a legacy message such as
     /// [`protocol::LegacyV1Nack`]) and queues it if it fits with `reserve` bytes to spare.
     pub fn push<M: Serialize + ?Sized>(&mut self, msg: &M, reserve: usize) -> bool {

@@ -182,9 +182,11 @@ impl Core {
     }
 
     /// Drains pending outgoing frame bytes into `out`; returns the count (0: nothing pending).
-    /// Capture chunks are generated here, a few at a time, so replies and telemetry
-    /// still go out while a capture uploads.
+    /// The stream samples the steps took are framed here, and capture chunks are
+    /// generated here, a few at a time, so replies and telemetry still go out while a
+    /// capture uploads.
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
+        self.frame_streams();
         while self.capture.phase() == CapturePhase::Uploading
             && self.tx.len() < CAPTURE_IN_FLIGHT
             && self.tx.free() >= protocol::MAX_DEVICE_FRAME_SIZE + REPLY_RESERVE
