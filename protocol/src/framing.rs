@@ -16,7 +16,7 @@ use postcard::ser_flavors::Flavor;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
-use crate::{Error, MAX_MESSAGE_SIZE};
+use crate::Error;
 
 /// A message with the sender's frame sequence number (wraps at `u16::MAX`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
@@ -72,31 +72,6 @@ impl Flavor for CobsCrc<'_> {
 /// delimiters included. An `out` of [`crate::MAX_FRAME_SIZE`] bytes always suffices for
 /// [`crate::Request`] and [`crate::DeviceMessage`].
 pub fn encode_frame<'o, M: Serialize + ?Sized>(
-    seq: u16,
-    msg: &M,
-    out: &'o mut [u8],
-) -> Result<&'o [u8], Error> {
-    // Fast path: postcard into a stack buffer, then one CRC pass and one COBS pass over the
-    // whole body (about 3x fewer cycles on the Cortex-M4 than streaming every field through
-    // both). Bodies larger than this crate's messages take the streaming path.
-    let mut body = [0u8; MAX_MESSAGE_SIZE + CRC_LEN];
-    let n = match postcard::to_slice(&(seq, msg), &mut body[..MAX_MESSAGE_SIZE]) {
-        Ok(used) => used.len(),
-        Err(postcard::Error::SerializeBufferFull) => return encode_frame_streaming(seq, msg, out),
-        Err(_) => return Err(Error::Serialize),
-    };
-    let crc = CRC32.checksum(&body[..n]).to_le_bytes();
-    body[n..n + CRC_LEN].copy_from_slice(&crc);
-    let (first, rest) = out.split_first_mut().ok_or(Error::BufferTooSmall)?;
-    *first = FRAME_DELIMITER;
-    let len = cobs::try_encode(&body[..n + CRC_LEN], rest).map_err(|_| Error::BufferTooSmall)?;
-    *rest.get_mut(len).ok_or(Error::BufferTooSmall)? = FRAME_DELIMITER;
-    Ok(&out[..len + FRAME_DELIMITERS])
-}
-
-/// [`encode_frame`] streaming the body through the CRC and the COBS encoder (no body
-/// buffer, any size).
-fn encode_frame_streaming<'o, M: Serialize + ?Sized>(
     seq: u16,
     msg: &M,
     out: &'o mut [u8],
@@ -187,36 +162,6 @@ mod tests {
     fn body<T: Serialize>(value: &T) -> Vec<u8> {
         let mut buf = [0u8; 512];
         postcard::to_slice(value, &mut buf).unwrap().to_vec()
-    }
-
-    #[test]
-    fn buffered_and_streaming_encodings_agree() {
-        let msgs = [
-            DeviceMessage::FaultEvent {
-                flags: crate::FaultFlags::empty(),
-                device_time_us: 99,
-            },
-            DeviceMessage::Telemetry(crate::TelemetrySample {
-                seq: 0x0102_0304,
-                device_time_us: 1_234_567,
-                cam_speed_rad_s: 62.8,
-                current_a: 2.5,
-                pwm_duty: -0.4,
-                tau_cam_nm: 0.02,
-                tau_rot_nm: 1.5,
-                state: crate::SupervisorState::Vibrating,
-                faults: crate::FaultFlags::empty(),
-                status: crate::StatusFlags::empty(),
-                output_angle_rad: f32::NAN,
-                output_speed_rad_s: 0.0,
-            }),
-        ];
-        for (k, msg) in msgs.iter().enumerate() {
-            let (mut a, mut b) = ([0u8; MAX_FRAME_SIZE], [0u8; MAX_FRAME_SIZE]);
-            let fast = encode_frame(k as u16 * 300, msg, &mut a).unwrap();
-            let slow = encode_frame_streaming(k as u16 * 300, msg, &mut b).unwrap();
-            assert_eq!(fast, slow);
-        }
     }
 
     #[test]
