@@ -28,17 +28,18 @@ impl Derived {
     /// keeps working); a new record asking for more is refused by [`check_board_caps`].
     pub(crate) fn new(p: &RigParameters, config: &CoreConfig) -> Result<Self, ParameterRejection> {
         p.validate()?;
-        let z = p.z.map(u32::from);
-        let gear = model::GearSet::new(
-            z,
-            f64::from(p.module_mm) * 1e-3,
-            f64::from(p.pressure_angle_deg).to_radians(),
-        )
-        .map_err(gear_rejection)?;
-        let vibrator = model::Calibration::from_paper_units(p.constants());
-        if !vibrator.is_plausible() || gear.n() == 0 {
-            // `validate` has checked the signs but allows a zero no-load current, which
-            // the model's vibrator cannot have.
+        check_gear(p)?;
+        let c = [p.c1_nmm_per_a, p.c2_nmm, p.c3_nmm_s_per_rad, p.c4_nmm].map(|c| c * 1e-3);
+        // `model::Calibration::is_plausible`, in f32 (the tests hold the two together):
+        // `validate` has checked the signs but allows a zero no-load current, which the
+        // model's vibrator cannot have.
+        let constants = [c[0], c[1], c[2], c[3], p.c5_a_s_per_rad, p.c6_a];
+        if !(constants.iter().all(|v| v.is_finite())
+            && c[0] > 0.0
+            && c[2] >= 0.0
+            && p.c5_a_s_per_rad >= 0.0
+            && p.c6_a > 0.0)
+        {
             return Err(ParameterRejection::new(
                 ParameterField::C6,
                 RejectReason::OutOfRange,
@@ -49,12 +50,6 @@ impl Derived {
         // Eq. (10): 2/pi mu_s tau_rot (axial force per torque) e + M w^2 e^2 / pi.
         let per_load = 2.0 / PI * p.mu_s * factors.axial_force_per_torque * e;
         let inertia = p.carrier_mass_kg * e * e / PI;
-        let c = [
-            vibrator.c1 as f32,
-            vibrator.c2 as f32,
-            vibrator.c3 as f32,
-            vibrator.c4 as f32,
-        ];
         let big_lambda = factors.big_lambda;
         Ok(Self {
             model: Coefficients::new(
@@ -136,6 +131,50 @@ fn cos_sin(x: f32) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn checks_agree_with_the_model() {
+        let config = CoreConfig::default();
+        let base = RigParameters::paper();
+        let mut cases = Vec::new();
+        for z in [
+            [49, 51, 50, 50],
+            [49, 51, 50, 49],
+            [50, 50, 51, 50],
+            [0, 51, 50, 1],
+            [50, 50, 50, 50],
+        ] {
+            for (module_mm, alpha) in [
+                (1.0, 20.0),
+                (0.0, 20.0),
+                (1.0, 0.0),
+                (1.0, 44.9),
+                (1.0, 45.0),
+            ] {
+                for (c1, c6) in [(62.1, 2.25), (0.0, 2.25), (62.1, 0.0), (-1.0, 2.25)] {
+                    cases.push(RigParameters {
+                        z,
+                        module_mm,
+                        pressure_angle_deg: alpha,
+                        c1_nmm_per_a: c1,
+                        c6_a: c6,
+                        ..base
+                    });
+                }
+            }
+        }
+        for p in cases {
+            let model_ok = p.validate().is_ok()
+                && model::GearSet::new(
+                    p.z.map(u32::from),
+                    f64::from(p.module_mm) * 1e-3,
+                    f64::from(p.pressure_angle_deg).to_radians(),
+                )
+                .is_ok()
+                && model::Calibration::from_paper_units(p.constants()).is_plausible();
+            assert_eq!(Derived::new(&p, &config).is_ok(), model_ok, "{p:?}");
+        }
+    }
 
     #[test]
     fn cos_sin_match_libm() {
@@ -225,17 +264,24 @@ mod tests {
     }
 }
 
-/// The model's refusal of a gear set, as the record field it concerns.
-fn gear_rejection(e: model::GearError) -> ParameterRejection {
-    use model::GearError as G;
-    let (field, reason) = match e {
-        G::ZeroTeeth { .. } => (ParameterField::Z, RejectReason::OutOfRange),
-        G::BadModule => (ParameterField::Module, RejectReason::OutOfRange),
-        G::BadPressureAngle => (ParameterField::PressureAngle, RejectReason::OutOfRange),
-        // Z1 = Z4, unequal centre distances, or a later rule about the tooth counts.
-        _ => (ParameterField::Z, RejectReason::Inconsistent),
+/// `model::GearSet::new`'s checks of a gear set, in f32 (no soft double on the target;
+/// the tests hold the two together), as the record field they concern.
+fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
+    let z = p.z.map(u32::from);
+    let alpha = p.pressure_angle_deg.to_radians();
+    let (field, reason) = if z.contains(&0) {
+        (ParameterField::Z, RejectReason::OutOfRange)
+    } else if z[0] == z[3] || z[0] + z[1] != z[2] + z[3] {
+        // Z1 = Z4 (no tooth difference) or unequal centre distances.
+        (ParameterField::Z, RejectReason::Inconsistent)
+    } else if !(p.module_mm.is_finite() && p.module_mm > 0.0) {
+        (ParameterField::Module, RejectReason::OutOfRange)
+    } else if !(alpha > 0.0 && alpha < PI / 4.0) {
+        (ParameterField::PressureAngle, RejectReason::OutOfRange)
+    } else {
+        return Ok(());
     };
-    ParameterRejection::new(field, reason)
+    Err(ParameterRejection::new(field, reason))
 }
 
 /// A new record may not ask for more than the board allows: a current limit above the
