@@ -128,6 +128,53 @@ fn cos_sin(x: f32) -> (f32, f32) {
     (c, x * s)
 }
 
+/// `model::GearSet::new`'s checks of a gear set, in f32 (no soft double on the target;
+/// the tests hold the two together), as the record field they concern.
+fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
+    let z = p.z.map(u32::from);
+    let alpha = p.pressure_angle_deg.to_radians();
+    let (field, reason) = if z.contains(&0) {
+        (ParameterField::Z, RejectReason::OutOfRange)
+    } else if z[0] == z[3] || z[0] + z[1] != z[2] + z[3] {
+        // Z1 = Z4 (no tooth difference) or unequal centre distances.
+        (ParameterField::Z, RejectReason::Inconsistent)
+    } else if !(p.module_mm.is_finite() && p.module_mm > 0.0) {
+        (ParameterField::Module, RejectReason::OutOfRange)
+    } else if !(alpha > 0.0 && alpha < PI / 4.0) {
+        (ParameterField::PressureAngle, RejectReason::OutOfRange)
+    } else {
+        return Ok(());
+    };
+    Err(ParameterRejection::new(field, reason))
+}
+
+/// A new record may not ask for more than the board allows: a current limit above the
+/// board's overcurrent trip or a frequency above the supervisor's highest would be
+/// silently lowered, so `SetParameters` refuses them naming the field.
+pub(crate) fn check_board_caps(
+    p: &RigParameters,
+    config: &CoreConfig,
+) -> Result<(), ParameterRejection> {
+    let caps = [
+        (
+            ParameterField::MaxCurrent,
+            p.max_current_a,
+            config.faults.overcurrent_a,
+        ),
+        (
+            ParameterField::MaxFreq,
+            p.max_freq_hz,
+            config.supervisor.max_freq_hz,
+        ),
+    ];
+    for (field, value, cap) in caps {
+        if value > cap {
+            return Err(ParameterRejection::new(field, RejectReason::AboveBoardCap));
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -262,51 +309,4 @@ mod tests {
         }
         assert!(d.holds_at_rest && d.keeps_moving);
     }
-}
-
-/// `model::GearSet::new`'s checks of a gear set, in f32 (no soft double on the target;
-/// the tests hold the two together), as the record field they concern.
-fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
-    let z = p.z.map(u32::from);
-    let alpha = p.pressure_angle_deg.to_radians();
-    let (field, reason) = if z.contains(&0) {
-        (ParameterField::Z, RejectReason::OutOfRange)
-    } else if z[0] == z[3] || z[0] + z[1] != z[2] + z[3] {
-        // Z1 = Z4 (no tooth difference) or unequal centre distances.
-        (ParameterField::Z, RejectReason::Inconsistent)
-    } else if !(p.module_mm.is_finite() && p.module_mm > 0.0) {
-        (ParameterField::Module, RejectReason::OutOfRange)
-    } else if !(alpha > 0.0 && alpha < PI / 4.0) {
-        (ParameterField::PressureAngle, RejectReason::OutOfRange)
-    } else {
-        return Ok(());
-    };
-    Err(ParameterRejection::new(field, reason))
-}
-
-/// A new record may not ask for more than the board allows: a current limit above the
-/// board's overcurrent trip or a frequency above the supervisor's highest would be
-/// silently lowered, so `SetParameters` refuses them naming the field.
-pub(crate) fn check_board_caps(
-    p: &RigParameters,
-    config: &CoreConfig,
-) -> Result<(), ParameterRejection> {
-    let caps = [
-        (
-            ParameterField::MaxCurrent,
-            p.max_current_a,
-            config.faults.overcurrent_a,
-        ),
-        (
-            ParameterField::MaxFreq,
-            p.max_freq_hz,
-            config.supervisor.max_freq_hz,
-        ),
-    ];
-    for (field, value, cap) in caps {
-        if value > cap {
-            return Err(ParameterRejection::new(field, RejectReason::AboveBoardCap));
-        }
-    }
-    Ok(())
 }
