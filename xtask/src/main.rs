@@ -2,12 +2,15 @@
 //! installs the thumb target when missing, cross-builds the firmware and prints its flash
 //! and RAM use, checks `model` and `protocol` for the target, then fmt, clippy (warnings
 //! denied), docs (warnings denied), every host test, and a 10 s smoke run of each fuzz target
-//! in `fuzz/` when a nightly toolchain and cargo-fuzz are installed.
+//! in `fuzz/` when a nightly toolchain and cargo-fuzz are installed. `cargo xtask
+//! target-bench` counts the control core's cycles in an emulated Cortex-M4F (see
+//! `target_bench`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
 mod size;
+mod target_bench;
 
 /// The firmware's target.
 const THUMB: &str = "thumbv7em-none-eabihf";
@@ -23,9 +26,10 @@ fn main() -> ExitCode {
         Some("firmware") => firmware().map(|_| ()),
         Some("setup") => setup(),
         Some("fuzz") => fuzz_smoke(),
+        Some("target-bench") => target_bench(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <task>\n\n  test      every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware  cross-build the release firmware and print its flash/RAM use\n  setup     install the thumb target and the rustfmt/clippy components when missing\n  fuzz      the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)"
+                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]"
             );
             Err("no task given".into())
         }
@@ -109,27 +113,37 @@ fn setup() -> Result {
 
 /// Where the release firmware ELF is built.
 fn firmware_elf() -> PathBuf {
-    let target_dir = std::env::var("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| root().join("target"));
-    target_dir.join(THUMB).join("release").join("firmware")
+    target_dir().join(THUMB).join("release").join("firmware")
 }
 
-/// Builds the release firmware and prints (and checks) its flash and RAM use.
-fn firmware() -> Result<size::Usage> {
-    run("firmware release build (thumbv7em-none-eabihf)", {
+/// The cargo target folder.
+fn target_dir() -> PathBuf {
+    std::env::var("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| root().join("target"))
+}
+
+/// Builds `package`'s binary of the same name for the thumb target (release) and returns
+/// the ELF's path.
+fn thumb_release_build(package: &str) -> Result<PathBuf> {
+    run(&format!("{package} release build ({THUMB})"), {
         let mut c = cargo();
         c.args([
             "build",
             "--package",
-            "firmware",
+            package,
             "--release",
             "--target",
             THUMB,
         ]);
         c
     })?;
-    let elf = firmware_elf();
+    Ok(target_dir().join(THUMB).join("release").join(package))
+}
+
+/// Builds the release firmware and prints (and checks) its flash and RAM use.
+fn firmware() -> Result<size::Usage> {
+    let elf = thumb_release_build("firmware")?;
     let usage = size::measure(&elf)?;
     println!(
         "firmware size: flash {} B ({:.1} KiB of {} KiB budget), static RAM {} B ({:.1} KiB of {} KiB budget)",
@@ -144,6 +158,34 @@ fn firmware() -> Result<size::Usage> {
         return Err("firmware exceeds its flash or RAM budget".into());
     }
     Ok(usage)
+}
+
+/// `cargo xtask target-bench [--json] [--check]`: builds the firmware (for its size) and
+/// the bench image, runs the image in the emulator and prints the figures.
+fn target_bench(args: &[String]) -> Result {
+    let options = target_bench::Options::parse(args)?;
+    setup()?;
+    let firmware_elf = thumb_release_build("firmware")?;
+    let usage = size::measure(&firmware_elf)?;
+    let image = thumb_release_build("firmware-bench")?;
+    let python = target_bench::python_env(&target_dir())?;
+    let driver = root().join("xtask").join("target_bench").join("driver.py");
+    let output = target_bench::run_driver(&python, &driver, &image)?;
+    let result = target_bench::result(&output, usage, &image)?;
+    if options.json {
+        println!("{result}");
+    } else {
+        print!("{}", target_bench::table(&result));
+    }
+    let over = target_bench::over_budget(&result);
+    if options.check && !over.is_empty() {
+        let list: Vec<String> = over
+            .iter()
+            .map(|(k, v, limit)| format!("{k} {v} > {limit}"))
+            .collect();
+        return Err(format!("over budget: {}", list.join(", ")));
+    }
+    Ok(())
 }
 
 fn test() -> Result {
@@ -245,10 +287,7 @@ fn fuzz_smoke() -> Result {
     run("fuzz targets type-check (stable)", {
         let mut c = cargo();
         c.args(["check", "--manifest-path", "fuzz/Cargo.toml", "--bins"]);
-        let target = std::env::var("CARGO_TARGET_DIR")
-            .map(PathBuf::from)
-            .unwrap_or_else(|_| root().join("target"));
-        c.env("CARGO_TARGET_DIR", target.join("fuzz-check"));
+        c.env("CARGO_TARGET_DIR", target_dir().join("fuzz-check"));
         c
     })?;
     let works = |args: &[&str]| {

@@ -22,8 +22,12 @@
 //! assert!(!out.enable && out.duty == 0.0); // vibration off: the safe state
 //! ```
 //!
-//! Per-sample work is integer sums and f32 arithmetic (the Cortex-M4F has a single-precision
-//! FPU); the model's f64 functions run once per revolution or when the calibration changes.
+//! Everything on the target's path is integer or f32 arithmetic (the Cortex-M4F has a
+//! single-precision FPU; no soft double, no f64 trigonometry): the revolution estimate
+//! evaluates [`Coefficients`] derived once per parameter record, whose f64 counterpart
+//! ([`EstimatorModel`], the model's own functions) the tests hold them to. Telemetry and
+//! health samples are taken by the step and framed by [`Core::transmit`].
+//! `cargo xtask target-bench` measures the cycles on an emulated Cortex-M4.
 //!
 //! # Board inputs (issue 10)
 //! Besides [`Inputs`], the binary hands over what else the board measures with
@@ -75,7 +79,7 @@ pub use config::{
     SupervisorConfig,
 };
 pub use controller::{BoardInputs, BootInfo, Core, Inputs, Outputs, Status, check_rules};
-pub use estimator::{EstimatorModel, RevolutionEstimate};
+pub use estimator::{Coefficients, EstimatorModel, RevolutionEstimate};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;
 pub use tx_queue::TX_QUEUE_LEN;

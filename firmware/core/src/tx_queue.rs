@@ -59,6 +59,11 @@ impl TxQueue {
         self.dropped
     }
 
+    /// Counts a frame that was never offered (a stream sample superseded before framing).
+    pub fn note_dropped(&mut self) {
+        self.dropped = self.dropped.saturating_add(1);
+    }
+
     /// Encodes `msg` (a [`protocol::DeviceMessage`], or a legacy message such as
     /// [`protocol::LegacyV1Nack`]) and queues it if it fits with `reserve` bytes to spare.
     pub fn push<M: Serialize + ?Sized>(&mut self, msg: &M, reserve: usize) -> bool {
@@ -67,10 +72,13 @@ impl TxQueue {
         let mut scratch = [0u8; MAX_DEVICE_FRAME_SIZE];
         let fits = match encode_frame(seq, msg, &mut scratch) {
             Ok(frame) if frame.len() + reserve <= self.free() => {
-                for &b in frame {
-                    self.buf[(self.head + self.len) % TX_QUEUE_LEN] = b;
-                    self.len += 1;
-                }
+                // At most two contiguous copies: up to the ring's end, then from its start.
+                let tail = (self.head + self.len) % TX_QUEUE_LEN;
+                let first = frame.len().min(TX_QUEUE_LEN - tail);
+                let (a, b) = frame.split_at(first);
+                self.buf[tail..tail + first].copy_from_slice(a);
+                self.buf[..b.len()].copy_from_slice(b);
+                self.len += frame.len();
                 true
             }
             _ => false,
@@ -84,10 +92,10 @@ impl TxQueue {
     /// Moves queued bytes into `out`; returns how many.
     pub fn drain(&mut self, out: &mut [u8]) -> usize {
         let n = out.len().min(self.len);
-        for slot in &mut out[..n] {
-            *slot = self.buf[self.head];
-            self.head = (self.head + 1) % TX_QUEUE_LEN;
-        }
+        let first = n.min(TX_QUEUE_LEN - self.head);
+        out[..first].copy_from_slice(&self.buf[self.head..self.head + first]);
+        out[first..n].copy_from_slice(&self.buf[..n - first]);
+        self.head = (self.head + n) % TX_QUEUE_LEN;
         self.len -= n;
         n
     }

@@ -198,19 +198,18 @@ impl Core {
     }
 
     /// Drains pending outgoing frame bytes into `out`; returns the count (0: nothing pending).
-    /// Capture chunks are generated here, a few at a time, so replies and telemetry
-    /// still go out while a capture uploads.
+    /// The stream samples the steps took are framed here, and capture chunks are
+    /// generated here, one per call, so replies and telemetry still go out while a
+    /// capture uploads.
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
-        while self.capture.phase() == CapturePhase::Uploading
+        self.frame_streams();
+        // One capture message per call: each is framed here, under the binary's core lock.
+        if self.capture.phase() == CapturePhase::Uploading
             && self.tx.len() < CAPTURE_IN_FLIGHT
             && self.tx.free() >= protocol::MAX_DEVICE_FRAME_SIZE + REPLY_RESERVE
+            && let Some(msg) = self.capture.next_message()
         {
-            match self.capture.next_message() {
-                Some(msg) => {
-                    self.tx.push(&msg, REPLY_RESERVE);
-                }
-                None => break,
-            }
+            self.tx.push(&msg, REPLY_RESERVE);
         }
         self.tx.drain(out)
     }

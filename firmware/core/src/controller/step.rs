@@ -99,10 +99,10 @@ impl Core {
                 tau_cam: e.tau_cam_nm,
                 tau_rot: e.tau_rot_nm,
                 required_no_load: e.required_no_load_nm,
-                required_max_load: self.derived.model.required(
-                    f64::from(self.derived.max_load_nm),
-                    f64::from(e.cam_speed_rad_s),
-                ) as f32,
+                required_max_load: self
+                    .derived
+                    .model
+                    .required(self.derived.max_load_nm, e.cam_speed_rad_s),
                 max_load: self.derived.max_load_nm,
                 load_cap: self.config.supervisor.max_release_load_nm
                     * (1.0 + self.config.supervisor.load_cap_tolerance),

@@ -1,5 +1,9 @@
 //! The unsolicited streams: telemetry at the host's rate, a health sample once a second
 //! while telemetry runs, and the control step's CPU-cycle statistics that health reports.
+//!
+//! The control step only takes the samples; [`Core::transmit`] frames them (postcard,
+//! CRC, COBS) when the link asks for bytes, so framing stays out of the 1 kHz step. A
+//! sample the link did not take before the next one is superseded and counted as dropped.
 
 use protocol::{DeviceMessage, HealthSample, ParametersStatus, StatusFlags, TelemetrySample};
 
@@ -19,6 +23,9 @@ pub(crate) struct Streams {
     telemetry_seq: u32,
     /// Device time the next health sample is due (telemetry on).
     health_due_us: Option<u64>,
+    /// Taken by the step, framed by `transmit`.
+    pending_telemetry: Option<TelemetrySample>,
+    pending_health: Option<HealthSample>,
 }
 
 impl Streams {
@@ -101,7 +108,9 @@ impl Core {
         if self.streams.health_due_us.is_some_and(|due| now >= due) {
             self.streams.health_due_us = Some(now + HEALTH_PERIOD_US);
             let health = self.health(now);
-            self.tx.push(&DeviceMessage::Health(health), REPLY_RESERVE);
+            if self.streams.pending_health.replace(health).is_some() {
+                self.tx.note_dropped();
+            }
         }
         self.streams.countdown = self.streams.countdown.saturating_sub(1);
         if self.streams.countdown > 0 {
@@ -126,8 +135,20 @@ impl Core {
         };
         // Sequence numbers advance even for a dropped sample: the host sees the gap.
         self.streams.telemetry_seq = self.streams.telemetry_seq.wrapping_add(1);
-        self.tx
-            .push(&DeviceMessage::Telemetry(sample), REPLY_RESERVE);
+        if self.streams.pending_telemetry.replace(sample).is_some() {
+            self.tx.note_dropped();
+        }
+    }
+
+    /// Frames the samples the steps took (health first), for `transmit`.
+    pub(super) fn frame_streams(&mut self) {
+        if let Some(health) = self.streams.pending_health.take() {
+            self.tx.push(&DeviceMessage::Health(health), REPLY_RESERVE);
+        }
+        if let Some(sample) = self.streams.pending_telemetry.take() {
+            self.tx
+                .push(&DeviceMessage::Telemetry(sample), REPLY_RESERVE);
+        }
     }
 
     fn health(&self, now: u64) -> HealthSample {
