@@ -29,6 +29,8 @@ pub enum Scenario {
     TorqueSweep(SweepArgs),
     /// Fault drills: overcurrent (jammed cam), encoder-loss, comms-loss, bad-calibration.
     Faults(FaultArgs),
+    /// Serve the virtual rig on a pseudo-terminal any serial client can open, until Ctrl-C.
+    Serve(super::serve::ServeArgs),
 }
 
 /// Arguments of `rig sim fig5`.
@@ -77,6 +79,10 @@ pub struct SweepArgs {
     /// Seed of the noise and the test order.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The plant: `paper` behaves as the paper's rig measured (docs/presets.md), `ideal` is
+    /// the paper's equations alone.
+    #[arg(long, default_value = "paper", value_parser = clap::builder::PossibleValuesParser::new(sim::preset::PRESETS))]
+    pub preset: String,
     /// Write one row per test point to this CSV file.
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -189,6 +195,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 repeats: a.repeats,
                 rest_s: a.rest,
                 seed: a.seed,
+                effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
             let points = sweep::run(&opts)?;
@@ -221,6 +228,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        Scenario::Serve(a) => super::serve::run(a),
         Scenario::Faults(a) => {
             let outcomes = faults::run(&a.drills, a.seed)?;
             if a.json {

@@ -29,7 +29,8 @@ pub struct SweepOptions {
     pub rest_s: f64,
     /// Seed of the sensor noise and of the test order.
     pub seed: u64,
-    /// Effects switched on in the plant (for the discrepancy workflow).
+    /// Effects switched on in the plant (for the discrepancy workflow); by default the
+    /// `paper` preset's ([`crate::Preset::paper`]), as the paper's rig measured.
     pub effects: PlantEffects,
 }
 
@@ -45,7 +46,7 @@ impl Default for SweepOptions {
             window_s: paper::CURRENT_AVERAGING_S,
             rest_s: 10.0,
             seed: 1,
-            effects: PlantEffects::default(),
+            effects: crate::Preset::paper().effects,
         }
     }
 }
