@@ -157,7 +157,7 @@ impl EffectSpec {
             let omega0 = get("omega0_rad_s", PAPER_AXIAL_DIP_OMEGA0);
             if !(0.0..=1.0).contains(&depth) || omega0 <= 0.0 {
                 return Err(bad(
-                    "depth must be in [0, 1] and omega0_rad_s above 0".to_string(),
+                    "depth must be in [0, 1] and omega0_rad_s above 0".to_string()
                 ));
             }
             plant.effects.axial_friction_speed = Some((depth, omega0));
@@ -178,7 +178,8 @@ impl EffectSpec {
         let e = &mut plant.effects;
         match self.effect {
             Effect::LoadDependentFriction => {
-                e.load_friction = Some((p.load_exponent, model::effects::LOAD_FRICTION_REFERENCE_NM));
+                e.load_friction =
+                    Some((p.load_exponent, model::effects::LOAD_FRICTION_REFERENCE_NM));
             }
             Effect::CurrentSensorOffset => e.current_offset = p.current_offset,
             Effect::ThermalDrift => e.thermal_drift = Some(p.thermal_coeff),
@@ -229,14 +230,22 @@ mod tests {
 
     #[test]
     fn presets_and_effects_parse() {
-        assert_eq!(Preset::by_name("ideal").unwrap().effects, PlantEffects::default());
+        assert_eq!(
+            Preset::by_name("ideal").unwrap().effects,
+            PlantEffects::default()
+        );
         let p = Preset::paper().effects;
         assert!((p.bush_hold_torque(0.0) - PAPER_BUSH_HOLD_NM).abs() < 1e-12);
         // The hold's design points (module docs).
         assert!(p.bush_hold_torque(31.4) < 0.736);
         assert!(p.bush_hold_torque(65.0) > 0.368);
         assert!(p.bush_hold_torque(97.0) < 0.368);
-        assert!(Preset::by_name("real").unwrap_err().to_string().contains("paper, ideal"));
+        assert!(
+            Preset::by_name("real")
+                .unwrap_err()
+                .to_string()
+                .contains("paper, ideal")
+        );
         let mut plant = crate::SimConfig::paper().plant;
         let s = EffectSpec::parse("current-sensor-offset:offset_a=0.1").unwrap();
         s.apply(&mut plant).unwrap();
@@ -248,7 +257,9 @@ mod tests {
         assert_eq!(plant.effects.axial_friction_speed, Some((0.6, 35.0)));
         let e = EffectSpec::parse("no-such").unwrap_err().to_string();
         assert!(e.contains("linear-bush-friction"), "{e}");
-        let e = EffectSpec::parse("thermal-drift:k=x").unwrap_err().to_string();
+        let e = EffectSpec::parse("thermal-drift:k=x")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("not a finite number"), "{e}");
         let e = EffectSpec::parse("tooth-compliance")
             .unwrap()
