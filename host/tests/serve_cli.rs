@@ -284,3 +284,38 @@ fn ideal_preset_sweep_backdrives_everywhere() {
     .unwrap();
     assert_eq!(v["not_backdriven"], 0, "{v}");
 }
+
+/// docs/examples/rig_client.py talks to the served rig (with pyserial when installed, else
+/// through its raw-file fallback); skipped without python3.
+#[test]
+fn python_example_reads_info_and_telemetry() {
+    let Ok(status) = std::process::Command::new("python3")
+        .arg("--version")
+        .stdout(Stdio::null())
+        .status()
+    else {
+        eprintln!("skipped: no python3 on this machine");
+        return;
+    };
+    assert!(status.success());
+    let server = Server::start(&[]);
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/examples/rig_client.py");
+    let out = std::process::Command::new("python3")
+        .arg(&script)
+        .arg(&server.port)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["info"]["board"], "virtual", "{v}");
+    assert_eq!(v["info"]["protocol_version"], 2, "{v}");
+    assert_eq!(v["telemetry"]["state"], "locked", "{v}");
+    // The rig serves the next client as before.
+    assert_eq!(server.json(&["info", "--json"])["board"], "virtual");
+    assert_eq!(server.interrupt().code(), Some(0));
+}
