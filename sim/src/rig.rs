@@ -210,6 +210,14 @@ impl SimRig {
             self.frozen_count = self.plant.encoder_count();
             self.frozen_count
         };
+        // The optional output encoder reads the plant's output angle at its resolution.
+        let output_count = self.core.config().output_encoder.map(|e| {
+            let counts = self.plant.state().output_angle / core::f64::consts::TAU
+                * f64::from(e.counts_per_rev);
+            // The hardware counter is 16 bits and wraps.
+            (counts.round() as i64).rem_euclid(1 << 16) as u16
+        });
+        self.core.set_output_encoder_count(output_count);
         let inputs = Inputs {
             now_us: self.now_us(),
             current_adc: &self.adc,

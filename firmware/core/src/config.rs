@@ -258,6 +258,9 @@ pub struct CoreConfig {
     pub faults: FaultConfig,
     /// Torque estimator.
     pub estimator: EstimatorConfig,
+    /// The optional output-shaft encoder (`None`: not fitted; `Some` also sets
+    /// `Capabilities::OUTPUT_ENCODER` in `Info`).
+    pub output_encoder: Option<crate::OutputEncoderConfig>,
 }
 
 impl CoreConfig {
@@ -296,6 +299,7 @@ impl Default for CoreConfig {
             supervisor: SupervisorConfig::default(),
             faults: FaultConfig::default(),
             estimator: EstimatorConfig::default(),
+            output_encoder: None,
         }
     }
 }

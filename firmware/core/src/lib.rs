@@ -47,6 +47,7 @@ mod current;
 mod encoder;
 mod estimator;
 mod faults;
+mod output_encoder;
 mod server;
 mod speed_loop;
 pub mod storage;
@@ -63,6 +64,7 @@ pub use config::{
 };
 pub use controller::{BootInfo, Core, Inputs, Outputs, Status};
 pub use estimator::{EstimatorModel, RevolutionEstimate};
+pub use output_encoder::{OutputEncoder, OutputEncoderConfig};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;
 pub use tx_queue::TX_QUEUE_LEN;

@@ -135,6 +135,7 @@ impl VirtualDevice {
     pub fn paper_config(preset: &sim::Preset) -> SimConfig {
         let mut config = SimConfig::paper();
         config.core.board_name = "virtual";
+        config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
         preset.apply(&mut config.plant);
         config
     }

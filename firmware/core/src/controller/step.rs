@@ -40,6 +40,7 @@ impl Core {
         self.capture
             .record_step(inputs.current_adc, prev_position as u16, position as u16);
 
+        self.update_output_encoder(now);
         self.update_release(now, inputs.release_button);
         self.check_hardware(now, position);
 
