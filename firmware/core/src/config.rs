@@ -259,7 +259,8 @@ pub struct CoreConfig {
     /// Torque estimator.
     pub estimator: EstimatorConfig,
     /// The optional output-shaft encoder (`None`: not fitted; `Some` also sets
-    /// `Capabilities::OUTPUT_ENCODER` in `Info`).
+    /// `Capabilities::OUTPUT_ENCODER` in `Info`). Read only with the `output-encoder`
+    /// feature.
     pub output_encoder: Option<crate::OutputEncoderConfig>,
 }
 

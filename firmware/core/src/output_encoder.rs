@@ -4,6 +4,9 @@
 //! whether the output is moving (backdrive: `StatusFlags::OUTPUT_MOVING`), and trips
 //! `FaultFlags::OUTPUT_OVERSPEED` when the load runs away.
 //!
+//! The core's wiring is behind the `output-encoder` feature (on in the simulator; off in the
+//! firmware image until the board reads the encoder, as it costs flash).
+//!
 //! Without it fitted ([`crate::CoreConfig::output_encoder`] is `None`) telemetry reports
 //! NaN and `Info` leaves `Capabilities::OUTPUT_ENCODER` clear.
 
@@ -104,17 +107,23 @@ impl crate::Core {
 
     /// The output turns by the output encoder (false without one).
     pub fn output_moving(&self) -> bool {
-        self.output_encoder.is_some_and(|e| e.moving())
+        cfg!(feature = "output-encoder") && self.output_encoder.is_some_and(|e| e.moving())
     }
 
     /// Output angle and speed by the output encoder, rad and rad/s (`None` without one).
     pub fn output_motion(&self) -> Option<(f32, f32)> {
+        if !cfg!(feature = "output-encoder") {
+            return None;
+        }
         self.output_encoder
             .map(|e| (e.angle_rad(), e.speed_rad_s()))
     }
 
     /// One control step's output-encoder work: the count in, the overspeed check.
     pub(crate) fn update_output_encoder(&mut self, now: u64) {
+        if !cfg!(feature = "output-encoder") {
+            return;
+        }
         let (Some(encoder), Some(count)) = (self.output_encoder.as_mut(), self.output_count) else {
             return;
         };

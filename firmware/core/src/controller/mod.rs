@@ -92,7 +92,7 @@ impl Core {
         };
         let step_s = config.period_us() as f32 * 1e-6;
         let mut config = config;
-        if config.output_encoder.is_some() {
+        if cfg!(feature = "output-encoder") && config.output_encoder.is_some() {
             config
                 .capabilities
                 .insert(protocol::Capabilities::OUTPUT_ENCODER);

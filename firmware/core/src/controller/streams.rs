@@ -122,8 +122,8 @@ impl Core {
             faults: self.faults.latched(),
             status: self.status_flags(),
             // NaN without an output encoder (Capabilities::OUTPUT_ENCODER clear).
-            output_angle_rad: self.output_encoder.map_or(f32::NAN, |e| e.angle_rad()),
-            output_speed_rad_s: self.output_encoder.map_or(f32::NAN, |e| e.speed_rad_s()),
+            output_angle_rad: self.output_motion().map_or(f32::NAN, |m| m.0),
+            output_speed_rad_s: self.output_motion().map_or(f32::NAN, |m| m.1),
         };
         // Sequence numbers advance even for a dropped sample: the host sees the gap.
         self.streams.telemetry_seq = self.streams.telemetry_seq.wrapping_add(1);
