@@ -43,8 +43,23 @@ fn torque_sweep_current_and_torque_grow_with_load_and_speed() {
         repeats: 2,
         rest_s: 2.0,
         seed: 7,
+        // The paper's equations alone: this test checks the plant against Eq. (10).
+        effects: sim::Preset::ideal().effects,
         ..Default::default()
     };
+    // The paper preset (the default) keeps the trends of Figs. 8-9.
+    let paper_opts = sweep::SweepOptions {
+        effects: sim::Preset::paper().effects,
+        ..opts.clone()
+    };
+    let paper = sweep::summarise(&sweep::run(&paper_opts).expect("sweep runs"), &paper_opts);
+    assert!(
+        paper.current_grows_with_load
+            && paper.current_grows_with_speed
+            && paper.tau_cam_grows_with_load
+            && paper.tau_cam_grows_with_speed,
+        "{paper:?}"
+    );
     let points = sweep::run(&opts).expect("sweep runs");
     assert_eq!(points.len(), 5 * 3 * 2);
     let s = sweep::summarise(&points, &opts);

@@ -9,11 +9,13 @@
 mod error;
 mod link;
 pub mod names;
+pub mod preset;
 mod rig;
 pub mod riglink;
 pub mod scenarios;
 
 pub use error::SimError;
 pub use link::{LineNoise, SimLink};
+pub use preset::{EffectSpec, Preset};
 pub use rig::{Injections, PLANT_HZ, SimBench, SimConfig, SimRig};
 pub use riglink::RigLink;

@@ -236,6 +236,14 @@ impl SimRig {
             vdda_v: self.plant.params().sensors.adc_reference as f32,
             ..BoardInputs::default()
         });
+        // The optional output encoder reads the plant's output angle at its resolution.
+        let output_count = self.core.config().output_encoder.map(|e| {
+            let counts = self.plant.state().output_angle / core::f64::consts::TAU
+                * f64::from(e.counts_per_rev);
+            // The hardware counter is 16 bits and wraps.
+            (counts.round() as i64).rem_euclid(1 << 16) as u16
+        });
+        self.core.set_output_encoder_count(output_count);
         let inputs = Inputs {
             now_us: self.now_us(),
             current_adc: &self.adc,

@@ -311,6 +311,10 @@ pub struct CoreConfig {
     pub faults: FaultConfig,
     /// Torque estimator.
     pub estimator: EstimatorConfig,
+    /// The optional output-shaft encoder (`None`: not fitted; `Some` also sets
+    /// `Capabilities::OUTPUT_ENCODER` in `Info`). Read only with the `output-encoder`
+    /// feature.
+    pub output_encoder: Option<crate::OutputEncoderConfig>,
 }
 
 impl CoreConfig {
@@ -361,6 +365,7 @@ impl Default for CoreConfig {
             supervisor: SupervisorConfig::default(),
             faults: FaultConfig::default(),
             estimator: EstimatorConfig::default(),
+            output_encoder: None,
         }
     }
 }

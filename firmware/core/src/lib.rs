@@ -64,6 +64,7 @@ mod current;
 mod encoder;
 mod estimator;
 mod faults;
+mod output_encoder;
 mod server;
 mod speed_loop;
 pub mod storage;
@@ -80,6 +81,7 @@ pub use config::{
 };
 pub use controller::{BoardInputs, BootInfo, Core, Inputs, Outputs, Status, check_rules};
 pub use estimator::{Coefficients, EstimatorModel, RevolutionEstimate};
+pub use output_encoder::{OutputEncoder, OutputEncoderConfig};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;
 pub use tx_queue::TX_QUEUE_LEN;

@@ -24,6 +24,7 @@ pub mod log;
 pub mod monitor;
 pub mod ports;
 pub mod release;
+pub mod serve;
 pub mod sim;
 
 use connect::{DeviceArgs, VerbDeviceArgs};
@@ -45,7 +46,7 @@ pub struct Cli {
 pub enum Command {
     /// Design calculator: ratio, contact ratios, Lambda, hold verdict and required cam torque.
     Design(design::DesignArgs),
-    /// Simulated rig (firmware core + plant): fig5, table1, torque-sweep, faults.
+    /// Simulated rig (firmware core + plant): fig5, table1, torque-sweep, faults, serve.
     Sim(sim::SimArgs),
     /// The main job: the whole simulated rig (design, calibration, fig5, table1, sweep, faults) with a report folder.
     Demo {

@@ -29,6 +29,8 @@ pub enum Scenario {
     TorqueSweep(SweepArgs),
     /// Fault drills: overcurrent (jammed cam), encoder-loss, comms-loss, bad-calibration.
     Faults(FaultArgs),
+    /// Serve the virtual rig on a pseudo-terminal any serial client can open, until Ctrl-C.
+    Serve(super::serve::ServeArgs),
 }
 
 /// Arguments of `rig sim fig5`.
@@ -83,6 +85,10 @@ pub struct SweepArgs {
     /// The current sensor's (ACS714) supply, V: 4.5 to 5.5 (the sensor is ratiometric).
     #[arg(long, default_value_t = 5.0, value_parser = sensor_supply)]
     pub sensor_supply_v: f64,
+    /// The plant: `paper` behaves as the paper's rig measured (docs/presets.md), `ideal` is
+    /// the paper's equations alone.
+    #[arg(long, default_value = "paper", value_parser = clap::builder::PossibleValuesParser::new(sim::preset::PRESETS))]
+    pub preset: String,
     /// Write one row per test point to this CSV file.
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -197,6 +203,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 rest_s: a.rest,
                 seed: a.seed,
                 sensor_supply_v: a.sensor_supply_v,
+                effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
             let points = sweep::run(&opts)?;
@@ -229,6 +236,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        Scenario::Serve(a) => super::serve::run(a),
         Scenario::Faults(a) => {
             let outcomes = faults::run(&a.drills, a.seed)?;
             if a.json {

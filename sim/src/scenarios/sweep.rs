@@ -29,7 +29,8 @@ pub struct SweepOptions {
     pub rest_s: f64,
     /// Seed of the sensor noise and of the test order.
     pub seed: u64,
-    /// Effects switched on in the plant (for the discrepancy workflow).
+    /// Effects switched on in the plant (for the discrepancy workflow); by default the
+    /// `paper` preset's ([`crate::Preset::paper`]), as the paper's rig measured.
     pub effects: PlantEffects,
     /// The ACS714's supply, V (ratiometric zero and sensitivity; the board allows
     /// 4.5-5.5 V).
@@ -48,7 +49,7 @@ impl Default for SweepOptions {
             window_s: paper::CURRENT_AVERAGING_S,
             rest_s: 10.0,
             seed: 1,
-            effects: PlantEffects::default(),
+            effects: crate::Preset::paper().effects,
             sensor_supply_v: model::hardware::acs714::SUPPLY_NOMINAL_V,
         }
     }

@@ -63,6 +63,9 @@ pub struct Core {
     duty: f32,
     enable: bool,
     pub(crate) persist: Persist,
+    /// The output encoder, when fitted, and its latest count (`Core::set_output_encoder_count`).
+    pub(crate) output_encoder: Option<crate::OutputEncoder>,
+    pub(crate) output_count: Option<u16>,
     pub(crate) streams: Streams,
     step_timing: StepTiming,
     overruns: u32,
@@ -90,6 +93,12 @@ impl Core {
             }
         };
         let step_s = config.period_us() as f32 * 1e-6;
+        let mut config = config;
+        if cfg!(feature = "output-encoder") && config.output_encoder.is_some() {
+            config
+                .capabilities
+                .insert(protocol::Capabilities::OUTPUT_ENCODER);
+        }
         let mut core = Self {
             current: CurrentSense::new(&config.current, step_s),
             encoder: CamEncoder::new(config.counts_per_rev()),
@@ -115,6 +124,8 @@ impl Core {
             duty: 0.0,
             enable: false,
             persist: Persist::Idle,
+            output_encoder: config.output_encoder.map(crate::OutputEncoder::new),
+            output_count: None,
             streams: Streams::default(),
             step_timing: StepTiming::default(),
             overruns: 0,

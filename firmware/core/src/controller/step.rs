@@ -43,6 +43,7 @@ impl Core {
 
         let supply = self.bus_supply_v();
         self.speed_loop.set_supply_v(supply);
+        self.update_output_encoder(now);
         self.update_release(now, inputs.release_button);
         self.check_hardware(now, position);
 

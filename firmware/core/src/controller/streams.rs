@@ -97,6 +97,7 @@ impl Core {
             self.parameters_status != ParametersStatus::Valid,
         );
         s.set(StatusFlags::OPEN_LOOP, self.open_loop_volts.is_some());
+        s.set(StatusFlags::OUTPUT_MOVING, self.output_moving());
         s
     }
 
@@ -129,9 +130,9 @@ impl Core {
             state: self.supervisor.state(),
             faults: self.faults.latched(),
             status: self.status_flags(),
-            // No output encoder is read yet (Capabilities::OUTPUT_ENCODER is not set).
-            output_angle_rad: f32::NAN,
-            output_speed_rad_s: f32::NAN,
+            // NaN without an output encoder (Capabilities::OUTPUT_ENCODER clear).
+            output_angle_rad: self.output_motion().map_or(f32::NAN, |m| m.0),
+            output_speed_rad_s: self.output_motion().map_or(f32::NAN, |m| m.1),
         };
         // Sequence numbers advance even for a dropped sample: the host sees the gap.
         self.streams.telemetry_seq = self.streams.telemetry_seq.wrapping_add(1);
