@@ -408,6 +408,21 @@ impl Operator {
     }
 }
 
+/// On a virtual rig, raises the release limit (`max_release_load_nm`, the paper's
+/// calibration has 1.0 N m) above `top_nm` so the paper's heavier loads can be released; a
+/// real rig's limit is the operator's to set (`rig calibration set`).
+pub fn allow_load<B: Bench + ?Sized>(bench: &mut B, top_nm: f64) -> Result<(), RigError> {
+    if !bench.is_virtual() {
+        return Ok(());
+    }
+    let mut cal = bench.calibration()?;
+    if f64::from(cal.max_release_load_nm) < 1.25 * top_nm {
+        cal.max_release_load_nm = (1.25 * top_nm) as f32;
+        bench.ack(&Request::SetParameters(cal))?;
+    }
+    Ok(())
+}
+
 /// The error for Ctrl-C during a procedure.
 pub fn interrupted() -> RigError {
     RigError::Operator("interrupted (Ctrl-C): the gear is locked".into())

@@ -230,13 +230,7 @@ pub fn run<B: Bench + ?Sized>(
     // The release limit sits above the heaviest load on a virtual rig (its calibration is
     // the paper's 1.0 N m); a real rig's is the operator's business (`rig calibration`).
     let top = runs.iter().map(|r| r.load_nm).fold(0.0, f64::max);
-    if bench.is_virtual() && !operator.forced {
-        let mut cal = bench.calibration()?;
-        if f64::from(cal.max_release_load_nm) < 1.25 * top {
-            cal.max_release_load_nm = (1.25 * top) as f32;
-            bench.ack(&protocol::Request::SetParameters(cal))?;
-        }
-    }
+    super::bench::allow_load(bench, top)?;
     bench.start_telemetry(TELEMETRY_HZ)?;
     let mut hung: Option<f64> = None;
     let todo: Vec<&Run> = runs
