@@ -151,9 +151,11 @@ pub fn experiment_panels(rows: &[crate::experiment::sweep::Row]) -> [XyPanel; 2]
         }
     };
     [
-        panel("current (Fig. 8): mean, bars +-1 sd over repeats", "i_in, A", &|r| {
-            r.i_in_a
-        }),
+        panel(
+            "current (Fig. 8): mean, bars +-1 sd over repeats",
+            "i_in, A",
+            &|r| r.i_in_a,
+        ),
         panel("cam speed (Fig. 8)", "w_n, rad/s", &|r| r.omega_n_rad_s),
     ]
 }

@@ -190,9 +190,8 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                 release_s: h.release,
                 after_s: h.after,
             };
-            let samples = hold_release::run(&mut bench, &mut operator, &opts, &mut |l| {
-                eprintln!("{l}")
-            })?;
+            let samples =
+                hold_release::run(&mut bench, &mut operator, &opts, &mut |l| eprintln!("{l}"))?;
             hold_release::write_csv(&samples, &h.csv)?;
             let svg = h.svg.unwrap_or_else(|| h.csv.with_extension("svg"));
             if !samples.is_empty() {

@@ -176,7 +176,8 @@ impl Bench for SimBench {
     }
 
     fn keep_alive(&mut self, on: bool) {
-        self.link.keep_alive(on.then_some(sim::scenarios::HEARTBEAT_S));
+        self.link
+            .keep_alive(on.then_some(sim::scenarios::HEARTBEAT_S));
     }
 
     fn sample(&mut self) -> Result<Option<TelemetrySample>, RigError> {
@@ -234,7 +235,11 @@ impl DeviceBench {
     fn note(&mut self, msg: &DeviceMessage) {
         if let DeviceMessage::Health(h) = msg
             && h.motor_temp_c.is_finite()
-            && self.session.info.capabilities.contains(Capabilities::MOTOR_TEMP)
+            && self
+                .session
+                .info
+                .capabilities
+                .contains(Capabilities::MOTOR_TEMP)
         {
             self.temp_c = Some(f64::from(h.motor_temp_c));
         }
@@ -370,7 +375,10 @@ impl Operator {
     /// Before a point: Enter runs it, `s` skips it.
     pub fn before(&mut self, question: &str) -> Result<Go, RigError> {
         loop {
-            match self.ask(&format!("{question}, then Enter (s: skip this point)"))?.as_str() {
+            match self
+                .ask(&format!("{question}, then Enter (s: skip this point)"))?
+                .as_str()
+            {
                 "" => return Ok(Go::Run),
                 "s" | "skip" => return Ok(Go::Skip),
                 other => eprintln!("  '{other}': press Enter to run the point, or s to skip it"),

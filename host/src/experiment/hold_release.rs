@@ -166,8 +166,8 @@ pub fn write_csv(samples: &[Sample], path: &Path) -> Result<(), RigError> {
 /// Draws the time history (output angle, cam speed, current against time) into the SVG
 /// file `path`, atomically.
 pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
-    let panel = |caption: &str, y: &str, color: usize, f: &dyn Fn(&Sample) -> Option<f64>| {
-        XyPanel {
+    let panel =
+        |caption: &str, y: &str, color: usize, f: &dyn Fn(&Sample) -> Option<f64>| XyPanel {
             caption: Some(caption.into()),
             x_label: "t, s".into(),
             y_label: y.into(),
@@ -182,8 +182,7 @@ pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
             x_range: Some(plot::span(samples.iter().map(|s| s.t_s), 0.02, true)),
             fine_grid: true,
             ..XyPanel::default()
-        }
-    };
+        };
     let panels = [
         panel("output angle (Fig. 5)", "output angle, rad", 0, &|s| {
             s.output_angle_rad

@@ -211,7 +211,10 @@ impl Plan {
             return Err(bad("rest_s".into(), "must be 0 or more seconds"));
         }
         if !(self.window_s.is_finite() && self.window_s > 0.0) {
-            return Err(bad("window_s".into(), "must be a positive number of seconds"));
+            return Err(bad(
+                "window_s".into(),
+                "must be a positive number of seconds",
+            ));
         }
         for (k, p) in self.points.iter().enumerate() {
             let key = |field: &str| format!("points[{}].{field}", k + 1);
@@ -244,7 +247,10 @@ impl Plan {
                 return Err(bad(key("repeats"), "must be at least 1"));
             }
             if p.duration_s.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
-                return Err(bad(key("duration_s"), "must be a positive number of seconds"));
+                return Err(bad(
+                    key("duration_s"),
+                    "must be a positive number of seconds",
+                ));
             }
             if p.temp_c.is_some_and(|t| !t.is_finite()) {
                 return Err(bad(key("temp_c"), "must be a temperature in deg C"));
@@ -308,8 +314,14 @@ mod tests {
         let runs = plan.runs();
         assert_eq!(runs.len(), 150);
         assert_eq!(runs, plan.runs());
-        assert!(runs.iter().any(|r| r.load_nm == 0.368 && r.volts == Some(3.6)));
-        assert!(runs.iter().any(|r| r.load_nm == 3.68 && r.volts == Some(8.8)));
+        assert!(
+            runs.iter()
+                .any(|r| r.load_nm == 0.368 && r.volts == Some(3.6))
+        );
+        assert!(
+            runs.iter()
+                .any(|r| r.load_nm == 3.68 && r.volts == Some(8.8))
+        );
         let as_listed: Vec<_> = runs.iter().map(|r| (r.load_nm, r.volts)).collect();
         let mut sorted = as_listed.clone();
         sorted.sort_by(|a, b| a.partial_cmp(b).unwrap());
@@ -361,7 +373,10 @@ volts = 6.2
                 "points[1].hz",
             ),
             ("[[points]]\nload_nm = 1\nvolt = 3\n", "volt"),
-            ("rest_s = -1\n[[points]]\nload_nm = 1\nvolts = 3\n", "rest_s"),
+            (
+                "rest_s = -1\n[[points]]\nload_nm = 1\nvolts = 3\n",
+                "rest_s",
+            ),
         ] {
             let e = Plan::parse(text, "p.toml").unwrap_err().to_string();
             assert!(e.contains(want), "{text}: {e}");

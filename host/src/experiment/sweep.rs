@@ -219,6 +219,8 @@ pub fn run<B: Bench + ?Sized>(
     progress: &mut dyn FnMut(&str),
 ) -> Result<SweepOutcome, RigError> {
     let runs = setup.plan.runs();
+    let top = runs.iter().map(|r| r.load_nm).fold(0.0, f64::max);
+    super::bench::allow_load(bench, top)?;
     let (done, mut out) = open_csv(bench, setup, csv)?;
     let resumed = done.len();
     let mut outcome = SweepOutcome {
@@ -229,8 +231,6 @@ pub fn run<B: Bench + ?Sized>(
     };
     // The release limit sits above the heaviest load on a virtual rig (its calibration is
     // the paper's 1.0 N m); a real rig's is the operator's business (`rig calibration`).
-    let top = runs.iter().map(|r| r.load_nm).fold(0.0, f64::max);
-    super::bench::allow_load(bench, top)?;
     bench.start_telemetry(TELEMETRY_HZ)?;
     let mut hung: Option<f64> = None;
     let todo: Vec<&Run> = runs
