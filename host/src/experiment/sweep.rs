@@ -595,4 +595,33 @@ mod tests {
         assert!(speed(3.6) < speed(6.2) && speed(6.2) < speed(8.8));
         assert!(rows.iter().all(|r| r.backdriven.is_some()));
     }
+
+    #[test]
+    fn closed_loop_plan_over_whole_revolutions() {
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("cl.csv");
+        let plan = Plan::parse(
+            "mode = \"closed-loop\"\nrest_s = 0.2\n[[points]]\nload_nm = 1.0\nhz = 5.0\n[[points]]\nload_nm = 1.0\nhz = 10.0\n",
+            "cl.toml",
+        )
+        .unwrap();
+        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut op = Operator::scripted(b"", false);
+        let setup = SweepSetup {
+            plan,
+            window: Window::Revolutions,
+            resume: false,
+            command: "test".into(),
+        };
+        run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).unwrap();
+        let (rows, _) = read_rows(&csv).unwrap();
+        assert_eq!(rows.len(), 2);
+        for r in &rows {
+            let hz = r.target_hz.unwrap();
+            assert!(r.v_in_v.is_none());
+            let measured = r.omega_n_rad_s / std::f64::consts::TAU;
+            assert!((measured - hz).abs() < 0.1 * hz, "{measured} Hz at {hz} Hz");
+            assert_eq!(r.backdriven, Some(1), "1 N m falls once released");
+        }
+    }
 }
