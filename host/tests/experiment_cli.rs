@@ -225,7 +225,7 @@ fn ctrl_c_locks_keeps_rows_and_resume_finishes_the_plan() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("int.csv");
     let bin = assert_cmd::cargo::cargo_bin("rig");
-    let mut child = std::process::Command::new(&bin)
+    let child = std::process::Command::new(&bin)
         .args([
             "--sim",
             "--speed",

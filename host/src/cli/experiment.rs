@@ -218,7 +218,7 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             } else {
                 vec![None]
             };
-            if b.all_sets && !(operator.forced || !bench.is_virtual()) {
+            if b.all_sets && !operator.forced && bench.is_virtual() {
                 return Err(RigError::BadValue {
                     what: "--all-sets".into(),
                     why: "a virtual device has one gear set: `rig sim table1` runs all six, or add --operator".into(),
