@@ -289,3 +289,60 @@ fn ctrl_c_locks_keeps_rows_and_resume_finishes_the_plan() {
         "the kept rows stay as written"
     );
 }
+
+#[test]
+fn rig_sim_torque_sweep_is_the_procedure_with_its_keys_and_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("s.csv");
+    let out = rig()
+        .args([
+            "sim",
+            "torque-sweep",
+            "--levels",
+            "5",
+            "--repeats",
+            "2",
+            "--rest",
+            "2",
+            "--json",
+            "--csv",
+        ])
+        .arg(&csv)
+        .assert()
+        .success()
+        .get_output()
+        .clone();
+    let s: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(s["points"], 30);
+    for key in [
+        "current_grows_with_load",
+        "current_grows_with_speed",
+        "tau_cam_grows_with_load",
+        "tau_cam_grows_with_speed",
+    ] {
+        assert_eq!(s[key], true, "{key}: {s}");
+    }
+    for (pair, want) in s["mean_hz_per_voltage"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip([5.0, 10.0, 15.0])
+    {
+        let hz = pair[1].as_f64().unwrap();
+        assert!((hz / want - 1.0).abs() < 0.15, "{hz} Hz");
+    }
+    assert!(
+        s["rmse_tau_cam_vs_eq10_nm"].as_f64().unwrap() < 0.005,
+        "{s}"
+    );
+    assert!(
+        s["rmse_estimate_vs_measured_nm"].as_f64().unwrap() < 0.004,
+        "{s}"
+    );
+    let body = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(
+        body.lines().next().unwrap(),
+        "t_s,v_in_v,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,repeat,tau_cam_est_nm,tau_cam_meas_nm,tau_cam_eq10_nm,backdriven"
+    );
+    assert_eq!(body.lines().count(), 31);
+}

@@ -114,6 +114,56 @@ fn check_freq(hz: f64) -> Result<f32, RigError> {
     })
 }
 
+/// The torque sweep as `rig experiment torque-sweep` runs it (one implementation), on the
+/// in-process virtual rig in virtual time, its rows with the simulator's extra columns
+/// (the torque measured by Eqs. (15)-(17) and Eq. (10) at the mean cam speed).
+fn sweep_procedure(opts: &sweep::SweepOptions) -> Result<Vec<sweep::SweepPoint>, RigError> {
+    use crate::experiment::{Operator, Plan, SimBench, sweep as procedure};
+    let z = opts.z;
+    let mut config = sim::SimConfig::for_gear(z, model::plant::Load::Torque(0.0))
+        .map_err(|source| sim::SimError::Gear { z, source })?;
+    config.seed = opts.seed;
+    config.plant.effects = opts.effects;
+    let drive = config.plant.drive;
+    let mu = config.plant.mu_s;
+    let mut plan = Plan::grid(
+        "rig sim torque-sweep",
+        &opts.loads,
+        &opts.voltages,
+        opts.repeats,
+        opts.rest_s,
+    );
+    plan.seed = opts.seed;
+    plan.window_s = opts.window_s;
+    let mut bench = SimBench::new(config)?;
+    let mut operator = Operator::scripted(b"", false);
+    let setup = procedure::SweepSetup {
+        plan,
+        window: procedure::Window::Start,
+        resume: false,
+        command: "rig sim torque-sweep".into(),
+    };
+    let outcome = procedure::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
+    let calibration = model::paper::CALIBRATION;
+    Ok(outcome
+        .rows
+        .into_iter()
+        .map(|r| sweep::SweepPoint {
+            t_s: r.t_s,
+            v_in_v: r.v_in_v.unwrap_or(0.0),
+            omega_n_rad_s: r.omega_n_rad_s,
+            tau_rot_nm: r.tau_rot_nm,
+            i_in_a: r.i_in_a,
+            temp_c: r.temp_c.unwrap_or(f64::NAN),
+            repeat: r.repeat,
+            tau_cam_est_nm: r.tau_cam_est_nm,
+            tau_cam_meas_nm: calibration.cam_torque(r.i_in_a, r.omega_n_rad_s),
+            tau_cam_eq10_nm: drive.required_cam_torque(mu, r.tau_rot_nm, r.omega_n_rad_s),
+            backdriven: r.backdriven.unwrap_or(1),
+        })
+        .collect())
+}
+
 /// Runs `rig sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
     let mut out = std::io::stdout().lock();
@@ -191,7 +241,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 seed: a.seed,
                 ..Default::default()
             };
-            let points = sweep::run(&opts)?;
+            let points = sweep_procedure(&opts)?;
             if let Some(path) = &a.csv {
                 crate::sweep_report::write_csv(&points, path)?;
             }

@@ -71,6 +71,9 @@ pub struct SweepOutcome {
     pub written: usize,
     /// Runs the operator skipped.
     pub skipped: usize,
+    /// The rows this run measured, in order.
+    #[serde(skip)]
+    pub rows: Vec<Row>,
 }
 
 /// The sweep's settings beyond the plan.
@@ -218,16 +221,34 @@ pub fn run<B: Bench + ?Sized>(
     csv: &Path,
     progress: &mut dyn FnMut(&str),
 ) -> Result<SweepOutcome, RigError> {
+    run_to(bench, operator, setup, Some(csv), progress)
+}
+
+/// As [`run`], writing the CSV only when `csv` is given (the rows are in the outcome).
+pub fn run_to<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &mut Operator,
+    setup: &SweepSetup,
+    csv: Option<&Path>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<SweepOutcome, RigError> {
     let runs = setup.plan.runs();
     let top = runs.iter().map(|r| r.load_nm).fold(0.0, f64::max);
     super::bench::allow_load(bench, top)?;
-    let (done, mut out) = open_csv(bench, setup, csv)?;
+    let (done, mut out) = match csv {
+        Some(csv) => {
+            let (done, out) = open_csv(bench, setup, csv)?;
+            (done, Some(out))
+        }
+        None => (Vec::new(), None),
+    };
     let resumed = done.len();
     let mut outcome = SweepOutcome {
         planned: runs.len(),
         resumed,
         written: 0,
         skipped: 0,
+        rows: Vec::new(),
     };
     // The release limit sits above the heaviest load on a virtual rig (its calibration is
     // the paper's 1.0 N m); a real rig's is the operator's business (`rig calibration`).
@@ -284,7 +305,10 @@ pub fn run<B: Bench + ?Sized>(
                 } else {
                     progress(&summary);
                 }
-                out.write(&csv_line(&row)?)?;
+                if let Some(out) = out.as_mut() {
+                    out.write(&csv_line(&row)?)?;
+                }
+                outcome.rows.push(row);
                 outcome.written += 1;
                 bench.wait(setup.plan.rest_s)?;
                 break;
@@ -483,9 +507,12 @@ fn average<B: Bench + ?Sized>(
 ) -> Result<(Row, Option<TelemetrySample>), RigError> {
     let t0 = first.device_time_us;
     let temp_c = bench.motor_temp_c();
-    let (mut sum_i, mut sum_w, mut sum_tau, mut n) = (0.0, 0.0, 0.0, 0u32);
+    let (mut sum_i, mut sum_w, mut n) = (0.0, 0.0, 0u32);
+    // The firmware's estimate changes once per cam revolution: average the fresh ones.
+    let mut estimates: Vec<f64> = Vec::new();
     let mut angle = 0.0;
     let mut prev = first;
+    let mut prev_tau = first.tau_cam_nm;
     let mut last;
     let window = setup.plan.window_s;
     loop {
@@ -506,7 +533,10 @@ fn average<B: Bench + ?Sized>(
         last = t;
         sum_i += f64::from(t.current_a);
         sum_w += f64::from(t.cam_speed_rad_s).abs();
-        sum_tau += f64::from(t.tau_cam_nm);
+        if t.tau_cam_nm.is_finite() && t.tau_cam_nm != prev_tau {
+            estimates.push(f64::from(t.tau_cam_nm));
+        }
+        prev_tau = t.tau_cam_nm;
         n += 1;
         let elapsed = t.device_time_us.saturating_sub(t0) as f64 / 1e6;
         let long_enough = elapsed >= window - 0.5 / f64::from(TELEMETRY_HZ);
@@ -544,7 +574,11 @@ fn average<B: Bench + ?Sized>(
             tau_rot_nm: run.load_nm,
             i_in_a: sum_i / n,
             temp_c,
-            tau_cam_est_nm: sum_tau / n,
+            tau_cam_est_nm: if estimates.is_empty() {
+                f64::from(last.tau_cam_nm)
+            } else {
+                estimates.iter().sum::<f64>() / estimates.len() as f64
+            },
             backdriven: None,
         },
         Some(last),
