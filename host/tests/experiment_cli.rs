@@ -346,3 +346,25 @@ fn rig_sim_torque_sweep_is_the_procedure_with_its_keys_and_columns() {
     );
     assert_eq!(body.lines().count(), 31);
 }
+
+#[test]
+fn rig_sim_table1_is_the_backdrive_procedure_and_agrees_with_the_paper() {
+    let out = rig()
+        .args(["sim", "table1", "--json"])
+        .assert()
+        .success()
+        .get_output()
+        .clone();
+    let rows: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 6);
+    for r in rows {
+        assert_eq!(r["agrees_with_paper"], true, "{r}");
+        assert_eq!(
+            r["backdriven_without_vibration"],
+            r["n"].as_u64().unwrap() > 1,
+            "{r}"
+        );
+        assert_eq!(r["backdriven_with_vibration"], true, "{r}");
+    }
+}
