@@ -368,3 +368,24 @@ fn rig_sim_table1_is_the_backdrive_procedure_and_agrees_with_the_paper() {
         assert_eq!(r["backdriven_with_vibration"], true, "{r}");
     }
 }
+
+#[test]
+fn rig_sim_fig5_is_the_hold_release_procedure() {
+    let out = rig()
+        .args(["sim", "fig5", "--json", "--hold", "3"])
+        .assert()
+        .success()
+        .get_output()
+        .clone();
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["held_without_vibration"], true, "{v}");
+    let t = v["release_to_motion_s"].as_f64().unwrap();
+    assert!(t > 0.0 && t < 1.0, "{v}");
+    // mu_d Lambda < 1: the load keeps falling after the vibration stops (Fig. 5).
+    assert!(v["mu_d_lambda"].as_f64().unwrap() < 1.0);
+    assert!(
+        v["output_speed_after_stop_rad_s"].as_f64().unwrap() > 0.0,
+        "{v}"
+    );
+    assert!(v["load_drop_m"].as_f64().unwrap() > 0.0, "{v}");
+}

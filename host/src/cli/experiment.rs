@@ -184,7 +184,7 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         }
         Procedure::HoldRelease(h) => {
             let opts = hold_release::HoldRelease {
-                load_nm: h.load,
+                load_nm: Some(h.load),
                 hold_s: h.hold,
                 hz: h.freq,
                 release_s: h.release,

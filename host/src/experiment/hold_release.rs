@@ -18,8 +18,9 @@ pub const TELEMETRY_HZ: u16 = 100;
 /// The procedure's settings.
 #[derive(Debug, Clone, Copy)]
 pub struct HoldRelease {
-    /// Load hung on the output, N m (Fig. 5: 1.0 kg on 75 mm, 0.736 N m).
-    pub load_nm: f64,
+    /// Load hung on the output, N m (Fig. 5: 1.0 kg on 75 mm, 0.736 N m); `None`: the
+    /// load already on the rig (nobody is asked, nothing is set).
+    pub load_nm: Option<f64>,
     /// Hold without vibration, s (the paper: 14.5 s).
     pub hold_s: f64,
     /// Vibration frequency, Hz (the paper: 3.6 V, about 5 Hz).
@@ -33,7 +34,7 @@ pub struct HoldRelease {
 impl Default for HoldRelease {
     fn default() -> Self {
         Self {
-            load_nm: model::paper::FIG5_LOAD.torque(),
+            load_nm: Some(model::paper::FIG5_LOAD.torque()),
             hold_s: model::paper::FIG5_HOLD_S,
             hz: model::paper::VIBRATION_HZ[0],
             release_s: 2.0,
@@ -66,16 +67,18 @@ pub fn run<B: Bench + ?Sized>(
     opts: &HoldRelease,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Vec<Sample>, RigError> {
-    let asks = operator.forced || !bench.is_virtual();
-    let set_by_rig = !operator.forced && bench.set_load(opts.load_nm)?;
-    if !set_by_rig
-        && asks
-        && operator.before(&format!(
-            "hang {} N m on the pulley (Fig. 5: 1.0 kg on 75 mm)",
-            reporting::human(opts.load_nm)
-        ))? == Go::Skip
-    {
-        return Ok(Vec::new());
+    if let Some(load) = opts.load_nm {
+        let asks = operator.forced || !bench.is_virtual();
+        let set_by_rig = !operator.forced && bench.set_load(load)?;
+        if !set_by_rig
+            && asks
+            && operator.before(&format!(
+                "hang {} N m on the pulley (Fig. 5: 1.0 kg on 75 mm)",
+                reporting::human(load)
+            ))? == Go::Skip
+        {
+            return Ok(Vec::new());
+        }
     }
     bench.start_telemetry(TELEMETRY_HZ)?;
     let mut samples = Vec::new();
@@ -196,4 +199,54 @@ pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
         Some("hold, release, after"),
         &panels,
     )?)
+}
+
+/// Fig. 5's numbers from a time history: whether the load held, when it moved after the
+/// release request, the output speed when the vibration stopped and at the end, and the
+/// rope paid out on a pulley of `radius_m`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fig5Numbers {
+    /// The output stayed within 0.1 mm of rope during the hold.
+    pub held_without_vibration: bool,
+    /// From the release request to the first motion, s.
+    pub release_to_motion_s: Option<f64>,
+    /// Output speed at the end of the release, rad/s.
+    pub output_speed_at_stop_rad_s: f64,
+    /// Output speed at the end of the record, rad/s.
+    pub output_speed_after_stop_rad_s: f64,
+    /// Rope paid out, m.
+    pub load_drop_m: f64,
+}
+
+/// Reads [`Fig5Numbers`] from `samples`.
+pub fn fig5_numbers(samples: &[Sample], radius_m: f64) -> Fig5Numbers {
+    let motion = super::bench::MOTION_RAD;
+    let angle = |s: &Sample| s.output_angle_rad.unwrap_or(0.0);
+    let held = samples
+        .iter()
+        .filter(|s| s.phase == "hold")
+        .all(|s| angle(s).abs() <= motion);
+    let release: Vec<&Sample> = samples.iter().filter(|s| s.phase == "release").collect();
+    // The release is requested just before its first sample.
+    let start = samples
+        .iter()
+        .rfind(|s| s.phase == "hold")
+        .or(release.first().copied())
+        .map_or(0.0, |s| s.t_s);
+    let release_to_motion_s = release
+        .iter()
+        .find(|s| angle(s).abs() > motion)
+        .map(|s| ((s.t_s - start) * 1e3).round() / 1e3);
+    let speed = |set: &[&Sample]| match set {
+        [.., a, b] if b.t_s > a.t_s => (angle(b) - angle(a)) / (b.t_s - a.t_s),
+        _ => 0.0,
+    };
+    let all: Vec<&Sample> = samples.iter().collect();
+    Fig5Numbers {
+        held_without_vibration: held,
+        release_to_motion_s,
+        output_speed_at_stop_rad_s: speed(&release),
+        output_speed_after_stop_rad_s: speed(&all),
+        load_drop_m: samples.last().map_or(0.0, |s| angle(s) * radius_m),
+    }
 }
