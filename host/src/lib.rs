@@ -10,6 +10,7 @@ pub mod demo;
 pub mod design;
 pub mod device;
 pub mod error;
+pub mod experiment;
 pub mod flash;
 pub mod limits;
 pub mod ports;

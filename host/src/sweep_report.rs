@@ -87,6 +87,92 @@ pub fn sweep_figure(path: &Path, points: &[SweepPoint]) -> Result<(), RigError> 
     )?)
 }
 
+/// Mean and standard deviation (0 for one value) of `values`.
+fn mean_sd(values: &[f64]) -> (f64, f64) {
+    let n = values.len().max(1) as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = if values.len() > 1 {
+        values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    (mean, var.sqrt())
+}
+
+/// Panels of a `rig experiment torque-sweep` CSV: the current (Fig. 8) and the cam speed
+/// (Fig. 8's speed panel) against the load, per supply voltage (or frequency): the mean
+/// over repeats as points, the spread (mean +- one standard deviation) as bars.
+pub fn experiment_panels(rows: &[crate::experiment::sweep::Row]) -> [XyPanel; 2] {
+    let drive = |r: &crate::experiment::sweep::Row| r.v_in_v.or(r.target_hz).unwrap_or(0.0);
+    let unit = if rows.iter().any(|r| r.v_in_v.is_some()) {
+        "V"
+    } else {
+        "Hz"
+    };
+    let mut drives: Vec<f64> = rows.iter().map(drive).collect();
+    drives.sort_by(f64::total_cmp);
+    drives.dedup();
+    let x = plot::span(rows.iter().map(|r| r.tau_rot_nm), 0.08, false);
+    let panel = |caption: &str, y: &str, f: &dyn Fn(&crate::experiment::sweep::Row) -> f64| {
+        let mut series = Vec::new();
+        for (k, &d) in drives.iter().enumerate() {
+            let color = PALETTE[k % PALETTE.len()];
+            let mut loads: Vec<f64> = rows
+                .iter()
+                .filter(|r| drive(r) == d)
+                .map(|r| r.tau_rot_nm)
+                .collect();
+            loads.sort_by(f64::total_cmp);
+            loads.dedup();
+            let mut means = Vec::new();
+            for &l in &loads {
+                let vals: Vec<f64> = rows
+                    .iter()
+                    .filter(|r| drive(r) == d && r.tau_rot_nm == l)
+                    .map(f)
+                    .collect();
+                let (m, sd) = mean_sd(&vals);
+                means.push((l, m));
+                if sd > 0.0 {
+                    series.push(Series::line(color, 1, vec![(l, m - sd), (l, m + sd)]));
+                }
+            }
+            series.push(Series::points(color, 3, means).labelled(format!("{d:.1} {unit}")));
+        }
+        XyPanel {
+            caption: Some(caption.into()),
+            x_label: "tau_rot, N m".into(),
+            y_label: y.into(),
+            series,
+            x_range: Some(x),
+            legend: Some(Legend::MiddleRight),
+            fine_grid: true,
+            ..XyPanel::default()
+        }
+    };
+    [
+        panel(
+            "current (Fig. 8): mean, bars +-1 sd over repeats",
+            "i_in, A",
+            &|r| r.i_in_a,
+        ),
+        panel("cam speed (Fig. 8)", "w_n, rad/s", &|r| r.omega_n_rad_s),
+    ]
+}
+
+/// Draws [`experiment_panels`] side by side into the SVG `path`, atomically.
+pub fn experiment_figure(
+    path: &Path,
+    rows: &[crate::experiment::sweep::Row],
+) -> Result<(), RigError> {
+    Ok(plot::columns_figure(
+        path,
+        (480, 400),
+        None,
+        &experiment_panels(rows),
+    )?)
+}
+
 /// Writes the sweep points as CSV to `path`, atomically (a failed run keeps an existing file).
 pub fn write_csv(points: &[SweepPoint], path: &Path) -> Result<(), RigError> {
     reporting::write_atomic_with(path, |tmp| {

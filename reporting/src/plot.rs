@@ -25,8 +25,17 @@ use crate::ReportError;
 /// every row).
 const MAX_POINTS: usize = 4000;
 
-/// Series colours, in order.
-pub const PALETTE: [RGBColor; 6] = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+/// Series colours, in order: the Okabe-Ito palette (Okabe and Ito, "Color Universal
+/// Design", 2002), told apart by readers with any common colour-vision deficiency: blue,
+/// vermillion, bluish green, reddish purple, orange, black.
+pub const PALETTE: [RGBColor; 6] = [
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(0, 0, 0),
+];
 
 /// The drawing area of a figure (or of one panel of it).
 pub type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;

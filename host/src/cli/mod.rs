@@ -16,6 +16,7 @@ pub mod clear;
 pub mod connect;
 pub mod demo;
 pub mod design;
+pub mod experiment;
 pub mod explain;
 pub mod faults;
 pub mod flash;
@@ -53,6 +54,15 @@ pub enum Command {
         /// The verb's arguments.
         #[command(flatten)]
         args: demo::DemoArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
+    /// The paper's experiments on a rig: torque-sweep (Figs. 8-9), hold-release (Fig. 5), backdrive (Table 1).
+    Experiment {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: experiment::ExperimentArgs,
         /// Device options after the verb.
         #[command(flatten)]
         device: VerbDeviceArgs,
@@ -171,6 +181,9 @@ impl Cli {
                 let mut given = before.given();
                 given.extend(device.given());
                 demo::run(args, &before.resolve(&device)?, &given)
+            }
+            Command::Experiment { args, device } => {
+                experiment::run(args, &before.resolve(&device)?)
             }
             Command::Info { args, device } => info::run(args, &before.resolve(&device)?),
             Command::Faults { args, device } => faults::run(args, &before.resolve(&device)?),
