@@ -6,10 +6,10 @@
 //! replacement, and reruns the forward selection on the resampled data: at each step every
 //! candidate is refitted jointly with the replicate's current model, the best is added when
 //! its BIC improvement clears the guard's critical value of that step (the same null
-//! simulation as the real selection, [`select::explore`]), and the next step starts from it;
-//! the held-out check is not repeated. Each refit is one bounded Gauss-Newton step from the
-//! fit on all the data, computed from per-block sums of the normal equations, so a replicate
-//! costs a few small matrix solves whatever the number of rows. Paths the real selection
+//! simulation as the real selection, [`select::explore`]) and it predicts the held-out folds
+//! better, and the next step starts from it. Each refit is one bounded Gauss-Newton step
+//! from the fit on all the data, computed from per-block and per-fold sums of the normal
+//! equations, so a replicate costs a few small matrix solves whatever the number of rows. Paths the real selection
 //! did not take are explored (fitted on all the data) as replicates reach them.
 //!
 //! Out of it: how often each effect is selected (its inclusion probability), how often each
@@ -30,7 +30,64 @@ use crate::stats;
 /// Seed of the block draws, fixed so a run repeats exactly.
 pub const BOOTSTRAP_SEED: u64 = 0xb007_5742_0000_0014;
 
-/// The linearised log-likelihood of one fitted model, summed per bootstrap block.
+/// Sums of the linearised fit over the points of one cell (a bootstrap block and a held-out
+/// fold): J^T W J (p x p), J^T W e, sum of W e^2 over the rows (spread included), rows, and
+/// rows x ln(relative noise variance).
+#[derive(Debug, Clone)]
+struct Sums {
+    a: Vec<f64>,
+    u: Vec<f64>,
+    c: f64,
+    n: f64,
+    log_var: f64,
+}
+
+impl Sums {
+    fn zero(p: usize) -> Self {
+        Self {
+            a: vec![0.0; p * p],
+            u: vec![0.0; p],
+            c: 0.0,
+            n: 0.0,
+            log_var: 0.0,
+        }
+    }
+
+    fn add(&mut self, other: &Sums, times: f64) {
+        for (x, y) in self.a.iter_mut().zip(&other.a) {
+            *x += times * y;
+        }
+        for (x, y) in self.u.iter_mut().zip(&other.u) {
+            *x += times * y;
+        }
+        self.c += times * other.c;
+        self.n += times * other.n;
+        self.log_var += times * other.log_var;
+    }
+
+    /// Weighted residual sum of squares after the step `delta`.
+    fn rss(&self, delta: &[f64]) -> f64 {
+        let p = delta.len();
+        let mut rss = self.c;
+        for i in 0..p {
+            rss -= 2.0 * self.u[i] * delta[i];
+            for j in 0..p {
+                rss += delta[i] * self.a[i * p + j] * delta[j];
+            }
+        }
+        rss.max(1e-12 * self.c).max(1e-300)
+    }
+}
+
+/// A replicate's scores of one model: its BIC and its held-out RMSE and log score.
+#[derive(Debug, Clone, Copy)]
+struct Score {
+    bic: f64,
+    held_out: Option<fit::HeldOut>,
+}
+
+/// The linearised log-likelihood of one fitted model, summed per bootstrap block and
+/// held-out fold.
 #[derive(Debug, Clone)]
 struct Lin {
     /// Free parameters.
@@ -39,13 +96,11 @@ struct Lin {
     theta: Vec<f64>,
     lo: Vec<f64>,
     hi: Vec<f64>,
-    /// Per block: J^T W J (p x p), J^T W e, sum of W e^2 (rows, spread included), rows,
-    /// sum of rows x ln(relative variance), backdrive errors and observations.
-    a: Vec<Vec<f64>>,
-    u: Vec<Vec<f64>>,
-    c: Vec<f64>,
-    n: Vec<f64>,
-    log_var: Vec<f64>,
+    /// Folds (at least one).
+    folds: usize,
+    /// Sums per block and fold, `cells[block * folds + fold]`.
+    cells: Vec<Sums>,
+    /// Backdrive errors and observations per block.
     hold_errors: Vec<f64>,
     hold_total: Vec<f64>,
     /// Parameters counted by the BIC.
@@ -55,6 +110,7 @@ struct Lin {
 impl Lin {
     fn of(points: &TestPoints, fit: &Fit) -> Self {
         let blocks = points.blocks;
+        let folds = points.folds.max(1);
         let p = fit.free.len();
         let idx: Vec<usize> = fit.free.iter().map(|q| q.index()).collect();
         let params = fit.model.params();
@@ -69,11 +125,8 @@ impl Lin {
             theta,
             lo,
             hi,
-            a: vec![vec![0.0; p * p]; blocks],
-            u: vec![vec![0.0; p]; blocks],
-            c: vec![0.0; blocks],
-            n: vec![0.0; blocks],
-            log_var: vec![0.0; blocks],
+            folds,
+            cells: vec![Sums::zero(p); blocks * folds],
             hold_errors: vec![0.0; blocks],
             hold_total: vec![0.0; blocks],
             k: fit.k,
@@ -91,23 +144,23 @@ impl Lin {
             };
             let n = points.weight[k];
             let w = n / v;
-            let b = points.block[k] as usize;
-            let (a, u) = (&mut lin.a[b], &mut lin.u[b]);
+            let fold = if points.folds == 0 { 0 } else { points.fold[k] };
+            let cell = &mut lin.cells[points.block[k] as usize * folds + fold];
             for i in 0..p {
                 let gi = grad[idx[i]];
-                u[i] += w * gi * e;
+                cell.u[i] += w * gi * e;
                 for j in 0..=i {
-                    a[i * p + j] += w * gi * grad[idx[j]];
+                    cell.a[i * p + j] += w * gi * grad[idx[j]];
                 }
             }
-            lin.c[b] += (n * e * e + points.within_ss[k]) / v;
-            lin.n[b] += n;
-            lin.log_var[b] += n * v.ln();
+            cell.c += (n * e * e + points.within_ss[k]) / v;
+            cell.n += n;
+            cell.log_var += n * v.ln();
         }
-        for a in &mut lin.a {
+        for cell in &mut lin.cells {
             for i in 0..p {
                 for j in 0..i {
-                    a[j * p + i] = a[i * p + j];
+                    cell.a[j * p + i] = cell.a[i * p + j];
                 }
             }
         }
@@ -129,48 +182,68 @@ impl Lin {
         lin
     }
 
-    /// BIC of the model refitted (one bounded Gauss-Newton step) to the data with block `b`
-    /// counted `m[b]` times.
-    fn bic(&self, m: &[f64]) -> f64 {
-        let p = self.p;
-        let mut a = vec![0.0; p * p];
-        let mut u = vec![0.0; p];
-        let (mut c, mut n, mut l, mut err, mut tot) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    /// The model refitted (one bounded Gauss-Newton step) to the data with block `b` counted
+    /// `m[b]` times: its BIC and, with folds, its held-out scores (each fold predicted by the
+    /// step fitted to the others).
+    fn score(&self, m: &[f64]) -> Score {
+        let (p, folds) = (self.p, self.folds);
+        let mut per_fold = vec![Sums::zero(p); folds];
+        let (mut err, mut tot) = (0.0, 0.0);
         for (b, &mb) in m.iter().enumerate() {
             if mb == 0.0 {
                 continue;
             }
-            for (x, y) in a.iter_mut().zip(&self.a[b]) {
-                *x += mb * y;
+            for (f, sums) in per_fold.iter_mut().enumerate() {
+                sums.add(&self.cells[b * folds + f], mb);
             }
-            for (x, y) in u.iter_mut().zip(&self.u[b]) {
-                *x += mb * y;
-            }
-            c += mb * self.c[b];
-            n += mb * self.n[b];
-            l += mb * self.log_var[b];
             err += mb * self.hold_errors[b];
             tot += mb * self.hold_total[b];
         }
+        let mut total = Sums::zero(p);
+        for sums in &per_fold {
+            total.add(sums, 1.0);
+        }
+        let n = total.n;
         if n < 2.0 {
-            return f64::INFINITY;
+            return Score {
+                bic: f64::INFINITY,
+                held_out: None,
+            };
         }
-        let delta = bounded_step(&a, &u, p, &self.theta, &self.lo, &self.hi);
-        let mut rss = c;
-        for i in 0..p {
-            rss -= 2.0 * u[i] * delta[i];
-            for j in 0..p {
-                rss += delta[i] * a[i * p + j] * delta[j];
-            }
-        }
-        let rss = rss.max(1e-12 * c).max(1e-300);
-        let ll = -0.5 * (n * (2.0 * std::f64::consts::PI * rss / n).ln() + n + l)
+        let delta = bounded_step(&total.a, &total.u, p, &self.theta, &self.lo, &self.hi);
+        let rss = total.rss(&delta);
+        let ll = -0.5 * (n * (2.0 * std::f64::consts::PI * rss / n).ln() + n + total.log_var)
             + if tot > 0.0 {
                 fit::hold_loglik(tot, err)
             } else {
                 0.0
             };
-        -2.0 * ll + self.k as f64 * n.ln()
+        let bic = -2.0 * ll + self.k as f64 * n.ln();
+        let held_out = (folds > 1).then(|| {
+            let (mut sse, mut nlpd, mut rows) = (0.0, 0.0, 0.0);
+            for test in per_fold.iter().filter(|s| s.n > 0.0) {
+                let mut train = total.clone();
+                train.add(test, -1.0);
+                if train.n < 3.0 {
+                    continue;
+                }
+                let d = bounded_step(&train.a, &train.u, p, &self.theta, &self.lo, &self.hi);
+                let s2 = train.rss(&d) / train.n;
+                let e2 = test.rss(&d);
+                // The test rows' squared residuals unscaled by their relative variance
+                // enter the RMSE only approximately (the ripple's scale is held).
+                sse += e2;
+                nlpd += 0.5 * test.n * (2.0 * std::f64::consts::PI * s2).ln()
+                    + 0.5 * test.log_var
+                    + 0.5 * e2 / s2;
+                rows += test.n;
+            }
+            fit::HeldOut {
+                rmse: (sse / rows.max(1.0)).sqrt(),
+                nlpd: nlpd / rows.max(1.0),
+            }
+        });
+        Score { bic, held_out }
     }
 }
 
@@ -411,18 +484,26 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             }
             let p = &paths[r];
             let node = &steps[p];
-            let here = lins[p].bic(&m[r]);
-            let mut best: Option<(Effect, f64)> = None;
+            let here = lins[p].score(&m[r]);
+            let mut best: Option<(Effect, f64, Score)> = None;
             for &c in &node.children {
                 let mut child = p.clone();
                 child.push(c);
-                let gain = here - lins[&child].bic(&m[r]);
-                if best.is_none_or(|(_, g)| gain > g) {
-                    best = Some((c, gain));
+                let s = lins[&child].score(&m[r]);
+                let gain = here.bic - s.bic;
+                if best.is_none_or(|(_, g, _)| gain > g) {
+                    best = Some((c, gain, s));
                 }
             }
-            best.filter(|&(_, g)| g > 0.0 && g > node.critical)
-                .map(|(e, _)| e)
+            let (e, gain, s) = best?;
+            let confirmed = match (here.held_out, s.held_out) {
+                (Some(b), Some(a)) if e == Effect::MeshLoadSharingRipple => a.nlpd < b.nlpd,
+                // The bush's evidence is the backdrive observations (as the selection's rule).
+                (Some(b), Some(a)) if e == Effect::LinearBushFriction => a.rmse <= 1.01 * b.rmse,
+                (Some(b), Some(a)) => a.rmse < b.rmse,
+                _ => true,
+            };
+            (gain > 0.0 && gain > node.critical && confirmed).then_some(e)
         });
         let mut any = false;
         for (r, mv) in moves.into_iter().enumerate() {

@@ -167,35 +167,30 @@ pub fn gap(points: &TestPoints, fit: &Fit) -> Gap {
         p_value: p,
         durbin_watson: stats::durbin_watson(&res),
     };
-    let mut conditions: Vec<(String, Vec<f64>)> = vec![
-        ("omega_n_rad_s".into(), rv.omega_n.clone()),
-        ("tau_rot_nm".into(), rv.tau_rot.clone()),
-        (
-            "tau_rot_nm*omega_n_rad_s".into(),
-            rv.tau_rot
-                .iter()
-                .zip(&rv.omega_n)
-                .map(|(t, w)| t * w)
-                .collect(),
-        ),
+    let omega = |j: usize| rv.omega_n[j];
+    let tau = |j: usize| rv.tau_rot[j];
+    let tau_omega = |j: usize| rv.tau_rot[j] * rv.omega_n[j];
+    let mut conditions: Vec<(&str, &dyn Fn(usize) -> f64)> = vec![
+        ("omega_n_rad_s", &omega),
+        ("tau_rot_nm", &tau),
+        ("tau_rot_nm*omega_n_rad_s", &tau_omega),
     ];
+    let thermal_of = |j: usize| x[j];
     if let Some(axis) = thermal_axis {
-        conditions.push((axis.to_string(), x.clone()));
+        conditions.push((axis, &thermal_of));
     }
     let mut correlations: Vec<Correlation> = conditions
         .into_iter()
         .map(|(with, v)| {
-            let r = stats::pearson(&v, &res);
+            let r = stats::pearson_by(n, v, |j| res[j]);
             Correlation {
-                with,
+                with: with.to_string(),
                 r,
                 p_value: stats::correlation_p_value(r, n),
             }
         })
         .collect();
-    let fric: Vec<f64> = (0..n).map(|j| ev.friction_current(&rv.op(j))).collect();
-    let abs: Vec<f64> = res.iter().map(|e| e.abs()).collect();
-    let r = stats::pearson(&fric, &abs);
+    let r = stats::pearson_by(n, |j| ev.friction_current(&rv.op(j)), |j| res[j].abs());
     correlations.push(Correlation {
         with: "|residual| vs friction current".into(),
         r,

@@ -441,6 +441,7 @@ fn screened_points(
         }
         outliers.extend(more);
         outliers.sort_by_key(|o| o.row);
+        drop(points);
         points = TestPoints::new(data, reference_c, options.folds, &excluded, start);
         if let Some(e) = too_few(&points) {
             return Err(e);

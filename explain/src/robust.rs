@@ -44,8 +44,12 @@ const MAX_OUTLIER_SHARE: f64 = 0.05;
 const RUNNING_HALF_WIDTH: usize = 5;
 /// Fewest rows at one set of conditions whose median stands for them.
 const MIN_NEIGHBOURS: usize = 3;
+/// Fewest rows of a pool whose median stands for them (else the cell's does).
+const MIN_POOL_ROWS: f64 = 8.0;
 /// Fewest rows of a load level with a scale of their own.
 const MIN_LEVEL_ROWS: usize = 8;
+/// Rows the global scale counts for when a load level's scale is shrunk towards it.
+const LEVEL_PRIOR_ROWS: f64 = 30.0;
 /// Scale of the median absolute deviation to a normal standard deviation.
 const MAD_SCALE: f64 = 1.4826;
 
@@ -258,6 +262,20 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// Median of the sorted `sorted` with one value equal to `v` left out.
+fn median_without(sorted: &[f64], v: f64) -> f64 {
+    let skip = sorted
+        .binary_search_by(|x| x.total_cmp(&v))
+        .unwrap_or_else(|i| i.min(sorted.len() - 1));
+    let m = sorted.len() - 1;
+    let at = |i: usize| if i < skip { sorted[i] } else { sorted[i + 1] };
+    if m % 2 == 1 {
+        at(m / 2)
+    } else {
+        0.5 * (at(m / 2 - 1) + at(m / 2))
+    }
+}
+
 /// Robust standard deviation 1.4826 MAD of `v` (reordered).
 pub fn robust_scale(v: &mut [f64]) -> f64 {
     let m = median(v);
@@ -297,31 +315,50 @@ pub fn residual_outliers(
     }
     let ev = model.evaluator();
     let e = rv.residuals(&ev);
-    // Less the median of the rows at the same conditions.
-    let key: Vec<usize> = if points.pooled {
-        rv.point.iter().map(|&p| p as usize).collect()
-    } else {
-        let loads = points.load_centres.len();
-        rv.point
-            .iter()
-            .map(|&p| points.speed_level[p as usize] * loads + points.load_level[p as usize])
-            .collect()
+    // Less the median of the rows at the same conditions: the rows of the same speed and
+    // load level; on pooled data the rows of the same pool (same conditions and stretch of
+    // the session) where it has enough of them.
+    let loads = points.load_centres.len();
+    let cell: Vec<usize> = rv
+        .point
+        .iter()
+        .map(|&p| points.speed_level[p as usize] * loads + points.load_level[p as usize])
+        .collect();
+    // Each group's sorted residuals: a row's neighbours' median leaves the row itself out
+    // (else a fifth of the rows of a five-row cell would sit at exactly zero).
+    let sorted_groups = |key: &[usize]| -> Vec<Vec<f64>> {
+        let groups = key.iter().copied().max().map_or(0, |m| m + 1);
+        let mut members: Vec<Vec<f64>> = vec![Vec::new(); groups];
+        for (j, &g) in key.iter().enumerate() {
+            members[g].push(e[j]);
+        }
+        for m in &mut members {
+            m.sort_unstable_by(f64::total_cmp);
+        }
+        members
     };
-    let groups = key.iter().copied().max().map_or(0, |m| m + 1);
-    let mut members: Vec<Vec<usize>> = vec![Vec::new(); groups];
-    for (j, &g) in key.iter().enumerate() {
-        members[g].push(j);
-    }
+    let others_median = |sorted: &[f64], v: f64| -> Option<f64> {
+        (sorted.len() > MIN_NEIGHBOURS).then(|| median_without(sorted, v))
+    };
+    let by_cell = sorted_groups(&cell);
+    let pool: Vec<usize> = rv.point.iter().map(|&p| p as usize).collect();
+    let by_pool = if points.pooled {
+        sorted_groups(&pool)
+    } else {
+        Vec::new()
+    };
     let mut d = e.clone();
-    let mut buf = Vec::new();
-    for m in members.iter().filter(|m| m.len() >= MIN_NEIGHBOURS) {
-        buf.clear();
-        buf.extend(m.iter().map(|&j| e[j]));
-        let med = median(&mut buf);
-        for &j in m {
-            d[j] = e[j] - med;
+    for j in 0..n {
+        let local = if points.pooled && points.weight[pool[j]] >= MIN_POOL_ROWS {
+            others_median(&by_pool[pool[j]], e[j])
+        } else {
+            None
+        };
+        if let Some(m) = local.or_else(|| others_median(&by_cell[cell[j]], e[j])) {
+            d[j] = e[j] - m;
         }
     }
+    let mut buf = Vec::new();
     // Less the running median in time order (unpooled data: pools are local in time).
     if !points.pooled {
         let h = RUNNING_HALF_WIDTH;
@@ -329,7 +366,7 @@ pub fn residual_outliers(
             .map(|j| {
                 let (lo, hi) = (j.saturating_sub(h), (j + h + 1).min(n));
                 buf.clear();
-                buf.extend_from_slice(&d[lo..hi]);
+                buf.extend((lo..hi).filter(|&i| i != j).map(|i| d[i]));
                 median(&mut buf)
             })
             .collect();
@@ -345,11 +382,17 @@ pub fn residual_outliers(
     for j in 0..n {
         by_level[points.load_level[rv.point[j] as usize]].push(d[j]);
     }
+    // A level's own scale, shrunk towards the global one as if that were backed by
+    // LEVEL_PRIOR_ROWS rows (fifteen rows alone estimate a scale only to some 30 %).
     let scale: Vec<f64> = by_level
         .iter_mut()
         .map(|v| {
             if v.len() >= MIN_LEVEL_ROWS {
-                spread_scale(v).max(0.5 * global)
+                let n = v.len() as f64;
+                let s = spread_scale(v);
+                ((n * s * s + LEVEL_PRIOR_ROWS * global * global) / (n + LEVEL_PRIOR_ROWS))
+                    .sqrt()
+                    .max(0.5 * global)
             } else {
                 global
             }
@@ -540,6 +583,15 @@ mod tests {
         let w = check_rig(&odd).unwrap();
         assert!(w.iter().any(|w| w.contains("c1")), "{w:?}");
         assert!(w.iter().any(|w| w.contains("eccentricity_mm")), "{w:?}");
+    }
+
+    #[test]
+    fn median_without_leaves_one_value_out() {
+        let s = [1.0, 2.0, 3.0, 10.0, 11.0];
+        assert_eq!(median_without(&s, 1.0), 6.5);
+        assert_eq!(median_without(&s, 3.0), 6.0);
+        assert_eq!(median_without(&s, 11.0), 2.5);
+        assert_eq!(median_without(&[1.0, 2.0, 3.0, 4.0], 4.0), 2.0);
     }
 
     #[test]
