@@ -9,8 +9,10 @@
 //! simulation as the real selection, [`select::explore`]) and it predicts the held-out folds
 //! better, and the next step starts from it. Each refit is one bounded Gauss-Newton step
 //! from the fit on all the data, computed from per-block and per-fold sums of the normal
-//! equations, so a replicate costs a few small matrix solves whatever the number of rows. Paths the real selection
-//! did not take are explored (fitted on all the data) as replicates reach them.
+//! equations, so a replicate costs a few small matrix solves whatever the number of rows.
+//! Paths the real selection did not take are explored (fitted on all the data, with a quarter
+//! of the null draws) when at least 2 % of the replicates reach them; replicates on rarer
+//! paths stop there.
 //!
 //! Out of it: how often each effect is selected (its inclusion probability), how often each
 //! set of effects is, and for a named effect how often a competitor is selected without it
@@ -29,6 +31,12 @@ use crate::stats;
 
 /// Seed of the block draws, fixed so a run repeats exactly.
 pub const BOOTSTRAP_SEED: u64 = 0xb007_5742_0000_0014;
+/// A path the real selection did not take is explored when at least this share of the
+/// replicates reach it; replicates on rarer paths stop there.
+const MIN_PATH_SHARE: f64 = 0.02;
+/// Draws of the guard's null simulation on paths the real selection did not take, as a
+/// share of `Options::null_draws`.
+const ALT_NULL_SHARE: f64 = 0.25;
 
 /// Sums of the linearised fit over the points of one cell (a bootstrap block and a held-out
 /// fold): J^T W J (p x p), J^T W e, sum of W e^2 over the rows (spread included), rows, and
@@ -420,17 +428,32 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
     let mut active = vec![true; opts.replicates];
     for _level in 0..depth {
         // Explore the paths the replicates reached that the real selection did not.
-        let mut wanted: Vec<Vec<Effect>> = paths
+        let mut reached: BTreeMap<&Vec<Effect>, usize> = BTreeMap::new();
+        for (p, _) in paths
             .iter()
             .zip(&active)
             .filter(|(p, a)| **a && !steps.contains_key(*p))
-            .map(|(p, _)| p.clone())
+        {
+            *reached.entry(p).or_default() += 1;
+        }
+        let min_count = (MIN_PATH_SHARE * opts.replicates as f64).ceil() as usize;
+        let wanted: Vec<Vec<Effect>> = reached
+            .iter()
+            .filter(|&(_, &c)| c >= min_count)
+            .map(|(p, _)| (*p).clone())
             .collect();
-        wanted.sort();
-        wanted.dedup();
+        let rare: Vec<Vec<Effect>> = reached
+            .iter()
+            .filter(|&(_, &c)| c < min_count)
+            .map(|(p, _)| (*p).clone())
+            .collect();
+        let alt_opts = Options {
+            null_draws: ((opts.null_draws as f64 * ALT_NULL_SHARE) as usize).max(1000),
+            ..*opts
+        };
         let explored = fit::par_map(&wanted, |p| {
             let current = &fits[p];
-            select::explore(points, current, opts).map(|ex| {
+            select::explore(points, current, &alt_opts).map(|ex| {
                 let children: Vec<(Effect, Fit)> = ex
                     .candidates
                     .into_iter()
@@ -459,6 +482,15 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 },
             };
             steps.insert(p, node);
+        }
+        for p in rare {
+            steps.insert(
+                p,
+                StepNode {
+                    critical: f64::INFINITY,
+                    children: Vec::new(),
+                },
+            );
         }
         // Linearise every model the replicates compare at this level.
         let mut needed: Vec<Vec<Effect>> = Vec::new();

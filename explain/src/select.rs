@@ -390,8 +390,8 @@ fn critical_value(null: &[f64], alpha: f64) -> f64 {
         return f64::NEG_INFINITY;
     }
     let mut sorted = null.to_vec();
-    sorted.sort_unstable_by(|a, b| b.total_cmp(a));
-    sorted[k]
+    let (_, v, _) = sorted.select_nth_unstable_by(k, |a, b| b.total_cmp(a));
+    *v
 }
 
 /// Fits the applicable candidates not yet in `current` (on large data the leaders of the score
