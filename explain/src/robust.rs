@@ -457,7 +457,7 @@ pub fn check_rig(rig: &RigFile) -> Result<Vec<String>, ExplainError> {
     let mut warnings = Vec::new();
     let fix = |issue: &CalibrationIssue| {
         format!(
-            "rig file [calibration] {issue}; fix {} in the rig file (Table 2 of the paper: c1 = 62.1, c2 = -138, c3 = 0.235, c4 = 1.69, c5 = 0.00378, c6 = 2.25)",
+            "[calibration] {issue} (the firmware's calibration check against the RS-735); fix {} in the rig file (Table 2 of the paper: c1 = 62.1, c2 = -138, c3 = 0.235, c4 = 1.69, c5 = 0.00378, c6 = 2.25)",
             issue.field.name()
         )
     };
@@ -470,7 +470,7 @@ pub fn check_rig(rig: &RigFile) -> Result<Vec<String>, ExplainError> {
                     why: fix(&issue),
                 });
             }
-            _ => warnings.push(fix(&issue)),
+            _ => warnings.push(format!("rig file {}", fix(&issue))),
         }
     }
     let (t_lo, t_hi) = TEMPERATURE_RANGE_C;
