@@ -320,8 +320,9 @@ impl Dataset {
     /// [`Dataset::parse_csv`] with the size of the input in bytes, if known, to reserve the
     /// columns once.
     fn parse_csv_sized<R: Read>(reader: R, name: &str, bytes: u64) -> Result<Self, ExplainError> {
+        // Fields are trimmed as they are parsed (cheaper than trimming every record).
         let mut csv = csv::ReaderBuilder::new()
-            .trim(csv::Trim::All)
+            .trim(csv::Trim::Headers)
             .comment(Some(b'#'))
             .flexible(true)
             .buffer_capacity(1 << 16)
@@ -396,7 +397,7 @@ impl Dataset {
                     record.len()
                 )));
             }
-            let field = |k: usize| record.get(k).unwrap_or(b"");
+            let field = |k: usize| record.get(k).unwrap_or(b"").trim_ascii();
             let number = |k: usize, column: &str| -> Result<f64, ExplainError> {
                 parse_number(field(k))
                     .map(|v| v.unwrap_or(f64::NAN))

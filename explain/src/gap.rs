@@ -6,11 +6,8 @@ use serde::Serialize;
 
 use super::fit::Fit;
 use super::library::ThermalDriver;
-use super::points::TestPoints;
+use super::points::{THERMAL_BINS, TestPoints};
 use super::stats;
-
-/// Bins of time or temperature.
-const THERMAL_BINS: usize = 5;
 
 /// Mean residual of one bin.
 #[derive(Debug, Clone, Serialize)]
@@ -138,21 +135,24 @@ pub fn gap(points: &TestPoints, fit: &Fit) -> Gap {
         ThermalDriver::Time => (Some("t_s"), 0.0, "s"),
         ThermalDriver::Unavailable => (None, 0.0, ""),
     };
-    let by_thermal = if thermal_axis.is_some() {
-        // Rows are in time order, so the thermal driver is (nearly) sorted already.
-        let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
-        let bins = THERMAL_BINS.min(n);
-        (0..bins)
-            .map(|b| {
-                let part = &order[b * n / bins..(b + 1) * n / bins];
-                let (sum, sq) = part
-                    .iter()
-                    .fold((0.0, 0.0), |(s, q), &k| (s + res[k], q + res[k] * res[k]));
-                let lo = x[part[0]] + offset;
-                let hi = x[*part.last().expect("non-empty bin")] + offset;
-                let c = part.iter().map(|&k| x[k]).sum::<f64>() / part.len() as f64 + offset;
-                bin_from_sums(format!("{lo:.0}-{hi:.0} {unit}"), c, part.len(), sum, sq)
+    let by_thermal = if thermal_axis.is_some() && !rv.thermal_bin.is_empty() {
+        // (rows, sum, square sum of residuals, lowest, highest and sum of the driver)
+        let mut acc = vec![(0usize, 0.0, 0.0, f64::INFINITY, f64::NEG_INFINITY, 0.0); THERMAL_BINS];
+        for j in 0..n {
+            let a = &mut acc[rv.thermal_bin[j] as usize];
+            a.0 += 1;
+            a.1 += res[j];
+            a.2 += res[j] * res[j];
+            a.3 = a.3.min(x[j]);
+            a.4 = a.4.max(x[j]);
+            a.5 += x[j];
+        }
+        acc.into_iter()
+            .filter(|a| a.0 > 0)
+            .map(|(rows, sum, sq, lo, hi, xs)| {
+                let (lo, hi) = (lo + offset, hi + offset);
+                let c = xs / rows as f64 + offset;
+                bin_from_sums(format!("{lo:.0}-{hi:.0} {unit}"), c, rows, sum, sq)
             })
             .collect()
     } else {
@@ -190,7 +190,9 @@ pub fn gap(points: &TestPoints, fit: &Fit) -> Gap {
             }
         })
         .collect();
-    let r = stats::pearson_by(n, |j| ev.friction_current(&rv.op(j)), |j| res[j].abs());
+    let fric: Vec<f64> = (0..n).map(|j| ev.friction_current(&rv.op(j))).collect();
+    let r = stats::pearson_by(n, |j| fric[j], |j| res[j].abs());
+    drop(fric);
     correlations.push(Correlation {
         with: "|residual| vs friction current".into(),
         r,

@@ -419,7 +419,11 @@ fn screened_points(
     start: &model::effects::CurrentModel,
     options: &Options,
 ) -> Result<(TestPoints, Vec<Outlier>, Vec<String>), ExplainError> {
-    let (mut excluded, mut outliers, mut warnings) = robust::range_check(data)?;
+    let robust::RangeCheck {
+        mut excluded,
+        mut outliers,
+        mut warnings,
+    } = robust::range_check(data)?;
     let too_few = |points: &TestPoints| {
         (points.n_rows < data::MIN_ROWS).then(|| ExplainError::TooFewRows {
             file: data.name.clone(),

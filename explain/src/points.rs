@@ -62,6 +62,36 @@ pub struct RowView {
     pub point: Vec<u32>,
     /// The row's index in the data set.
     pub row: Vec<u32>,
+    /// Quantile bin of the thermal driver (of [`THERMAL_BINS`], equal counts in the order of
+    /// the driver; empty when the data has no thermal driver).
+    pub thermal_bin: Vec<u8>,
+}
+
+/// Quantile bins of the thermal driver in the gap tables.
+pub const THERMAL_BINS: usize = 5;
+
+/// Each value's quantile bin of `bins` equal-count bins in the order of (value, index): the
+/// split a full sort would give, found by successive selections in linear time.
+fn quantile_bins(x: &[f64], bins: usize) -> Vec<u8> {
+    let n = x.len();
+    let bins = bins.min(n).max(1);
+    let mut pairs: Vec<(f64, u32)> = x.iter().copied().zip(0..n as u32).collect();
+    let order = |a: &(f64, u32), b: &(f64, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+    let mut start = 0;
+    for b in 1..bins {
+        let rank = b * n / bins;
+        if rank > start && rank < n {
+            pairs[start..].select_nth_unstable_by(rank - start, order);
+        }
+        start = rank;
+    }
+    let mut out = vec![0u8; n];
+    for b in 0..bins {
+        for p in &pairs[b * n / bins..(b + 1) * n / bins] {
+            out[p.1 as usize] = b as u8;
+        }
+    }
+    out
 }
 
 impl RowView {
@@ -423,6 +453,9 @@ impl TestPoints {
         row_view.omega_n = timed.iter().map(|&k| omega[k]).collect();
         row_view.tau_rot = timed.iter().map(|&k| tau[k]).collect();
         row_view.thermal = timed.iter().map(|&k| x_of(k)).collect();
+        if thermal != ThermalDriver::Unavailable {
+            row_view.thermal_bin = quantile_bins(&row_view.thermal, THERMAL_BINS);
+        }
         row_view.current = timed.iter().map(|&k| current[k]).collect();
         row_view.point = timed.iter().map(|&k| point_of_row[k]).collect();
         row_view.row = timed.iter().map(|&k| k as u32).collect();
@@ -552,6 +585,19 @@ impl TestPoints {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quantile_bins_split_like_a_sort() {
+        let x: Vec<f64> = (0..103).map(|k| ((k * 37) % 101) as f64 / 7.0).collect();
+        let bins = quantile_bins(&x, 5);
+        let mut order: Vec<usize> = (0..x.len()).collect();
+        order.sort_by(|&a, &b| x[a].total_cmp(&x[b]).then(a.cmp(&b)));
+        for b in 0..5 {
+            for &k in &order[b * 103 / 5..(b + 1) * 103 / 5] {
+                assert_eq!(bins[k] as usize, b);
+            }
+        }
+    }
 
     #[test]
     fn levels_find_the_paper_sweep_and_fall_back_to_bins() {

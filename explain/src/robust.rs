@@ -73,9 +73,20 @@ pub fn no_load_cam_speed() -> f64 {
     board::BRIDGE_SUPPLY_V / rs735::KE_CAM_V_S_PER_RAD
 }
 
+/// What the range rules found in a data set.
+#[derive(Debug, Clone, Default)]
+pub struct RangeCheck {
+    /// Rows to leave out (indexed like the data set).
+    pub excluded: Vec<bool>,
+    /// Those rows, with why.
+    pub outliers: Vec<Outlier>,
+    /// Things to fix that did not exclude a row.
+    pub warnings: Vec<String>,
+}
+
 /// Rows of `data` that break a range rule, and the warnings its columns give. An error when
 /// most rows break the same rule (a unit or sign slip of a whole column).
-pub fn range_check(data: &Dataset) -> Result<(Vec<bool>, Vec<Outlier>, Vec<String>), ExplainError> {
+pub fn range_check(data: &Dataset) -> Result<RangeCheck, ExplainError> {
     let n = data.len();
     let mut excluded = vec![false; n];
     let mut outliers = Vec::new();
@@ -234,7 +245,11 @@ pub fn range_check(data: &Dataset) -> Result<(Vec<bool>, Vec<Outlier>, Vec<Strin
             ));
         }
     }
-    Ok((excluded, outliers, warnings))
+    Ok(RangeCheck {
+        excluded,
+        outliers,
+        warnings,
+    })
 }
 
 /// A number with four significant digits.
@@ -540,7 +555,11 @@ mod tests {
         r[11].temp_c = Some(300.0);
         r[13].tau_rot = -1.0;
         let d = Dataset::from_rows("m.csv", r).unwrap();
-        let (ex, out, warn) = range_check(&d).unwrap();
+        let RangeCheck {
+            excluded: ex,
+            outliers: out,
+            warnings: warn,
+        } = range_check(&d).unwrap();
         assert_eq!(out.len(), 3);
         assert!(ex[7] && ex[9] && ex[11] && !ex[13]);
         assert_eq!((out[0].row, out[0].line), (8, 9));

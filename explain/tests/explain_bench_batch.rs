@@ -273,7 +273,7 @@ fn run_batch(truths: &[Truth], seeds: u64, all_noise: bool) -> (Vec<(Truth, Tall
     let rigs = rigs();
     let sessions = sessions();
     let mut jobs = Vec::new();
-    for (ti, &truth) in truths.iter().enumerate() {
+    for ti in 0..truths.len() {
         for (ri, _) in rigs.iter().enumerate() {
             for (si, _) in sessions.iter().enumerate() {
                 for s in 0..seeds {

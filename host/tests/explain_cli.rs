@@ -174,7 +174,12 @@ fn a_corrupt_row_is_reported_with_its_row_and_line_and_makes_no_finding() {
     assert_eq!(o["row"], 40);
     assert_eq!(o["line"], 42);
     assert_eq!(o["column"], "i_in_a");
-    assert!(o["reason"].as_str().unwrap().contains("current sensor's range"));
+    assert!(
+        o["reason"]
+            .as_str()
+            .unwrap()
+            .contains("current sensor's range")
+    );
     assert_eq!(v["rows"], 149);
     assert!(v["finding"].as_str().unwrap().contains("set aside"));
     let stderr = String::from_utf8(out.stderr).unwrap();
@@ -264,7 +269,14 @@ fn bad_input_fails_with_a_message_naming_the_row_or_column() {
     // A calibration constant of the wrong sign: the firmware's rule refuses it, naming it.
     let wrong = write("wrong.toml", "[calibration]\nc2 = 138.0\n");
     let out = rig()
-        .args(["explain", "--synthetic", "none", "--model", &wrong, "--no-report"])
+        .args([
+            "explain",
+            "--synthetic",
+            "none",
+            "--model",
+            &wrong,
+            "--no-report",
+        ])
         .assert()
         .failure()
         .get_output()
