@@ -6,6 +6,9 @@
 //! Other columns are ignored. Header names are matched without regard to case or surrounding
 //! spaces; lines starting with `#` are comments. A row whose `backdriven` is 0 may leave
 //! `i_in_a` empty (the paper has no current where the load did not move).
+//!
+//! The rows are kept as columns (one `Vec<f64>` per quantity, no per-row allocation), so a
+//! million rows take about 60 MB; the CSV is parsed as it streams in.
 
 use std::io::Read;
 use std::path::Path;
@@ -38,14 +41,12 @@ pub struct MeasuredRow {
     pub backdriven: Option<bool>,
 }
 
-/// A validated set of test points. An optional column counts as present when every row has
-/// it.
-#[derive(Debug, Clone, PartialEq)]
+/// A validated set of test points, stored as columns. An optional column counts as present
+/// when every row has it.
+#[derive(Debug, Clone)]
 pub struct Dataset {
     /// Where the data came from (file name), for messages.
     pub name: String,
-    /// The rows, in file order.
-    pub rows: Vec<MeasuredRow>,
     /// Every row has `t_s`.
     pub has_time: bool,
     /// Every row has `v_in_v`.
@@ -54,14 +55,212 @@ pub struct Dataset {
     pub has_temperature: bool,
     /// Every row has `backdriven`.
     pub has_backdriven: bool,
+    omega_n: Vec<f64>,
+    tau_rot: Vec<f64>,
+    /// NaN where the current is missing.
+    i_in: Vec<f64>,
+    /// Empty when the column is absent (likewise the other optional columns).
+    t_s: Vec<f64>,
+    v_in: Vec<f64>,
+    temp_c: Vec<f64>,
+    backdriven: Vec<bool>,
+    /// Line of each row in its file (1-based); empty when the rows did not come from a file
+    /// (then row k sits on line k + 1, after a header).
+    lines: Vec<u32>,
 }
 
-fn row_error(file: &str, row: usize, why: String) -> ExplainError {
+impl PartialEq for Dataset {
+    /// Same name, columns and values (file lines aside).
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name
+            && self.has_time == other.has_time
+            && self.has_voltage == other.has_voltage
+            && self.has_temperature == other.has_temperature
+            && self.has_backdriven == other.has_backdriven
+            && self.len() == other.len()
+            && self.rows().eq(other.rows())
+    }
+}
+
+fn row_error(file: &str, row: usize, line: u64, why: String) -> ExplainError {
     ExplainError::MeasuredRow {
         file: file.to_string(),
         row,
-        line: row as u64 + 1,
+        line,
         why,
+    }
+}
+
+/// Columns as read, optional values NaN (or 2 for `backdriven`) where a row leaves them empty.
+#[derive(Default)]
+struct RawColumns {
+    omega_n: Vec<f64>,
+    tau_rot: Vec<f64>,
+    i_in: Vec<f64>,
+    t_s: Vec<f64>,
+    v_in: Vec<f64>,
+    temp_c: Vec<f64>,
+    backdriven: Vec<u8>,
+    lines: Vec<u32>,
+}
+
+const MISSING_FLAG: u8 = 2;
+
+impl RawColumns {
+    fn with_capacity(n: usize) -> Self {
+        Self {
+            omega_n: Vec::with_capacity(n),
+            tau_rot: Vec::with_capacity(n),
+            i_in: Vec::with_capacity(n),
+            t_s: Vec::with_capacity(n),
+            v_in: Vec::with_capacity(n),
+            temp_c: Vec::with_capacity(n),
+            backdriven: Vec::with_capacity(n),
+            lines: Vec::new(),
+        }
+    }
+
+    fn push(&mut self, r: &MeasuredRow) {
+        let opt = |v: Option<f64>| v.unwrap_or(f64::NAN);
+        self.omega_n.push(r.omega_n);
+        self.tau_rot.push(r.tau_rot);
+        self.i_in.push(opt(r.i_in));
+        self.t_s.push(opt(r.t_s));
+        self.v_in.push(opt(r.v_in));
+        self.temp_c.push(opt(r.temp_c));
+        self.backdriven.push(match r.backdriven {
+            Some(true) => 1,
+            Some(false) => 0,
+            None => MISSING_FLAG,
+        });
+    }
+
+    fn len(&self) -> usize {
+        self.omega_n.len()
+    }
+
+    fn line(&self, k: usize) -> u64 {
+        self.lines.get(k).map_or(k as u64 + 2, |&l| u64::from(l))
+    }
+
+    /// Checks the columns (see [`Dataset::from_rows`]) and builds the data set.
+    fn validate(self, name: &str) -> Result<Dataset, ExplainError> {
+        let n = self.len();
+        if n == 0 {
+            return Err(ExplainError::EmptyData {
+                file: name.to_string(),
+                min_rows: MIN_ROWS,
+            });
+        }
+        let bad = |k: usize, why: String| row_error(name, k + 1, self.line(k), why);
+        for k in 0..n {
+            for (column, v) in [
+                ("omega_n_rad_s", self.omega_n[k]),
+                ("tau_rot_nm", self.tau_rot[k]),
+            ] {
+                if !v.is_finite() {
+                    return Err(bad(
+                        k,
+                        format!("column {column} is not a finite number ({v})"),
+                    ));
+                }
+            }
+            for (column, v) in [
+                ("i_in_a", self.i_in[k]),
+                ("t_s", self.t_s[k]),
+                ("v_in_v", self.v_in[k]),
+                ("temp_c", self.temp_c[k]),
+            ] {
+                if v.is_infinite() {
+                    return Err(bad(
+                        k,
+                        format!("column {column} is not a finite number ({v})"),
+                    ));
+                }
+            }
+            if self.omega_n[k] <= 0.0 {
+                return Err(bad(
+                    k,
+                    format!(
+                        "column omega_n_rad_s is {}: the cam must turn (give the speed in rad/s, > 0)",
+                        self.omega_n[k]
+                    ),
+                ));
+            }
+            if self.i_in[k].is_nan() && self.backdriven[k] != 0 {
+                return Err(bad(
+                    k,
+                    "column i_in_a is empty: only rows with backdriven = 0 may leave out the current"
+                        .into(),
+                ));
+            }
+        }
+        // An optional column: present in every row, in none, or an error at the first gap.
+        let presence = |missing: &dyn Fn(usize) -> bool, column: &str| {
+            let gaps = (0..n).filter(|&k| missing(k)).count();
+            if gaps == 0 {
+                Ok(true)
+            } else if gaps == n {
+                Ok(false)
+            } else {
+                let k = (0..n).find(|&k| missing(k)).unwrap_or(0);
+                Err(bad(
+                    k,
+                    format!(
+                        "column {column} is empty while other rows have it: fill it in every row or drop the column"
+                    ),
+                ))
+            }
+        };
+        let has_time = presence(&|k| self.t_s[k].is_nan(), "t_s")?;
+        let has_voltage = presence(&|k| self.v_in[k].is_nan(), "v_in_v")?;
+        let has_temperature = presence(&|k| self.temp_c[k].is_nan(), "temp_c")?;
+        let has_backdriven = presence(&|k| self.backdriven[k] == MISSING_FLAG, "backdriven")?;
+        let with_current = self.i_in.iter().filter(|v| !v.is_nan()).count();
+        if with_current < MIN_ROWS {
+            return Err(ExplainError::TooFewRows {
+                file: name.to_string(),
+                rows: with_current,
+                min_rows: MIN_ROWS,
+            });
+        }
+        let keep = |has: bool, v: Vec<f64>| if has { v } else { Vec::new() };
+        let lines_needed = self
+            .lines
+            .iter()
+            .enumerate()
+            .any(|(k, &l)| u64::from(l) != k as u64 + 2);
+        Ok(Dataset {
+            name: name.to_string(),
+            has_time,
+            has_voltage,
+            has_temperature,
+            has_backdriven,
+            omega_n: self.omega_n,
+            tau_rot: self.tau_rot,
+            i_in: self.i_in,
+            t_s: keep(has_time, self.t_s),
+            v_in: keep(has_voltage, self.v_in),
+            temp_c: keep(has_temperature, self.temp_c),
+            backdriven: if has_backdriven {
+                self.backdriven.into_iter().map(|b| b == 1).collect()
+            } else {
+                Vec::new()
+            },
+            lines: if lines_needed { self.lines } else { Vec::new() },
+        })
+    }
+}
+
+/// Parses one CSV field as a finite number; `Ok(None)` when it is empty.
+fn parse_number(bytes: &[u8]) -> Result<Option<f64>, String> {
+    if bytes.is_empty() {
+        return Ok(None);
+    }
+    match std::str::from_utf8(bytes).ok().map(str::parse::<f64>) {
+        Some(Ok(v)) if v.is_finite() => Ok(Some(v)),
+        Some(Ok(_)) => Err("is not a finite number".into()),
+        _ => Err("is not a number".into()),
     }
 }
 
@@ -70,108 +269,28 @@ impl Dataset {
     /// `name`. Every value must be finite, the cam must turn (w_n > 0), an optional value must
     /// be given in every row or in none, and a current is needed wherever the load backdrove.
     pub fn from_rows(name: &str, rows: Vec<MeasuredRow>) -> Result<Self, ExplainError> {
-        if rows.is_empty() {
-            return Err(ExplainError::EmptyData {
-                file: name.to_string(),
-                min_rows: MIN_ROWS,
-            });
-        }
-        let all = |f: fn(&MeasuredRow) -> bool| rows.iter().all(f);
-        let any = |f: fn(&MeasuredRow) -> bool| rows.iter().any(f);
+        let mut raw = RawColumns::with_capacity(rows.len());
         for (k, r) in rows.iter().enumerate() {
-            let row = k + 1;
-            let checks = [
-                ("omega_n_rad_s", Some(r.omega_n)),
-                ("tau_rot_nm", Some(r.tau_rot)),
+            for (column, v) in [
                 ("i_in_a", r.i_in),
                 ("t_s", r.t_s),
                 ("v_in_v", r.v_in),
                 ("temp_c", r.temp_c),
-            ];
-            for (column, v) in checks {
+            ] {
                 if let Some(v) = v
                     && !v.is_finite()
                 {
                     return Err(row_error(
                         name,
-                        row,
+                        k + 1,
+                        k as u64 + 2,
                         format!("column {column} is not a finite number ({v})"),
                     ));
                 }
             }
-            if r.omega_n <= 0.0 {
-                return Err(row_error(
-                    name,
-                    row,
-                    format!(
-                        "column omega_n_rad_s is {}: the cam must turn (give the speed in rad/s, > 0)",
-                        r.omega_n
-                    ),
-                ));
-            }
-            if r.i_in.is_none() && r.backdriven != Some(false) {
-                return Err(row_error(
-                    name,
-                    row,
-                    "column i_in_a is empty: only rows with backdriven = 0 may leave out the current"
-                        .into(),
-                ));
-            }
+            raw.push(r);
         }
-        let mixed = |has: bool, some: bool, column: &str, missing: fn(&MeasuredRow) -> bool| {
-            if some && !has {
-                let k = rows.iter().position(missing).unwrap_or(0);
-                Err(row_error(
-                    name,
-                    k + 1,
-                    format!(
-                        "column {column} is empty while other rows have it: fill it in every row or drop the column"
-                    ),
-                ))
-            } else {
-                Ok(has)
-            }
-        };
-        let has_time = mixed(
-            all(|r| r.t_s.is_some()),
-            any(|r| r.t_s.is_some()),
-            "t_s",
-            |r| r.t_s.is_none(),
-        )?;
-        let has_voltage = mixed(
-            all(|r| r.v_in.is_some()),
-            any(|r| r.v_in.is_some()),
-            "v_in_v",
-            |r| r.v_in.is_none(),
-        )?;
-        let has_temperature = mixed(
-            all(|r| r.temp_c.is_some()),
-            any(|r| r.temp_c.is_some()),
-            "temp_c",
-            |r| r.temp_c.is_none(),
-        )?;
-        let has_backdriven = mixed(
-            all(|r| r.backdriven.is_some()),
-            any(|r| r.backdriven.is_some()),
-            "backdriven",
-            |r| r.backdriven.is_none(),
-        )?;
-        let with_current = rows.iter().filter(|r| r.i_in.is_some()).count();
-        if with_current < MIN_ROWS {
-            return Err(ExplainError::TooFewRows {
-                file: name.to_string(),
-                rows: with_current,
-                min_rows: MIN_ROWS,
-            });
-        }
-        Ok(Self {
-            name: name.to_string(),
-            rows,
-            has_time,
-            has_voltage,
-            has_temperature,
-            has_backdriven,
-        })
+        raw.validate(name)
     }
 
     /// Reads a CSV file (see the module docs for the columns).
@@ -185,15 +304,28 @@ impl Dataset {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| path.display().to_string());
-        Self::parse_csv(file, &name)
+        let size = file.metadata().map(|m| m.len()).unwrap_or(0);
+        Self::parse_csv_sized(
+            std::io::BufReader::with_capacity(1 << 16, file),
+            &name,
+            size,
+        )
     }
 
     /// Parses CSV text from `reader`; `name` names the source in messages.
     pub fn parse_csv<R: Read>(reader: R, name: &str) -> Result<Self, ExplainError> {
+        Self::parse_csv_sized(reader, name, 0)
+    }
+
+    /// [`Dataset::parse_csv`] with the size of the input in bytes, if known, to reserve the
+    /// columns once.
+    fn parse_csv_sized<R: Read>(reader: R, name: &str, bytes: u64) -> Result<Self, ExplainError> {
+        // Fields are trimmed as they are parsed (cheaper than trimming every record).
         let mut csv = csv::ReaderBuilder::new()
-            .trim(csv::Trim::All)
+            .trim(csv::Trim::Headers)
             .comment(Some(b'#'))
             .flexible(true)
+            .buffer_capacity(1 << 16)
             .from_reader(reader);
         let file_err = |why: String| ExplainError::MeasuredFile {
             file: name.to_string(),
@@ -235,75 +367,61 @@ impl Dataset {
             })?;
         }
         let [c_omega, c_tau, c_i] = required;
-        let c_t = find("t_s")?;
-        let c_v = find("v_in_v")?;
-        let c_temp = find("temp_c")?;
+        let optional = [find("t_s")?, find("v_in_v")?, find("temp_c")?];
         let c_bd = find("backdriven")?;
+        let columns = headers.len();
 
-        let mut rows = Vec::new();
+        // About 60 bytes a row in the usual files: reserve once instead of doubling.
+        let mut raw = RawColumns::with_capacity((bytes / 48).min(50_000_000) as usize);
         let mut record = csv::ByteRecord::new();
         loop {
+            let row = raw.len() + 1;
             match csv.read_byte_record(&mut record) {
                 Ok(false) => break,
                 Ok(true) => {}
                 Err(e) => {
-                    let (row, line) = e
-                        .position()
-                        .map(|p| (rows.len() + 1, p.line()))
-                        .unwrap_or((rows.len() + 1, 0));
-                    return Err(ExplainError::MeasuredRow {
-                        file: name.to_string(),
+                    let line = e.position().map_or(0, |p| p.line());
+                    return Err(row_error(
+                        name,
                         row,
                         line,
-                        why: format!("not readable as CSV: {e}"),
-                    });
+                        format!("not readable as CSV: {e}"),
+                    ));
                 }
             }
-            let row = rows.len() + 1;
-            let line = record
-                .position()
-                .map(|p| p.line())
-                .unwrap_or(row as u64 + 1);
-            let bad = |why: String| ExplainError::MeasuredRow {
-                file: name.to_string(),
-                row,
-                line,
-                why,
-            };
-            if record.len() < headers.len() {
+            let line = record.position().map_or(row as u64 + 1, |p| p.line());
+            let bad = |why: String| row_error(name, row, line, why);
+            if record.len() < columns {
                 return Err(bad(format!(
-                    "has {} fields but the header has {}",
-                    record.len(),
-                    headers.len()
+                    "has {} fields but the header has {columns}",
+                    record.len()
                 )));
             }
-            let number = |k: usize, column: &str| -> Result<Option<f64>, ExplainError> {
-                let bytes = record.get(k).unwrap_or(b"");
-                if bytes.is_empty() {
-                    return Ok(None);
-                }
-                let text = String::from_utf8_lossy(bytes);
-                match text.parse::<f64>() {
-                    Ok(v) if v.is_finite() => Ok(Some(v)),
-                    Ok(_) => Err(bad(format!(
-                        "column {column} is not a finite number ('{text}')"
-                    ))),
-                    Err(_) => Err(bad(format!("column {column} is not a number ('{text}')"))),
-                }
+            let field = |k: usize| record.get(k).unwrap_or(b"").trim_ascii();
+            let number = |k: usize, column: &str| -> Result<f64, ExplainError> {
+                parse_number(field(k))
+                    .map(|v| v.unwrap_or(f64::NAN))
+                    .map_err(|why| {
+                        bad(format!(
+                            "column {column} {why} ('{}')",
+                            String::from_utf8_lossy(field(k))
+                        ))
+                    })
             };
             let required_number = |k: usize, column: &str| -> Result<f64, ExplainError> {
-                number(k, column)?.ok_or_else(|| bad(format!("column {column} is empty")))
+                let v = number(k, column)?;
+                if v.is_nan() {
+                    Err(bad(format!("column {column} is empty")))
+                } else {
+                    Ok(v)
+                }
             };
-            let backdriven = match c_bd.map(|k| record.get(k).unwrap_or(b"")) {
-                None | Some(b"") => None,
-                Some(b"1") => Some(true),
-                Some(b"0") => Some(false),
-                Some(v) if v.eq_ignore_ascii_case(b"true") || v.eq_ignore_ascii_case(b"yes") => {
-                    Some(true)
-                }
-                Some(v) if v.eq_ignore_ascii_case(b"false") || v.eq_ignore_ascii_case(b"no") => {
-                    Some(false)
-                }
+            let backdriven = match c_bd.map(field) {
+                None | Some(b"") => MISSING_FLAG,
+                Some(b"1") => 1,
+                Some(b"0") => 0,
+                Some(v) if v.eq_ignore_ascii_case(b"true") || v.eq_ignore_ascii_case(b"yes") => 1,
+                Some(v) if v.eq_ignore_ascii_case(b"false") || v.eq_ignore_ascii_case(b"no") => 0,
                 Some(other) => {
                     return Err(bad(format!(
                         "column backdriven is '{}': give 0 (not backdriven) or 1 (backdriven)",
@@ -311,18 +429,26 @@ impl Dataset {
                     )));
                 }
             };
-            let i_in = number(c_i, "i_in_a")?;
-            rows.push(MeasuredRow {
-                omega_n: required_number(c_omega, "omega_n_rad_s")?,
-                tau_rot: required_number(c_tau, "tau_rot_nm")?,
-                i_in,
-                t_s: c_t.map(|k| number(k, "t_s")).transpose()?.flatten(),
-                v_in: c_v.map(|k| number(k, "v_in_v")).transpose()?.flatten(),
-                temp_c: c_temp.map(|k| number(k, "temp_c")).transpose()?.flatten(),
-                backdriven,
-            });
+            raw.omega_n.push(required_number(c_omega, "omega_n_rad_s")?);
+            raw.tau_rot.push(required_number(c_tau, "tau_rot_nm")?);
+            raw.i_in.push(number(c_i, "i_in_a")?);
+            let opt =
+                |c: Option<usize>, column: &str| c.map_or(Ok(f64::NAN), |k| number(k, column));
+            raw.t_s.push(opt(optional[0], "t_s")?);
+            raw.v_in.push(opt(optional[1], "v_in_v")?);
+            raw.temp_c.push(opt(optional[2], "temp_c")?);
+            raw.backdriven.push(backdriven);
+            let line32 = u32::try_from(line).unwrap_or(u32::MAX);
+            if !raw.lines.is_empty() || line != row as u64 + 1 {
+                if raw.lines.is_empty() {
+                    // Every earlier row sat right after the header.
+                    raw.lines.reserve(raw.omega_n.capacity());
+                    raw.lines.extend((1..row).map(|r| r as u32 + 1));
+                }
+                raw.lines.push(line32);
+            }
         }
-        Self::from_rows(name, rows)
+        raw.validate(name)
     }
 
     /// Writes the data as CSV with the standard column names (optional columns only when
@@ -340,7 +466,7 @@ impl Dataset {
         let io = |e: csv::Error| ExplainError::Output(std::io::Error::other(e));
         w.write_record(&header).map_err(io)?;
         let opt = |v: Option<f64>| v.map(|x| format!("{x}")).unwrap_or_default();
-        for r in &self.rows {
+        for r in self.rows() {
             let mut rec = vec![
                 format!("{}", r.omega_n),
                 format!("{}", r.tau_rot),
@@ -368,9 +494,78 @@ impl Dataset {
         Ok(())
     }
 
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.omega_n.len()
+    }
+
+    /// Whether there are no rows (never, for a validated data set).
+    pub fn is_empty(&self) -> bool {
+        self.omega_n.is_empty()
+    }
+
+    /// Row `k` (0-based).
+    pub fn row(&self, k: usize) -> MeasuredRow {
+        let opt = |v: &[f64]| v.get(k).copied().filter(|x| !x.is_nan());
+        MeasuredRow {
+            omega_n: self.omega_n[k],
+            tau_rot: self.tau_rot[k],
+            i_in: opt(&self.i_in),
+            t_s: opt(&self.t_s),
+            v_in: opt(&self.v_in),
+            temp_c: opt(&self.temp_c),
+            backdriven: self.backdriven.get(k).copied(),
+        }
+    }
+
+    /// Every row, in file order.
+    pub fn rows(&self) -> impl Iterator<Item = MeasuredRow> + '_ {
+        (0..self.len()).map(|k| self.row(k))
+    }
+
+    /// The file line of row `k` (0-based index; the header is line 1).
+    pub fn line(&self, k: usize) -> u64 {
+        self.lines.get(k).map_or(k as u64 + 2, |&l| u64::from(l))
+    }
+
+    /// Cam speeds, rad/s.
+    pub fn omega_n(&self) -> &[f64] {
+        &self.omega_n
+    }
+
+    /// Load torques, N m.
+    pub fn tau_rot(&self) -> &[f64] {
+        &self.tau_rot
+    }
+
+    /// Currents, A (NaN where a non-backdriven row has none).
+    pub fn i_in(&self) -> &[f64] {
+        &self.i_in
+    }
+
+    /// Times, s, when the data has them.
+    pub fn t_s(&self) -> Option<&[f64]> {
+        self.has_time.then_some(self.t_s.as_slice())
+    }
+
+    /// Vibrator voltages, V, when the data has them.
+    pub fn v_in(&self) -> Option<&[f64]> {
+        self.has_voltage.then_some(self.v_in.as_slice())
+    }
+
+    /// Motor temperatures, deg C, when the data has them.
+    pub fn temp_c(&self) -> Option<&[f64]> {
+        self.has_temperature.then_some(self.temp_c.as_slice())
+    }
+
+    /// Backdrive observations, when the data has them.
+    pub fn backdriven(&self) -> Option<&[bool]> {
+        self.has_backdriven.then_some(self.backdriven.as_slice())
+    }
+
     /// Rows with a measured current.
     pub fn current_rows(&self) -> usize {
-        self.rows.iter().filter(|r| r.i_in.is_some()).count()
+        self.i_in.iter().filter(|v| !v.is_nan()).count()
     }
 }
 
@@ -408,10 +603,10 @@ mod tests {
             ));
         }
         let d = parse(&text).unwrap();
-        assert_eq!(d.rows.len(), 12);
+        assert_eq!(d.len(), 12);
         assert!(d.has_backdriven && !d.has_time && !d.has_temperature);
-        assert_eq!(d.rows[1].backdriven, Some(true));
-        assert_eq!(d.rows[0].i_in, Some(2.5));
+        assert_eq!(d.row(1).backdriven, Some(true));
+        assert_eq!(d.row(0).i_in, Some(2.5));
     }
 
     #[test]

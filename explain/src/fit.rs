@@ -70,8 +70,10 @@ pub struct Fit {
     pub model: CurrentModel,
     /// The fitted mean parameters, in the order of `cov`.
     pub free: Vec<Param>,
-    /// Measured minus fitted current of the fitted points, A.
+    /// Measured minus fitted current of the fitted points (of each point's mean current), A.
     pub residuals: Vec<f64>,
+    /// Sum of squared residuals of the fitted rows (the points' spread included), A^2.
+    pub sse: f64,
     /// Standard deviation of the current noise without ripple, A.
     pub sigma0: f64,
     /// Log-likelihood of the currents (Gaussian).
@@ -80,7 +82,7 @@ pub struct Fit {
     pub loglik_hold: f64,
     /// Backdrive observations the model gets wrong.
     pub hold_errors: usize,
-    /// Number of fitted points.
+    /// Number of fitted rows.
     pub n: usize,
     /// Number of parameters.
     pub k: usize,
@@ -93,9 +95,9 @@ pub struct Fit {
 }
 
 impl Fit {
-    /// Root mean square of the residuals, A.
+    /// Root mean square of the residuals of the fitted rows, A.
     pub fn rmse(&self) -> f64 {
-        stats::rms(&self.residuals)
+        (self.sse / self.n.max(1) as f64).sqrt()
     }
 
     /// Total log-likelihood.
@@ -139,20 +141,23 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
     }
     let free = spec.free_params();
     let ripple = spec.has(Effect::MeshLoadSharingRipple);
-    let n = subset.len();
-    let mut result = levenberg_marquardt(points, subset, None, &mut model, &free);
+    let counts: Vec<f64> = subset.iter().map(|&k| points.weight[k]).collect();
+    let n = counts.iter().sum::<f64>();
+    let within: f64 = subset.iter().map(|&k| points.within_ss[k]).sum();
+    let mut result = levenberg_marquardt(points, subset, &points.weight, &mut model, &free);
     if ripple {
         for _ in 0..RIPPLE_ROUNDS {
             let (e, fric) = residuals_and_friction(points, subset, &model);
-            let rho = ripple_profile(&e, &fric).0;
+            let sse = point_sse(points, subset, &e);
+            let rho = ripple_profile(&sse, &counts, &fric).0;
             let w: Vec<f64> = {
-                let mut w = vec![1.0; points.len()];
+                let mut w = points.weight.clone();
                 for (j, &k) in subset.iter().enumerate() {
-                    w[k] = 1.0 / (1.0 + rho * fric[j] * fric[j]).sqrt();
+                    w[k] /= 1.0 + rho * fric[j] * fric[j];
                 }
                 w
             };
-            result = levenberg_marquardt(points, subset, Some(&w), &mut model, &free);
+            result = levenberg_marquardt(points, subset, &w, &mut model, &free);
         }
     }
     let (residuals, fric) = if ripple {
@@ -165,17 +170,23 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
             .collect();
         (r, Vec::new())
     };
+    let point_sse = point_sse(points, subset, &residuals);
+    let sse: f64 = point_sse.iter().sum();
     let (sigma0, loglik_current) = if ripple {
-        let (rho, s2) = ripple_profile(&residuals, &fric);
+        let (rho, s2) = ripple_profile(&point_sse, &counts, &fric);
         let ll = -0.5
-            * (n as f64 * (2.0 * std::f64::consts::PI * s2).ln()
-                + fric.iter().map(|f| (1.0 + rho * f * f).ln()).sum::<f64>()
-                + n as f64);
+            * (n * (2.0 * std::f64::consts::PI * s2).ln()
+                + fric
+                    .iter()
+                    .zip(&counts)
+                    .map(|(f, c)| c * (1.0 + rho * f * f).ln())
+                    .sum::<f64>()
+                + n);
         model.effects.mesh_ripple_rms = (rho * s2).sqrt();
         (s2.sqrt(), ll)
     } else {
-        let s2 = (residuals.iter().map(|e| e * e).sum::<f64>() / n as f64).max(1e-300);
-        let ll = -0.5 * n as f64 * ((2.0 * std::f64::consts::PI * s2).ln() + 1.0);
+        let s2 = (sse / n).max(1e-300);
+        let ll = -0.5 * n * ((2.0 * std::f64::consts::PI * s2).ln() + 1.0);
         (s2.sqrt(), ll)
     };
 
@@ -186,17 +197,17 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
         let (hold, omega_b, errors) = fit_hold(&points.holds);
         model.effects.bush_hold_torque = hold;
         model.effects.bush_corner_speed = omega_b;
-        (errors, hold_loglik(points.holds.len(), errors))
+        (errors, hold_loglik(hold_rows(&points.holds), errors as f64))
     } else {
-        let errors = points.holds.iter().filter(|h| !h.backdriven).count();
-        (errors, hold_loglik(points.holds.len(), errors))
+        let errors = held_rows(&points.holds);
+        (errors, hold_loglik(hold_rows(&points.holds), errors as f64))
     };
 
     // Covariance of the parameters off their bounds: s^2 (J^T W J)^-1.
     let p = free.len();
     let mut cov = vec![f64::NAN; p * p];
-    let dof = (n as f64 - p as f64).max(1.0);
-    let s2 = result.cost / dof;
+    let dof = (n - p as f64).max(1.0);
+    let s2 = (result.cost + within) / dof;
     let theta = model.params();
     let inner: Vec<usize> = (0..p)
         .filter(|&i| {
@@ -226,21 +237,36 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
         model,
         free,
         residuals,
+        sse,
         sigma0,
         loglik_current,
         loglik_hold,
         hold_errors,
-        n,
+        n: n.round() as usize,
         k,
-        bic: -2.0 * loglik + k as f64 * (n as f64).ln(),
+        bic: -2.0 * loglik + k as f64 * n.ln(),
         cov,
         converged: result.converged,
     }
 }
 
 /// Log-likelihood of `total` backdrive observations of which `errors` are mispredicted.
-fn hold_loglik(total: usize, errors: usize) -> f64 {
-    errors as f64 * HOLD_LABEL_ERROR.ln() + (total - errors) as f64 * (1.0 - HOLD_LABEL_ERROR).ln()
+pub fn hold_loglik(total: f64, errors: f64) -> f64 {
+    errors * HOLD_LABEL_ERROR.ln() + (total - errors) * (1.0 - HOLD_LABEL_ERROR).ln()
+}
+
+/// Rows of the backdrive observations.
+fn hold_rows(holds: &[HoldCheck]) -> f64 {
+    holds.iter().map(|h| f64::from(h.count)).sum()
+}
+
+/// Squared residuals of the rows of each point of `subset` (mean residual `e`), A^2.
+fn point_sse(points: &TestPoints, subset: &[usize], e: &[f64]) -> Vec<f64> {
+    subset
+        .iter()
+        .zip(e)
+        .map(|(&k, e)| points.weight[k] * e * e + points.within_ss[k])
+        .collect()
 }
 
 /// Residuals and friction currents of `subset` under `model`.
@@ -259,24 +285,39 @@ fn residuals_and_friction(
         .unzip()
 }
 
+/// Rows observed not to backdrive.
+pub fn held_rows(holds: &[HoldCheck]) -> usize {
+    holds
+        .iter()
+        .filter(|h| !h.backdriven)
+        .map(|h| h.count as usize)
+        .sum()
+}
+
 /// Maximum-likelihood ratio rho = (r / sigma0)^2 of the ripple variance
-/// sigma^2 = sigma0^2 (1 + rho F^2), and sigma0^2 at it: the root of the profile
+/// sigma^2 = sigma0^2 (1 + rho F^2), and sigma0^2 at it, from each point's squared row
+/// residuals `sse`, row count `count` and friction current `fric`: the root of the profile
 /// likelihood's slope by Newton's method, kept inside a bracket (bisection in
 /// u = ln(1 + rho F_max^2) whenever a Newton step leaves it).
-fn ripple_profile(e: &[f64], fric: &[f64]) -> (f64, f64) {
-    let n = e.len() as f64;
+pub fn ripple_profile(sse: &[f64], count: &[f64], fric: &[f64]) -> (f64, f64) {
+    let n: f64 = count.iter().sum();
     let f_max = fric.iter().fold(0.0f64, |m, f| m.max(f.abs())).max(1e-9);
-    let sq: Vec<(f64, f64)> = e.iter().zip(fric).map(|(e, f)| (e * e, f * f)).collect();
+    let sq: Vec<(f64, f64, f64)> = sse
+        .iter()
+        .zip(count)
+        .zip(fric)
+        .map(|((e2, c), f)| (*e2, *c, f * f))
+        .collect();
     // Slope and curvature of n ln S(rho) + sum ln(1 + rho F^2), and S / n.
     let derivatives = |rho: f64| {
         let (mut s, mut t, mut u, mut w, mut x) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for &(e2, f2) in &sq {
+        for &(e2, c, f2) in &sq {
             let iv = 1.0 / (1.0 + rho * f2);
             s += e2 * iv;
             t += e2 * f2 * iv * iv;
-            u += f2 * iv;
+            u += c * f2 * iv;
             w += e2 * f2 * f2 * iv * iv * iv;
-            x += f2 * f2 * iv * iv;
+            x += c * f2 * f2 * iv * iv;
         }
         let s = s.max(1e-300);
         let slope = u - n * t / s;
@@ -321,16 +362,22 @@ fn ripple_profile(e: &[f64], fric: &[f64]) -> (f64, f64) {
 /// Returns (hold N m, w_b rad/s, mispredicted rows), choosing among equally good thresholds
 /// the one with the widest relative margin.
 pub fn fit_hold(holds: &[HoldCheck]) -> (f64, f64, usize) {
-    let held_total = holds.iter().filter(|h| !h.backdriven).count();
+    let held_total = held_rows(holds);
     let mut best = (0.0, 0.0, held_total, 0.0f64);
     // Corner speeds 3..3000 rad/s: at the top the hold hardly fades over the tested speeds.
     let corners: Vec<f64> = (0..=48)
         .map(|k| 3.0 * 10f64.powf(k as f64 * 3.0 / 48.0))
         .collect();
     for omega_b in corners {
-        let mut r: Vec<(f64, bool)> = holds
+        let mut r: Vec<(f64, bool, usize)> = holds
             .iter()
-            .map(|h| (h.tau_rot.abs() * (1.0 + h.omega_n / omega_b), h.backdriven))
+            .map(|h| {
+                (
+                    h.tau_rot.abs() * (1.0 + h.omega_n / omega_b),
+                    h.backdriven,
+                    h.count as usize,
+                )
+            })
             .collect();
         r.sort_by(|a, b| a.0.total_cmp(&b.0));
         // Threshold after position i: rows 0..=i held, the rest backdriven.
@@ -338,9 +385,9 @@ pub fn fit_hold(holds: &[HoldCheck]) -> (f64, f64, usize) {
         let mut held_above = held_total; // held rows predicted backdriven
         for i in 0..r.len() {
             if r[i].1 {
-                wrong_below += 1;
+                wrong_below += r[i].2;
             } else {
-                held_above -= 1;
+                held_above -= r[i].2;
             }
             let errors = wrong_below + held_above;
             let next = r.get(i + 1).map(|x| x.0).unwrap_or(r[i].0 * 2.0);
@@ -385,7 +432,7 @@ pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec
 
 /// Outcome of one Levenberg-Marquardt run.
 struct LmResult {
-    /// Weighted sum of squared residuals at the end.
+    /// Weighted sum of squared residuals of the points at the end (their spread aside).
     cost: f64,
     /// J^T W J at the end (free parameters).
     jtj: Vec<f64>,
@@ -397,7 +444,7 @@ struct LmResult {
 fn normal_equations(
     points: &TestPoints,
     subset: &[usize],
-    weights: Option<&[f64]>,
+    weights: &[f64],
     model: &CurrentModel,
     free: &[Param],
 ) -> (f64, Vec<f64>, Vec<f64>) {
@@ -411,15 +458,15 @@ fn normal_equations(
     let ev = model.evaluator();
     for &k in subset {
         let f = ev.current_and_gradient(&points.ops[k], &mut grad);
-        let w = weights.map_or(1.0, |w| w[k]);
-        let r = w * (points.current[k] - f);
-        cost += r * r;
+        let w = weights[k];
+        let r = points.current[k] - f;
+        cost += w * r * r;
         for i in 0..p {
-            j[i] = w * grad[idx[i]];
-            g[i] += j[i] * r;
+            j[i] = grad[idx[i]];
+            g[i] += w * j[i] * r;
         }
         for i in 0..p {
-            let ji = j[i];
+            let ji = w * j[i];
             for l in 0..=i {
                 a[i * p + l] += ji * j[l];
             }
@@ -437,7 +484,7 @@ fn normal_equations(
 fn levenberg_marquardt(
     points: &TestPoints,
     subset: &[usize],
-    weights: Option<&[f64]>,
+    weights: &[f64],
     model: &mut CurrentModel,
     free: &[Param],
 ) -> LmResult {
@@ -578,26 +625,31 @@ pub fn held_out(points: &TestPoints, spec: &ModelSpec, start: &CurrentModel) -> 
     let parts = par_map(&folds, |&f| {
         let (train, test) = points.split(f);
         if train.len() < 3 || test.is_empty() {
-            return (0.0, 0.0, 0usize);
+            return (0.0, 0.0, 0.0);
         }
         let fit = fit(points, &train, spec, start);
         let ev = fit.model.evaluator();
-        let (mut sse, mut nlpd) = (0.0, 0.0);
+        let (mut sse, mut nlpd, mut count) = (0.0, 0.0, 0.0);
         for &k in &test {
             let op = &points.ops[k];
             let e = points.current[k] - ev.current(op);
             let s = fit.sigma_with(&ev, op).max(1e-12);
-            sse += e * e;
-            nlpd += 0.5 * (2.0 * std::f64::consts::PI * s * s).ln() + 0.5 * e * e / (s * s);
+            let (n, e2) = (
+                points.weight[k],
+                points.weight[k] * e * e + points.within_ss[k],
+            );
+            sse += e2;
+            nlpd += n * 0.5 * (2.0 * std::f64::consts::PI * s * s).ln() + 0.5 * e2 / (s * s);
+            count += n;
         }
-        (sse, nlpd, test.len())
+        (sse, nlpd, count)
     });
     let (sse, nlpd, count) = parts
         .into_iter()
-        .fold((0.0, 0.0, 0usize), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
-    (count > 0).then(|| HeldOut {
-        rmse: (sse / count as f64).sqrt(),
-        nlpd: nlpd / count as f64,
+        .fold((0.0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+    (count > 0.0).then(|| HeldOut {
+        rmse: (sse / count).sqrt(),
+        nlpd: nlpd / count,
     })
 }
 
@@ -630,28 +682,31 @@ pub fn scores(points: &TestPoints, fit: &Fit, extra: &[Param]) -> Scores {
         let f = ev.current_and_gradient(op, &mut grad);
         let sigma = fit.sigma_with(&ev, op).max(1e-12);
         let w = 1.0 / sigma;
-        let r = (points.current[k] - f) * w;
+        let n = points.weight[k];
+        let e = points.current[k] - f;
+        let r = e * w;
         for (x, &c) in cols.iter().enumerate() {
             j[x] = w * grad[c];
-            score[x] += j[x] * r;
+            score[x] += n * j[x] * r;
         }
         for x in 0..m {
+            let jx = n * j[x];
             for y in 0..=x {
-                gram[x * m + y] += j[x] * j[y];
+                gram[x * m + y] += jx * j[y];
             }
         }
         let fr = ev.friction_current(op);
         let f2 = fr * fr;
-        f2_sum += f2;
-        f4_sum += f2 * f2;
-        f2e2_sum += f2 * r * r;
+        f2_sum += n * f2;
+        f4_sum += n * f2 * f2;
+        f2e2_sum += f2 * (n * e * e + points.within_ss[k]) * w * w;
     }
     for x in 0..m {
         for y in 0..x {
             gram[y * m + x] = gram[x * m + y];
         }
     }
-    let n = points.len().max(1) as f64;
+    let n = points.rows_in(&points.all).max(1.0);
     let spread = 2.0 * (f4_sum - f2_sum * f2_sum / n);
     let ripple_z = if spread > 0.0 {
         // Whitened residuals average one in square at the ML fit, so the centred score is
@@ -699,7 +754,7 @@ mod tests {
                 }
             }
         }
-        TestPoints::new(&Dataset::from_rows("t", rows).unwrap(), 25.0, 5)
+        TestPoints::new(&Dataset::from_rows("t", rows).unwrap(), 25.0, 5, &[], truth)
     }
 
     #[test]
@@ -745,7 +800,8 @@ mod tests {
             })
             .collect();
         let fric: Vec<f64> = (0..400).map(|k| 0.1 + (k % 10) as f64 * 0.1).collect();
-        let (rho, s2) = ripple_profile(&e, &fric);
+        let e2: Vec<f64> = e.iter().map(|e| e * e).collect();
+        let (rho, s2) = ripple_profile(&e2, &vec![1.0; e.len()], &fric);
         let r = (rho * s2).sqrt();
         assert!((r - 0.1).abs() < 0.01, "{r}");
         assert!((s2.sqrt() - 0.02).abs() < 0.003, "{}", s2.sqrt());
@@ -763,6 +819,8 @@ mod tests {
                     omega_n: w,
                     tau_rot: tau,
                     backdriven: !held,
+                    count: 1,
+                    block: 0,
                 });
             }
         }

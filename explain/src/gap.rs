@@ -6,11 +6,8 @@ use serde::Serialize;
 
 use super::fit::Fit;
 use super::library::ThermalDriver;
-use super::points::TestPoints;
+use super::points::{THERMAL_BINS, TestPoints};
 use super::stats;
-
-/// Bins of time or temperature.
-const THERMAL_BINS: usize = 5;
 
 /// Mean residual of one bin.
 #[derive(Debug, Clone, Serialize)]
@@ -76,11 +73,31 @@ pub struct Gap {
     pub correlations: Vec<Correlation>,
 }
 
-fn bin(label: String, centre: f64, residuals: &[f64]) -> Bin {
-    let n = residuals.len();
-    let m = stats::mean(residuals);
+/// Mean residual per level (`levels[j]` of row `j`), as bins labelled by their centre.
+fn group(
+    levels: impl Iterator<Item = usize>,
+    centres: &[f64],
+    residuals: &[f64],
+    label: impl Fn(f64) -> String,
+) -> Vec<Bin> {
+    let mut sums = vec![(0usize, 0.0f64, 0.0f64); centres.len()];
+    for (l, e) in levels.zip(residuals) {
+        let s = &mut sums[l];
+        s.0 += 1;
+        s.1 += e;
+        s.2 += e * e;
+    }
+    centres
+        .iter()
+        .zip(sums)
+        .map(|(&c, (n, sum, sq))| bin_from_sums(label(c), c, n, sum, sq))
+        .collect()
+}
+
+fn bin_from_sums(label: String, centre: f64, n: usize, sum: f64, sq: f64) -> Bin {
+    let m = if n > 0 { sum / n as f64 } else { 0.0 };
     let sd = if n > 1 {
-        (residuals.iter().map(|e| (e - m) * (e - m)).sum::<f64>() / (n - 1) as f64).sqrt()
+        ((sq - n as f64 * m * m).max(0.0) / (n - 1) as f64).sqrt()
     } else {
         0.0
     };
@@ -93,110 +110,97 @@ fn bin(label: String, centre: f64, residuals: &[f64]) -> Bin {
     }
 }
 
-fn group(
-    levels: &[usize],
-    centres: &[f64],
-    residuals: &[f64],
-    label: impl Fn(f64) -> String,
-) -> Vec<Bin> {
-    centres
-        .iter()
-        .enumerate()
-        .map(|(id, &c)| {
-            let r: Vec<f64> = levels
-                .iter()
-                .zip(residuals)
-                .filter(|(l, _)| **l == id)
-                .map(|(_, e)| *e)
-                .collect();
-            bin(label(c), c, &r)
-        })
-        .collect()
-}
-
-/// The gap between `fit` (fitted to every point) and the measured currents.
+/// The gap between `fit` (fitted to every point) and the measured currents of every row.
 pub fn gap(points: &TestPoints, fit: &Fit) -> Gap {
-    let res = &fit.residuals;
+    let rv = &points.row_view;
+    let ev = fit.model.evaluator();
+    let res = rv.residuals(&ev);
     let n = res.len();
-    let by_speed = group(&points.speed_level, &points.speed_centres, res, |w| {
-        format!("{:.1} Hz", w / (2.0 * std::f64::consts::PI))
-    });
-    let by_load = group(&points.load_level, &points.load_centres, res, |t| {
-        format!("{t:.2} N m")
-    });
-    let x: Vec<f64> = points.ops.iter().map(|o| o.thermal).collect();
+    let point = |j: usize| rv.point[j] as usize;
+    let by_speed = group(
+        (0..n).map(|j| points.speed_level[point(j)]),
+        &points.speed_centres,
+        &res,
+        |w| format!("{:.1} Hz", w / (2.0 * std::f64::consts::PI)),
+    );
+    let by_load = group(
+        (0..n).map(|j| points.load_level[point(j)]),
+        &points.load_centres,
+        &res,
+        |t| format!("{t:.2} N m"),
+    );
+    let x = &rv.thermal;
     let (thermal_axis, offset, unit) = match points.thermal {
         ThermalDriver::Temperature { reference_c } => (Some("temp_c"), reference_c, "C"),
         ThermalDriver::Time => (Some("t_s"), 0.0, "s"),
         ThermalDriver::Unavailable => (None, 0.0, ""),
     };
-    let by_thermal = if thermal_axis.is_some() {
-        let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
-        let bins = THERMAL_BINS.min(n);
-        (0..bins)
-            .map(|b| {
-                let part = &order[b * n / bins..(b + 1) * n / bins];
-                let r: Vec<f64> = part.iter().map(|&k| res[k]).collect();
-                let lo = x[part[0]] + offset;
-                let hi = x[*part.last().expect("non-empty bin")] + offset;
-                let c = part.iter().map(|&k| x[k]).sum::<f64>() / part.len() as f64 + offset;
-                bin(format!("{lo:.0}-{hi:.0} {unit}"), c, &r)
+    let by_thermal = if thermal_axis.is_some() && !rv.thermal_bin.is_empty() {
+        // (rows, sum, square sum of residuals, lowest, highest and sum of the driver)
+        let mut acc = vec![(0usize, 0.0, 0.0, f64::INFINITY, f64::NEG_INFINITY, 0.0); THERMAL_BINS];
+        for j in 0..n {
+            let a = &mut acc[rv.thermal_bin[j] as usize];
+            a.0 += 1;
+            a.1 += res[j];
+            a.2 += res[j] * res[j];
+            a.3 = a.3.min(x[j]);
+            a.4 = a.4.max(x[j]);
+            a.5 += x[j];
+        }
+        acc.into_iter()
+            .filter(|a| a.0 > 0)
+            .map(|(rows, sum, sq, lo, hi, xs)| {
+                let (lo, hi) = (lo + offset, hi + offset);
+                let c = xs / rows as f64 + offset;
+                bin_from_sums(format!("{lo:.0}-{hi:.0} {unit}"), c, rows, sum, sq)
             })
             .collect()
     } else {
         Vec::new()
     };
-    let ordered: Vec<f64> = points.time_order.iter().map(|&k| res[k]).collect();
     let lags = (n / 5).clamp(1, 10);
-    let (q, p) = stats::ljung_box(&ordered, lags);
+    let (q, p) = stats::ljung_box(&res, lags);
     let whiteness = Whiteness {
         order: if points.time_known { "t_s" } else { "file" }.into(),
         lags,
         ljung_box_q: q,
         p_value: p,
-        durbin_watson: stats::durbin_watson(&ordered),
+        durbin_watson: stats::durbin_watson(&res),
     };
-    let mut conditions: Vec<(String, Vec<f64>)> = vec![
-        (
-            "omega_n_rad_s".into(),
-            points.ops.iter().map(|o| o.omega_n).collect(),
-        ),
-        (
-            "tau_rot_nm".into(),
-            points.ops.iter().map(|o| o.tau_rot).collect(),
-        ),
-        (
-            "tau_rot_nm*omega_n_rad_s".into(),
-            points.ops.iter().map(|o| o.tau_rot * o.omega_n).collect(),
-        ),
+    let omega = |j: usize| rv.omega_n[j];
+    let tau = |j: usize| rv.tau_rot[j];
+    let tau_omega = |j: usize| rv.tau_rot[j] * rv.omega_n[j];
+    let mut conditions: Vec<(&str, &dyn Fn(usize) -> f64)> = vec![
+        ("omega_n_rad_s", &omega),
+        ("tau_rot_nm", &tau),
+        ("tau_rot_nm*omega_n_rad_s", &tau_omega),
     ];
+    let thermal_of = |j: usize| x[j];
     if let Some(axis) = thermal_axis {
-        conditions.push((axis.to_string(), x.clone()));
+        conditions.push((axis, &thermal_of));
     }
     let mut correlations: Vec<Correlation> = conditions
         .into_iter()
         .map(|(with, v)| {
-            let r = stats::pearson(&v, res);
+            let r = stats::pearson_by(n, v, |j| res[j]);
             Correlation {
-                with,
+                with: with.to_string(),
                 r,
                 p_value: stats::correlation_p_value(r, n),
             }
         })
         .collect();
-    let ev = fit.model.evaluator();
-    let fric: Vec<f64> = points.ops.iter().map(|o| ev.friction_current(o)).collect();
-    let abs: Vec<f64> = res.iter().map(|e| e.abs()).collect();
-    let r = stats::pearson(&fric, &abs);
+    let fric: Vec<f64> = (0..n).map(|j| ev.friction_current(&rv.op(j))).collect();
+    let r = stats::pearson_by(n, |j| fric[j], |j| res[j].abs());
+    drop(fric);
     correlations.push(Correlation {
         with: "|residual| vs friction current".into(),
         r,
         p_value: stats::correlation_p_value(r, n),
     });
     Gap {
-        rmse_a: stats::rms(res),
-        mean_residual_a: stats::mean(res),
+        rmse_a: stats::rms(&res),
+        mean_residual_a: stats::mean(&res),
         rows: n,
         by_speed,
         by_load,

@@ -1,19 +1,30 @@
 //! `rig explain`: find where the model of the vibrator current and the measurement disagree,
 //! name the missing effect, add it to the model and show the gap shrink.
 //!
+//! 0. Screen: rows that cannot be right (beyond the sensors' or the motor's range) or stand
+//!    out from the rows at like conditions are set aside and reported; rig-file values are
+//!    checked with the firmware's rules ([`robust`]).
 //! 1. Gap: fit the paper's model i = (tau_cam_hat(tau_rot, w_n; mu) + C3 w_n + C4 - C2) / C1
 //!    (Eqs. 10, 15-17, mu fitted; or a loaded model with its effects refitted) and show where
 //!    it disagrees ([`gap`]).
 //! 2. Candidates: the effects of [`library`], each fitted jointly with the model ([`fit`]).
 //! 3. Selection: forward selection by BIC, guarded by a parametric bootstrap of the best
-//!    improvement under the current model and confirmed on held-out blocks of test points
-//!    ([`select`]); candidates within 2 of the best BIC are `ambiguous`.
-//! 4. Add: the augmented model as a rig file ([`rigfile`]).
-//! 5. Show: a report folder with residual plots, the candidate table and the finding
+//!    improvement under the current model, confirmed on held-out blocks of test points and
+//!    required to survive leaving out its most influential test point ([`select`]).
+//! 4. Confidence: a block bootstrap of the whole selection gives each effect's inclusion
+//!    probability, the share of replicates that reach the same finding (`confidence`), and
+//!    `ambiguous` when a competitor is selected instead of the leading effect in a fifth or
+//!    more of the replicates ([`bootstrap`]); BIC weights of the models tried.
+//! 5. Add: the augmented model as a rig file ([`rigfile`]).
+//! 6. Show: a report folder with residual plots, the candidate table and the finding
 //!    ([`report_files`]).
+//!
+//! Large data is pooled into points of like conditions ([`points`]): a million rows take
+//! about a second.
 //!
 //! The entry point for plain rows (files, the simulator, tests) is [`explain`].
 
+pub mod bootstrap;
 pub mod data;
 pub mod fit;
 pub mod gap;
@@ -21,6 +32,7 @@ pub mod library;
 
 pub mod points;
 pub mod report_files;
+pub mod robust;
 pub mod select;
 pub mod stats;
 pub mod synth;
@@ -34,6 +46,7 @@ mod error;
 
 pub use data::{Dataset, MeasuredRow};
 pub use error::ExplainError;
+pub use robust::Outlier;
 pub use select::Options;
 
 use fit::{Fit, ModelSpec};
@@ -82,6 +95,12 @@ pub struct EffectReport {
     pub holdout_rmse_a: Option<f64>,
     /// What the effect means at the fitted values.
     pub description: String,
+    /// Share of the block-bootstrap replicates of the whole selection that select it (null
+    /// without a bootstrap).
+    pub inclusion_probability: Option<f64>,
+    /// BIC weight of the model with it among the models of its step (the model without it
+    /// and every candidate).
+    pub bic_weight: f64,
 }
 
 /// A row of a candidate table.
@@ -103,6 +122,55 @@ pub struct CandidateReport {
     pub rmse_a: Option<f64>,
     /// Held-out RMSE of the joint fit, A (computed for the leaders only on large data).
     pub holdout_rmse_a: Option<f64>,
+    /// BIC weight of the model with it among the models of its step (the current model and
+    /// every fitted candidate).
+    pub bic_weight: Option<f64>,
+    /// Share of the block-bootstrap replicates of the whole selection that select it.
+    pub inclusion_probability: Option<f64>,
+}
+
+/// A candidate of an ambiguous verdict.
+#[derive(Debug, Clone, Serialize)]
+pub struct AmbiguousCandidate {
+    /// The effect.
+    pub name: String,
+    /// Share of the bootstrap replicates that select it.
+    pub probability: f64,
+}
+
+/// One model the selection fitted, with its BIC weight among all of them.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelWeight {
+    /// Its effects beyond the loaded ones, in the order they were added.
+    pub effects: Vec<String>,
+    /// Its BIC.
+    pub bic: f64,
+    /// exp(-BIC / 2), normalised over every model fitted.
+    pub weight: f64,
+}
+
+/// One selection the bootstrap replicates reached, with its share.
+#[derive(Debug, Clone, Serialize)]
+pub struct BootstrapSet {
+    /// The effects selected (beyond the loaded ones), sorted by name.
+    pub effects: Vec<String>,
+    /// Share of the replicates.
+    pub share: f64,
+}
+
+/// How the block bootstrap was run, and what it reached.
+#[derive(Debug, Clone, Serialize)]
+pub struct BootstrapReport {
+    /// Replicates.
+    pub replicates: usize,
+    /// Blocks of consecutive test points.
+    pub blocks: usize,
+    /// Test points (rows) per block.
+    pub block_length: usize,
+    /// Seed of the draws.
+    pub seed: u64,
+    /// The most frequent selections (up to five).
+    pub selections: Vec<BootstrapSet>,
 }
 
 /// One step of the forward selection.
@@ -116,8 +184,11 @@ pub struct StepReport {
     pub p_value: f64,
     /// Why it was (not) added.
     pub reason: String,
-    /// Candidates the data cannot tell from the best.
+    /// Candidates the data cannot tell from the best: selected instead of it in at least
+    /// `Options::ambiguity_share` of the bootstrap replicates (accepted steps only).
     pub ambiguous_with: Vec<String>,
+    /// The guard's critical value of the best improvement.
+    pub critical_delta_bic: f64,
     /// Every candidate.
     pub candidates: Vec<CandidateReport>,
 }
@@ -144,6 +215,30 @@ pub struct Explanation {
     pub effects: Vec<EffectReport>,
     /// Names the data cannot tell apart (the chosen one first), when the verdict is ambiguous.
     pub ambiguous: Vec<String>,
+    /// The same with their bootstrap inclusion probabilities.
+    pub ambiguous_candidates: Vec<AmbiguousCandidate>,
+    /// Share of the block-bootstrap replicates of the whole selection that reach the same set
+    /// of effects (none, for `no-missing-effect`); null without a bootstrap.
+    pub confidence: Option<f64>,
+    /// Every applicable effect's bootstrap inclusion probability.
+    pub inclusion_probabilities: BTreeMap<String, f64>,
+    /// The models fitted along the selection with their BIC weights, heaviest first (up to
+    /// ten).
+    pub model_weights: Vec<ModelWeight>,
+    /// The block bootstrap, when it ran.
+    pub bootstrap: Option<BootstrapReport>,
+    /// Rows set aside, in file order: data row, file line, column, value and why.
+    pub outliers: Vec<Outlier>,
+    /// Things in the data or the rig file worth fixing; they did not stop the analysis.
+    pub warnings: Vec<String>,
+    /// Robust standard deviation (1.4826 MAD) of the final model's row residuals, A.
+    pub robust_sigma_a: f64,
+    /// Rows in the data (with or without a current, outliers included).
+    pub rows_in_data: usize,
+    /// Whether rows at like conditions were pooled into points for the fits.
+    pub pooled: bool,
+    /// Fitting points (rows, or pools of them).
+    pub points: usize,
     /// RMSE of the starting model, A.
     pub rmse_before_a: f64,
     /// RMSE of the final model, A.
@@ -160,7 +255,7 @@ pub struct Explanation {
     pub mu_before: f64,
     /// mu fitted in the final model.
     pub mu_after: f64,
-    /// Rows with a current.
+    /// Rows with a current that the fits use (outliers excluded).
     pub rows: usize,
     /// Rows whose output did not backdrive.
     pub held_rows: usize,
@@ -237,7 +332,12 @@ fn intervals(effect: Effect, fit: &Fit, thermal: ThermalDriver) -> BTreeMap<Stri
     out
 }
 
-fn candidate_report(c: &select::Candidate, thermal: ThermalDriver) -> CandidateReport {
+fn candidate_report(
+    c: &select::Candidate,
+    thermal: ThermalDriver,
+    weight: Option<f64>,
+    inclusion: Option<f64>,
+) -> CandidateReport {
     match &c.fit {
         Some(f) => CandidateReport {
             name: c.effect.name().to_string(),
@@ -248,6 +348,8 @@ fn candidate_report(c: &select::Candidate, thermal: ThermalDriver) -> CandidateR
             delta_bic: Some(-c.improvement),
             rmse_a: Some(f.rmse()),
             holdout_rmse_a: c.held_out.map(|h| h.rmse),
+            bic_weight: weight,
+            inclusion_probability: inclusion,
         },
         None if c.estimated => CandidateReport {
             name: c.effect.name().to_string(),
@@ -260,6 +362,8 @@ fn candidate_report(c: &select::Candidate, thermal: ThermalDriver) -> CandidateR
             delta_bic: Some(-c.improvement),
             rmse_a: None,
             holdout_rmse_a: None,
+            bic_weight: None,
+            inclusion_probability: inclusion,
         },
         None => CandidateReport {
             name: c.effect.name().to_string(),
@@ -270,8 +374,84 @@ fn candidate_report(c: &select::Candidate, thermal: ThermalDriver) -> CandidateR
             delta_bic: None,
             rmse_a: None,
             holdout_rmse_a: None,
+            bic_weight: None,
+            inclusion_probability: None,
         },
     }
+}
+
+/// BIC weights exp(-BIC/2), normalised, of `bics`.
+fn bic_weights(bics: &[f64]) -> Vec<f64> {
+    let min = bics.iter().copied().fold(f64::INFINITY, f64::min);
+    let w: Vec<f64> = bics.iter().map(|b| (-(b - min) / 2.0).exp()).collect();
+    let total: f64 = w.iter().sum();
+    w.into_iter().map(|x| x / total).collect()
+}
+
+/// BIC weight of each fitted candidate of `step` among the step's models (the current one
+/// with BIC `current_bic` and every fitted candidate).
+fn step_weights(step: &select::Step, current_bic: f64) -> Vec<Option<f64>> {
+    let mut bics = vec![current_bic];
+    bics.extend(
+        step.candidates
+            .iter()
+            .filter_map(|c| c.fit.as_ref().map(|f| f.bic)),
+    );
+    let w = bic_weights(&bics);
+    let mut next = 1;
+    step.candidates
+        .iter()
+        .map(|c| {
+            c.fit.as_ref().map(|_| {
+                next += 1;
+                w[next - 1]
+            })
+        })
+        .collect()
+}
+
+/// Prepares the test points of `data`: range outliers, then residual outliers under the
+/// starting model, set aside. Returns the points, the outliers (file order) and warnings.
+fn screened_points(
+    data: &Dataset,
+    rig: &RigFile,
+    spec: &ModelSpec,
+    start: &model::effects::CurrentModel,
+    options: &Options,
+) -> Result<(TestPoints, Vec<Outlier>, Vec<String>), ExplainError> {
+    let robust::RangeCheck {
+        mut excluded,
+        mut outliers,
+        mut warnings,
+    } = robust::range_check(data)?;
+    let too_few = |points: &TestPoints| {
+        (points.n_rows < data::MIN_ROWS).then(|| ExplainError::TooFewRows {
+            file: data.name.clone(),
+            rows: points.n_rows,
+            min_rows: data::MIN_ROWS,
+        })
+    };
+    let reference_c = rig.calibration.temperature_c;
+    let mut points = TestPoints::new(data, reference_c, options.folds, &excluded, start);
+    if let Some(e) = too_few(&points) {
+        return Err(e);
+    }
+    let base = fit::fit(&points, &points.all, spec, start);
+    let (more, warning) = robust::residual_outliers(data, &points, &base.model);
+    warnings.extend(warning);
+    if !more.is_empty() {
+        for o in &more {
+            excluded[o.row - 1] = true;
+        }
+        outliers.extend(more);
+        outliers.sort_by_key(|o| o.row);
+        drop(points);
+        points = TestPoints::new(data, reference_c, options.folds, &excluded, start);
+        if let Some(e) = too_few(&points) {
+            return Err(e);
+        }
+    }
+    Ok((points, outliers, warnings))
 }
 
 /// Explains `data` against the rig (and model) of `rig`.
@@ -281,18 +461,58 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         file: "model".into(),
         why,
     })?;
-    let points = TestPoints::new(data, rig.calibration.temperature_c, options.folds);
+    let mut warnings = robust::check_rig(rig)?;
     let spec = ModelSpec {
         effects: known.clone(),
     };
+    let (points, outliers, data_warnings) = screened_points(data, rig, &spec, &start, options)?;
+    warnings.extend(data_warnings);
     let selection = select::select(&points, &spec, &start, options);
+    let boot = bootstrap::bootstrap(&points, &selection, options);
+    let inclusion = |e: Effect| boot.as_ref().map(|b| b.inclusion(e));
     let thermal = points.thermal;
     let before = selection.start.clone();
     let after = selection.end.clone();
 
+    // BIC weights of every step's models, and of every model fitted.
+    let mut current_bic = before.bic;
+    let mut weights_by_step = Vec::new();
+    let mut all_models: Vec<(Vec<String>, f64)> = vec![(Vec::new(), before.bic)];
+    let mut path: Vec<String> = Vec::new();
+    for step in &selection.steps {
+        weights_by_step.push(step_weights(step, current_bic));
+        for c in &step.candidates {
+            if let Some(f) = &c.fit {
+                let mut effects = path.clone();
+                effects.push(c.effect.name().to_string());
+                all_models.push((effects, f.bic));
+            }
+        }
+        if let (true, Some(b)) = (step.accepted, step.best()) {
+            path.push(b.effect.name().to_string());
+            current_bic = b.fit.as_ref().map_or(current_bic, |f| f.bic);
+        }
+    }
+    let w = bic_weights(&all_models.iter().map(|m| m.1).collect::<Vec<_>>());
+    let mut model_weights: Vec<ModelWeight> = all_models
+        .into_iter()
+        .zip(w)
+        .map(|((effects, bic), weight)| ModelWeight {
+            effects,
+            bic,
+            weight,
+        })
+        .collect();
+    model_weights.sort_by(|a, b| b.weight.total_cmp(&a.weight));
+    model_weights.truncate(10);
+
     let mut effects = Vec::new();
-    let mut ambiguous = Vec::new();
-    for step in selection.steps.iter().filter(|s| s.accepted) {
+    for (k, step) in selection
+        .steps
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.accepted)
+    {
         let best = step.best().expect("an accepted step has a best candidate");
         let f = best.fit.as_ref().expect("fitted");
         effects.push(EffectReport {
@@ -307,12 +527,48 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             p_value: step.p_value,
             holdout_rmse_a: best.held_out.map(|h| h.rmse),
             description: library::describe(best.effect, &after.model.effects, thermal),
+            inclusion_probability: inclusion(best.effect),
+            bic_weight: weights_by_step[k][0].unwrap_or(0.0),
         });
-        if !step.ambiguous_with.is_empty() && ambiguous.is_empty() {
-            ambiguous.push(best.effect.name().to_string());
-            ambiguous.extend(step.ambiguous_with.iter().map(|e| e.name().to_string()));
+    }
+    let named = selection.added();
+    // A competitor selected instead of a named effect in enough replicates: ambiguous.
+    let traits = points.traits();
+    let competitors: Vec<Effect> = Effect::ALL
+        .into_iter()
+        .filter(|e| !after.spec.has(*e) && library::not_applicable(*e, &traits).is_none())
+        .collect();
+    let rivals_of = |e: Effect| -> Vec<Effect> {
+        let Some(b) = &boot else {
+            return Vec::new();
+        };
+        let mut r: Vec<(Effect, f64)> = competitors
+            .iter()
+            .map(|&c| (c, b.share(|s| s.contains(&c) && !s.contains(&e))))
+            .filter(|&(_, share)| share >= options.ambiguity_share)
+            .collect();
+        r.sort_by(|a, b| b.1.total_cmp(&a.1));
+        r.into_iter().map(|(c, _)| c).collect()
+    };
+    // The verdict turns on the leading finding; rivals of later effects are listed with
+    // their step.
+    let mut ambiguous_candidates = Vec::new();
+    if let Some(&e) = named.first() {
+        let rivals = rivals_of(e);
+        if !rivals.is_empty() {
+            ambiguous_candidates = std::iter::once(e)
+                .chain(rivals)
+                .map(|c| AmbiguousCandidate {
+                    name: c.name().to_string(),
+                    probability: inclusion(c).unwrap_or(0.0),
+                })
+                .collect();
         }
     }
+    let ambiguous: Vec<String> = ambiguous_candidates
+        .iter()
+        .map(|c| c.name.clone())
+        .collect();
     let verdict = if effects.is_empty() {
         Verdict::NoMissingEffect
     } else if !ambiguous.is_empty() {
@@ -320,32 +576,75 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     } else {
         Verdict::Explained
     };
+    let mut inclusion_probabilities = BTreeMap::new();
+    if let Some(b) = &boot {
+        for e in Effect::ALL {
+            if known.contains(&e) || library::not_applicable(e, &traits).is_some() {
+                continue;
+            }
+            inclusion_probabilities.insert(e.name().to_string(), b.inclusion(e));
+        }
+    }
     let steps: Vec<StepReport> = selection
         .steps
         .iter()
-        .map(|s| StepReport {
+        .zip(&weights_by_step)
+        .map(|(s, w)| StepReport {
             best: s.best().map(|c| c.effect.name().to_string()),
             accepted: s.accepted,
             p_value: s.p_value,
             reason: s.reason.clone(),
-            ambiguous_with: s
-                .ambiguous_with
-                .iter()
-                .map(|e| e.name().to_string())
-                .collect(),
+            ambiguous_with: match s.best() {
+                Some(b) if s.accepted => rivals_of(b.effect)
+                    .iter()
+                    .map(|e| e.name().to_string())
+                    .collect(),
+                _ => Vec::new(),
+            },
+            critical_delta_bic: -s.critical,
             candidates: s
                 .candidates
                 .iter()
-                .map(|c| candidate_report(c, thermal))
+                .zip(w)
+                .map(|(c, &w)| candidate_report(c, thermal, w, inclusion(c.effect)))
                 .collect(),
         })
         .collect();
     let gap_before = gap::gap(&points, &before);
     let gap_after = gap::gap(&points, &after);
+    let mut residuals = points.row_view.residuals(&after.model.evaluator());
+    let robust_sigma_a = robust::robust_scale(&mut residuals);
+    drop(residuals);
+    let bootstrap = boot.as_ref().map(|b| BootstrapReport {
+        replicates: b.replicates,
+        blocks: b.blocks,
+        block_length: b.block_length,
+        seed: b.seed,
+        selections: b
+            .sets()
+            .into_iter()
+            .take(5)
+            .map(|(set, share)| BootstrapSet {
+                effects: set.iter().map(|e| e.name().to_string()).collect(),
+                share,
+            })
+            .collect(),
+    });
     let mut explanation = Explanation {
         verdict,
         effects,
         ambiguous,
+        ambiguous_candidates,
+        confidence: boot.as_ref().map(|b| b.set_share(&named)),
+        inclusion_probabilities,
+        model_weights,
+        bootstrap,
+        outliers,
+        warnings,
+        robust_sigma_a,
+        rows_in_data: data.len(),
+        pooled: points.pooled,
+        points: points.len(),
         rmse_before_a: before.rmse(),
         rmse_after_a: after.rmse(),
         holdout_rmse_before_a: selection.start_held_out.map(|h| h.rmse),
@@ -354,7 +653,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         bic_after: after.bic,
         mu_before: before.model.mu,
         mu_after: after.model.mu,
-        rows: points.len(),
+        rows: points.n_rows,
         held_rows: points.traits().held_rows,
         known_effects: known.iter().map(|e| e.name().to_string()).collect(),
         candidates: steps

@@ -18,6 +18,11 @@ fn opt_ma(a: Option<f64>) -> String {
     a.map(ma).unwrap_or_else(|| "n/a".into())
 }
 
+fn opt_pct(p: Option<f64>) -> String {
+    p.map(|p| format!("{:.0} %", 100.0 * p))
+        .unwrap_or_else(|| "n/a".into())
+}
+
 fn p_text(p: f64) -> String {
     if p < 0.001 {
         "p < 0.001".into()
@@ -57,8 +62,43 @@ fn params_text(
         .join(", ")
 }
 
+/// The outliers in a sentence (empty without any).
+fn outliers_text(e: &Explanation) -> String {
+    let n = e.outliers.len();
+    if n == 0 {
+        return String::new();
+    }
+    let first = &e.outliers[0];
+    format!(
+        " {n} row{} set aside as outlier{} (first: row {}, line {}: {}).",
+        if n == 1 { " was" } else { "s were" },
+        if n == 1 { "" } else { "s" },
+        first.row,
+        first.line,
+        first.reason
+    )
+}
+
+/// The bootstrap's confidence in a sentence (empty without a bootstrap).
+fn confidence_text(e: &Explanation) -> String {
+    match (e.confidence, &e.bootstrap) {
+        (Some(c), Some(b)) => format!(
+            " Confidence {:.0} %: the share of {} resamples of {} blocks of consecutive test points that reach the same finding.",
+            100.0 * c,
+            b.replicates,
+            b.blocks
+        ),
+        _ => String::new(),
+    }
+}
+
 /// The finding in words.
 pub fn finding(e: &Explanation, selection: &Selection) -> String {
+    let s = finding_core(e, selection);
+    format!("{s}{}{}", confidence_text(e), outliers_text(e))
+}
+
+fn finding_core(e: &Explanation, selection: &Selection) -> String {
     let mut s = String::new();
     let model = if e.known_effects.is_empty() {
         format!(
@@ -109,10 +149,11 @@ pub fn finding(e: &Explanation, selection: &Selection) -> String {
                 );
             }
             s.push_str(". ");
+            let accepted: Vec<&super::StepReport> = e.steps.iter().filter(|s| s.accepted).collect();
             for (k, eff) in e.effects.iter().enumerate() {
                 let _ = write!(
                     s,
-                    "{} {}: {}. It lowers the BIC by {:.1} ({}), held-out RMSE {}. ",
+                    "{} {}: {}. It lowers the BIC by {:.1} ({}), held-out RMSE {}",
                     if k == 0 { "Missing:" } else { "Also:" },
                     eff.name,
                     eff.description,
@@ -120,11 +161,29 @@ pub fn finding(e: &Explanation, selection: &Selection) -> String {
                     p_text(eff.p_value),
                     opt_ma(eff.holdout_rmse_a)
                 );
+                if let Some(p) = eff.inclusion_probability {
+                    let _ = write!(s, ", selected in {:.0} % of the resamples", 100.0 * p);
+                }
+                s.push_str(". ");
+                let rivals = accepted.get(k).map_or(&[][..], |st| &st.ambiguous_with[..]);
+                if k > 0 && !rivals.is_empty() {
+                    let _ = write!(
+                        s,
+                        "(The data cannot tell it from {}: a fifth or more of the resamples select that instead.) ",
+                        rivals.join(", ")
+                    );
+                }
             }
             if e.verdict == Verdict::Ambiguous {
+                let shares = e
+                    .ambiguous_candidates
+                    .iter()
+                    .map(|c| format!("{} {:.0} %", c.name, 100.0 * c.probability))
+                    .collect::<Vec<_>>()
+                    .join(", ");
                 let _ = write!(
                     s,
-                    "The data cannot tell {} apart (BIC within 2 of each other); the model takes {}, more tests at other loads, speeds or temperatures would separate them. ",
+                    "The data cannot tell {} apart: resampling blocks of consecutive test points selects them in {shares} of the replicates; the model takes {}, more tests at other loads, speeds or temperatures would separate them. ",
                     e.ambiguous.join(", "),
                     e.ambiguous[0]
                 );
@@ -153,7 +212,14 @@ pub fn finding(e: &Explanation, selection: &Selection) -> String {
 pub fn render_text(e: &Explanation, source: &str) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "rig explain: {source} ({} rows with a current)", e.rows);
-    let _ = writeln!(s, "verdict: {}", e.verdict.as_str());
+    let _ = writeln!(
+        s,
+        "verdict: {}{}",
+        e.verdict.as_str(),
+        e.confidence
+            .map(|c| format!(" (confidence {:.0} %)", 100.0 * c))
+            .unwrap_or_default()
+    );
     let _ = writeln!(
         s,
         "  before: RMSE {}  held-out {}  mu {:.4}",
@@ -173,17 +239,38 @@ pub fn render_text(e: &Explanation, source: &str) -> String {
         for eff in &e.effects {
             let _ = writeln!(
                 s,
-                "  {:<32} delta-BIC {:>8.1}  {}  held-out {}",
+                "  {:<32} delta-BIC {:>8.1}  {}  held-out {}  inclusion {}",
                 eff.name,
                 eff.delta_bic,
                 p_text(eff.p_value),
-                opt_ma(eff.holdout_rmse_a)
+                opt_ma(eff.holdout_rmse_a),
+                opt_pct(eff.inclusion_probability)
             );
             let _ = writeln!(s, "    {}", params_text(&eff.params, &eff.intervals));
         }
     }
     if !e.ambiguous.is_empty() {
-        let _ = writeln!(s, "ambiguous: {}", e.ambiguous.join(", "));
+        let _ = writeln!(
+            s,
+            "ambiguous: {}",
+            e.ambiguous_candidates
+                .iter()
+                .map(|c| format!("{} ({:.0} %)", c.name, 100.0 * c.probability))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    if !e.outliers.is_empty() {
+        let _ = writeln!(s, "outliers set aside ({}):", e.outliers.len());
+        for o in e.outliers.iter().take(10) {
+            let _ = writeln!(s, "  row {} (line {}): {}", o.row, o.line, o.reason);
+        }
+        if e.outliers.len() > 10 {
+            let _ = writeln!(s, "  ... and {} more (see --json)", e.outliers.len() - 10);
+        }
+    }
+    for w in &e.warnings {
+        let _ = writeln!(s, "warning: {w}");
     }
     let _ = writeln!(s, "candidates (first step):");
     for c in &e.candidates {
@@ -209,11 +296,12 @@ fn candidate_line(c: &CandidateReport) -> String {
     }
     match c.delta_bic {
         Some(d) => format!(
-            "{:<32} delta-BIC {:>8.1}  RMSE {:>9}  held-out {:>9}  {}",
+            "{:<32} delta-BIC {:>8.1}  RMSE {:>9}  held-out {:>9}  inclusion {:>5}  {}",
             c.name,
             d,
             opt_ma(c.rmse_a),
             opt_ma(c.holdout_rmse_a),
+            opt_pct(c.inclusion_probability),
             params_text(&c.params, &c.intervals)
         ),
         None => format!(
@@ -279,6 +367,52 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
     let _ = writeln!(s, "# rig explain: {source}\n");
     let _ = writeln!(s, "**Verdict: {}**\n", e.verdict.as_str());
     let _ = writeln!(s, "{}\n", e.finding);
+    if !e.warnings.is_empty() {
+        let _ = writeln!(s, "## Warnings\n");
+        for w in &e.warnings {
+            let _ = writeln!(s, "- {w}");
+        }
+        s.push('\n');
+    }
+    if !e.outliers.is_empty() {
+        let _ = writeln!(
+            s,
+            "## Outliers set aside ({})\n\nThese rows are excluded from every fit.\n\n| row | line | column | value | reason |\n|---|---|---|---|---|",
+            e.outliers.len()
+        );
+        for o in e.outliers.iter().take(200) {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | {} |",
+                o.row, o.line, o.column, o.value, o.reason
+            );
+        }
+        s.push('\n');
+    }
+    if let Some(b) = &e.bootstrap {
+        let _ = writeln!(
+            s,
+            "## Confidence\n\nBlock bootstrap of the whole selection: {} replicates, {} blocks of {} consecutive test points (seed {:#x}). Confidence (same finding): {}.\n\n| selection | share |\n|---|---|",
+            b.replicates,
+            b.blocks,
+            b.block_length,
+            b.seed,
+            opt_pct(e.confidence)
+        );
+        for set in &b.selections {
+            let name = if set.effects.is_empty() {
+                "(none)".to_string()
+            } else {
+                set.effects.join(" + ")
+            };
+            let _ = writeln!(s, "| {name} | {:.0} % |", 100.0 * set.share);
+        }
+        let _ = writeln!(s, "\n| effect | inclusion probability |\n|---|---|");
+        for (name, p) in &e.inclusion_probabilities {
+            let _ = writeln!(s, "| {name} | {:.0} % |", 100.0 * p);
+        }
+        s.push('\n');
+    }
     let _ = writeln!(
         s,
         "| | RMSE | held-out RMSE | BIC | mu |\n|---|---|---|---|---|\n| before | {} | {} | {:.1} | {:.4} |\n| after | {} | {} | {:.1} | {:.4} |\n",
@@ -318,25 +452,27 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
         let _ = writeln!(s, "## Step {}: {}\n", k + 1, step.reason);
         let _ = writeln!(
             s,
-            "| candidate | parameters [95 % interval] | delta-BIC | RMSE | held-out RMSE |\n|---|---|---|---|---|"
+            "| candidate | parameters [95 % interval] | delta-BIC | BIC weight | RMSE | held-out RMSE | inclusion |\n|---|---|---|---|---|---|---|"
         );
         for c in &step.candidates {
             match c.delta_bic {
                 Some(d) => {
                     let _ = writeln!(
                         s,
-                        "| {} | {} | {:.1} | {} | {} |",
+                        "| {} | {} | {:.1} | {} | {} | {} | {} |",
                         c.name,
                         params_text(&c.params, &c.intervals),
                         d,
+                        c.bic_weight.map(|w| format!("{w:.3}")).unwrap_or_default(),
                         opt_ma(c.rmse_a),
-                        opt_ma(c.holdout_rmse_a)
+                        opt_ma(c.holdout_rmse_a),
+                        opt_pct(c.inclusion_probability)
                     );
                 }
                 None => {
                     let _ = writeln!(
                         s,
-                        "| {} | not applicable: {} | | | |",
+                        "| {} | not applicable: {} | | | | | |",
                         c.name,
                         c.note.as_deref().unwrap_or("")
                     );
@@ -353,7 +489,7 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
 
 fn candidates_csv(e: &Explanation) -> String {
     let mut s = String::from(
-        "step,name,applicable,delta_bic,rmse_a,holdout_rmse_a,params,intervals,note\n",
+        "step,name,applicable,delta_bic,rmse_a,holdout_rmse_a,params,intervals,note,bic_weight,inclusion_probability\n",
     );
     for (k, step) in e.steps.iter().enumerate() {
         for c in &step.candidates {
@@ -372,7 +508,7 @@ fn candidates_csv(e: &Explanation) -> String {
                 .join(";");
             let _ = writeln!(
                 s,
-                "{},{},{},{},{},{},\"{}\",\"{}\",\"{}\"",
+                "{},{},{},{},{},{},\"{}\",\"{}\",\"{}\",{},{}",
                 k + 1,
                 c.name,
                 c.applicable,
@@ -381,7 +517,9 @@ fn candidates_csv(e: &Explanation) -> String {
                 f(c.holdout_rmse_a),
                 params,
                 iv,
-                c.note.as_deref().unwrap_or("")
+                c.note.as_deref().unwrap_or(""),
+                f(c.bic_weight),
+                f(c.inclusion_probability)
             );
         }
     }

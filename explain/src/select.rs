@@ -8,9 +8,15 @@
 //!    current model linearised at its fit with Gaussian noise, `Options::null_draws` draws
 //!    with a fixed seed) at level `Options::alpha`, and
 //! 3. it predicts held-out blocks of test points better (lower RMSE; for the ripple, which
-//!    only changes the scatter, a lower negative log predictive density).
+//!    only changes the scatter, a lower negative log predictive density), and
+//! 4. it is not carried by a single test point: with the point that contributes most to the
+//!    improvement left out, the improvement still clears the guard's critical value at level
+//!    [`INFLUENCE_ALPHA`] (so one corrupt row, isolated outliers aside, cannot make a
+//!    finding, while a variance effect whose evidence sits in its largest deviations keeps
+//!    most of it).
 //!
-//! Candidates within `Options::ambiguity_bic` of the best are reported as ambiguous with it.
+//! Which candidates the data cannot tell apart is judged by the block bootstrap of the whole
+//! selection ([`crate::bootstrap`]).
 
 use model::effects::{CurrentModel, Effect, Param};
 use model::plant::NoiseSource;
@@ -27,6 +33,9 @@ const NULL_SEED: u64 = 0x5eed_0e4f_1a7e_0006;
 const FULL_TABLE_POINTS: usize = 20_000;
 /// Candidates fitted per step on large data.
 const SCREEN_KEEP: usize = 3;
+/// Level of the guard that the best improvement must still clear with its most influential
+/// test point left out (at least `Options::alpha`).
+pub const INFLUENCE_ALPHA: f64 = 0.05;
 
 /// Settings of the selection.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -37,10 +46,14 @@ pub struct Options {
     pub max_effects: usize,
     /// Draws of the null simulation.
     pub null_draws: usize,
-    /// Candidates whose BIC improvement is this close to the best's are ambiguous with it.
-    pub ambiguity_bic: f64,
     /// Folds of the held-out validation.
     pub folds: usize,
+    /// Replicates of the block bootstrap of the selection (0: none; then no inclusion
+    /// probabilities and no ambiguity judgement).
+    pub replicates: usize,
+    /// A competitor is ambiguous with a named effect when at least this share of the
+    /// bootstrap replicates select the competitor without the named effect.
+    pub ambiguity_share: f64,
 }
 
 impl Default for Options {
@@ -49,8 +62,9 @@ impl Default for Options {
             alpha: 0.002,
             max_effects: 4,
             null_draws: 20_000,
-            ambiguity_bic: 2.0,
             folds: 5,
+            replicates: 200,
+            ambiguity_share: 0.2,
         }
     }
 }
@@ -81,12 +95,12 @@ pub struct Step {
     /// Probability that effect-free data (under the current model) gives a best improvement
     /// at least this large.
     pub p_value: f64,
+    /// The smallest best improvement the guard lets through (its critical value).
+    pub critical: f64,
     /// Held-out score of the current model.
     pub held_out_before: Option<HeldOut>,
     /// Whether the best candidate was added.
     pub accepted: bool,
-    /// Other candidates the data cannot tell from the best.
-    pub ambiguous_with: Vec<Effect>,
     /// Why the best was or was not added.
     pub reason: String,
 }
@@ -347,6 +361,203 @@ fn confirmed(
     }
 }
 
+/// The candidates of one step fitted against the current model, with the guard's null
+/// distribution: what the selection and the bootstrap both start from.
+#[derive(Debug, Clone)]
+pub struct Explored {
+    /// The fitted candidates, best first, then the screened-out ones with their score-test
+    /// estimates (inapplicable candidates are not listed).
+    pub candidates: Vec<Candidate>,
+    /// Draws of the best improvement under the current model (the guard's null).
+    pub null: Vec<f64>,
+    /// The smallest best improvement the guard lets through at level `alpha`.
+    pub critical: f64,
+    /// The same at level [`INFLUENCE_ALPHA`], for the improvement without the most
+    /// influential point.
+    pub critical_influence: f64,
+}
+
+/// The critical value of the guard: the improvement a best candidate must exceed so that its
+/// p-value, (1 + draws at or above it) / (1 + draws), falls below `alpha`.
+fn critical_value(null: &[f64], alpha: f64) -> f64 {
+    let allowed = alpha * (1 + null.len()) as f64 - 1.0;
+    if allowed <= 0.0 {
+        return f64::INFINITY;
+    }
+    // Up to `allowed` draws (strictly fewer) may reach the improvement.
+    let k = (allowed.ceil() as usize).saturating_sub(1);
+    if k >= null.len() {
+        return f64::NEG_INFINITY;
+    }
+    let mut sorted = null.to_vec();
+    let (_, v, _) = sorted.select_nth_unstable_by(k, |a, b| b.total_cmp(a));
+    *v
+}
+
+/// Fits the applicable candidates not yet in `current` (on large data the leaders of the score
+/// test) and simulates the guard's null; `None` when no candidate is left.
+pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Explored> {
+    let traits = points.traits();
+    let full_table = points.len() <= FULL_TABLE_POINTS;
+    let applicable: Vec<Effect> = Effect::ALL
+        .into_iter()
+        .filter(|e| !current.spec.has(*e))
+        .filter(|&e| library::not_applicable(e, &traits).is_none())
+        .collect();
+    if applicable.is_empty() {
+        return None;
+    }
+    let mean: Vec<Effect> = applicable
+        .iter()
+        .copied()
+        .filter(|e| e.mean_param().is_some())
+        .collect();
+    let ripple = applicable.contains(&Effect::MeshLoadSharingRipple);
+    let tests = score_tests(points, current, &mean);
+    let ln_n = (current.n as f64).ln();
+    // Score-test estimate of each candidate's BIC improvement, for screening.
+    let estimate = |e: Effect| -> f64 {
+        let k = library::parameter_count(e) as f64 * ln_n;
+        if e == Effect::MeshLoadSharingRipple {
+            return tests.ripple_lr - k;
+        }
+        let a = mean.iter().position(|&m| m == e).expect("a mean candidate");
+        let mut lr = tests.lr[a].unwrap_or(0.0);
+        if e == Effect::LinearBushFriction && !points.holds.is_empty() {
+            let (_, _, errors) = fit::fit_hold(&points.holds);
+            let before = current.hold_errors as f64;
+            lr += 2.0
+                * (before - errors as f64)
+                * ((1.0 - fit::HOLD_LABEL_ERROR) / fit::HOLD_LABEL_ERROR).ln();
+        }
+        lr - k
+    };
+    let mut ranked: Vec<(Effect, f64)> = applicable.iter().map(|&e| (e, estimate(e))).collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let to_fit: Vec<Effect> = ranked
+        .iter()
+        .enumerate()
+        .filter(|(i, (e, _))| full_table || *i < SCREEN_KEEP || *e == Effect::LinearBushFriction)
+        .map(|(_, (e, _))| *e)
+        .collect();
+    let fits = fit::par_map(&to_fit, |&e| fit_candidate(points, current, e));
+    let mut candidates: Vec<Candidate> = to_fit
+        .iter()
+        .zip(fits)
+        .map(|(&effect, f)| Candidate {
+            effect,
+            not_applicable: None,
+            improvement: current.bic - f.bic,
+            estimated: false,
+            fit: Some(f),
+            held_out: None,
+        })
+        .collect();
+    candidates.sort_by(|a, b| b.improvement.total_cmp(&a.improvement));
+    // The screened-out candidates follow with their estimates.
+    for &(e, est) in &ranked {
+        if !to_fit.contains(&e) {
+            candidates.push(Candidate {
+                effect: e,
+                not_applicable: None,
+                fit: None,
+                improvement: est,
+                estimated: true,
+                held_out: None,
+            });
+        }
+    }
+    let null = null_best_improvements(&tests, &mean, ripple, current.n, opts.null_draws);
+    let critical = critical_value(&null, opts.alpha);
+    let critical_influence = critical_value(&null, INFLUENCE_ALPHA.max(opts.alpha));
+    Some(Explored {
+        candidates,
+        null,
+        critical,
+        critical_influence,
+    })
+}
+
+/// Per-point parts of a fit's log-likelihood of the currents, for refits without one point:
+/// rows, squared residuals scaled by the point's relative noise variance, and the
+/// log of that variance times the rows.
+struct PointParts {
+    rows: Vec<f64>,
+    scaled_sse: Vec<f64>,
+    log_var: Vec<f64>,
+}
+
+impl PointParts {
+    fn of(points: &TestPoints, fit: &Fit) -> Self {
+        let ev = fit.model.evaluator();
+        let s2 = fit.sigma0 * fit.sigma0;
+        let r = fit.model.effects.mesh_ripple_rms;
+        let rho = if r > 0.0 && s2 > 0.0 { r * r / s2 } else { 0.0 };
+        let mut out = PointParts {
+            rows: Vec::with_capacity(points.len()),
+            scaled_sse: Vec::with_capacity(points.len()),
+            log_var: Vec::with_capacity(points.len()),
+        };
+        for k in 0..points.len() {
+            let op = &points.ops[k];
+            let e = points.current[k] - ev.current(op);
+            let n = points.weight[k];
+            let v = if rho > 0.0 {
+                let f = ev.friction_current(op);
+                1.0 + rho * f * f
+            } else {
+                1.0
+            };
+            out.rows.push(n);
+            out.scaled_sse.push((n * e * e + points.within_ss[k]) / v);
+            out.log_var.push(n * v.ln());
+        }
+        out
+    }
+
+    /// Log-likelihood of the currents without point `skip` (noise level re-profiled, the
+    /// ripple's share held).
+    fn loglik_without(&self, totals: (f64, f64, f64), skip: usize) -> f64 {
+        let n = totals.0 - self.rows[skip];
+        let s = (totals.1 - self.scaled_sse[skip]).max(1e-300);
+        let l = totals.2 - self.log_var[skip];
+        -0.5 * (n * (2.0 * std::f64::consts::PI * s / n).ln() + l + n)
+    }
+
+    fn totals(&self) -> (f64, f64, f64) {
+        (
+            self.rows.iter().sum(),
+            self.scaled_sse.iter().sum(),
+            self.log_var.iter().sum(),
+        )
+    }
+}
+
+/// The BIC improvement of `with` over `current` when the point that contributes most to it is
+/// left out, and that point.
+fn improvement_without_top_point(points: &TestPoints, current: &Fit, with: &Fit) -> (f64, usize) {
+    let a = PointParts::of(points, current);
+    let b = PointParts::of(points, with);
+    let (ta, tb) = (a.totals(), b.totals());
+    let dk = (with.k as f64 - current.k as f64).max(0.0);
+    let mut worst = (f64::INFINITY, 0usize);
+    for k in 0..points.len() {
+        let n = ta.0 - a.rows[k];
+        if n < 3.0 {
+            continue;
+        }
+        let gain = 2.0
+            * (b.loglik_without(tb, k) + with.loglik_hold
+                - a.loglik_without(ta, k)
+                - current.loglik_hold)
+            - dk * n.ln();
+        if gain < worst.0 {
+            worst = (gain, k);
+        }
+    }
+    worst
+}
+
 /// Forward selection from the model `spec` started at `start`.
 pub fn select(
     points: &TestPoints,
@@ -369,96 +580,24 @@ pub fn select(
             .into_iter()
             .filter(|e| !current.spec.has(*e))
             .collect();
-        let applicable: Vec<Effect> = pending
-            .iter()
-            .copied()
-            .filter(|&e| library::not_applicable(e, &traits).is_none())
-            .collect();
-        if applicable.is_empty() {
+        let Some(Explored {
+            mut candidates,
+            null,
+            critical,
+            critical_influence,
+        }) = explore(points, &current, opts)
+        else {
             break;
-        }
-        let mean: Vec<Effect> = applicable
-            .iter()
-            .copied()
-            .filter(|e| e.mean_param().is_some())
-            .collect();
-        let ripple = applicable.contains(&Effect::MeshLoadSharingRipple);
-        let tests = score_tests(points, &current, &mean);
-        let ln_n = (current.n as f64).ln();
-        // Score-test estimate of each candidate's BIC improvement, for screening.
-        let estimate = |e: Effect| -> f64 {
-            let k = library::parameter_count(e) as f64 * ln_n;
-            if e == Effect::MeshLoadSharingRipple {
-                return tests.ripple_lr - k;
-            }
-            let a = mean.iter().position(|&m| m == e).expect("a mean candidate");
-            let mut lr = tests.lr[a].unwrap_or(0.0);
-            if e == Effect::LinearBushFriction && !points.holds.is_empty() {
-                let (_, _, errors) = fit::fit_hold(&points.holds);
-                let before = current.hold_errors as f64;
-                lr += 2.0
-                    * (before - errors as f64)
-                    * ((1.0 - fit::HOLD_LABEL_ERROR) / fit::HOLD_LABEL_ERROR).ln();
-            }
-            lr - k
         };
-        let mut ranked: Vec<(Effect, f64)> = applicable.iter().map(|&e| (e, estimate(e))).collect();
-        ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
-        let to_fit: Vec<Effect> = ranked
-            .iter()
-            .enumerate()
-            .filter(|(i, (e, _))| {
-                full_table || *i < SCREEN_KEEP || *e == Effect::LinearBushFriction
-            })
-            .map(|(_, (e, _))| *e)
-            .collect();
-        let fits = fit::par_map(&to_fit, |&e| fit_candidate(points, &current, e));
-        let mut candidates: Vec<Candidate> = to_fit
-            .iter()
-            .zip(fits)
-            .map(|(&effect, f)| Candidate {
-                effect,
-                not_applicable: None,
-                improvement: current.bic - f.bic,
-                estimated: false,
-                fit: Some(f),
-                held_out: None,
-            })
-            .collect();
-        candidates.sort_by(|a, b| b.improvement.total_cmp(&a.improvement));
         let best_improvement = candidates[0].improvement;
-        let ambiguous_with: Vec<Effect> = candidates[1..]
-            .iter()
-            .filter(|c| {
-                c.improvement > 0.0 && best_improvement - c.improvement < opts.ambiguity_bic
-            })
-            .map(|c| c.effect)
-            .collect();
-        // The screened-out candidates follow with their estimates.
-        for &(e, est) in &ranked {
-            if !to_fit.contains(&e) {
-                candidates.push(Candidate {
-                    effect: e,
-                    not_applicable: None,
-                    fit: None,
-                    improvement: est,
-                    estimated: true,
-                    held_out: None,
-                });
-            }
-        }
-        let null = null_best_improvements(&tests, &mean, ripple, current.n, opts.null_draws);
         let exceed = null.iter().filter(|&&v| v >= best_improvement).count();
         let p_value = (1 + exceed) as f64 / (1 + null.len()) as f64;
-        // Held-out scores: every fitted candidate on small data; on large data the leaders,
-        // and only when the guard has not already turned the best down.
+        // Held-out scores: every fitted candidate on small data; on large data the best,
+        // and only when the guard has not already turned it down.
         let guard_passed = best_improvement > 0.0 && p_value < opts.alpha;
         let scored: Vec<usize> = (0..candidates.len())
             .filter(|&i| candidates[i].fit.is_some())
-            .filter(|&i| {
-                full_table
-                    || (guard_passed && (i == 0 || ambiguous_with.contains(&candidates[i].effect)))
-            })
+            .filter(|&i| full_table || (guard_passed && i == 0))
             .collect();
         let scores = fit::par_map(&scored, |&i| {
             let c = &candidates[i];
@@ -505,15 +644,32 @@ pub fn select(
                 ),
             )
         } else {
-            (
-                true,
-                format!(
-                    "{} improves the BIC by {:.1} ({}); {held_note}",
-                    best.effect.name(),
-                    best_improvement,
-                    p_text(p_value)
-                ),
-            )
+            let (without, k) = improvement_without_top_point(points, &current, best_fit);
+            if without <= critical_influence {
+                (
+                    false,
+                    format!(
+                        "{} improves the BIC by {:.1} ({}), but without the single test point at data row {} (the one that contributes most) only by {:.1}, below the {:.1} that effect-free data reaches with probability {}: one point does not make a finding",
+                        best.effect.name(),
+                        best_improvement,
+                        p_text(p_value),
+                        points.rows[k] + 1,
+                        without,
+                        critical_influence,
+                        INFLUENCE_ALPHA.max(opts.alpha)
+                    ),
+                )
+            } else {
+                (
+                    true,
+                    format!(
+                        "{} improves the BIC by {:.1} ({}); {held_note}",
+                        best.effect.name(),
+                        best_improvement,
+                        p_text(p_value)
+                    ),
+                )
+            }
         };
         // The inapplicable candidates close the table.
         for e in pending {
@@ -532,9 +688,9 @@ pub fn select(
         steps.push(Step {
             candidates,
             p_value,
+            critical,
             held_out_before: current_held_out,
             accepted,
-            ambiguous_with: if accepted { ambiguous_with } else { Vec::new() },
             reason,
         });
         match next {
@@ -554,5 +710,22 @@ pub fn select(
         steps,
         end_held_out: current_held_out,
         end: current,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn critical_value_matches_the_p_value_rule() {
+        let null: Vec<f64> = (0..999).map(|k| k as f64).collect();
+        // alpha 0.01 of 1000: fewer than 9 draws may reach it: above the 9th largest (990).
+        let c = critical_value(&null, 0.01);
+        assert_eq!(c, 990.0);
+        let above = |v: f64| (1 + null.iter().filter(|&&x| x >= v).count()) as f64 / 1000.0;
+        assert!(above(c + 0.5) < 0.01);
+        assert!(above(c) >= 0.01);
+        assert_eq!(critical_value(&null, 0.0005), f64::INFINITY);
     }
 }

@@ -152,6 +152,33 @@ pub fn pearson(x: &[f64], y: &[f64]) -> f64 {
     }
 }
 
+/// Pearson correlation of `x(j)` and `y(j)` over j in 0..n, without collecting them (0 when
+/// either is constant).
+pub fn pearson_by(n: usize, x: impl Fn(usize) -> f64, y: impl Fn(usize) -> f64) -> f64 {
+    if n == 0 {
+        return 0.0;
+    }
+    let (mut mx, mut my) = (0.0, 0.0);
+    for j in 0..n {
+        mx += x(j);
+        my += y(j);
+    }
+    mx /= n as f64;
+    my /= n as f64;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for j in 0..n {
+        let (dx, dy) = (x(j) - mx, y(j) - my);
+        sxy += dx * dy;
+        sxx += dx * dx;
+        syy += dy * dy;
+    }
+    if sxx <= 0.0 || syy <= 0.0 {
+        0.0
+    } else {
+        sxy / (sxx * syy).sqrt()
+    }
+}
+
 /// Two-sided p-value of a correlation `r` over `n` pairs (Fisher's z).
 pub fn correlation_p_value(r: f64, n: usize) -> f64 {
     if n < 4 {

@@ -137,21 +137,86 @@ pub fn plausible_effect(
     p
 }
 
+/// The order of the tests in a bench session.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TestOrder {
+    /// Every test of every repeat in random order (the paper's advice).
+    #[default]
+    Shuffled,
+    /// As a sweep is often run by hand: voltage after voltage, loads rising, the whole sweep
+    /// repeated (time, and so the motor's warm-up, runs with load and speed).
+    Ascending,
+    /// Voltage after voltage, the loads of each voltage in random order, repeated.
+    ShuffledWithinVoltage,
+}
+
+/// How a bench session runs its tests: their order and the rests between them.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Session {
+    /// Order of the tests.
+    pub order: TestOrder,
+    /// A rest after every this many tests (0: none).
+    pub rest_every: usize,
+    /// Length of a rest, s (the motor cools towards ambient).
+    pub rest_s: f64,
+}
+
+/// The conditions of one synthetic test, for a current law other than the library's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Conditions {
+    /// The operating point (its thermal driver is the motor temperature above ambient).
+    pub op: OperatingPoint,
+    /// Time of the test since the session began, s.
+    pub t_s: f64,
+    /// Motor temperature, deg C.
+    pub temp_c: f64,
+    /// Vibrator voltage, V.
+    pub v_in: f64,
+}
+
+/// A current (A) added to the model's at each test: an effect in a form the library does not
+/// have. It sees the true model and the test's conditions.
+pub type ExtraCurrent<'a> = &'a (dyn Fn(&CurrentModel, &Conditions) -> f64 + Sync);
+
 /// A synthetic sweep of `truth` (the model with its hidden effects) under `plan`, with the
 /// random test order and noise fixed by `seed`.
 pub fn generate(truth: &CurrentModel, plan: &SweepPlan, seed: u64) -> Vec<MeasuredRow> {
+    generate_session(truth, plan, &Session::default(), seed, None)
+}
+
+/// A synthetic bench session of `truth` under `plan`, its tests ordered and rested as
+/// `session` says, with `extra` current (an effect in another form) added when given. The
+/// test order, noise and rests are fixed by `seed`; with the default session this is
+/// [`generate`].
+pub fn generate_session(
+    truth: &CurrentModel,
+    plan: &SweepPlan,
+    session: &Session,
+    seed: u64,
+    extra: Option<ExtraCurrent>,
+) -> Vec<MeasuredRow> {
     let mut rng = NoiseSource::new(seed);
     let mut tests: Vec<(f64, f64)> = Vec::new();
     for _ in 0..plan.repeats {
         for &v in &plan.voltages_v {
+            let first = tests.len();
             for &tau in &plan.loads_nm {
                 tests.push((tau, v));
             }
+            if session.order == TestOrder::ShuffledWithinVoltage {
+                let part = &mut tests[first..];
+                for i in (1..part.len()).rev() {
+                    let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+                    part.swap(i, j);
+                }
+            }
         }
     }
-    for i in (1..tests.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        tests.swap(i, j);
+    if session.order == TestOrder::Shuffled {
+        for i in (1..tests.len()).rev() {
+            let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+            tests.swap(i, j);
+        }
     }
     let tau_max = plan
         .loads_nm
@@ -160,13 +225,24 @@ pub fn generate(truth: &CurrentModel, plan: &SweepPlan, seed: u64) -> Vec<Measur
         .max(1e-9);
     let gear = &truth.drive.gear;
     let contact_ratio = gear.contact_ratio(3) + gear.contact_ratio(4);
+    let tc = plan.temp_time_constant_s;
     let mut t = 0.0;
+    // Share of the full temperature rise reached (with rests: heating and cooling).
+    let mut heat = 0.0f64;
     let mut rows = Vec::with_capacity(tests.len());
-    for (tau, v) in tests {
-        t += uniform(&mut rng, plan.test_seconds.0, plan.test_seconds.1);
-        let temp = plan.ambient_c
-            + plan.temp_rise_c * (1.0 - (-t / plan.temp_time_constant_s).exp())
-            + 0.1 * rng.normal();
+    for (k, (tau, v)) in tests.into_iter().enumerate() {
+        if session.rest_every > 0 && k > 0 && k % session.rest_every == 0 {
+            t += session.rest_s;
+            heat *= (-session.rest_s / tc).exp();
+        }
+        let d = uniform(&mut rng, plan.test_seconds.0, plan.test_seconds.1);
+        t += d;
+        heat = if session.rest_every == 0 {
+            1.0 - (-t / tc).exp()
+        } else {
+            1.0 - (1.0 - heat) * (-d / tc).exp()
+        };
+        let temp = plan.ambient_c + plan.temp_rise_c * heat + 0.1 * rng.normal();
         let omega = nominal_cam_speed(v)
             * (1.0 - plan.speed_droop * tau.abs() / tau_max)
             * (1.0 + 0.005 * rng.normal());
@@ -178,6 +254,17 @@ pub fn generate(truth: &CurrentModel, plan: &SweepPlan, seed: u64) -> Vec<Measur
             let phase = rng.uniform();
             let m = effects::mesh_friction_modulation(phase, contact_ratio, ISO_LOAD_EXPONENT);
             i += ripple * m * truth.friction_current(&op);
+        }
+        if let Some(f) = extra {
+            i += f(
+                truth,
+                &Conditions {
+                    op,
+                    t_s: t,
+                    temp_c: temp,
+                    v_in: v,
+                },
+            );
         }
         rows.push(MeasuredRow {
             omega_n: omega,
@@ -218,6 +305,35 @@ mod tests {
         assert!(rows.iter().take(10).any(|r| r.tau_rot > 1.0));
         assert!(rows.iter().all(|r| r.backdriven == Some(true)));
         assert_eq!(generate(&paper(), &SweepPlan::default(), 3), rows);
+    }
+
+    #[test]
+    fn bench_orders_and_rests() {
+        let plan = SweepPlan::default();
+        let asc = Session {
+            order: TestOrder::Ascending,
+            rest_every: 30,
+            rest_s: 1800.0,
+        };
+        let rows = generate_session(&paper(), &plan, &asc, 3, None);
+        assert_eq!(rows.len(), 150);
+        // Voltage after voltage, loads rising.
+        assert!(rows[..10].windows(2).all(|w| w[0].tau_rot < w[1].tau_rot));
+        assert_eq!(rows[0].v_in, Some(3.6));
+        assert_eq!(rows[10].v_in, Some(6.2));
+        // The motor cools over a 30-minute rest.
+        let before = rows[29].temp_c.unwrap();
+        let after = rows[30].temp_c.unwrap();
+        assert!(after < before - 3.0, "{before} -> {after}");
+        assert!(rows[30].t_s.unwrap() - rows[29].t_s.unwrap() > 1800.0);
+        // An extra current in another form is added.
+        let extra = |_: &CurrentModel, c: &Conditions| 0.1 * c.op.tau_rot;
+        let plain = generate(&paper(), &plan, 4);
+        let more = generate_session(&paper(), &plan, &Session::default(), 4, Some(&extra));
+        for (a, b) in plain.iter().zip(&more) {
+            let d = b.i_in.unwrap() - a.i_in.unwrap();
+            assert!((d - 0.1 * a.tau_rot).abs() < 1e-12);
+        }
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! (52, 48, 50, 50) rig. Slow in debug builds, so ignored by default:
 //!
 //! ```sh
-//! cargo test --release -p host --test explain_batch -- --ignored --nocapture
+//! cargo test --release -p explain --test explain_batch -- --ignored --nocapture
 //! ```
 
 use explain::synth::{self, SweepPlan};

@@ -59,6 +59,15 @@ fn json_contract_on_measured_data() {
         assert!(v[key].as_f64().is_some(), "missing {key}: {v}");
     }
     assert!(v["holdout_rmse_after_a"].as_f64() < v["holdout_rmse_before_a"].as_f64());
+    // Confidence: a block bootstrap of the whole selection.
+    let p = effects[0]["inclusion_probability"].as_f64().unwrap();
+    assert!(p > 0.8 && p <= 1.0, "{p}");
+    assert!(v["confidence"].as_f64().unwrap() > 0.5);
+    assert!(v["inclusion_probabilities"]["speed-dependent-axial-friction"].is_number());
+    assert!(v["model_weights"][0]["weight"].is_number());
+    assert_eq!(v["bootstrap"]["replicates"], 200);
+    assert_eq!(v["outliers"], serde_json::json!([]));
+    assert!(v["candidates"][0]["bic_weight"].is_number());
     // The default report folder sits beside the data.
     let report = dir.path().join("speed-dependent-axial-friction-3-explain");
     for f in [
@@ -135,6 +144,65 @@ fn written_model_is_loaded_back_and_explains_the_data() {
 }
 
 #[test]
+fn a_corrupt_row_is_reported_with_its_row_and_line_and_makes_no_finding() {
+    let dir = tempfile::tempdir().unwrap();
+    let clean = synthetic_csv(dir.path(), "none", "11");
+    let text = std::fs::read_to_string(&clean).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    // A comment after the header shifts the file lines by one against the data rows.
+    lines.insert(1, "# bench session 11".into());
+    // Data row 40 (file line 42): the current misread as 100 A.
+    let mut fields: Vec<String> = lines[41].split(',').map(str::to_string).collect();
+    fields[2] = "100".into();
+    lines[41] = fields.join(",");
+    // Data row 7: a negative load (a warning, not an outlier).
+    let mut fields: Vec<String> = lines[8].split(',').map(str::to_string).collect();
+    fields[1] = format!("-{}", fields[1]);
+    lines[8] = fields.join(",");
+    let path = dir.path().join("corrupt.csv");
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let p = path.to_str().unwrap();
+    let out = rig()
+        .args(["explain", "--measured", p, "--json", "--no-report"])
+        .assert()
+        .success()
+        .get_output()
+        .clone();
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["verdict"], "no-missing-effect", "{}", v["finding"]);
+    let o = &v["outliers"][0];
+    assert_eq!(o["row"], 40);
+    assert_eq!(o["line"], 42);
+    assert_eq!(o["column"], "i_in_a");
+    assert!(
+        o["reason"]
+            .as_str()
+            .unwrap()
+            .contains("current sensor's range")
+    );
+    assert_eq!(v["rows"], 149);
+    assert!(v["finding"].as_str().unwrap().contains("set aside"));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(
+        stderr.contains("warning: tau_rot_nm is negative in 1 of 150 rows (first: row 7, line 9)"),
+        "{stderr}"
+    );
+    // The text output says so too.
+    let out = rig()
+        .args(["explain", "--measured", p, "--no-report"])
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let text = String::from_utf8(out).unwrap();
+    assert!(
+        text.contains("outliers set aside (1):") && text.contains("row 40 (line 42)"),
+        "{text}"
+    );
+}
+
+#[test]
 fn bad_input_fails_with_a_message_naming_the_row_or_column() {
     let dir = tempfile::tempdir().unwrap();
     let write = |name: &str, text: &str| {
@@ -198,6 +266,23 @@ fn bad_input_fails_with_a_message_naming_the_row_or_column() {
             .unwrap()
             .contains("unequal centre distances")
     );
+    // A calibration constant of the wrong sign: the firmware's rule refuses it, naming it.
+    let wrong = write("wrong.toml", "[calibration]\nc2 = 138.0\n");
+    let out = rig()
+        .args([
+            "explain",
+            "--synthetic",
+            "none",
+            "--model",
+            &wrong,
+            "--no-report",
+        ])
+        .assert()
+        .failure()
+        .get_output()
+        .clone();
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(err.contains("c2") && err.contains("wrong sign"), "{err}");
     rig()
         .args(["explain", "--synthetic", "gremlins"])
         .assert()

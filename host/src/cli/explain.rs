@@ -36,6 +36,18 @@ Effects searched for: speed-dependent-axial-friction, load-dependent-friction,
 current-sensor-offset, thermal-drift, vibrator-viscous-loss, inertia-rectification,
 linear-bush-friction (needs backdriven = 0 rows), tooth-compliance, mesh-load-sharing-ripple.
 
+Rows that cannot be right (a current beyond the sensor's +-5 A, a cam speed beyond the
+motor's no-load speed, a temperature outside -40..150 C) or that stand out from the rows at
+like conditions by more than 5.5 robust standard deviations are set aside and listed
+(JSON \"outliers\": row, file line, column, value, reason). Warnings (negative loads,
+implausible rig values by the firmware's calibration rules) go to stderr and JSON
+\"warnings\".
+
+Confidence: a block bootstrap of the whole selection (--replicates, blocks of consecutive
+test points) gives each effect's inclusion_probability and the top-level confidence (share of
+replicates reaching the same finding); ambiguous when a competitor is selected instead of
+the leading effect in a fifth or more of them.
+
 Verdicts: explained, no-missing-effect, ambiguous. Exit code 0 for any verdict, 1 on bad input.";
 
 /// Arguments of `rig explain`.
@@ -70,8 +82,19 @@ pub struct ExplainArgs {
     #[arg(long, default_value_t = 20.0, requires = "synthetic", value_parser = crate::args::non_negative)]
     pub noise_ma: f64,
     /// Also save the synthetic sweep as CSV.
-    #[arg(long, value_name = "FILE.csv", requires = "synthetic")]
+    #[arg(
+        long,
+        value_name = "FILE.csv",
+        requires = "synthetic",
+        visible_alias = "save-data"
+    )]
     pub write_synthetic: Option<PathBuf>,
+    /// Repeats of the synthetic sweep's 30 test points (5: the paper's 150 rows; 33334: a million rows).
+    #[arg(long, default_value_t = 5, requires = "synthetic", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub repeats: u32,
+    /// Replicates of the block bootstrap of the selection (0: no bootstrap, no confidence).
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(0..=10_000))]
+    pub replicates: u32,
     /// Level of the false-discovery guard (probability that effect-free data gives a finding).
     #[arg(long, default_value_t = 0.002, value_parser = parse_alpha)]
     pub alpha: f64,
@@ -125,10 +148,28 @@ pub fn synthetic_data(
     seed: u64,
     noise_a: f64,
 ) -> Result<(Dataset, SyntheticTruth), RigError> {
+    synthetic_sweep(rig, hidden, seed, noise_a, 5)
+}
+
+/// [`synthetic_data`] with `repeats` repeats of the sweep's test points (tests of 0.5-1.5 s
+/// beyond the paper's five repeats, so a long sweep stays within a working day).
+pub fn synthetic_sweep(
+    rig: &RigFile,
+    hidden: Option<Effect>,
+    seed: u64,
+    noise_a: f64,
+    repeats: usize,
+) -> Result<(Dataset, SyntheticTruth), RigError> {
     let mut truth = rig.current_model()?;
     truth.effects = EffectParams::default();
     let plan = SweepPlan {
         noise_a,
+        repeats,
+        test_seconds: if repeats > 5 {
+            (0.5, 1.5)
+        } else {
+            (15.0, 25.0)
+        },
         ..SweepPlan::default()
     };
     let mut rng = NoiseSource::new(seed ^ 0x9e37_79b9_7f4a_7c15);
@@ -176,7 +217,13 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
             )
         }
         (None, Some(Hidden(hidden))) => {
-            let (data, truth) = synthetic_data(&rig, hidden, args.seed, args.noise_ma * 1e-3)?;
+            let (data, truth) = synthetic_sweep(
+                &rig,
+                hidden,
+                args.seed,
+                args.noise_ma * 1e-3,
+                args.repeats as usize,
+            )?;
             if let Some(p) = &args.write_synthetic {
                 reporting::write_atomic_with(p, |tmp| -> Result<(), RigError> {
                     let file = std::fs::File::create(tmp).map_err(|source| RigError::File {
@@ -205,9 +252,16 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
     let options = Options {
         alpha: args.alpha,
         folds: args.folds as usize,
+        replicates: args.replicates as usize,
         ..Options::default()
     };
     let mut outcome = explain::explain(&data, &rig, &options)?;
+    if args.json {
+        // The text output lists them itself.
+        for w in &outcome.explanation.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
     outcome.explanation.synthetic = truth;
     // The model file is written last, when everything else worked: a failed run leaves an
     // existing FILE as it was. Named in the report before it exists.
