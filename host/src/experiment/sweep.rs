@@ -611,7 +611,7 @@ mod tests {
         let out = run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).unwrap();
         assert_eq!((out.planned, out.written), (12, 12));
         let data = explain::Dataset::read_csv(&csv).unwrap();
-        assert_eq!(data.rows.len(), 12);
+        assert_eq!(data.len(), 12);
         let (rows, plan) = read_rows(&csv).unwrap();
         assert_eq!(plan.unwrap(), setup.plan.one_line());
         // Current grows with load at every voltage; cam speed with the voltage.
