@@ -248,14 +248,7 @@ impl ResetCause {
     }
 }
 
-/// Sense of rotation of the cam motor, as driven on the direction pin.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
-pub enum Direction {
-    /// Direction pin low.
-    Forward,
-    /// Direction pin high.
-    Reverse,
-}
+pub use crate::trip::Direction;
 
 /// Where in the PWM period TIM1's update (the ADC trigger) falls.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]

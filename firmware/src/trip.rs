@@ -29,7 +29,6 @@ use embassy_stm32::pac::comp::vals::{Hysteresis, Inm, Polarity};
 use embassy_stm32::peripherals::{COMP3, DAC3};
 
 use crate::analog;
-use crate::board::Direction;
 
 /// DAC3 settling (unbuffered, internal load) and COMP3 start-up: 10 us at 170 MHz.
 const SETTLE_CYCLES: u32 = 1_700;
@@ -118,4 +117,13 @@ impl OvercurrentTrip {
         self.dac.set(Value::Bit12Right(code));
         pac::COMP3.csr().modify(|w| w.set_polarity(polarity));
     }
+}
+
+/// Sense of rotation of the cam motor, as driven on the direction pin.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum Direction {
+    /// Direction pin low.
+    Forward,
+    /// Direction pin high.
+    Reverse,
 }

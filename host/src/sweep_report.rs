@@ -10,18 +10,7 @@ use reporting::plot::{self, Legend, PALETTE, Series, XyPanel};
 use crate::RigError;
 use sim::scenarios::sweep::SweepPoint;
 
-/// Lightest and heaviest load of the paper's sweep, N m (Figs. 8-9).
-pub const SWEEP_LOADS_NM: (f64, f64) = (0.368, 3.68);
-
-/// `levels` loads evenly from the lightest to the heaviest of [`SWEEP_LOADS_NM`], as a
-/// person writes them (to the micro-newton-metre: 1.104, not 1.1039999999999999).
-pub fn sweep_loads(levels: u32) -> Vec<f64> {
-    let (lo, hi) = SWEEP_LOADS_NM;
-    let steps = f64::from(levels.max(2) - 1);
-    (0..levels.max(2))
-        .map(|k| ((lo + (hi - lo) * f64::from(k) / steps) * 1e6).round() / 1e6)
-        .collect()
-}
+pub use crate::experiment::plan::{SWEEP_LOADS_NM, sweep_loads};
 
 /// The supply voltages of the sweep, ascending.
 fn voltages(points: &[SweepPoint]) -> Vec<f64> {

@@ -33,6 +33,7 @@ pub mod excitation;
 pub mod friction;
 pub mod gear;
 pub mod hardware;
+pub mod load;
 mod math;
 pub mod paper;
 pub mod plant;

@@ -116,9 +116,23 @@ pub struct Run {
     pub temp_c: Option<f64>,
 }
 
+/// Lightest and heaviest load of the paper's sweep, N m (Figs. 8-9).
+pub const SWEEP_LOADS_NM: (f64, f64) =
+    (model::paper::TAU_ROT_MIN_TESTED, model::paper::TAU_ROT_MAX);
+
+/// `levels` loads evenly from the lightest to the heaviest of [`SWEEP_LOADS_NM`], as a
+/// person writes them (to the micro-newton-metre: 1.104, not 1.1039999999999999).
+pub fn sweep_loads(levels: u32) -> Vec<f64> {
+    let (lo, hi) = SWEEP_LOADS_NM;
+    let steps = f64::from(levels.max(2) - 1);
+    (0..levels.max(2))
+        .map(|k| ((lo + (hi - lo) * f64::from(k) / steps) * 1e6).round() / 1e6)
+        .collect()
+}
+
 /// The paper's loads: `levels` evenly from 0.368 to 3.68 N m.
 pub fn paper_loads(levels: u32) -> Vec<f64> {
-    crate::sweep_report::sweep_loads(levels)
+    sweep_loads(levels)
 }
 
 impl Plan {
