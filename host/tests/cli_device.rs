@@ -104,7 +104,12 @@ fn info_json_has_the_contract_keys() {
     assert_eq!(v["firmware_build"], "virtual", "{v}");
     assert_eq!(v["reset_cause"], "power-on", "{v}");
     assert!(v["uptime_s"].as_u64().is_some(), "{v}");
-    assert_eq!(v["capabilities"], serde_json::json!(["SIMULATION"]), "{v}");
+    // The virtual rig has the optional output-shaft encoder fitted.
+    assert_eq!(
+        v["capabilities"],
+        serde_json::json!(["OUTPUT_ENCODER", "SIMULATION"]),
+        "{v}"
+    );
     let text = stdout_of(sim(&["info"]));
     assert!(
         text.contains("firmware")

@@ -134,7 +134,8 @@ pub struct SimBench {
 
 impl SimBench {
     /// Boots `config`'s rig and opens the session (hello).
-    pub fn new(config: sim::SimConfig) -> Result<Self, RigError> {
+    pub fn new(mut config: sim::SimConfig) -> Result<Self, RigError> {
+        virtual_release_limit(&mut config);
         let mut link = sim::SimLink::new(sim::SimRig::new(config));
         let hello = protocol::session::Session::hello();
         let reply = link.request(&hello)?;
@@ -419,18 +420,30 @@ impl Operator {
 }
 
 /// On a virtual rig, raises the release limit (`max_release_load_nm`, the paper's
-/// calibration has 1.0 N m) above `top_nm` so the paper's heavier loads can be released; a
+/// calibration has 1.0 N m) above `top_nm`, up to the board's cap, so the paper's heavier loads can be released; a
 /// real rig's limit is the operator's to set (`rig calibration set`).
 pub fn allow_load<B: Bench + ?Sized>(bench: &mut B, top_nm: f64) -> Result<(), RigError> {
     if !bench.is_virtual() {
         return Ok(());
     }
     let mut cal = bench.calibration()?;
-    if f64::from(cal.max_release_load_nm) < 1.25 * top_nm {
-        cal.max_release_load_nm = (1.25 * top_nm) as f32;
+    // Never above the board's cap (the gear's tooth strength): the firmware refuses that, and
+    // the core allows estimate noise around the cap itself.
+    let wanted = (1.25 * top_nm).min(model::BoardLimits::PAPER.max_release_load_nm);
+    if f64::from(cal.max_release_load_nm) < wanted {
+        cal.max_release_load_nm = wanted as f32;
         bench.ack(&Request::SetParameters(cal))?;
     }
     Ok(())
+}
+
+/// The virtual rig's stored record releases the paper's heaviest load with room for the
+/// estimate's noise (as the simulator's own sweep does): a record stored in flash is taken
+/// as it is, where `SetParameters` would refuse a limit above the board's cap.
+pub fn virtual_release_limit(config: &mut sim::SimConfig) {
+    let wanted = (1.25 * model::paper::TAU_ROT_MAX) as f32;
+    let limit = &mut config.calibration.max_release_load_nm;
+    *limit = limit.max(wanted);
 }
 
 /// The error for Ctrl-C during a procedure.
