@@ -137,7 +137,6 @@ impl VirtualDevice {
         config.core.board_name = "virtual";
         config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
         preset.apply(&mut config.plant);
-        crate::experiment::bench::virtual_release_limit(&mut config);
         config
     }
 
