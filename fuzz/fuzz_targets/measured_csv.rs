@@ -36,7 +36,7 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     assert!(ds.current_rows() >= MIN_ROWS);
-    for r in &ds.rows {
+    for r in ds.rows() {
         let values = [
             Some(r.omega_n),
             Some(r.tau_rot),
