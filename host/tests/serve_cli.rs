@@ -86,7 +86,7 @@ impl Drop for Server {
 }
 
 #[test]
-#[ignore = "known failure after merging the experiment procedures (issue 12): the killed client's release no longer leaves a latched fault on the served rig; to be fixed next session"]
+
 fn served_rig_keeps_calibration_and_faults_between_clients_and_stops_on_sigint() {
     let server = Server::start(&[
         "--preset",
