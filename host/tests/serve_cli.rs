@@ -197,7 +197,7 @@ fn serve_refuses_an_unknown_effect_naming_the_known_ones() {
 /// 3.6 and 6.2 V (but at 8.8 V), the torque furthest below Eq. (10) at 3.6 V, and
 /// `rig explain` names one of the paper's own explanations.
 #[test]
-#[ignore = "known failure after `rig sim torque-sweep` became the experiment procedure (issue 12): its backdrive judgement (output encoder) calls 0.368 N m at 3.6 V backdriven where the scenario's did not; to be fixed next session"]
+
 fn paper_preset_sweep_shows_what_the_paper_measured() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("sweep.csv");

@@ -18,8 +18,19 @@ use crate::RigError;
 use crate::connection::Session;
 
 /// Output rotation that counts as "the output moved", rad: 0.1 mm of rope on the paper's
-/// 75 mm pulley.
-pub const MOTION_RAD: f64 = sim::scenarios::MOTION_RAD;
+/// 75 mm pulley (docs/plans.md).
+pub const MOTION_RAD: f64 = 0.1e-3 / model::paper::R_OUT;
+
+/// The one backdrive rule of every procedure (`backdriven` in the sweep's CSV, Table 1's
+/// verdicts, Fig. 5's hold): the output moved by more than [`MOTION_RAD`] between two
+/// readings of its angle, rad. `None` when either reading is missing (no output encoder on
+/// a real rig): then the operator is asked.
+pub fn moved(from_rad: Option<f64>, to_rad: Option<f64>) -> Option<bool> {
+    match (from_rad, to_rad) {
+        (Some(a), Some(b)) => Some((b - a).abs() > MOTION_RAD),
+        _ => None,
+    }
+}
 
 /// A rig the procedures drive: requests, telemetry and time, the same on the virtual rig
 /// and on a real one.
