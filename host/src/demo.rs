@@ -246,7 +246,15 @@ fn calibrate_virtual(
         .as_ref()
         .ok_or_else(|| RigError::Protocol("the virtual device did not start".into()))?;
     let mut bench = SimBench::new(device, None);
-    let measurements = calibrate::measure(client, &mut bench, &plan, &mut |_| {})?;
+    let mut measurements = calibrate::Measurements::default();
+    calibrate::measure(
+        client,
+        &mut bench,
+        &plan,
+        &mut measurements,
+        &mut |_, _| {},
+        &|| false,
+    )?;
     let result = calibrate::analyse(&measurements)?;
     let dir = out.join("calibration");
     create_dir(&dir)?;
