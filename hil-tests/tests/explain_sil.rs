@@ -31,7 +31,7 @@ fn sweep_csv(effects: PlantEffects, seed: u64) -> Dataset {
         effects,
         ..Default::default()
     };
-    let points = sweep::run(&opts).expect("sweep runs");
+    let points = host::experiment::paper::torque_sweep(&opts).expect("sweep runs");
     let dir = std::env::temp_dir().join(format!("rig-explain-sil-{seed}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("sweep.csv");

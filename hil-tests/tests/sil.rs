@@ -1,32 +1,56 @@
 //! Software-in-the-loop: the paper's experiments and the fault drills on the simulated rig.
+//! Fig. 5, Table 1 and the torque sweep run the procedures of `rig experiment`
+//! (`host::experiment`) on the in-process virtual rig: one implementation with `rig sim` and
+//! `rig demo`.
 
-use sim::scenarios::{faults, fig5, sweep, table1};
+use host::experiment::paper;
+use sim::scenarios::{faults, fig5, sweep};
 
+/// Fig. 5 on both presets: the paper's rig and the paper's equations alone.
 #[test]
 fn fig5_load_held_without_vibration_and_falls_once_released() {
-    let r = fig5::run(&fig5::Fig5Options::default()).expect("fig5 runs");
-    assert!(r.held_without_vibration, "{r:?}");
-    let t = r
-        .release_to_motion_s
-        .expect("the load moves after the release");
-    assert!(t < 0.5, "release to motion {t} s");
-    // mu_d Lambda = 0.858 < 1: the load keeps moving after the vibration stops.
-    assert!(r.mu_d_lambda < 1.0);
-    assert!(
-        r.output_speed_after_stop_rad_s > r.output_speed_at_stop_rad_s * 0.99,
-        "{r:?}"
-    );
-    assert!(r.output_speed_after_stop_rad_s > 0.0);
+    for preset in [sim::Preset::paper(), sim::Preset::ideal()] {
+        let r = paper::fig5(&fig5::Fig5Options {
+            effects: preset.effects,
+            ..Default::default()
+        })
+        .expect("fig5 runs");
+        let name = preset.name;
+        assert!(r.held_without_vibration, "{name}: {r:?}");
+        let t = r
+            .release_to_motion_s
+            .expect("the load moves after the release");
+        // The equations alone: the load moves as the cam starts; the paper's rig: its
+        // linear bush holds until the cam is nearly up to speed.
+        let within = if name == "ideal" { 0.5 } else { 1.0 };
+        assert!(t < within, "{name}: release to motion {t} s");
+        // mu_d Lambda = 0.858 < 1: the load keeps moving after the vibration stops.
+        assert!(r.mu_d_lambda < 1.0);
+        assert!(
+            r.output_speed_after_stop_rad_s > r.output_speed_at_stop_rad_s * 0.99,
+            "{name}: {r:?}"
+        );
+        assert!(r.output_speed_after_stop_rad_s > 0.0, "{name}: {r:?}");
+    }
 }
 
+/// Table 1 on both presets.
 #[test]
 fn table1_agrees_with_the_paper() {
-    let rows = table1::run(&model::paper::TABLE1, 10.0, 3).expect("table1 runs");
-    assert_eq!(rows.len(), 6);
-    for r in &rows {
-        assert_eq!(r.backdriven_without_vibration, r.n >= 2, "{r:?}");
-        assert!(r.backdriven_with_vibration, "{r:?}");
-        assert!(r.agrees_with_paper);
+    for preset in [sim::Preset::paper(), sim::Preset::ideal()] {
+        let rows =
+            paper::table1(&model::paper::TABLE1, 10.0, 3, preset.effects).expect("table1 runs");
+        assert_eq!(rows.len(), 6);
+        for r in &rows {
+            assert_eq!(
+                r.backdriven_without_vibration,
+                r.n >= 2,
+                "{}: {r:?}",
+                preset.name
+            );
+            assert!(r.backdriven_with_vibration, "{}: {r:?}", preset.name);
+            assert!(r.agrees_with_paper);
+        }
     }
 }
 
@@ -52,7 +76,10 @@ fn torque_sweep_current_and_torque_grow_with_load_and_speed() {
         effects: sim::Preset::paper().effects,
         ..opts.clone()
     };
-    let paper = sweep::summarise(&sweep::run(&paper_opts).expect("sweep runs"), &paper_opts);
+    let paper = sweep::summarise(
+        &paper::torque_sweep(&paper_opts).expect("sweep runs"),
+        &paper_opts,
+    );
     assert!(
         paper.current_grows_with_load
             && paper.current_grows_with_speed
@@ -60,7 +87,7 @@ fn torque_sweep_current_and_torque_grow_with_load_and_speed() {
             && paper.tau_cam_grows_with_speed,
         "{paper:?}"
     );
-    let points = sweep::run(&opts).expect("sweep runs");
+    let points = paper::torque_sweep(&opts).expect("sweep runs");
     assert_eq!(points.len(), 5 * 3 * 2);
     let s = sweep::summarise(&points, &opts);
     assert!(
@@ -147,7 +174,7 @@ fn fig5_and_the_sweep_work_across_the_sensor_supply_tolerance() {
     // A ratiometric ACS714 on 4.75 or 5.25 V: no fault (the zero window is sized from the
     // 4.5-5.5 V supply) and the same estimate quality as at 5.0 V.
     for sensor_supply_v in [4.75, 5.25] {
-        let r = fig5::run(&fig5::Fig5Options {
+        let r = paper::fig5(&fig5::Fig5Options {
             hold_s: 2.0,
             sensor_supply_v,
             ..Default::default()
@@ -165,7 +192,7 @@ fn fig5_and_the_sweep_work_across_the_sensor_supply_tolerance() {
             sensor_supply_v,
             ..Default::default()
         };
-        let points = sweep::run(&opts).expect("the sweep runs without a fault");
+        let points = paper::torque_sweep(&opts).expect("the sweep runs without a fault");
         let s = sweep::summarise(&points, &opts);
         assert!(
             s.rmse_estimate_vs_measured_nm < 0.0015,

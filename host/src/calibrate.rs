@@ -29,7 +29,7 @@ use crate::RigError;
 use crate::client::Client;
 
 pub use analysis::{CalibrationResult, Consistency, VersusPaper, analyse, write_points_csv};
-pub use gauge::read_gauge_csv;
+pub use gauge::{GaugeUnit, parse_reading, read_gauge_csv, read_points_csv};
 
 /// How the rig must be set up for the next part of the procedure.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -59,18 +59,28 @@ impl Setup {
     }
 }
 
+/// The operator's answer at a torque step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Reading {
+    /// The gauge's torque, N mm.
+    Nmm(f64),
+    /// Measure the step again (the operator answered `r`).
+    Redo,
+}
+
 /// The operator's side of the procedure.
 pub trait Bench {
     /// Puts the rig into `setup` (asks the operator, or changes the simulated rig).
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError>;
-    /// The gauge's torque reading, N mm, at torque step `step` (0-based) while the drive
-    /// holds `measured`; `keep_alive` keeps the drive's heartbeat while waiting.
+    /// The gauge's torque reading at torque step `step` (0-based) while the drive holds
+    /// `measured`, or a request to measure the step again; `keep_alive` keeps the drive's
+    /// heartbeat while waiting (and fails once Ctrl-C was pressed).
     fn gauge_nmm(
         &mut self,
         step: usize,
         measured: &StepMeasurement,
         keep_alive: &mut dyn FnMut() -> Result<(), RigError>,
-    ) -> Result<f64, RigError>;
+    ) -> Result<Reading, RigError>;
 }
 
 /// The voltages and timing of the procedure.
@@ -136,7 +146,7 @@ pub struct TorquePoint {
 }
 
 /// Everything measured.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Measurements {
     /// No-load sweep, in the order driven.
     pub no_load: Vec<StepMeasurement>,
@@ -158,65 +168,106 @@ pub enum Progress {
     Done,
 }
 
-/// Runs the procedure: sweep, then torque steps; the drive is stopped at the end and on
-/// any error.
+/// Runs the procedure: sweep, then torque steps, into `taken` (every point as it is
+/// measured, so an interrupted run keeps them); `progress` sees each step and the points
+/// so far. The drive is stopped at the end and on any error; `interrupted` (Ctrl-C) ends
+/// the procedure between samples with [`interrupted_error`].
 pub fn measure<T: Read + Write>(
     client: &mut Client<T>,
     bench: &mut dyn Bench,
     plan: &Plan,
-    progress: &mut dyn FnMut(Progress),
-) -> Result<Measurements, RigError> {
+    taken: &mut Measurements,
+    progress: &mut dyn FnMut(Progress, &Measurements),
+    interrupted: &dyn Fn() -> bool,
+) -> Result<(), RigError> {
     client.start_telemetry(plan.telemetry_hz)?;
-    let result = measure_inner(client, bench, plan, progress);
+    let result = measure_inner(client, bench, plan, taken, progress, interrupted);
     // Stop the motor whatever happened; the first error is the one to report.
     let stopped = client.open_loop(0.0);
     let _ = client.stop_telemetry();
-    let measurements = result?;
+    result?;
     stopped?;
     bench.prepare(Setup::Done)?;
-    Ok(measurements)
+    Ok(())
+}
+
+/// The error of a calibration ended by Ctrl-C.
+pub fn interrupted_error() -> RigError {
+    RigError::Operator(
+        "calibration interrupted (Ctrl-C): the drive is off and the gear locked; the points measured so far are kept (points.csv): `rig calibrate --from-points FILE` fits them".into(),
+    )
 }
 
 fn measure_inner<T: Read + Write>(
     client: &mut Client<T>,
     bench: &mut dyn Bench,
     plan: &Plan,
-    progress: &mut dyn FnMut(Progress),
-) -> Result<Measurements, RigError> {
+    taken: &mut Measurements,
+    progress: &mut dyn FnMut(Progress, &Measurements),
+    interrupted: &dyn Fn() -> bool,
+) -> Result<(), RigError> {
+    let check = || {
+        if interrupted() {
+            Err(interrupted_error())
+        } else {
+            Ok(())
+        }
+    };
     bench.prepare(Setup::NoLoad)?;
-    let mut no_load = Vec::with_capacity(plan.sweep_volts.len());
+    check()?;
     for (k, &volts) in plan.sweep_volts.iter().enumerate() {
-        progress(Progress::Step {
-            setup: Setup::NoLoad,
-            volts,
-        });
+        progress(
+            Progress::Step {
+                setup: Setup::NoLoad,
+                volts,
+            },
+            taken,
+        );
         client.open_loop(volts as f32)?;
         client.discard_telemetry();
         let extra = if k == 0 { plan.spin_up_s } else { 0.0 };
-        no_load.push(average(client, volts, plan.settle_s + extra, plan)?);
-        progress(Progress::Done);
+        taken.no_load.push(average(
+            client,
+            volts,
+            plan.settle_s + extra,
+            plan,
+            interrupted,
+        )?);
+        progress(Progress::Done, taken);
     }
     client.open_loop(0.0)?;
     bench.prepare(Setup::Gauge)?;
-    let mut torque = Vec::with_capacity(plan.torque_volts.len());
-    for (k, &volts) in plan.torque_volts.iter().enumerate() {
-        progress(Progress::Step {
-            setup: Setup::Gauge,
-            volts,
-        });
+    check()?;
+    let mut k = 0;
+    while k < plan.torque_volts.len() {
+        let volts = plan.torque_volts[k];
+        progress(
+            Progress::Step {
+                setup: Setup::Gauge,
+                volts,
+            },
+            taken,
+        );
         client.open_loop(volts as f32)?;
         client.discard_telemetry();
-        let step = average(client, volts, plan.settle_s, plan)?;
-        let gauge_nmm = bench.gauge_nmm(k, &step, &mut || client.tick())?;
-        torque.push(TorquePoint { step, gauge_nmm });
+        let step = average(client, volts, plan.settle_s, plan, interrupted)?;
+        let reading = bench.gauge_nmm(k, &step, &mut || {
+            check()?;
+            client.tick()
+        })?;
         // The blocked motor draws its stall current: off between steps, so the winding
         // does not heat up and each step starts from rest (the firmware's spin-up limit
         // of 3 s also applies to a shaft that cannot turn).
         client.open_loop(0.0)?;
         wait_until_locked(client)?;
-        progress(Progress::Done);
+        if let Reading::Nmm(gauge_nmm) = reading {
+            taken.torque.push(TorquePoint { step, gauge_nmm });
+            progress(Progress::Done, taken);
+            k += 1;
+        }
+        check()?;
     }
-    Ok(Measurements { no_load, torque })
+    Ok(())
 }
 
 /// Waits until the supervisor reports the motor off and at rest.
@@ -256,9 +307,13 @@ fn average<T: Read + Write>(
     volts: f64,
     settle_s: f64,
     plan: &Plan,
+    interrupted: &dyn Fn() -> bool,
 ) -> Result<StepMeasurement, RigError> {
     let wait = Duration::from_secs(2) + client.options().reply_timeout;
     let next = |client: &mut Client<T>| -> Result<TelemetrySample, RigError> {
+        if interrupted() {
+            return Err(interrupted_error());
+        }
         let t = client.next_telemetry(wait)?.ok_or_else(|| {
             RigError::Protocol(format!(
                 "telemetry stopped during the calibration on {}; check the link and `rig faults`",

@@ -154,14 +154,19 @@ pub fn run_simulated(
     let calibration = calibrate_virtual(&opts.out, write_calibration, &mut files)?;
 
     progress("fig5: 1 kg on 75 mm, held 14.5 s, then released");
-    let fig5 = fig5::run(&fig5::Fig5Options {
+    let fig5 = crate::experiment::paper::fig5(&fig5::Fig5Options {
         seed: opts.seed,
         ..Default::default()
     })?;
     write_json(&opts.out, "fig5.json", &fig5, &mut files)?;
 
     progress("table1: six gear sets at 3.68 N m");
-    let table1 = table1::run(&model::TABLE1, 10.0, opts.seed)?;
+    let table1 = crate::experiment::paper::table1(
+        &model::TABLE1,
+        10.0,
+        opts.seed,
+        sim::Preset::paper().effects,
+    )?;
     write_json(&opts.out, "table1.json", &table1, &mut files)?;
 
     progress("torque sweep: 0.368-3.68 N m at 3.6, 6.2, 8.8 V");
@@ -180,7 +185,7 @@ pub fn run_simulated(
             ..Default::default()
         }
     };
-    let points = sweep::run(&sweep_opts)?;
+    let points = crate::experiment::paper::torque_sweep(&sweep_opts)?;
     let csv_path = opts.out.join("torque_sweep.csv");
     crate::sweep_report::write_csv(&points, &csv_path)?;
     files.push(csv_path.display().to_string());
@@ -241,7 +246,15 @@ fn calibrate_virtual(
         .as_ref()
         .ok_or_else(|| RigError::Protocol("the virtual device did not start".into()))?;
     let mut bench = SimBench::new(device, None);
-    let measurements = calibrate::measure(client, &mut bench, &plan, &mut |_| {})?;
+    let mut measurements = calibrate::Measurements::default();
+    calibrate::measure(
+        client,
+        &mut bench,
+        &plan,
+        &mut measurements,
+        &mut |_, _| {},
+        &|| false,
+    )?;
     let result = calibrate::analyse(&measurements)?;
     let dir = out.join("calibration");
     create_dir(&dir)?;

@@ -20,39 +20,57 @@ fn voltages(points: &[SweepPoint]) -> Vec<f64> {
     v
 }
 
-/// The two panels of the sweep figure: Fig. 8 and Fig. 9.
-pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 2] {
+/// The three panels of the sweep figure: Fig. 8's current and cam speed, and Fig. 9's cam
+/// torque with Eq. (10) at the mean cam speed, per supply voltage; repeats as their means
+/// with bars of +-1 standard deviation ([`plot::mean_with_spread`]).
+pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 3] {
     let volts = voltages(points);
     let at = |v: f64| points.iter().filter(move |p| p.v_in_v == v);
     let color = |k: usize| PALETTE[k % PALETTE.len()];
     let x = plot::span(points.iter().map(|p| p.tau_rot_nm), 0.08, false);
-    let current = XyPanel {
-        caption: Some("current (Fig. 8)".into()),
-        x_label: "tau_rot, N m".into(),
-        y_label: "i_in, A".into(),
-        series: volts
+    let per_voltage = |f: &dyn Fn(&SweepPoint) -> f64, labelled: bool| -> Vec<Series> {
+        volts
             .iter()
             .enumerate()
-            .map(|(k, &v)| {
-                let pts = at(v).map(|p| (p.tau_rot_nm, p.i_in_a)).collect();
-                Series::points(color(k), 3, pts).labelled(format!("{v:.1} V"))
+            .flat_map(|(k, &v)| {
+                let pts: Vec<(f64, f64)> = at(v).map(|p| (p.tau_rot_nm, f(p))).collect();
+                let mut s = plot::mean_with_spread(color(k), 3, format!("{v:.1} V"), &pts);
+                if !labelled && let Some(last) = s.last_mut() {
+                    last.label = None;
+                }
+                s
             })
-            .collect(),
+            .collect()
+    };
+    let current = XyPanel {
+        caption: Some("current (Fig. 8): mean, bars +-1 sd over repeats".into()),
+        x_label: "tau_rot, N m".into(),
+        y_label: "i_in, A".into(),
+        series: per_voltage(&|p| p.i_in_a, true),
         x_range: Some(x),
         legend: Some(Legend::MiddleRight),
         fine_grid: true,
         ..XyPanel::default()
     };
-    let mut torque = Vec::new();
+    let speed = XyPanel {
+        caption: Some("cam speed (Fig. 8)".into()),
+        x_label: "tau_rot, N m".into(),
+        y_label: "w_n, rad/s".into(),
+        series: per_voltage(&|p| p.omega_n_rad_s, false),
+        x_range: Some(x),
+        fine_grid: true,
+        ..XyPanel::default()
+    };
+    let mut torque = per_voltage(&|p| p.tau_cam_meas_nm * 1e3, false);
     for (k, &v) in volts.iter().enumerate() {
-        let measured = at(v)
-            .map(|p| (p.tau_rot_nm, p.tau_cam_meas_nm * 1e3))
-            .collect();
-        torque.push(Series::points(color(k), 3, measured));
-        let eq10 = at(v)
+        let eq10: Vec<(f64, f64)> = at(v)
             .map(|p| (p.tau_rot_nm, p.tau_cam_eq10_nm * 1e3))
             .collect();
-        torque.push(Series::line(color(k), 2, eq10));
+        // Eq. (10) at the mean cam speed of the repeats.
+        let mean = plot::mean_with_spread(color(k), 0, "", &eq10)
+            .pop()
+            .map_or_else(Vec::new, |s| s.points);
+        torque.push(Series::line(color(k), 2, mean));
     }
     let torque = XyPanel {
         caption: Some("cam torque (Fig. 9): points measured, lines Eq. (10)".into()),
@@ -63,29 +81,18 @@ pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 2] {
         fine_grid: true,
         ..XyPanel::default()
     };
-    [current, torque]
+    [current, speed, torque]
 }
 
-/// Draws Figs. 8 and 9 of the sweep side by side into the SVG `path`, atomically.
+/// Draws Fig. 8 (current and cam speed) and Fig. 9 of the sweep side by side into the SVG
+/// `path`, atomically.
 pub fn sweep_figure(path: &Path, points: &[SweepPoint]) -> Result<(), RigError> {
     Ok(plot::columns_figure(
         path,
-        (480, 400),
+        (420, 400),
         None,
         &sweep_panels(points),
     )?)
-}
-
-/// Mean and standard deviation (0 for one value) of `values`.
-fn mean_sd(values: &[f64]) -> (f64, f64) {
-    let n = values.len().max(1) as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let var = if values.len() > 1 {
-        values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)
-    } else {
-        0.0
-    };
-    (mean, var.sqrt())
 }
 
 /// Panels of a `rig experiment torque-sweep` CSV: the current (Fig. 8) and the cam speed
@@ -106,27 +113,17 @@ pub fn experiment_panels(rows: &[crate::experiment::sweep::Row]) -> [XyPanel; 2]
         let mut series = Vec::new();
         for (k, &d) in drives.iter().enumerate() {
             let color = PALETTE[k % PALETTE.len()];
-            let mut loads: Vec<f64> = rows
+            let samples: Vec<(f64, f64)> = rows
                 .iter()
                 .filter(|r| drive(r) == d)
-                .map(|r| r.tau_rot_nm)
+                .map(|r| (r.tau_rot_nm, f(r)))
                 .collect();
-            loads.sort_by(f64::total_cmp);
-            loads.dedup();
-            let mut means = Vec::new();
-            for &l in &loads {
-                let vals: Vec<f64> = rows
-                    .iter()
-                    .filter(|r| drive(r) == d && r.tau_rot_nm == l)
-                    .map(f)
-                    .collect();
-                let (m, sd) = mean_sd(&vals);
-                means.push((l, m));
-                if sd > 0.0 {
-                    series.push(Series::line(color, 1, vec![(l, m - sd), (l, m + sd)]));
-                }
-            }
-            series.push(Series::points(color, 3, means).labelled(format!("{d:.1} {unit}")));
+            series.extend(plot::mean_with_spread(
+                color,
+                3,
+                format!("{d:.1} {unit}"),
+                &samples,
+            ));
         }
         XyPanel {
             caption: Some(caption.into()),
@@ -200,6 +197,27 @@ mod tests {
     }
 
     #[test]
+    fn repeats_are_drawn_as_means_with_bars() {
+        let mut points = Vec::new();
+        for r in 0..3 {
+            let mut p = point(3.6, 1.0);
+            p.repeat = r;
+            p.i_in_a += 0.1 * f64::from(r);
+            points.push(p);
+        }
+        let [current, ..] = sweep_panels(&points);
+        // A bar and the mean point.
+        assert_eq!(current.series.len(), 2);
+        let mean = &current.series[1].points;
+        assert!((mean[0].1 - 2.3).abs() < 1e-12, "{mean:?}");
+        let bar = &current.series[0].points;
+        assert!(
+            (bar[1].1 - bar[0].1 - 0.2).abs() < 1e-12,
+            "+-1 sd of 0.1: {bar:?}"
+        );
+    }
+
+    #[test]
     fn loads_are_as_written() {
         let loads = sweep_loads(10);
         assert_eq!(loads.len(), 10);
@@ -215,14 +233,22 @@ mod tests {
             .iter()
             .flat_map(|&v| [0.368, 1.84, 3.68].map(|l| point(v, l)))
             .collect();
-        let [current, torque] = sweep_panels(&points);
+        let [current, speed, torque] = sweep_panels(&points);
         assert_eq!(current.series.len(), 3);
+        assert_eq!(speed.series.len(), 3);
         assert_eq!(torque.series.len(), 6);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("sweep.svg");
         sweep_figure(&path, &points).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
-        for want in ["Fig. 8", "Fig. 9", "3.6 V", "8.8 V", "tau_cam, N mm"] {
+        for want in [
+            "Fig. 8",
+            "Fig. 9",
+            "3.6 V",
+            "8.8 V",
+            "tau_cam, N mm",
+            "cam speed",
+        ] {
             assert!(svg.contains(want), "missing {want}");
         }
     }

@@ -115,6 +115,35 @@ impl Series {
     }
 }
 
+/// Repeated measurements as their means with their spread: for every distinct x of
+/// `samples`, the mean of its y as a labelled point series, and, where there is more than
+/// one value, a bar from mean - sd to mean + sd (the sample standard deviation) in the same
+/// colour. Bars first, so the means are drawn over them.
+pub fn mean_with_spread(
+    color: RGBColor,
+    radius: u32,
+    label: impl Into<String>,
+    samples: &[(f64, f64)],
+) -> Vec<Series> {
+    let mut xs: Vec<f64> = samples.iter().map(|p| p.0).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    let mut out = Vec::new();
+    let mut means = Vec::with_capacity(xs.len());
+    for x in xs {
+        let ys: Vec<f64> = samples.iter().filter(|p| p.0 == x).map(|p| p.1).collect();
+        let n = ys.len() as f64;
+        let mean = ys.iter().sum::<f64>() / n;
+        if ys.len() > 1 {
+            let sd = (ys.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            out.push(Series::line(color, 1, vec![(x, mean - sd), (x, mean + sd)]));
+        }
+        means.push((x, mean));
+    }
+    out.push(Series::points(color, radius, means).labelled(label));
+    out
+}
+
 /// Where a panel's legend goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Legend {
@@ -352,6 +381,19 @@ pub fn residual_figure(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn means_with_their_spread() {
+        let samples = [(1.0, 2.0), (1.0, 4.0), (2.0, 5.0)];
+        let series = mean_with_spread(PALETTE[0], 3, "a", &samples);
+        // One bar (x = 1 has two values), then the means.
+        assert_eq!(series.len(), 2);
+        let sd = 2f64.sqrt();
+        assert_eq!(series[0].mark, Mark::Line(1));
+        assert_eq!(series[0].points, vec![(1.0, 3.0 - sd), (1.0, 3.0 + sd)]);
+        assert_eq!(series[1].points, vec![(1.0, 3.0), (2.0, 5.0)]);
+        assert_eq!(series[1].label.as_deref(), Some("a"));
+    }
+
     use super::*;
 
     #[test]

@@ -353,7 +353,12 @@ fn serve(command: SimCommand, plant: &mut Plant, bench: &mut SimBench) -> Result
         }
     };
     match command {
-        SimCommand::SetLoad { tau_rot_nm } => plant.set_load(Load::Torque(finite(tau_rot_nm)?)),
+        // The operator hangs the load still (a load still falling from the last run is
+        // caught and hung again), where the output is: the encoder sees no jump.
+        SimCommand::SetLoad { tau_rot_nm } => {
+            plant.set_load(Load::Torque(finite(tau_rot_nm)?));
+            plant.stop_output();
+        }
         SimCommand::SetSupplyVoltage { volts } => {
             positive(volts)?;
             bench.supply_v = Some(volts);

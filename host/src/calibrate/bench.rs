@@ -3,15 +3,25 @@
 //! simulation, the gauge read from the simulated arm).
 
 use std::io::BufRead;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
 use std::time::Duration;
 
-use indicatif::ProgressBar;
+use indicatif::{ProgressBar, ProgressDrawTarget};
 use model::plant::CamSetup;
 
-use super::{Bench, Setup, StepMeasurement};
+use super::{Bench, GaugeUnit, Reading, Setup, StepMeasurement, parse_reading};
 use crate::RigError;
 use crate::device::VirtualDevice;
+
+fn cam_setup(setup: Setup) -> CamSetup {
+    match setup {
+        Setup::NoLoad => CamSetup::Uncoupled,
+        Setup::Gauge => CamSetup::Blocked,
+        Setup::Done => CamSetup::Coupled,
+    }
+}
 
 /// The virtual device as the bench: the operator's hands are the simulation's.
 #[derive(Debug)]
@@ -30,12 +40,7 @@ impl<'a> SimBench<'a> {
 
 impl Bench for SimBench<'_> {
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError> {
-        let cam = match setup {
-            Setup::NoLoad => CamSetup::Uncoupled,
-            Setup::Gauge => CamSetup::Blocked,
-            Setup::Done => CamSetup::Coupled,
-        };
-        self.device.with_plant(|p| p.set_cam(cam));
+        self.device.with_plant(|p| p.set_cam(cam_setup(setup)));
         Ok(())
     }
 
@@ -44,34 +49,61 @@ impl Bench for SimBench<'_> {
         step: usize,
         _measured: &StepMeasurement,
         _keep_alive: &mut dyn FnMut() -> Result<(), RigError>,
-    ) -> Result<f64, RigError> {
+    ) -> Result<Reading, RigError> {
         if let Some(g) = &self.gauge {
-            return g.get(step).copied().ok_or_else(|| {
-                RigError::Operator(format!("no gauge reading for torque step {}", step + 1))
-            });
+            return from_file(g, step);
         }
-        Ok(self.device.with_plant(|p| p.state().gauge_torque) * 1e3)
+        Ok(Reading::Nmm(
+            self.device.with_plant(|p| p.state().gauge_torque) * 1e3,
+        ))
     }
 }
 
-/// A person at the rig: set-up instructions and gauge prompts on stderr, answers on stdin
-/// (read by a thread, so the drive's heartbeat goes on while the operator types).
-#[derive(Debug)]
-pub struct OperatorBench {
-    gauge: Option<Vec<f64>>,
-    progress: ProgressBar,
-    lines: Option<Receiver<std::io::Result<String>>>,
+fn from_file(g: &[f64], step: usize) -> Result<Reading, RigError> {
+    g.get(step)
+        .copied()
+        .map(Reading::Nmm)
+        .ok_or_else(|| RigError::Operator(format!("no gauge reading for torque step {}", step + 1)))
 }
 
-impl OperatorBench {
-    /// Prompts through `progress` (suspended while asking); `gauge` readings (N mm), when
-    /// given, are used instead of asking.
-    pub fn new(gauge: Option<Vec<f64>>, progress: ProgressBar) -> Self {
+/// A person at the rig: set-up instructions and gauge prompts on stderr, answers on stdin
+/// (read by a thread, so the drive's heartbeat goes on while the operator types). At a
+/// gauge prompt `r` measures the step again. While a prompt waits the progress bar is off
+/// the screen, so it never draws over the prompt. With a virtual device (`--sim
+/// --operator`) the set-up also happens on the simulated rig, as the person's hands.
+#[derive(Debug)]
+pub struct OperatorBench<'a> {
+    gauge: Option<Vec<f64>>,
+    unit: GaugeUnit,
+    progress: ProgressBar,
+    lines: Option<Receiver<std::io::Result<String>>>,
+    interrupted: Arc<AtomicBool>,
+    device: Option<&'a VirtualDevice>,
+}
+
+impl<'a> OperatorBench<'a> {
+    /// Prompts through `progress`; `gauge` readings (N mm), when given, are used instead of
+    /// asking; typed readings are in `unit`; `interrupted` (Ctrl-C) ends a wait.
+    pub fn new(
+        gauge: Option<Vec<f64>>,
+        unit: GaugeUnit,
+        progress: ProgressBar,
+        interrupted: Arc<AtomicBool>,
+    ) -> Self {
         Self {
             gauge,
+            unit,
             progress,
             lines: None,
+            interrupted,
+            device: None,
         }
+    }
+
+    /// Also sets up `device`'s simulated rig at each step (rehearsal on the virtual rig).
+    pub fn with_device(mut self, device: &'a VirtualDevice) -> Self {
+        self.device = Some(device);
+        self
     }
 
     /// Asks `prompt` and waits for a line, calling `keep_alive` while waiting.
@@ -80,7 +112,24 @@ impl OperatorBench {
         prompt: &str,
         keep_alive: &mut dyn FnMut() -> Result<(), RigError>,
     ) -> Result<String, RigError> {
-        self.progress.suspend(|| eprint!("{prompt}"));
+        // The bar leaves the screen while the prompt waits: nothing draws over it.
+        let visible = !self.progress.is_hidden();
+        if visible {
+            self.progress.set_draw_target(ProgressDrawTarget::hidden());
+            eprint!("\r\x1b[2K");
+        }
+        eprint!("{prompt}");
+        let answer = self.read_line(keep_alive);
+        if visible {
+            self.progress.set_draw_target(ProgressDrawTarget::stderr());
+        }
+        answer
+    }
+
+    fn read_line(
+        &mut self,
+        keep_alive: &mut dyn FnMut() -> Result<(), RigError>,
+    ) -> Result<String, RigError> {
         let lines = self.lines.get_or_insert_with(|| {
             let (tx, rx) = channel();
             std::thread::spawn(move || {
@@ -93,13 +142,17 @@ impl OperatorBench {
             rx
         });
         loop {
+            if self.interrupted.load(Ordering::SeqCst) {
+                eprintln!();
+                return Err(super::interrupted_error());
+            }
             match lines.recv_timeout(Duration::from_millis(20)) {
                 Ok(Ok(line)) => return Ok(line.trim().to_owned()),
                 Ok(Err(e)) => return Err(RigError::Output(e)),
                 Err(RecvTimeoutError::Timeout) => keep_alive()?,
                 Err(RecvTimeoutError::Disconnected) => {
                     return Err(RigError::Operator(
-                        "calibrate needs the operator at the rig, but standard input ended: run it in a terminal (gauge readings can come from --gauge-csv FILE)".into(),
+                        "calibrate needs the operator at the rig, but standard input ended: run it in a terminal (gauge readings can come from --gauge-csv FILE); the points measured so far are kept (points.csv)".into(),
                     ));
                 }
             }
@@ -107,8 +160,11 @@ impl OperatorBench {
     }
 }
 
-impl Bench for OperatorBench {
+impl Bench for OperatorBench<'_> {
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError> {
+        if let Some(d) = self.device {
+            d.with_plant(|p| p.set_cam(cam_setup(setup)));
+        }
         if setup == Setup::Done {
             self.progress
                 .suspend(|| eprintln!("{}", setup.instructions()));
@@ -126,27 +182,33 @@ impl Bench for OperatorBench {
         step: usize,
         m: &StepMeasurement,
         keep_alive: &mut dyn FnMut() -> Result<(), RigError>,
-    ) -> Result<f64, RigError> {
+    ) -> Result<Reading, RigError> {
         if let Some(g) = &self.gauge {
-            return g.get(step).copied().ok_or_else(|| {
-                RigError::Operator(format!("no gauge reading for torque step {}", step + 1))
-            });
+            return from_file(g, step);
         }
+        let what = match self.unit {
+            GaugeUnit::Torque => "Gauge torque (N mm".to_string(),
+            GaugeUnit::Force { arm_m: Some(l) } => {
+                format!("Gauge force (N, on the {} m arm", reporting::human(l))
+            }
+            GaugeUnit::Force { arm_m: None } => "Gauge force and arm (F N @ L m".to_string(),
+        };
         loop {
             let answer = self.ask(
                 &format!(
-                    "step {}: {:.2} V, {:.3} A. Gauge torque (N mm): ",
+                    "step {}: {:.2} V, {:.3} A. {what}; r: redo the step): ",
                     step + 1,
                     m.volts,
                     m.current_a
                 ),
                 keep_alive,
             )?;
-            match answer.parse::<f64>() {
-                Ok(v) if v.is_finite() => return Ok(v),
-                _ => self.progress.suspend(|| {
-                    eprintln!("'{answer}' is not a number: type the torque in N mm, e.g. 37.5")
-                }),
+            if answer.eq_ignore_ascii_case("r") {
+                return Ok(Reading::Redo);
+            }
+            match parse_reading(&answer, self.unit) {
+                Ok(v) => return Ok(Reading::Nmm(v)),
+                Err(why) => eprintln!("{why}"),
             }
         }
     }

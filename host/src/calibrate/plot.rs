@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use plotters::prelude::*;
+use reporting::plot::PALETTE;
 
 use super::fit::LineFit;
 use crate::RigError;
@@ -92,7 +93,7 @@ fn draw_into(target: &Path, path: &Path, plot: &FitPlot<'_>) -> Result<(), RigEr
     chart
         .draw_series(LineSeries::new(
             [(x0, f.at(x0)), (x1, f.at(x1))],
-            BLUE.stroke_width(2),
+            PALETTE[0].stroke_width(2),
         ))
         .map_err(|e| err(&e))?
         .label(format!(
@@ -103,7 +104,7 @@ fn draw_into(target: &Path, path: &Path, plot: &FitPlot<'_>) -> Result<(), RigEr
                 .unwrap_or(f.intercept),
             f.r_squared
         ))
-        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], PALETTE[0].stroke_width(2)));
     if let Some((slope, intercept)) = plot.reference {
         chart
             .draw_series(LineSeries::new(
@@ -118,7 +119,7 @@ fn draw_into(target: &Path, path: &Path, plot: &FitPlot<'_>) -> Result<(), RigEr
         .draw_series(
             plot.points
                 .iter()
-                .map(|&(x, y)| Circle::new((x, y), 4, RED.filled())),
+                .map(|&(x, y)| Circle::new((x, y), 4, PALETTE[1].filled())),
         )
         .map_err(|e| err(&e))?;
     chart
@@ -149,7 +150,7 @@ fn draw_into(target: &Path, path: &Path, plot: &FitPlot<'_>) -> Result<(), RigEr
     res.draw_series(
         residuals
             .iter()
-            .map(|&(x, r)| Circle::new((x, r), 3, RED.filled())),
+            .map(|&(x, r)| Circle::new((x, r), 3, PALETTE[1].filled())),
     )
     .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;

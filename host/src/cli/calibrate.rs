@@ -7,6 +7,8 @@
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::SystemTime;
 
 use clap::Args;
@@ -17,7 +19,9 @@ use super::connect::{DeviceOpts, Session, confirm};
 use crate::RigError;
 use crate::calibrate::bench::{OperatorBench, SimBench};
 use crate::calibrate::plot::{self, FitPlot};
-use crate::calibrate::{self, Bench, CalibrationResult, Measurements, Plan, Progress, Setup};
+use crate::calibrate::{
+    self, Bench, CalibrationResult, GaugeUnit, Measurements, Plan, Progress, Setup,
+};
 use rigfile::{RigFile, paper_units};
 
 /// Arguments of `rig calibrate`.
@@ -39,6 +43,34 @@ pub struct CalibrateArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
+    /// Fit the points of an earlier run (its points.csv, kept also when Ctrl-C ended it)
+    /// instead of measuring.
+    #[arg(long, value_name = "FILE", conflicts_with = "gauge_csv")]
+    from_points: Option<PathBuf>,
+    /// What the gauge reads: `torque` (N mm) or `force` (N, on an arm: --arm-m, or typed
+    /// with each reading as `F N @ L m`).
+    #[arg(long, value_enum, default_value_t = GaugeKind::Torque)]
+    gauge: GaugeKind,
+    /// The arm from the shaft's axis to a force gauge, m (with --gauge force).
+    #[arg(long, value_name = "M", value_parser = crate::args::positive)]
+    arm_m: Option<f64>,
+    /// Prompt as on a real rig even on the virtual one (set up, read the gauge): to
+    /// rehearse, and for tests.
+    #[arg(long)]
+    operator: bool,
+    /// Write a fit that is implausible for the vibrator's motor (the firmware's rule,
+    /// model::Calibration::check) anyway: to the rig file only, the firmware refuses it.
+    #[arg(long)]
+    force: bool,
+}
+
+/// `rig calibrate --gauge`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum GaugeKind {
+    /// A torque gauge, N mm.
+    Torque,
+    /// A force gauge on an arm, N.
+    Force,
 }
 
 /// Files written by `rig calibrate`.
@@ -109,11 +141,27 @@ pub fn default_out_dir(now: SystemTime) -> PathBuf {
 /// Runs `rig calibrate`.
 pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let plan = Plan::default();
+    let unit = match a.gauge {
+        GaugeKind::Torque => GaugeUnit::Torque,
+        GaugeKind::Force => GaugeUnit::Force { arm_m: a.arm_m },
+    };
+    if a.arm_m.is_some() && a.gauge == GaugeKind::Torque {
+        return Err(RigError::BadValue {
+            what: "--arm-m".into(),
+            why: "is the arm of a force gauge: add --gauge force (a torque gauge reads N mm)"
+                .into(),
+        });
+    }
     // Check the inputs before anything moves.
     let gauge = a
         .gauge_csv
         .as_deref()
         .map(|p| calibrate::read_gauge_csv(p, &plan))
+        .transpose()?;
+    let from_points = a
+        .from_points
+        .as_deref()
+        .map(calibrate::read_points_csv)
         .transpose()?;
     let out = a
         .out
@@ -126,55 +174,63 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             source,
         })?;
     }
-    let mut session = dev.connect()?;
-    let latched = session.client.faults()?.latched;
-    if !latched.is_empty() {
-        return Err(RigError::DeviceFault {
-            what: "calibrate needs a device without faults".into(),
-            faults: latched.to_string(),
-        });
-    }
-    let base = session.client.calibration()?;
-    let bar = progress_bar(&plan, a.json);
-    let Session { client, device, .. } = &mut session;
-    let mut sim_bench;
-    let mut operator_bench;
-    let bench: &mut dyn Bench = match device {
-        Some(d) => {
-            sim_bench = SimBench::new(d, gauge);
-            &mut sim_bench
-        }
+    let stop = super::connect::interrupt_flag();
+    // Refitting earlier points needs the device only to read its record and write the
+    // result: a dry run refits offline against the paper's record.
+    let mut session = if from_points.is_some() && a.dry_run {
+        None
+    } else {
+        Some(dev.connect()?)
+    };
+    let base = match session.as_mut() {
+        Some(s) => s.client.calibration()?,
+        None => protocol::RigParameters::paper(),
+    };
+    let measurements = match from_points {
+        Some(m) => m,
         None => {
-            operator_bench = OperatorBench::new(gauge, bar.clone());
-            &mut operator_bench
+            let session = session
+                .as_mut()
+                .expect("a session unless refitting offline");
+            match measure(session, &a, &plan, gauge, unit, &out, &stop) {
+                Ok(m) => m,
+                Err(e) if stop.load(Ordering::SeqCst) => {
+                    eprintln!("{e}");
+                    return Ok(ExitCode::from(130));
+                }
+                Err(e) => return Err(e),
+            }
         }
     };
-    let measurements = calibrate::measure(client, bench, &plan, &mut |p| match p {
-        Progress::Step { setup, volts } => bar.set_message(format!(
-            "{} {volts:.2} V",
-            if setup == Setup::NoLoad {
-                "no-load sweep"
-            } else {
-                "torque step"
-            }
-        )),
-        Progress::Done => bar.inc(1),
-    })?;
-    bar.finish_and_clear();
     let result = calibrate::analyse(&measurements)?;
+    let motor = firmware_core::CoreConfig::default().motor.constants;
+    let plausible = result.calibration.check(&motor);
+    if let Err(issue) = &plausible
+        && !a.force
+        && !a.dry_run
+    {
+        // Keep what was measured; write neither the rig file nor the device.
+        write_points(&out, &measurements)?;
+        return Err(RigError::CalibrationFit(format!(
+            "the fit is implausible for the vibrator's motor: {issue} (the firmware's rule, model::Calibration::check); nothing was written to the device and no calibration.toml; the points are in {}: check the set-up and the gauge readings and measure again, or pass --force to write the rig file anyway",
+            out.join("points.csv").display()
+        )));
+    }
+    let port = session
+        .as_ref()
+        .map_or_else(|| "(refit offline)".to_string(), |s| s.port().to_string());
     let files = if a.dry_run {
         None
     } else {
-        Some(write_files(
-            &out,
-            &result,
-            &measurements,
-            &base,
-            session.port(),
-        )?)
+        Some(write_files(&out, &result, &measurements, &base, &port)?)
     };
     let new_cal = result.apply_to(&base);
-    let write = if a.dry_run {
+    let write = if a.dry_run || plausible.is_err() {
+        if plausible.is_err() && !a.dry_run {
+            eprintln!(
+                "--force: the implausible fit is in the rig file only; the firmware refuses it, so it was not written to the device"
+            );
+        }
         false
     } else if a.yes {
         true
@@ -191,7 +247,7 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         }
         ok
     };
-    if write {
+    if write && let Some(session) = session.as_mut() {
         session.client.set_calibration(&new_cal)?;
         let back = session.client.calibration()?;
         if back != new_cal {
@@ -208,14 +264,14 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         files,
         written_to_device: write,
         dry_run: a.dry_run,
-        sim: session.device.is_some(),
+        sim: session.as_ref().is_some_and(|s| s.device.is_some()),
     };
     if a.json {
         let mut out = std::io::stdout().lock();
         serde_json::to_writer_pretty(&mut out, &report)?;
         writeln!(out)?;
     } else {
-        if a.dry_run || a.yes {
+        if a.dry_run || a.yes || plausible.is_err() {
             print_text(
                 &report.result,
                 &report.measurements,
@@ -224,10 +280,92 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             )?;
         }
         if write {
-            println!("written to the device on {}", session.port());
+            println!("written to the device on {port}");
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Measures on the device of `session`, writing the points to `out`/points.csv (atomically)
+/// as they are taken, unless a dry run; Ctrl-C (`stop`) ends it with the gear locked.
+fn measure(
+    session: &mut Session,
+    a: &CalibrateArgs,
+    plan: &Plan,
+    gauge: Option<Vec<f64>>,
+    unit: GaugeUnit,
+    out: &Path,
+    stop: &Arc<AtomicBool>,
+) -> Result<Measurements, RigError> {
+    let latched = session.client.faults()?.latched;
+    if !latched.is_empty() {
+        return Err(RigError::DeviceFault {
+            what: "calibrate needs a device without faults".into(),
+            faults: latched.to_string(),
+        });
+    }
+    let bar = progress_bar(plan, a.json);
+    let Session { client, device, .. } = session;
+    let mut sim_bench;
+    let mut operator_bench;
+    let bench: &mut dyn Bench = match device {
+        Some(d) if !a.operator => {
+            sim_bench = SimBench::new(d, gauge);
+            &mut sim_bench
+        }
+        d => {
+            operator_bench = OperatorBench::new(gauge, unit, bar.clone(), Arc::clone(stop));
+            if let Some(d) = d {
+                operator_bench = operator_bench.with_device(d);
+            }
+            &mut operator_bench
+        }
+    };
+    let mut taken = Measurements::default();
+    let mut write_error = None;
+    let result = calibrate::measure(
+        client,
+        bench,
+        plan,
+        &mut taken,
+        &mut |p, m| match p {
+            Progress::Step { setup, volts } => bar.set_message(format!(
+                "{} {volts:.2} V",
+                if setup == Setup::NoLoad {
+                    "no-load sweep"
+                } else {
+                    "torque step"
+                }
+            )),
+            Progress::Done => {
+                bar.inc(1);
+                if !a.dry_run
+                    && write_error.is_none()
+                    && let Err(e) = write_points(out, m)
+                {
+                    write_error = Some(e);
+                }
+            }
+        },
+        &|| stop.load(Ordering::SeqCst),
+    );
+    bar.finish_and_clear();
+    if let Some(e) = write_error {
+        return Err(e);
+    }
+    result.map(|()| taken)
+}
+
+/// Writes the measured points to `dir`/points.csv, atomically.
+fn write_points(dir: &Path, m: &Measurements) -> Result<PathBuf, RigError> {
+    let path = dir.join("points.csv");
+    let mut csv = Vec::new();
+    calibrate::write_points_csv(m, &mut csv).map_err(|e| RigError::MeasuredFile {
+        file: path.display().to_string(),
+        why: e.to_string(),
+    })?;
+    reporting::write_atomic(&path, &csv)?;
+    Ok(path)
 }
 
 fn progress_bar(plan: &Plan, json: bool) -> ProgressBar {
@@ -261,13 +399,7 @@ pub fn write_files(
              `rig calibration set FILE` writes it to the device, `rig explain --model FILE` uses it."
         ),
     )?;
-    let points_path = dir.join("points.csv");
-    let mut csv = Vec::new();
-    calibrate::write_points_csv(m, &mut csv).map_err(|e| RigError::MeasuredFile {
-        file: points_path.display().to_string(),
-        why: e.to_string(),
-    })?;
-    reporting::write_atomic(&points_path, &csv)?;
+    let points_path = write_points(dir, m)?;
     let table2 = paper_units::table2();
     let torque_plot = dir.join("torque_current.svg");
     let torque_points: Vec<(f64, f64)> = m

@@ -136,128 +136,131 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     };
     let mut bench = DeviceBench::new(dev.connect()?);
     let mut out = std::io::stdout().lock();
-    let result = match a.procedure {
-        Procedure::TorqueSweep(s) => {
-            let setup = SweepSetup {
-                plan: plan.unwrap_or_else(Plan::quick),
-                window: s.window,
-                resume: s.resume,
-                command: std::env::args().collect::<Vec<_>>().join(" "),
-            };
-            let quiet = s.json;
-            let r = sweep::run(&mut bench, &mut operator, &setup, &s.csv, &mut |line| {
-                if !quiet {
-                    eprintln!("{line}");
-                }
-            });
-            match r {
-                Ok(o) => {
-                    if let Some(svg) = &s.svg {
-                        let (rows, _) = sweep::read_rows(&s.csv)?;
-                        crate::sweep_report::experiment_figure(svg, &rows)?;
+    // Every error of the procedure, so Ctrl-C anywhere ends with exit 130.
+    let result = (|| -> Result<(), RigError> {
+        match a.procedure {
+            Procedure::TorqueSweep(s) => {
+                let setup = SweepSetup {
+                    plan: plan.unwrap_or_else(Plan::quick),
+                    window: s.window,
+                    resume: s.resume,
+                    command: std::env::args().collect::<Vec<_>>().join(" "),
+                };
+                let quiet = s.json;
+                let r = sweep::run(&mut bench, &mut operator, &setup, &s.csv, &mut |line| {
+                    if !quiet {
+                        eprintln!("{line}");
                     }
-                    if s.json {
-                        super::print_json(&mut out, &o)?;
-                    } else {
-                        writeln!(
-                            out,
-                            "torque sweep: {} of {} runs written to {} ({} resumed, {} skipped)",
-                            o.written + o.resumed,
-                            o.planned,
+                });
+                match r {
+                    Ok(o) => {
+                        if let Some(svg) = &s.svg {
+                            let (rows, _) = sweep::read_rows(&s.csv)?;
+                            crate::sweep_report::experiment_figure(svg, &rows)?;
+                        }
+                        if s.json {
+                            super::print_json(&mut out, &o)?;
+                        } else {
+                            writeln!(
+                                out,
+                                "torque sweep: {} of {} runs written to {} ({} resumed, {} skipped)",
+                                o.written + o.resumed,
+                                o.planned,
+                                s.csv.display(),
+                                o.resumed,
+                                o.skipped
+                            )?;
+                        }
+                        Ok(())
+                    }
+                    Err(e) => {
+                        let kept = sweep::read_rows(&s.csv).map(|r| r.0.len()).unwrap_or(0);
+                        eprintln!(
+                            "stopped: {kept} completed rows kept in {}; continue with `rig experiment torque-sweep --resume --csv {}` and the same plan",
                             s.csv.display(),
-                            o.resumed,
-                            o.skipped
-                        )?;
+                            s.csv.display()
+                        );
+                        Err(e)
                     }
-                    Ok(())
-                }
-                Err(e) => {
-                    let kept = sweep::read_rows(&s.csv).map(|r| r.0.len()).unwrap_or(0);
-                    eprintln!(
-                        "stopped: {kept} completed rows kept in {}; continue with `rig experiment torque-sweep --resume --csv {}` and the same plan",
-                        s.csv.display(),
-                        s.csv.display()
-                    );
-                    Err(e)
                 }
             }
-        }
-        Procedure::HoldRelease(h) => {
-            let opts = hold_release::HoldRelease {
-                load_nm: Some(h.load),
-                hold_s: h.hold,
-                hz: h.freq,
-                release_s: h.release,
-                after_s: h.after,
-            };
-            let samples =
-                hold_release::run(&mut bench, &mut operator, &opts, &mut |l| eprintln!("{l}"))?;
-            hold_release::write_csv(&samples, &h.csv)?;
-            let svg = h.svg.unwrap_or_else(|| h.csv.with_extension("svg"));
-            if !samples.is_empty() {
-                hold_release::write_svg(&samples, &svg)?;
+            Procedure::HoldRelease(h) => {
+                let opts = hold_release::HoldRelease {
+                    load_nm: Some(h.load),
+                    hold_s: h.hold,
+                    hz: h.freq,
+                    release_s: h.release,
+                    after_s: h.after,
+                };
+                let samples =
+                    hold_release::run(&mut bench, &mut operator, &opts, &mut |l| eprintln!("{l}"))?;
+                hold_release::write_csv(&samples, &h.csv)?;
+                let svg = h.svg.unwrap_or_else(|| h.csv.with_extension("svg"));
+                if !samples.is_empty() {
+                    hold_release::write_svg(&samples, &svg)?;
+                }
+                writeln!(
+                    out,
+                    "hold-release: {} samples to {} and {}",
+                    samples.len(),
+                    h.csv.display(),
+                    svg.display()
+                )?;
+                Ok(())
             }
-            writeln!(
-                out,
-                "hold-release: {} samples to {} and {}",
-                samples.len(),
-                h.csv.display(),
-                svg.display()
-            )?;
-            Ok(())
-        }
-        Procedure::Backdrive(b) => {
-            let opts = backdrive::Backdrive {
-                load_nm: b.load,
-                hold_s: b.hold,
-                hz: b.freq,
-                release_s: b.release,
-            };
-            let sets: Vec<Option<[u32; 4]>> = if b.all_sets {
-                model::TABLE1.iter().copied().map(Some).collect()
-            } else {
-                vec![None]
-            };
-            if b.all_sets && !operator.forced && bench.is_virtual() {
-                return Err(RigError::BadValue {
+            Procedure::Backdrive(b) => {
+                let opts = backdrive::Backdrive {
+                    load_nm: b.load,
+                    hold_s: b.hold,
+                    hz: b.freq,
+                    release_s: b.release,
+                };
+                let sets: Vec<Option<[u32; 4]>> = if b.all_sets {
+                    model::TABLE1.iter().copied().map(Some).collect()
+                } else {
+                    vec![None]
+                };
+                if b.all_sets && !operator.forced && bench.is_virtual() {
+                    return Err(RigError::BadValue {
                     what: "--all-sets".into(),
                     why: "a virtual device has one gear set: `rig sim table1` runs all six, or add --operator".into(),
                 });
-            }
-            let mut verdicts = Vec::new();
-            for z in sets {
-                if let Some(z) = z {
-                    let q = format!(
-                        "fit gear set (Z1, Z2, Z3, Z4) = ({})",
-                        z.map(|v| v.to_string()).join(", ")
-                    );
-                    if operator.before(&q)? == crate::experiment::bench::Go::Skip {
-                        continue;
+                }
+                let mut verdicts = Vec::new();
+                for z in sets {
+                    if let Some(z) = z {
+                        let q = format!(
+                            "fit gear set (Z1, Z2, Z3, Z4) = ({})",
+                            z.map(|v| v.to_string()).join(", ")
+                        );
+                        if operator.before(&q)? == crate::experiment::bench::Go::Skip {
+                            continue;
+                        }
+                    }
+                    if let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, z)? {
+                        verdicts.push(v);
                     }
                 }
-                if let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, z)? {
-                    verdicts.push(v);
+                if b.json {
+                    super::print_json(&mut out, &verdicts)?;
+                } else {
+                    for v in &verdicts {
+                        let word = |m: bool| if m { "backdriven" } else { "held" };
+                        writeln!(
+                            out,
+                            "{}{} N m: without vibration {}, with vibration {} (judged by {})",
+                            v.z.map(|z| format!("{:?} ", z)).unwrap_or_default(),
+                            reporting::human(v.load_nm),
+                            word(v.backdriven_without_vibration),
+                            word(v.backdriven_with_vibration),
+                            v.judged_by
+                        )?;
+                    }
                 }
+                Ok(())
             }
-            if b.json {
-                super::print_json(&mut out, &verdicts)?;
-            } else {
-                for v in &verdicts {
-                    let word = |m: bool| if m { "backdriven" } else { "held" };
-                    writeln!(
-                        out,
-                        "{}{} N m: without vibration {}, with vibration {} (judged by {})",
-                        v.z.map(|z| format!("{:?} ", z)).unwrap_or_default(),
-                        reporting::human(v.load_nm),
-                        word(v.backdriven_without_vibration),
-                        word(v.backdriven_with_vibration),
-                        v.judged_by
-                    )?;
-                }
-            }
-            Ok(())
         }
-    };
+    })();
     match result {
         Ok(()) => Ok(ExitCode::SUCCESS),
         Err(e) if operator.interrupted() => {

@@ -47,6 +47,91 @@ pub struct MonitorArgs {
     /// One JSON object per sample (JSON lines) instead of text.
     #[arg(long)]
     json: bool,
+    /// Explain the status flags and when estimates are shown as `-`, then exit (no device).
+    #[arg(long)]
+    explain: bool,
+}
+
+/// What each status flag of telemetry means, for the view's legend and `--explain`.
+pub const STATUS_LEGEND: [(&str, &str); 8] = [
+    (
+        "COASTS_AFTER_STOP",
+        "mu_d Lambda < 1: once moving, the load keeps moving after vibration stops",
+    ),
+    (
+        "NOT_SELF_LOCKING",
+        "mu_s Lambda <= 1: this gear set does not hold its load even locked",
+    ),
+    (
+        "HOST_RELEASE",
+        "a host's release is live (kept by heartbeats)",
+    ),
+    ("BUTTON_RELEASE", "the release button is held"),
+    ("CAPTURE_RUNNING", "a capture is recording"),
+    (
+        "CALIBRATION_DEFAULTS",
+        "the paper's calibration is in use (none stored, or it failed its check)",
+    ),
+    (
+        "OUTPUT_MOVING",
+        "the output shaft turns; while locked, that is backdrive",
+    ),
+    ("OPEN_LOOP", "an open-loop drive is running"),
+];
+
+/// When the view shows the firmware's estimates (tau_cam, tau_rot) as `-`.
+pub const STALE_RULE: &str = "tau_cam and tau_rot show `-` when stale: gear locked, a fault, or no cam revolution for more than 1 s (the estimator updates once a revolution)";
+
+/// The meaning of status flag `name`.
+pub fn status_meaning(name: &str) -> Option<&'static str> {
+    STATUS_LEGEND
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, m)| *m)
+}
+
+/// Whether the firmware's per-revolution estimates are current: not when the gear is
+/// locked, a fault is active or latched, or the cam has not completed a revolution for
+/// more than [`Freshness::STALE_AFTER_S`] of device time.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Freshness {
+    turned_rad: f64,
+    last_us: Option<u64>,
+    last_rev_us: Option<u64>,
+}
+
+impl Freshness {
+    /// Device seconds without a whole cam revolution after which estimates are stale.
+    pub const STALE_AFTER_S: f64 = 1.0;
+
+    /// Takes sample `t`; true when its estimates are current.
+    pub fn update(&mut self, t: &TelemetrySample) -> bool {
+        let now = t.device_time_us;
+        if let Some(prev) = self.last_us {
+            let dt = now.saturating_sub(prev) as f64 * 1e-6;
+            self.turned_rad += f64::from(t.cam_speed_rad_s.abs()) * dt;
+        }
+        self.last_us = Some(now);
+        if self.turned_rad >= std::f64::consts::TAU {
+            self.turned_rad %= std::f64::consts::TAU;
+            self.last_rev_us = Some(now);
+        }
+        let turning = self
+            .last_rev_us
+            .is_some_and(|r| now.saturating_sub(r) as f64 * 1e-6 <= Self::STALE_AFTER_S);
+        let locked_or_faulted = matches!(t.state, SupervisorState::Locked | SupervisorState::Fault)
+            || !t.faults.is_empty();
+        turning && !locked_or_faulted
+    }
+}
+
+/// An estimate for display: `-` when stale.
+fn estimate(fresh: bool, v: f32, scale: f32, width: usize, digits: usize) -> String {
+    if fresh && v.is_finite() {
+        format!("{:width$.digits$}", v * scale)
+    } else {
+        format!("{:>width$}", "-")
+    }
 }
 
 /// What a key in the full-screen view asks for.
@@ -86,17 +171,17 @@ fn csv_row(t: &TelemetrySample) -> [String; 10] {
     ]
 }
 
-/// One line of `--plain` output.
-pub fn plain_line(t: &TelemetrySample) -> String {
+/// One line of `--plain` output; the estimates are `-` unless `fresh` ([`Freshness`]).
+pub fn plain_line(t: &TelemetrySample, fresh: bool) -> String {
     format!(
-        "{:10.3} s  {:<9} cam {:6.2} Hz  i {:6.3} A  duty {:+.3}  tau_cam {:7.2} N mm  tau_rot {:6.3} N m  faults {}",
+        "{:10.3} s  {:<9} cam {:6.2} Hz  i {:6.3} A  duty {:+.3}  tau_cam {} N mm  tau_rot {} N m  faults {}",
         t.device_time_us as f64 * 1e-6,
         t.state.name(),
         t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
         t.current_a,
         t.pwm_duty,
-        t.tau_cam_nm * 1e3,
-        t.tau_rot_nm,
+        estimate(fresh, t.tau_cam_nm, 1e3, 7, 2),
+        estimate(fresh, t.tau_rot_nm, 1.0, 6, 3),
         t.faults
     )
 }
@@ -104,7 +189,8 @@ pub fn plain_line(t: &TelemetrySample) -> String {
 /// The full-screen view's state: the last [`MonitorView::WINDOW_S`] seconds of samples.
 #[derive(Debug, Default)]
 pub struct MonitorView {
-    history: VecDeque<TelemetrySample>,
+    history: VecDeque<(TelemetrySample, bool)>,
+    freshness: Freshness,
     series: [Vec<(f64, f64)>; 4],
     port: String,
     stats: LinkStats,
@@ -124,17 +210,20 @@ impl MonitorView {
         }
     }
 
-    /// Adds a sample, forgetting those older than the window.
-    pub fn push(&mut self, t: TelemetrySample) {
+    /// Adds a sample, forgetting those older than the window; returns whether its
+    /// estimates are current ([`Freshness`]).
+    pub fn push(&mut self, t: TelemetrySample) -> bool {
         let now = t.device_time_us;
-        self.history.push_back(t);
+        let fresh = self.freshness.update(&t);
+        self.history.push_back((t, fresh));
         while self
             .history
             .front()
-            .is_some_and(|f| (now - f.device_time_us) as f64 * 1e-6 > Self::WINDOW_S)
+            .is_some_and(|f| (now - f.0.device_time_us) as f64 * 1e-6 > Self::WINDOW_S)
         {
             self.history.pop_front();
         }
+        fresh
     }
 
     /// Records the link counters to show.
@@ -145,7 +234,7 @@ impl MonitorView {
     /// Draws the view into `frame`.
     pub fn render(&mut self, frame: &mut Frame<'_>) {
         let [status, top, bottom] = Layout::vertical([
-            Constraint::Length(5),
+            Constraint::Length(7),
             Constraint::Fill(1),
             Constraint::Fill(1),
         ])
@@ -153,7 +242,7 @@ impl MonitorView {
         let [a, b] = Layout::horizontal([Constraint::Fill(1); 2]).areas(top);
         let [c, d] = Layout::horizontal([Constraint::Fill(1); 2]).areas(bottom);
         frame.render_widget(self.status(), status);
-        let now = self.history.back().map_or(0, |t| t.device_time_us);
+        let now = self.history.back().map_or(0, |t| t.0.device_time_us);
         let values: [fn(&TelemetrySample) -> f64; 4] = [
             |t| f64::from(t.current_a),
             |t| f64::from(t.cam_speed_rad_s.abs()) / std::f64::consts::TAU,
@@ -161,10 +250,12 @@ impl MonitorView {
             |t| f64::from(t.tau_rot_nm),
         ];
         for (k, value) in values.iter().enumerate() {
+            // The estimates (charts 3 and 4) only where they are current.
             self.series[k] = self
                 .history
                 .iter()
-                .map(|t| (-((now - t.device_time_us) as f64) * 1e-6, value(t)))
+                .filter(|(_, fresh)| k < 2 || *fresh)
+                .map(|(t, _)| (-((now - t.device_time_us) as f64) * 1e-6, value(t)))
                 .collect();
         }
         let titles = [
@@ -181,7 +272,7 @@ impl MonitorView {
     }
 
     fn status(&self) -> Paragraph<'static> {
-        let Some(t) = self.history.back() else {
+        let Some(&(t, fresh)) = self.history.back() else {
             return Paragraph::new(format!("waiting for telemetry from {} ...", self.port))
                 .block(Block::bordered().title(" rig monitor "));
         };
@@ -191,17 +282,16 @@ impl MonitorView {
             SupervisorState::Vibrating => Color::Cyan,
             _ => Color::Red,
         };
+        // Every line fits 78 columns (an 80-column terminal inside the border).
         let line1 = Line::from(vec![
             "state ".into(),
             t.state.name().to_uppercase().fg(state_color).bold(),
             format!(
-                "   t {:.2} s   cam {:.2} Hz   i {:.3} A   duty {:+.3}   tau_cam {:.2} N mm   tau_rot {:.3} N m",
+                "  t {:.2} s  cam {:.2} Hz  i {:.3} A  duty {:+.3}",
                 t.device_time_us as f64 * 1e-6,
                 t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
                 t.current_a,
                 t.pwm_duty,
-                t.tau_cam_nm * 1e3,
-                t.tau_rot_nm
             )
             .into(),
         ]);
@@ -211,15 +301,41 @@ impl MonitorView {
             format!("faults {}", t.faults).fg(Color::Red).bold()
         };
         let line2 = Line::from(vec![
-            faults,
             format!(
-                "   status {}   link: {} frames, {} bad, {} samples lost   r release/lock, q quit",
-                t.status, self.stats.frames_ok, self.stats.frame_errors, self.stats.telemetry_lost
+                "tau_cam {} N mm  tau_rot {} N m  ",
+                estimate(fresh, t.tau_cam_nm, 1e3, 1, 2).trim(),
+                estimate(fresh, t.tau_rot_nm, 1.0, 1, 3).trim()
             )
             .into(),
+            faults,
         ]);
-        let line3 = Line::from(self.note.clone().unwrap_or_default()).fg(Color::Yellow);
-        Paragraph::new(vec![line1, line2, line3])
+        let line3 = Line::from(format!(
+            "status {}  link {} frames, {} bad, {} lost",
+            if t.status.is_empty() {
+                "none".to_string()
+            } else {
+                t.status.to_string()
+            },
+            self.stats.frames_ok,
+            self.stats.frame_errors,
+            self.stats.telemetry_lost
+        ));
+        // The legend: what the flags set now mean (all of them: `rig monitor --explain`).
+        let legend: Vec<String> = t
+            .status
+            .names()
+            .filter_map(|name| status_meaning(name).map(|m| format!("{name}: {m}")))
+            .collect();
+        let line4 = Line::from(if legend.is_empty() {
+            "r release/lock  q quit  `-`: estimate stale (locked, fault, no turn in 1 s)"
+                .to_string()
+        } else {
+            legend.join("; ")
+        })
+        .fg(Color::DarkGray);
+        let line5 = Line::from(self.note.clone().unwrap_or_default()).fg(Color::Yellow);
+        Paragraph::new(vec![line1, line2, line3, line4, line5])
+            .wrap(ratatui::widgets::Wrap { trim: true })
             .block(Block::bordered().title(format!(" rig monitor: {} ", self.port)))
     }
 }
@@ -264,6 +380,16 @@ fn render_chart(
 
 /// Runs `rig monitor`.
 pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    if a.explain {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "status flags:")?;
+        for (name, meaning) in STATUS_LEGEND {
+            writeln!(out, "  {name:<21} {meaning}")?;
+        }
+        writeln!(out, "{STALE_RULE}")?;
+        writeln!(out, "faults: `rig faults` names them and what to do")?;
+        return Ok(ExitCode::SUCCESS);
+    }
     // The firmware would send at its control rate divided by a whole number.
     limits::check_telemetry_rate("--rate", a.rate)?;
     match &a.csv {
@@ -367,12 +493,12 @@ fn watch(
                     w.write_record(csv_row(&t)).map_err(csv_error(path))?;
                     *logged += 1;
                 }
+                let fresh = view.push(t);
                 if a.json {
                     super::print_json_line(&mut out, &sample_json(&t))?;
                 } else if terminal.is_none() {
-                    writeln!(out, "{}", plain_line(&t))?;
+                    writeln!(out, "{}", plain_line(&t, fresh))?;
                 }
-                view.push(t);
                 if a.seconds
                     .is_some_and(|limit| (t.device_time_us - start) as f64 * 1e-6 >= limit)
                 {
@@ -513,9 +639,69 @@ mod tests {
     }
 
     #[test]
+    fn every_status_flag_is_explained() {
+        for name in StatusFlags::all().names() {
+            assert!(status_meaning(name).is_some(), "{name} has no legend");
+        }
+    }
+
+    #[test]
+    fn estimates_go_stale_when_locked_faulted_or_the_cam_stops() {
+        let mut f = Freshness::default();
+        let mut t = sample(0, SupervisorState::Vibrating);
+        // 10 Hz: a revolution every 0.1 s.
+        for ms in (0..300).step_by(10) {
+            t.device_time_us = ms * 1000;
+            f.update(&t);
+        }
+        assert!(f.update(&t), "turning and vibrating: current");
+        let mut locked = t;
+        locked.state = SupervisorState::Locked;
+        assert!(!f.update(&locked), "locked: stale");
+        let mut faulted = t;
+        faulted.faults = FaultFlags::STALL;
+        assert!(!f.update(&faulted), "a fault: stale");
+        // The cam stops while still Vibrating: stale once 1 s passes without a turn.
+        t.cam_speed_rad_s = 0.0;
+        t.device_time_us = 900_000;
+        assert!(f.update(&t));
+        t.device_time_us = 1_400_000;
+        assert!(!f.update(&t), "no revolution for over 1 s: stale");
+        let line = plain_line(&locked, false);
+        assert!(line.contains("tau_cam       - N mm"), "{line}");
+    }
+
+    #[test]
+    fn the_view_fits_80_columns_and_shows_stale_estimates_as_dashes() {
+        let mut view = MonitorView::new("/dev/pts/9");
+        for ms in (0..3_000).step_by(20) {
+            view.push(sample(ms, SupervisorState::Vibrating));
+        }
+        let mut s = sample(3_000, SupervisorState::Locked);
+        s.status = StatusFlags::OUTPUT_MOVING | StatusFlags::COASTS_AFTER_STOP;
+        view.push(s);
+        let mut term = Terminal::new(TestBackend::new(80, 24)).unwrap();
+        term.draw(|f| view.render(f)).unwrap();
+        let buf = term.backend().buffer().clone();
+        let rows: Vec<String> = (0..24)
+            .map(|y| (0..80).map(|x| buf[(x, y)].symbol()).collect())
+            .collect();
+        let text = rows.join("\n");
+        for want in [
+            "LOCKED",
+            "tau_cam - N mm",
+            "tau_rot - N m",
+            "OUTPUT_MOVING: the output shaft turns",
+            "faults none",
+        ] {
+            assert!(text.contains(want), "missing {want}:\n{text}");
+        }
+    }
+
+    #[test]
     fn plain_line_and_csv_row_agree() {
         let t = sample(1500, SupervisorState::Locked);
-        let line = plain_line(&t);
+        let line = plain_line(&t, false);
         assert!(
             line.contains("1.500 s") && line.contains("locked") && line.contains("10.00 Hz"),
             "{line}"

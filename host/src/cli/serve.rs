@@ -41,8 +41,9 @@ pub struct ServeArgs {
     /// Print one JSON line with the port when ready.
     #[arg(long)]
     pub json: bool,
-    /// Mix this many random bytes per second into each direction of the line (tests).
-    #[arg(long, hide = true, default_value_t = 0.0, value_parser = crate::args::non_negative)]
+    /// Mix this many random bytes per second (wall clock) into each direction of the line,
+    /// as a noisy cable would: to test that clients survive it.
+    #[arg(long, value_name = "N", default_value_t = 0.0, value_parser = crate::args::non_negative)]
     pub line_noise_bytes_per_s: f64,
 }
 

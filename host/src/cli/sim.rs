@@ -48,6 +48,10 @@ pub struct Fig5Args {
     /// The current sensor's (ACS714) supply, V: 4.5 to 5.5 (the sensor is ratiometric).
     #[arg(long, default_value_t = 5.0, value_parser = sensor_supply)]
     pub sensor_supply_v: f64,
+    /// The plant: `paper` behaves as the paper's rig measured (docs/presets.md), `ideal` is
+    /// the paper's equations alone.
+    #[arg(long, default_value = "paper", value_parser = clap::builder::PossibleValuesParser::new(sim::preset::PRESETS))]
+    pub preset: String,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -62,6 +66,10 @@ pub struct Table1Args {
     /// Sensor-noise seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The plant: `paper` behaves as the paper's rig measured (docs/presets.md), `ideal` is
+    /// the paper's equations alone.
+    #[arg(long, default_value = "paper", value_parser = clap::builder::PossibleValuesParser::new(sim::preset::PRESETS))]
+    pub preset: String,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -126,128 +134,6 @@ fn check_freq(hz: f64) -> Result<f32, RigError> {
     })
 }
 
-/// The torque sweep as `rig experiment torque-sweep` runs it (one implementation), on the
-/// in-process virtual rig in virtual time, its rows with the simulator's extra columns
-/// (the torque measured by Eqs. (15)-(17) and Eq. (10) at the mean cam speed).
-fn sweep_procedure(opts: &sweep::SweepOptions) -> Result<Vec<sweep::SweepPoint>, RigError> {
-    use crate::experiment::{Operator, Plan, SimBench, sweep as procedure};
-    let z = opts.z;
-    let mut config = sim::SimConfig::for_gear(z, model::plant::Load::Torque(0.0))
-        .map_err(|source| sim::SimError::Gear { z, source })?;
-    config.seed = opts.seed;
-    config.plant.effects = opts.effects;
-    let drive = config.plant.drive;
-    let mu = config.plant.mu_s;
-    let mut plan = Plan::grid(
-        "rig sim torque-sweep",
-        &opts.loads,
-        &opts.voltages,
-        opts.repeats,
-        opts.rest_s,
-    );
-    plan.seed = opts.seed;
-    plan.window_s = opts.window_s;
-    let mut bench = SimBench::new(config)?;
-    let mut operator = Operator::scripted(b"", false);
-    let setup = procedure::SweepSetup {
-        plan,
-        window: procedure::Window::Start,
-        resume: false,
-        command: "rig sim torque-sweep".into(),
-    };
-    let outcome = procedure::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
-    let calibration = model::paper::CALIBRATION;
-    Ok(outcome
-        .rows
-        .into_iter()
-        .map(|r| sweep::SweepPoint {
-            t_s: r.t_s,
-            v_in_v: r.v_in_v.unwrap_or(0.0),
-            omega_n_rad_s: r.omega_n_rad_s,
-            tau_rot_nm: r.tau_rot_nm,
-            i_in_a: r.i_in_a,
-            temp_c: r.temp_c.unwrap_or(f64::NAN),
-            repeat: r.repeat,
-            tau_cam_est_nm: r.tau_cam_est_nm,
-            tau_cam_meas_nm: calibration.cam_torque(r.i_in_a, r.omega_n_rad_s),
-            tau_cam_eq10_nm: drive.required_cam_torque(mu, r.tau_rot_nm, r.omega_n_rad_s),
-            backdriven: r.backdriven.unwrap_or(1),
-        })
-        .collect())
-}
-
-/// Table 1 as `rig experiment backdrive` runs it (one implementation), once per gear set
-/// on a fresh in-process virtual rig with that set.
-fn table1_procedure(
-    sets: &[[u32; 4]],
-    hz: f64,
-    seed: u64,
-) -> Result<Vec<table1::Table1Row>, RigError> {
-    use crate::experiment::{Operator, SimBench, backdrive};
-    let opts = backdrive::Backdrive {
-        load_nm: table1::TAU_ROT,
-        hz,
-        ..Default::default()
-    };
-    let mut rows = Vec::new();
-    for &z in sets {
-        let mut config = sim::SimConfig::for_gear(z, model::plant::Load::Torque(0.0))
-            .map_err(|source| sim::SimError::Gear { z, source })?;
-        config.seed = seed;
-        let gear = config.plant.drive.gear;
-        let mut bench = SimBench::new(config)?;
-        let mut operator = Operator::scripted(b"", false);
-        let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, Some(z))? else {
-            continue;
-        };
-        let paper_non_backdriven_point = gear.n() == 1;
-        rows.push(table1::Table1Row {
-            z,
-            n: gear.n(),
-            mu_s_lambda: model::paper::MU_S * gear.big_lambda(),
-            backdriven_without_vibration: v.backdriven_without_vibration,
-            backdriven_with_vibration: v.backdriven_with_vibration,
-            paper_non_backdriven_point,
-            agrees_with_paper: v.backdriven_without_vibration != paper_non_backdriven_point
-                && v.backdriven_with_vibration,
-        });
-    }
-    Ok(rows)
-}
-
-/// Fig. 5 as `rig experiment hold-release` runs it (one implementation), on the
-/// in-process virtual rig with Fig. 5's gear set and its 1.0 kg mass on 75 mm.
-fn fig5_procedure(opts: &fig5::Fig5Options) -> Result<fig5::Fig5Result, RigError> {
-    use crate::experiment::{Operator, SimBench, hold_release};
-    let z = model::paper::FIG5_Z;
-    let mut config = sim::SimConfig::for_gear(z, model::paper::FIG5_LOAD)
-        .map_err(|source| sim::SimError::Gear { z, source })?;
-    config.seed = opts.seed;
-    let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
-    let mut bench = SimBench::new(config)?;
-    let mut operator = Operator::scripted(b"", false);
-    let procedure = hold_release::HoldRelease {
-        load_nm: None,
-        hold_s: opts.hold_s,
-        hz: f64::from(opts.vibration_hz),
-        release_s: opts.release_s,
-        // The cam brakes to rest (well under a second), then `after_stop_s`.
-        after_s: 1.0 + opts.after_stop_s,
-    };
-    let samples = hold_release::run(&mut bench, &mut operator, &procedure, &mut |_| {})?;
-    let n = hold_release::fig5_numbers(&samples, model::paper::R_OUT);
-    Ok(fig5::Fig5Result {
-        z,
-        held_without_vibration: n.held_without_vibration,
-        hold_s: opts.hold_s,
-        release_to_motion_s: n.release_to_motion_s,
-        output_speed_after_stop_rad_s: n.output_speed_after_stop_rad_s,
-        output_speed_at_stop_rad_s: n.output_speed_at_stop_rad_s,
-        load_drop_m: n.load_drop_m,
-        mu_d_lambda,
-    })
-}
-
 /// Runs `rig sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
     let mut out = std::io::stdout().lock();
@@ -258,9 +144,10 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 vibration_hz: check_freq(a.freq)?,
                 seed: a.seed,
                 sensor_supply_v: a.sensor_supply_v,
+                effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
-            let r = fig5_procedure(&opts)?;
+            let r = crate::experiment::paper::fig5(&opts)?;
             if a.json {
                 super::print_json(&mut out, &r)?;
             } else {
@@ -283,7 +170,12 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
         Scenario::Table1(a) => {
-            let rows = table1_procedure(&model::TABLE1, f64::from(check_freq(a.freq)?), a.seed)?;
+            let rows = crate::experiment::paper::table1(
+                &model::TABLE1,
+                f64::from(check_freq(a.freq)?),
+                a.seed,
+                sim::Preset::by_name(&a.preset)?.effects,
+            )?;
             if a.json {
                 super::print_json(&mut out, &rows)?;
             } else {
@@ -328,7 +220,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
-            let points = sweep_procedure(&opts)?;
+            let points = crate::experiment::paper::torque_sweep(&opts)?;
             if let Some(path) = &a.csv {
                 crate::sweep_report::write_csv(&points, path)?;
             }

@@ -12,7 +12,8 @@
 //! which at `speed` 20 is many virtual seconds. So while a release (or open-loop drive) is
 //! live and the host has been quiet for 0.2 virtual seconds, virtual time stands still for
 //! up to 1.5 s of wall time, waiting for the host. A host that really stopped still trips
-//! the comms timeout, after that grace.
+//! the comms timeout, after that grace; one that closed the port (quit or died, as when a
+//! served rig's client is killed) trips it at once, so the next client finds the fault.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -245,7 +246,15 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
                 rig.advance(ticks * tick);
             }
             let status = rig.core().status();
-            let awaiting_host = status.host_release || status.open_loop_volts.is_some();
+            let mut awaiting_host = status.host_release || status.open_loop_volts.is_some();
+            if awaiting_host && master.hung_up() {
+                // The port was closed (the client quit or died) with a release live: that
+                // host is gone for good, and no other client may keep its release alive.
+                // The comms timeout runs out now, before another client's bytes are read.
+                rig.advance(f64::from(protocol::COMMS_TIMEOUT_MS) / 1000.0 + tick);
+                let status = rig.core().status();
+                awaiting_host = status.host_release || status.open_loop_volts.is_some();
+            }
             pace = if awaiting_host && rig.time() - last_rx > HOST_QUIET_S {
                 let since = *quiet_since.get_or_insert(now);
                 if now - since < HOST_GRACE { 0.0 } else { speed }
@@ -291,6 +300,23 @@ mod tests {
         // A host that stops for good still loses the release, after the grace.
         std::thread::sleep(HOST_GRACE + Duration::from_millis(500));
         let latched = client.faults().unwrap().latched;
+        assert!(
+            latched.contains(protocol::FaultFlags::COMMS_TIMEOUT),
+            "{latched}"
+        );
+    }
+
+    #[test]
+    fn a_host_that_closes_the_port_during_a_release_leaves_a_latched_fault() {
+        let dev = VirtualDevice::paper(5.0).unwrap();
+        let mut client = connect(&dev);
+        client.release(true, 10.0).unwrap();
+        client.recv(Duration::from_millis(50)).unwrap();
+        drop(client);
+        // The next client comes at once: it must not keep the gone host's release alive.
+        std::thread::sleep(Duration::from_millis(20));
+        let mut next = connect(&dev);
+        let latched = next.faults().unwrap().latched;
         assert!(
             latched.contains(protocol::FaultFlags::COMMS_TIMEOUT),
             "{latched}"

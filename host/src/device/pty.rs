@@ -69,6 +69,18 @@ impl PtyMaster {
         }
     }
 
+    /// Whether no client has the slave open now (the last one closed it, or died).
+    pub fn hung_up(&self) -> bool {
+        let mut fds = [PollFd::new(&self.file, PollFlags::IN)];
+        let ts = Timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        matches!(rustix::event::poll(&mut fds, Some(&ts)), Ok(n) if n > 0
+            && fds[0].revents().contains(PollFlags::HUP)
+            && !fds[0].revents().contains(PollFlags::IN))
+    }
+
     /// Reads what the host sent, without waiting: 0 when there is nothing (or no host).
     pub fn read_available(&mut self, buf: &mut [u8]) -> usize {
         self.file.read(buf).unwrap_or(0)
@@ -104,7 +116,9 @@ mod tests {
         assert_eq!(back, [0x0D, 0x0A]);
         // Nothing more: a read does not block.
         assert_eq!(master.read_available(&mut buf), 0);
+        assert!(!master.hung_up());
         drop(slave);
         assert!(!master.wait_readable(Duration::from_millis(5)));
+        assert!(master.hung_up());
     }
 }

@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use super::bench::{Bench, Go, MOTION_RAD, Operator, interrupted};
+use super::bench::{Bench, Go, Operator, interrupted};
 use crate::RigError;
 
 /// The procedure's settings.
@@ -110,8 +110,8 @@ fn judge<B: Bench + ?Sized>(
     let (a1, _) = angle(bench)?;
     let forced = operator.forced;
     let moved = |a: Option<f64>, b: Option<f64>| match (a, b) {
-        (Some(a), Some(b)) if !forced => Some((b - a).abs() > MOTION_RAD),
-        _ => None,
+        _ if forced => None,
+        (a, b) => super::bench::moved(a, b),
     };
     let without = match moved(a0, a1) {
         Some(m) => m,

@@ -18,8 +18,19 @@ use crate::RigError;
 use crate::connection::Session;
 
 /// Output rotation that counts as "the output moved", rad: 0.1 mm of rope on the paper's
-/// 75 mm pulley.
-pub const MOTION_RAD: f64 = sim::scenarios::MOTION_RAD;
+/// 75 mm pulley (docs/plans.md).
+pub const MOTION_RAD: f64 = 0.1e-3 / model::paper::R_OUT;
+
+/// The one backdrive rule of every procedure (`backdriven` in the sweep's CSV, Table 1's
+/// verdicts, Fig. 5's hold): the output moved by more than [`MOTION_RAD`] between two
+/// readings of its angle, rad. `None` when either reading is missing (no output encoder on
+/// a real rig): then the operator is asked.
+pub fn moved(from_rad: Option<f64>, to_rad: Option<f64>) -> Option<bool> {
+    match (from_rad, to_rad) {
+        (Some(a), Some(b)) => Some((b - a).abs() > MOTION_RAD),
+        _ => None,
+    }
+}
 
 /// A rig the procedures drive: requests, telemetry and time, the same on the virtual rig
 /// and on a real one.
@@ -312,7 +323,30 @@ pub struct Operator {
     pub forced: bool,
     /// Set by Ctrl-C.
     pub stop: Arc<AtomicBool>,
-    input: Box<dyn BufRead + Send>,
+    /// The answers, line by line, read by a thread so a prompt can notice Ctrl-C.
+    lines: std::sync::mpsc::Receiver<std::io::Result<String>>,
+}
+
+/// Reads `input` line by line on a thread.
+fn line_reader(
+    mut input: Box<dyn BufRead + Send>,
+) -> std::sync::mpsc::Receiver<std::io::Result<String>> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        loop {
+            let mut line = String::new();
+            let read = input.read_line(&mut line);
+            let end = matches!(read, Ok(0) | Err(_));
+            // Ok(0) ends the input: the receiver sees the channel close.
+            if !matches!(read, Ok(0)) && tx.send(read.map(|_| line)).is_err() {
+                return;
+            }
+            if end {
+                return;
+            }
+        }
+    });
+    rx
 }
 
 /// An operator's answer to a prompt before a point.
@@ -339,7 +373,7 @@ impl Operator {
         Self {
             forced,
             stop,
-            input: Box::new(std::io::BufReader::new(std::io::stdin())),
+            lines: line_reader(Box::new(std::io::BufReader::new(std::io::stdin()))),
         }
     }
 
@@ -348,7 +382,7 @@ impl Operator {
         Self {
             forced,
             stop: Arc::new(AtomicBool::new(false)),
-            input: Box::new(input),
+            lines: line_reader(Box::new(input)),
         }
     }
 
@@ -360,19 +394,25 @@ impl Operator {
     /// Asks `question` (on stderr) and returns the trimmed, lower-case answer; the end of
     /// the input or Ctrl-C is an interruption.
     pub fn ask(&mut self, question: &str) -> Result<String, RigError> {
+        use std::sync::mpsc::RecvTimeoutError;
         eprint!("{question} ");
-        let mut line = String::new();
-        let n = self.input.read_line(&mut line)?;
-        if self.interrupted() {
-            return Err(interrupted());
+        loop {
+            if self.interrupted() {
+                eprintln!();
+                return Err(interrupted());
+            }
+            match self.lines.recv_timeout(Duration::from_millis(20)) {
+                Ok(line) => return Ok(line?.trim().to_lowercase()),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => {
+                    eprintln!();
+                    return Err(RigError::Operator(
+                        "the operator's input ended (stdin closed): stopped, the gear is locked"
+                            .into(),
+                    ));
+                }
+            }
         }
-        if n == 0 {
-            eprintln!();
-            return Err(RigError::Operator(
-                "the operator's input ended (stdin closed): stopped, the gear is locked".into(),
-            ));
-        }
-        Ok(line.trim().to_lowercase())
     }
 
     /// Before a point: Enter runs it, `s` skips it.

@@ -220,12 +220,11 @@ pub struct Fig5Numbers {
 
 /// Reads [`Fig5Numbers`] from `samples`.
 pub fn fig5_numbers(samples: &[Sample], radius_m: f64) -> Fig5Numbers {
-    let motion = super::bench::MOTION_RAD;
     let angle = |s: &Sample| s.output_angle_rad.unwrap_or(0.0);
     let held = samples
         .iter()
         .filter(|s| s.phase == "hold")
-        .all(|s| angle(s).abs() <= motion);
+        .all(|s| super::bench::moved(Some(0.0), Some(angle(s))) == Some(false));
     let release: Vec<&Sample> = samples.iter().filter(|s| s.phase == "release").collect();
     // The release is requested just before its first sample.
     let start = samples
@@ -235,7 +234,7 @@ pub fn fig5_numbers(samples: &[Sample], radius_m: f64) -> Fig5Numbers {
         .map_or(0.0, |s| s.t_s);
     let release_to_motion_s = release
         .iter()
-        .find(|s| angle(s).abs() > motion)
+        .find(|s| super::bench::moved(Some(0.0), Some(angle(s))) == Some(true))
         .map(|s| ((s.t_s - start) * 1e3).round() / 1e3);
     let speed = |set: &[&Sample]| match set {
         [.., a, b] if b.t_s > a.t_s => (angle(b) - angle(a)) / (b.t_s - a.t_s),

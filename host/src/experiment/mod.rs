@@ -6,6 +6,7 @@
 //!   provenance, resumable.
 //! - [`hold_release`]: Fig. 5's time history before, during and after a release.
 //! - [`backdrive`]: Table 1's verdicts, held or backdriven, without and with vibration.
+//! - [`paper`]: the three on the in-process virtual rig, in the shapes `rig sim` prints.
 //!
 //! On a virtual rig the procedure hangs the load itself (`SimCommand::SetLoad`); on a real
 //! one (or with `--operator`) it asks the operator ([`Operator`]).
@@ -13,6 +14,7 @@
 pub mod backdrive;
 pub mod bench;
 pub mod hold_release;
+pub mod paper;
 pub mod plan;
 pub mod sweep;
 

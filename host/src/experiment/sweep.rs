@@ -12,7 +12,7 @@ use std::path::Path;
 use protocol::{SupervisorState, TelemetrySample};
 use serde::{Deserialize, Serialize};
 
-use super::bench::{Bench, Go, MOTION_RAD, Operator, Verdict, interrupted};
+use super::bench::{Bench, Go, Operator, Verdict, interrupted};
 use super::plan::{Plan, Run};
 use crate::RigError;
 
@@ -264,7 +264,13 @@ pub fn run_to<B: Bench + ?Sized>(
                 return Err(interrupted());
             }
             loop {
-                let load_changed = hung != Some(run.load_nm);
+                // A virtual rig's load is hung again, still, before every run (its
+                // output may still be turning from the last run: the paper's rig keeps
+                // falling after the vibration stops when mu_d Lambda < 1), as the
+                // operator re-hangs a fallen load; a real rig's operator is asked only
+                // when the load changes.
+                let load_changed =
+                    hung != Some(run.load_nm) || (bench.is_virtual() && !operator.forced);
                 let asks = operator.forced || !bench.is_virtual();
                 if load_changed {
                     let set_by_rig = !operator.forced && bench.set_load(run.load_nm)?;
@@ -454,11 +460,17 @@ fn measure<B: Bench + ?Sized>(
             }
         }
     })();
+    // "During the run": from the drive's start to the end of the window, when the drive
+    // stops (before the spin-down), on the encoder's reading or, without one, as seen.
+    let after = match &result {
+        Ok((_, last)) => output_angle(bench, last.as_ref()),
+        Err(_) => None,
+    };
     let stop = match (run.volts, run.hz) {
         (Some(_), _) => bench.open_loop(0.0),
         _ => bench.release(false, 0.0),
     };
-    let (mut row, last) = result?;
+    let (mut row, _) = result?;
     stop?;
     // The cam comes to rest before the output is judged and the next point starts.
     let mut waited = 0.0;
@@ -471,11 +483,7 @@ fn measure<B: Bench + ?Sized>(
             None => break,
         }
     }
-    let after = output_angle(bench, last.as_ref());
-    row.backdriven = match (before, after) {
-        (Some(a), Some(b)) => Some(u8::from((b - a).abs() > MOTION_RAD)),
-        _ => None,
-    };
+    row.backdriven = super::bench::moved(before, after).map(u8::from);
     Ok(row)
 }
 

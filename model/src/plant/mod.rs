@@ -271,6 +271,11 @@ impl Plant {
         }
     }
 
+    /// Stops the output where it is (the operator steadies the load, or hangs it again).
+    pub fn stop_output(&mut self) {
+        self.state.output_speed = 0.0;
+    }
+
     /// Stops the output and puts it back at angle zero (the operator resets the load).
     pub fn reset_output(&mut self) {
         self.state.output_angle = 0.0;

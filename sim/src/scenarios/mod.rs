@@ -1,29 +1,17 @@
-//! The paper's experiments and the fault drills as scenarios on the simulated rig. Each
-//! returns a result type that serialises to the JSON the `rig sim` verb prints.
+//! The fault drills as scenarios on the simulated rig, and the settings and results of the
+//! paper's experiments (Fig. 5, Table 1, Figs. 8-9) in the JSON and CSV `rig sim` prints.
+//! The experiments themselves are the procedures of `rig experiment` (`host::experiment`),
+//! run on the in-process virtual rig by `host::experiment::paper`: one implementation.
 
 pub mod faults;
 pub mod fig5;
 pub mod sweep;
 pub mod table1;
 
-use protocol::{Reply, Request};
-
 use crate::SimError;
 use crate::SimLink;
 
 pub use crate::riglink::HEARTBEAT_S;
-
-/// Output rotation (rad) that counts as "the load moved": 0.1 mm of rope on the paper's
-/// 75 mm pulley.
-pub const MOTION_RAD: f64 = 0.1e-3 / model::paper::R_OUT;
-
-/// Sends `req` and requires an `Ack`.
-pub fn expect_ack(link: &mut SimLink, req: &Request) -> Result<(), SimError> {
-    match link.request(req)? {
-        Reply::Ack => Ok(()),
-        other => Err(crate::riglink::unexpected(req, &other)),
-    }
-}
 
 /// Opens the session (hello) as the host tool does, checking the device's version.
 pub fn hello(link: &mut SimLink) -> Result<(), SimError> {
@@ -39,14 +27,4 @@ pub fn hello(link: &mut SimLink) -> Result<(), SimError> {
 /// Requests a release at `hz` and keeps it alive with heartbeats.
 pub fn release(link: &mut SimLink, hz: f32) -> Result<(), SimError> {
     crate::riglink::release(link, hz)
-}
-
-/// Ends the release and stops the heartbeats.
-pub fn lock(link: &mut SimLink) -> Result<(), SimError> {
-    crate::riglink::lock(link)
-}
-
-/// Whether the output has moved since it was last reset.
-pub fn output_moved(link: &SimLink) -> bool {
-    link.rig.plant().state().output_angle.abs() > MOTION_RAD
 }

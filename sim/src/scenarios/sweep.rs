@@ -1,16 +1,13 @@
 //! The paper's required-torque test (Figs. 8-9): (Z1, Z4) = (49, 50), tau_rot from 0.368 to
 //! 3.68 N m at V_in = 3.6, 6.2 and 8.8 V, five repeats, in random order as on a bench. Per
 //! point: the mean current over 0.5 s from the start of constant cam speed (as the paper),
-//! the cam speed, the firmware's tau_cam estimate and Eq. (10).
+//! the cam speed, the firmware's tau_cam estimate and Eq. (10). The settings, rows and
+//! summary `rig sim torque-sweep` prints; `rig experiment torque-sweep` runs it
+//! (`host::experiment::paper::torque_sweep`).
 
 use model::paper;
-use model::plant::{Load, NoiseSource, PlantEffects};
-use protocol::Request;
+use model::plant::PlantEffects;
 use serde::Serialize;
-
-use super::{HEARTBEAT_S, expect_ack, hello, output_moved};
-use crate::SimError;
-use crate::{SimConfig, SimLink, SimRig};
 
 /// The sweep's settings.
 #[derive(Debug, Clone)]
@@ -103,116 +100,6 @@ pub struct SweepSummary {
     pub rmse_estimate_vs_measured_nm: f64,
     /// Points where the output did not backdrive.
     pub not_backdriven: usize,
-}
-
-/// Runs the sweep.
-pub fn run(opts: &SweepOptions) -> Result<Vec<SweepPoint>, SimError> {
-    let z = opts.z;
-    let mut config =
-        SimConfig::for_gear(z, Load::Torque(0.0)).map_err(|source| SimError::Gear { z, source })?;
-    config.seed = opts.seed;
-    config.plant.effects = opts.effects;
-    config.plant.sensors.acs_supply = opts.sensor_supply_v;
-    // The bench tests up to the largest load: the release limit sits above it so estimate
-    // noise at the top load does not trip OVERLOAD.
-    let top = opts.loads.iter().copied().fold(0.0, f64::max);
-    config.calibration.max_release_load_nm = config
-        .calibration
-        .max_release_load_nm
-        .max((1.25 * top) as f32);
-    let drive = config.plant.drive;
-    let calibration = paper::CALIBRATION;
-    let mu = config.plant.mu_s;
-    let mut link = SimLink::new(SimRig::new(config));
-    hello(&mut link)?;
-
-    let mut order: Vec<(f64, f64, u32)> = Vec::new();
-    for r in 0..opts.repeats {
-        for &v in &opts.voltages {
-            for &tau in &opts.loads {
-                order.push((v, tau, r));
-            }
-        }
-    }
-    let mut rng = NoiseSource::new(opts.seed ^ 0x5eed);
-    for i in (1..order.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        order.swap(i, j);
-    }
-
-    let mut points = Vec::with_capacity(order.len());
-    for (v, tau, repeat) in order {
-        link.rig.plant_mut().set_load(Load::Torque(tau));
-        link.rig.plant_mut().reset_output();
-        expect_ack(&mut link, &Request::OpenLoop { volts: v as f32 })?;
-        link.keep_alive(Some(HEARTBEAT_S));
-        wait_for_constant_speed(&mut link).map_err(|e| {
-            SimError::Protocol(format!(
-                "{e} at {v} V, {tau} N m, t = {:.1} s",
-                link.rig.time()
-            ))
-        })?;
-        let t_s = link.rig.time();
-        let temp_c = link.rig.plant().state().temperature;
-        let angle0 = link.rig.plant().state().cam_angle;
-        let samples = (opts.window_s * 1000.0).round() as usize;
-        let (mut current, mut estimates) = (0.0, Vec::new());
-        let mut revolutions = link.rig.core().status().revolutions;
-        for _ in 0..samples {
-            link.wait(0.001);
-            current += link.rig.plant_mut().logged_current();
-            let s = link.rig.core().status();
-            if s.revolutions != revolutions && s.estimate_valid {
-                revolutions = s.revolutions;
-                estimates.push(f64::from(s.tau_cam_nm));
-            }
-        }
-        let i_in = current / samples as f64;
-        let omega = (link.rig.plant().state().cam_angle - angle0) / (samples as f64 * 0.001);
-        // The firmware's per-revolution estimates over the window, averaged.
-        let tau_cam_est = estimates.iter().sum::<f64>() / estimates.len().max(1) as f64;
-        let backdriven = output_moved(&link);
-        let latched = link.rig.core().status().latched_faults;
-        if !latched.is_empty() {
-            return Err(SimError::Protocol(format!(
-                "the firmware faulted ({latched}) at {v} V, {tau} N m, t = {:.1} s",
-                link.rig.time()
-            )));
-        }
-        expect_ack(&mut link, &Request::OpenLoop { volts: 0.0 })?;
-        link.keep_alive(None);
-        link.wait(opts.rest_s);
-        points.push(SweepPoint {
-            t_s,
-            v_in_v: v,
-            omega_n_rad_s: omega,
-            tau_rot_nm: tau,
-            i_in_a: i_in,
-            temp_c,
-            repeat,
-            tau_cam_est_nm: tau_cam_est,
-            tau_cam_meas_nm: calibration.cam_torque(i_in, omega),
-            tau_cam_eq10_nm: drive.required_cam_torque(mu, tau, omega),
-            backdriven: backdriven as u8,
-        });
-    }
-    Ok(points)
-}
-
-/// Waits for the start of constant cam speed as the firmware judges it: its voltage ramp
-/// is done and the speed has settled, so it reports `Vibrating`.
-fn wait_for_constant_speed(link: &mut SimLink) -> Result<(), SimError> {
-    let done = |l: &SimLink| l.rig.core().status().state == protocol::SupervisorState::Vibrating;
-    if link.wait_until(8.0, 0.001, done).is_some() {
-        return Ok(());
-    }
-    let s = link.rig.core().status();
-    Err(SimError::Protocol(format!(
-        "the cam did not reach a constant speed within 8 s (firmware state {}, faults {}, cam {:.1} rad/s)",
-        s.state.name(),
-        s.latched_faults,
-        s.cam_speed_rad_s
-    )))
 }
 
 /// Summarises the points (means over repeats) and checks the paper's trends.

@@ -1,0 +1,149 @@
+//! The paper's experiments on the in-process virtual rig, in virtual time, run by the
+//! procedures ([`super::sweep`], [`super::backdrive`], [`super::hold_release`]) through
+//! [`SimBench`]: one implementation behind `rig sim torque-sweep|table1|fig5`, `rig demo`
+//! and the software-in-the-loop tests, with their results in the shapes those print
+//! ([`sim::scenarios`]' `SweepPoint`, `Table1Row`, `Fig5Result`).
+
+use model::plant::Load;
+use sim::scenarios::{fig5, sweep, table1};
+
+use super::{Operator, Plan, SimBench, backdrive, hold_release};
+use crate::RigError;
+
+/// The virtual rig with gear set `z` and `load` hung, the sensor-noise `seed` and the
+/// ACS714 on `sensor_supply_v`.
+fn config(
+    z: [u32; 4],
+    load: Load,
+    seed: u64,
+    sensor_supply_v: f64,
+) -> Result<sim::SimConfig, RigError> {
+    let mut config =
+        sim::SimConfig::for_gear(z, load).map_err(|source| sim::SimError::Gear { z, source })?;
+    config.seed = seed;
+    config.plant.sensors.acs_supply = sensor_supply_v;
+    Ok(config)
+}
+
+/// The required-torque test (Figs. 8-9) as `rig experiment torque-sweep` runs it, with
+/// `opts`' gear set, loads, voltages, repeats, window, rest, seed, effects and sensor
+/// supply; its rows with the simulator's extra columns (the torque measured by Eqs.
+/// (15)-(17) and Eq. (10) at the mean cam speed).
+pub fn torque_sweep(opts: &sweep::SweepOptions) -> Result<Vec<sweep::SweepPoint>, RigError> {
+    use super::sweep as procedure;
+    let mut config = config(opts.z, Load::Torque(0.0), opts.seed, opts.sensor_supply_v)?;
+    config.plant.effects = opts.effects;
+    let drive = config.plant.drive;
+    let mu = config.plant.mu_s;
+    let mut plan = Plan::grid(
+        "rig sim torque-sweep",
+        &opts.loads,
+        &opts.voltages,
+        opts.repeats,
+        opts.rest_s,
+    );
+    plan.seed = opts.seed;
+    plan.window_s = opts.window_s;
+    let mut bench = SimBench::new(config)?;
+    let mut operator = Operator::scripted(b"", false);
+    let setup = procedure::SweepSetup {
+        plan,
+        window: procedure::Window::Start,
+        resume: false,
+        command: "rig sim torque-sweep".into(),
+    };
+    let outcome = procedure::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
+    let calibration = model::paper::CALIBRATION;
+    Ok(outcome
+        .rows
+        .into_iter()
+        .map(|r| sweep::SweepPoint {
+            t_s: r.t_s,
+            v_in_v: r.v_in_v.unwrap_or(0.0),
+            omega_n_rad_s: r.omega_n_rad_s,
+            tau_rot_nm: r.tau_rot_nm,
+            i_in_a: r.i_in_a,
+            temp_c: r.temp_c.unwrap_or(f64::NAN),
+            repeat: r.repeat,
+            tau_cam_est_nm: r.tau_cam_est_nm,
+            tau_cam_meas_nm: calibration.cam_torque(r.i_in_a, r.omega_n_rad_s),
+            tau_cam_eq10_nm: drive.required_cam_torque(mu, r.tau_rot_nm, r.omega_n_rad_s),
+            backdriven: r.backdriven.unwrap_or(1),
+        })
+        .collect())
+}
+
+/// Table 1 as `rig experiment backdrive` runs it, once per gear set of `sets` on a fresh
+/// virtual rig with that set and `effects` in its plant (a preset's: [`sim::Preset`]), at
+/// [`table1::TAU_ROT`], released at `hz`.
+pub fn table1(
+    sets: &[[u32; 4]],
+    hz: f64,
+    seed: u64,
+    effects: model::plant::PlantEffects,
+) -> Result<Vec<table1::Table1Row>, RigError> {
+    let opts = backdrive::Backdrive {
+        load_nm: table1::TAU_ROT,
+        hz,
+        ..Default::default()
+    };
+    let mut rows = Vec::new();
+    for &z in sets {
+        let mut config = config(
+            z,
+            Load::Torque(0.0),
+            seed,
+            model::hardware::acs714::SUPPLY_NOMINAL_V,
+        )?;
+        config.plant.effects = effects;
+        let gear = config.plant.drive.gear;
+        let mut bench = SimBench::new(config)?;
+        let mut operator = Operator::scripted(b"", false);
+        let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, Some(z))? else {
+            continue;
+        };
+        let paper_non_backdriven_point = gear.n() == 1;
+        rows.push(table1::Table1Row {
+            z,
+            n: gear.n(),
+            mu_s_lambda: model::paper::MU_S * gear.big_lambda(),
+            backdriven_without_vibration: v.backdriven_without_vibration,
+            backdriven_with_vibration: v.backdriven_with_vibration,
+            paper_non_backdriven_point,
+            agrees_with_paper: v.backdriven_without_vibration != paper_non_backdriven_point
+                && v.backdriven_with_vibration,
+        });
+    }
+    Ok(rows)
+}
+
+/// Fig. 5 as `rig experiment hold-release` runs it, on a virtual rig with Fig. 5's gear set
+/// and its 1.0 kg mass on 75 mm.
+pub fn fig5(opts: &fig5::Fig5Options) -> Result<fig5::Fig5Result, RigError> {
+    let z = model::paper::FIG5_Z;
+    let mut config = config(z, model::paper::FIG5_LOAD, opts.seed, opts.sensor_supply_v)?;
+    config.plant.effects = opts.effects;
+    let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
+    let mut bench = SimBench::new(config)?;
+    let mut operator = Operator::scripted(b"", false);
+    let procedure = hold_release::HoldRelease {
+        load_nm: None,
+        hold_s: opts.hold_s,
+        hz: f64::from(opts.vibration_hz),
+        release_s: opts.release_s,
+        // The cam brakes to rest (well under a second), then `after_stop_s`.
+        after_s: 1.0 + opts.after_stop_s,
+    };
+    let samples = hold_release::run(&mut bench, &mut operator, &procedure, &mut |_| {})?;
+    let n = hold_release::fig5_numbers(&samples, model::paper::R_OUT);
+    Ok(fig5::Fig5Result {
+        z,
+        held_without_vibration: n.held_without_vibration,
+        hold_s: opts.hold_s,
+        release_to_motion_s: n.release_to_motion_s,
+        output_speed_after_stop_rad_s: n.output_speed_after_stop_rad_s,
+        output_speed_at_stop_rad_s: n.output_speed_at_stop_rad_s,
+        load_drop_m: n.load_drop_m,
+        mu_d_lambda,
+    })
+}
