@@ -164,8 +164,9 @@ pub struct SupervisorConfig {
     /// released latches `LOAD_LIMIT`.
     pub max_release_load_nm: f32,
     /// Relative allowance for the load estimate's error above `max_release_load_nm`
-    /// before `LOAD_LIMIT` latches (the estimate is good to about 2 % at the cap, see the
-    /// closed-loop tests; 0.05 keeps a load at the cap itself from tripping on noise).
+    /// before `LOAD_LIMIT` latches, and above the calibration's release limit before
+    /// `OVERLOAD` (the estimate is good to about 2 % at the cap, see the closed-loop
+    /// tests; 0.05 keeps a load at the limit itself from tripping on noise).
     pub load_cap_tolerance: f32,
     /// Relative speed error within which the cam counts as at speed.
     pub at_speed_tolerance: f32,
@@ -185,7 +186,8 @@ pub struct SupervisorConfig {
     pub weak_revolutions: u8,
     /// Revolutions ignored after reaching speed (settling) before the load checks run.
     pub settle_revolutions: u8,
-    /// Consecutive revolutions above `max_release_load_nm` before `OVERLOAD`.
+    /// Consecutive revolutions above the release limit (plus `load_cap_tolerance`) before
+    /// `OVERLOAD`.
     pub overload_revolutions: u8,
     /// Consecutive revolutions above the board's load cap (`max_release_load_nm` and its
     /// tolerance) before `LOAD_LIMIT`.
