@@ -8,11 +8,13 @@
 
 mod effects;
 mod motor;
+pub mod pwm;
 mod rng;
 mod sensors;
 
 pub use effects::PlantEffects;
 pub use motor::MotorParams;
+pub use pwm::AdcSampling;
 pub use rng::NoiseSource;
 pub use sensors::SensorParams;
 
@@ -64,8 +66,13 @@ pub struct PlantParams {
     pub i_hat: f64,
     /// The load.
     pub load: Load,
-    /// H-bridge supply, V.
+    /// H-bridge supply, V (open-circuit: the bus sags under load through
+    /// `supply_resistance`).
     pub supply: f64,
+    /// Internal resistance of the supply and its leads, ohm
+    /// ([`crate::hardware::board::SUPPLY_RESISTANCE_OHM`]).
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub supply_resistance: f64,
     /// Whether the drive can take power back (synchronous H-bridge, backdrivable gearhead).
     /// Without it the current cannot reverse and the carrier's inertial power is lost, so the
     /// inertia term of Eq. (9) no longer averages out (`inertia-rectification`).
@@ -95,6 +102,7 @@ impl PlantParams {
             i_hat: paper::I_HAT,
             load,
             supply: board::BRIDGE_SUPPLY_V,
+            supply_resistance: board::SUPPLY_RESISTANCE_OHM,
             // The paper's bench supply cannot sink current, and actuators in general do not
             // return negative power (the paper's ref. [18]).
             regeneration: board::REGENERATIVE_DECAY,
@@ -147,6 +155,9 @@ pub struct PlantState {
     pub gauge_torque: f64,
     /// Voltage across the motor over the last step, V.
     pub motor_voltage: f64,
+    /// Bridge supply at the board over the last step (after the supply's internal
+    /// resistance), V: what the bus divider measures.
+    pub bus_voltage: f64,
 }
 
 /// Energy bookkeeping, J, for the balance check.
@@ -170,6 +181,31 @@ pub struct EnergyLedger {
     pub unreturned: f64,
 }
 
+/// The true torque the cam delivers to the carrier (tooth and bush friction against the
+/// axial motion and the carrier's inertia, Eq. (9)), summed over whole cam revolutions
+/// since the start: what the firmware's per-revolution tau_cam estimate stands for. Two
+/// readings give the mean over the revolutions between them
+/// ([`CamTorqueLedger::mean_since`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CamTorqueLedger {
+    /// Whole cam revolutions completed.
+    pub revolutions: u64,
+    /// Time those revolutions took, s.
+    pub seconds: f64,
+    /// Integral of the cam torque over that time, N m s.
+    pub torque_seconds: f64,
+}
+
+impl CamTorqueLedger {
+    /// Mean cam torque over the revolutions completed between `earlier` and this reading,
+    /// N m; `None` when none completed.
+    pub fn mean_since(&self, earlier: &CamTorqueLedger) -> Option<f64> {
+        let dt = self.seconds - earlier.seconds;
+        (self.revolutions > earlier.revolutions && dt > 0.0)
+            .then(|| (self.torque_seconds - earlier.torque_seconds) / dt)
+    }
+}
+
 /// The simulated rig.
 #[derive(Debug, Clone)]
 pub struct Plant {
@@ -190,6 +226,13 @@ pub struct Plant {
     thermal: [f64; 2],
     /// The comparator tripped the timer's break: the bridge is off.
     break_tripped: bool,
+    /// The PWM ripple at the end of the last step: duty magnitude and the signed
+    /// peak-to-peak (negative in reverse; zero with the bridge off).
+    ripple: (f64, f64),
+    /// The cam torque over whole revolutions, and the revolution under way: its start
+    /// angle, seconds and torque integral.
+    cam_ledger: CamTorqueLedger,
+    cam_rev: (f64, f64, f64),
 }
 
 impl Plant {
@@ -199,6 +242,7 @@ impl Plant {
             shaft: params.output_shaft(),
             state: PlantState {
                 temperature: params.motor.ambient_c,
+                bus_voltage: params.supply,
                 ..Default::default()
             },
             rng: NoiseSource::new(seed),
@@ -211,6 +255,9 @@ impl Plant {
                 1.0 / params.motor.thermal_capacity,
             ],
             break_tripped: false,
+            ripple: (0.0, 0.0),
+            cam_ledger: CamTorqueLedger::default(),
+            cam_rev: (0.0, 0.0, 0.0),
             params,
         }
     }
@@ -304,10 +351,59 @@ impl Plant {
             + 0.5 * self.shaft.i_hat * s.output_speed * s.output_speed
     }
 
-    /// ADC code of the current sensor now (with noise and quantisation).
+    /// ADC code of the current sensor now (with noise and quantisation), sampled at the
+    /// ADC's instant in the PWM period ([`SensorParams::sampling`]): the mean current plus
+    /// the ripple there ([`pwm`]).
     pub fn current_adc(&mut self) -> u16 {
-        let i = self.state.current;
+        let i = self.sampled_current();
         self.params.sensors.current_to_adc(i, &mut self.rng)
+    }
+
+    /// The instantaneous winding current at the ADC's sampling instant, A.
+    pub fn sampled_current(&self) -> f64 {
+        let (duty, pp) = self.ripple;
+        let mean = self.state.current;
+        if pp == 0.0 {
+            return mean;
+        }
+        let phase = self.params.sensors.sampling.phase();
+        let i = mean + pwm::ripple_at(phase, duty, pp.abs()) * pp.signum();
+        // Without regeneration the current does not cross zero against the drive (the
+        // discontinuous conduction this implies for the mean is not modelled).
+        if !self.params.regeneration && (i < 0.0) != (pp < 0.0) && i != 0.0 {
+            0.0
+        } else {
+            i
+        }
+    }
+
+    /// Peak-to-peak PWM ripple of the winding current now, A (zero with the bridge off).
+    pub fn ripple_peak_to_peak(&self) -> f64 {
+        self.ripple.1.abs()
+    }
+
+    /// The bridge supply at the board now, V (what the firmware's bus divider reads).
+    pub fn bus_voltage(&self) -> f64 {
+        self.state.bus_voltage
+    }
+
+    /// Changes the bridge's supply (open-circuit) voltage, V (the bench turns its knob).
+    pub fn set_supply(&mut self, volts: f64) {
+        self.params.supply = volts;
+        if self.ripple.1 == 0.0 {
+            self.state.bus_voltage = volts;
+        }
+    }
+
+    /// Changes the current sensor's supply, V (the ACS714 is ratiometric: its zero and
+    /// sensitivity follow).
+    pub fn set_sensor_supply(&mut self, volts: f64) {
+        self.params.sensors.acs_supply = volts;
+    }
+
+    /// The true cam torque over the whole revolutions completed so far.
+    pub fn cam_torque_ledger(&self) -> CamTorqueLedger {
+        self.cam_ledger
     }
 
     /// The current a logger on the sensor reads (the `current-sensor-offset` effect included), A.
@@ -347,9 +443,17 @@ impl Plant {
         let m = &p.motor;
         let omega = self.state.cam_speed;
 
-        // Electrical: exact R-L response for this step's back-EMF.
-        let v_bridge = drive.duty.clamp(-1.0, 1.0) * p.supply;
+        // Electrical: exact R-L response for this step's back-EMF, on the bus the supply's
+        // internal resistance leaves at the last step's supply current d i (sign-magnitude:
+        // the supply carries the winding current during the on-time only).
+        let duty = drive.duty.clamp(-1.0, 1.0);
         let i0 = self.state.current;
+        let bus = if drive.enabled {
+            p.supply - p.supply_resistance * duty * i0
+        } else {
+            p.supply
+        };
+        let v_bridge = duty * bus;
         let (i1, i_mean, v_motor) = if drive.enabled {
             let [decay, mean_factor, conductance] = winding;
             let i_ss = (v_bridge - m.ke_cam() * omega) * conductance;
@@ -458,11 +562,45 @@ impl Plant {
         led.load_work += tau_rot * wt_mean * dt;
         led.output_friction += -out_friction * wt_mean * dt;
 
+        // The true cam torque (Eq. 9 on the carrier side, with the carrier's share of the
+        // cam's acceleration), over whole revolutions.
+        if coupled {
+            let accel = (new_omega - omega) / dt;
+            let tau = t_axial + t_carrier + mass * e * e * s * s * accel;
+            let (start, secs, integral) = &mut self.cam_rev;
+            *secs += dt;
+            *integral += tau * dt;
+            let turned = self.state.cam_angle + dtheta - *start;
+            if turned.abs() >= core::f64::consts::TAU {
+                let led = &mut self.cam_ledger;
+                led.revolutions += 1;
+                led.seconds += *secs;
+                led.torque_seconds += *integral;
+                *start += core::f64::consts::TAU * turned.signum();
+                *secs = 0.0;
+                *integral = 0.0;
+            }
+        } else {
+            self.cam_rev = (self.state.cam_angle + dtheta, 0.0, 0.0);
+        }
+
         self.state.current = i1;
-        // The comparator watches the pin continuously: past its threshold the break cuts
-        // the bridge within microseconds, modelled as from the end of this step.
+        // The PWM ripple around the mean (the average model's current) for the sampling.
+        self.ripple = if drive.enabled && v_motor == v_bridge {
+            let pp = pwm::ripple_peak_to_peak(duty, bus, m.inductance);
+            (duty.abs(), if duty < 0.0 { -pp } else { pp })
+        } else {
+            (0.0, 0.0)
+        };
+        // The comparator watches the pin continuously, the ripple's peaks included: past
+        // its threshold the break cuts the bridge within microseconds, modelled as from the
+        // end of this step.
         if let Some(threshold) = self.params.break_threshold_v
-            && self.params.sensors.pin_voltage(i1) > threshold
+            && self
+                .params
+                .sensors
+                .pin_voltage(i1 + 0.5 * self.ripple.1.abs())
+                > threshold
         {
             self.break_tripped = true;
         }
@@ -471,6 +609,7 @@ impl Plant {
         self.state.output_speed = new_wt;
         self.state.output_angle += wt_mean * dt;
         self.state.motor_voltage = v_motor;
+        self.state.bus_voltage = bus;
         self.state.time += dt;
     }
 }

@@ -1,6 +1,7 @@
 //! The rig's sensors as the firmware sees them: an ACS714 hall current sensor through a
 //! divider into a 12-bit ADC, and a quadrature encoder (CUI AMT102-V) on the cam shaft.
 
+use super::pwm::AdcSampling;
 use super::rng::NoiseSource;
 use crate::hardware::{acs714, adc, amt102, divider};
 
@@ -25,6 +26,9 @@ pub struct SensorParams {
     pub adc_bits: u32,
     /// Encoder pulses per revolution per channel (the AMT102-V is set to 2048).
     pub encoder_ppr: u32,
+    /// When in the bridge's PWM period the ADC samples the current (the ripple it sees).
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub sampling: AdcSampling,
 }
 
 impl Default for SensorParams {
@@ -38,6 +42,7 @@ impl Default for SensorParams {
             adc_reference: adc::VREF_V,
             adc_bits: adc::BITS,
             encoder_ppr: amt102::PPR,
+            sampling: AdcSampling::Synchronous,
         }
     }
 }
