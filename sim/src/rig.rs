@@ -6,10 +6,10 @@
 //! The virtual rig also serves `Request::Simulation` commands, the operator's and the
 //! bench's actions, so procedures can hang a load through the same link a real rig uses
 //! (real firmware refuses them with `SimulationOnly`): `SetLoad` hangs a torque on the
-//! plant's output; `SetSupplyVoltage` and `SetSensorSupply` are recorded in [`SimBench`]
-//! and acknowledged, but the plant keeps its own supplies (`PlantParams::supply`,
-//! `SensorParams::acs_supply`): it has no way yet to change them while it runs, which
-//! another issue adds to `model`.
+//! plant's output; `SetSupplyVoltage` sets the bridge supply's open-circuit voltage (the
+//! bus the firmware measures sags from it through the supply's internal resistance) and
+//! `SetSensorSupply` the ACS714's supply (ratiometric: its zero and sensitivity follow);
+//! both are also recorded in [`SimBench`].
 
 use firmware_core::{BoardInputs, BootInfo, Core, CoreConfig, Inputs};
 use model::plant::{Drive, MotorParams, Plant, PlantParams};
@@ -127,11 +127,9 @@ fn board_plant(mut plant: PlantParams) -> PlantParams {
 /// The bench around the virtual rig, as `Request::Simulation` commands set it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimBench {
-    /// The supply the last `SetSupplyVoltage` asked for, V (recorded; the plant keeps
-    /// its own, see the module documentation).
+    /// The supply the last `SetSupplyVoltage` set, V (the plant's open-circuit supply).
     pub supply_v: Option<f32>,
-    /// The current sensor's supply the last `SetSensorSupply` asked for, V (recorded, as
-    /// above).
+    /// The current sensor's supply the last `SetSensorSupply` set, V.
     pub sensor_supply_v: Option<f32>,
     /// `Simulation` commands served.
     pub commands: u32,
@@ -234,6 +232,8 @@ impl SimRig {
             hw_break: self.plant.break_tripped(),
             // VDDA as the binary measures it through VREFINT.
             vdda_v: self.plant.params().sensors.adc_reference as f32,
+            // The bus divider's reading (its 0.9 ms filter averages the PWM ripple).
+            bus_voltage_v: self.plant.bus_voltage() as f32,
             ..BoardInputs::default()
         });
         // The optional output encoder reads the plant's output angle at its resolution.
@@ -355,11 +355,11 @@ fn serve(command: SimCommand, plant: &mut Plant, bench: &mut SimBench) -> Result
     match command {
         SimCommand::SetLoad { tau_rot_nm } => plant.set_load(Load::Torque(finite(tau_rot_nm)?)),
         SimCommand::SetSupplyVoltage { volts } => {
-            positive(volts)?;
+            plant.set_supply(positive(volts)?);
             bench.supply_v = Some(volts);
         }
         SimCommand::SetSensorSupply { volts } => {
-            positive(volts)?;
+            plant.set_sensor_supply(positive(volts)?);
             bench.sensor_supply_v = Some(volts);
         }
         // A command of a newer protocol this simulator does not model.
