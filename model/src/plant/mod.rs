@@ -16,7 +16,7 @@ pub use effects::PlantEffects;
 pub use motor::MotorParams;
 pub use pwm::AdcSampling;
 pub use rng::NoiseSource;
-pub use sensors::SensorParams;
+pub use sensors::{AdcTransfer, SensorParams};
 
 use crate::effects::{
     axial_corner_speed, axial_friction_speed_factor, carrier_inertia_torque,
@@ -229,6 +229,12 @@ pub struct Plant {
     /// The PWM ripple at the end of the last step: duty magnitude and the signed
     /// peak-to-peak (negative in reverse; zero with the bridge off).
     ripple: (f64, f64),
+    /// The ripple's value at the ADC's sampling instant (signed, A), and the triangle's
+    /// shape there per ampere of ripple for the duty it was computed at: (duty, shape).
+    ripple_sample: f64,
+    ripple_shape: (f64, f64),
+    /// The current sensor chain as one affine map (recomputed when the sensor changes).
+    adc: AdcTransfer,
     /// The cam torque over whole revolutions, and the revolution under way: its start
     /// angle, seconds and torque integral.
     cam_ledger: CamTorqueLedger,
@@ -256,6 +262,9 @@ impl Plant {
             ],
             break_tripped: false,
             ripple: (0.0, 0.0),
+            ripple_sample: 0.0,
+            ripple_shape: (0.0, 0.0),
+            adc: params.sensors.adc_transfer(),
             cam_ledger: CamTorqueLedger::default(),
             cam_rev: (0.0, 0.0, 0.0),
             params,
@@ -356,18 +365,17 @@ impl Plant {
     /// the ripple there ([`pwm`]).
     pub fn current_adc(&mut self) -> u16 {
         let i = self.sampled_current();
-        self.params.sensors.current_to_adc(i, &mut self.rng)
+        self.adc.code(i, &mut self.rng)
     }
 
     /// The instantaneous winding current at the ADC's sampling instant, A.
     pub fn sampled_current(&self) -> f64 {
-        let (duty, pp) = self.ripple;
+        let pp = self.ripple.1;
         let mean = self.state.current;
         if pp == 0.0 {
             return mean;
         }
-        let phase = self.params.sensors.sampling.phase();
-        let i = mean + pwm::ripple_at(phase, duty, pp.abs()) * pp.signum();
+        let i = mean + self.ripple_sample;
         // Without regeneration the current does not cross zero against the drive (the
         // discontinuous conduction this implies for the mean is not modelled).
         if !self.params.regeneration && (i < 0.0) != (pp < 0.0) && i != 0.0 {
@@ -399,6 +407,7 @@ impl Plant {
     /// sensitivity follow).
     pub fn set_sensor_supply(&mut self, volts: f64) {
         self.params.sensors.acs_supply = volts;
+        self.adc = self.params.sensors.adc_transfer();
     }
 
     /// The true cam torque over the whole revolutions completed so far.
@@ -592,6 +601,14 @@ impl Plant {
         } else {
             (0.0, 0.0)
         };
+        // The triangle's shape at the sampling phase changes with the duty only (once per
+        // control step), its height with the bus at every step.
+        let (d, pp) = self.ripple;
+        if self.ripple_shape.0 != d {
+            let phase = self.params.sensors.sampling.phase();
+            self.ripple_shape = (d, pwm::ripple_at(phase, d, 1.0));
+        }
+        self.ripple_sample = pp * self.ripple_shape.1;
         // The comparator watches the pin continuously, the ripple's peaks included: past
         // its threshold the break cuts the bridge within microseconds, modelled as from the
         // end of this step.

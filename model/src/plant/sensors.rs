@@ -60,19 +60,20 @@ impl SensorParams {
 
     /// ADC code for motor current `current` (A), with noise from `rng` and quantisation.
     pub fn current_to_adc(&self, current: f64, rng: &mut NoiseSource) -> u16 {
-        let v_sensor = self.acs_supply / 2.0
-            + self.acs_zero_error
-            + self.sensitivity_at_supply() * current
-            + self.acs_noise * rng.normal_fast();
-        let v_pin = (v_sensor * self.divider).clamp(0.0, self.adc_reference);
+        self.adc_transfer().code(current, rng)
+    }
+
+    /// The sensor chain from amperes to ADC counts as one affine map, for a caller that
+    /// converts at every step ([`AdcTransfer::code`]).
+    pub fn adc_transfer(&self) -> AdcTransfer {
         let full = self.adc_full_scale() as f64;
-        #[allow(
-            clippy::cast_possible_truncation,
-            clippy::cast_sign_loss,
-            reason = "clamped to 0..=full, a u16"
-        )]
-        let code = libm::round(v_pin / self.adc_reference * full).clamp(0.0, full) as u16;
-        code
+        let counts_per_volt = self.divider / self.adc_reference * full;
+        AdcTransfer {
+            zero: (self.acs_supply / 2.0 + self.acs_zero_error) * counts_per_volt,
+            per_amp: self.sensitivity_at_supply() * counts_per_volt,
+            noise: self.acs_noise * counts_per_volt,
+            full,
+        }
     }
 
     /// Noise-free voltage at the ADC pin (and the comparator's input) for `current`, V.
@@ -105,6 +106,36 @@ impl SensorParams {
         )]
         let count = (counts as i64) as u16;
         count
+    }
+}
+
+/// The sensor chain (ACS714, divider, ADC) from amperes to counts at fixed parameters:
+/// code = round(zero + per_amp i + noise z) within 0..=full, z a unit normal draw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdcTransfer {
+    /// Counts (unrounded) at zero current.
+    pub zero: f64,
+    /// Counts per ampere.
+    pub per_amp: f64,
+    /// RMS noise, counts.
+    pub noise: f64,
+    /// Largest code.
+    pub full: f64,
+}
+
+impl AdcTransfer {
+    /// ADC code for `current` (A), with noise from `rng` and quantisation; the pin clamps
+    /// to the ADC's range.
+    pub fn code(&self, current: f64, rng: &mut NoiseSource) -> u16 {
+        let counts = self.zero + self.per_amp * current + self.noise * rng.normal_fast();
+        // Rounded half up; in range, so truncating the shifted value is the floor.
+        #[allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "clamped to 0..=full, a u16"
+        )]
+        let code = (counts + 0.5).clamp(0.0, self.full + 0.25) as u16;
+        code
     }
 }
 
