@@ -216,7 +216,7 @@ pub struct Plant {
     shaft: OutputShaft,
     /// For the (dt, R) they were computed at (R drifts slowly with temperature): the step's
     /// decay exp(-dt R / L), the mean-current factor tau / dt (1 - decay) and 1 / R.
-    decay_cache: (f64, f64, [f64; 3]),
+    decay_cache: (f64, f64, [f64; 4]),
     /// sin and cos of the cam angle they were computed at, and steps until a full
     /// evaluation.
     trig_cache: (f64, f64, f64, u32),
@@ -235,6 +235,15 @@ pub struct Plant {
     ripple_shape: (f64, f64),
     /// The current sensor chain as one affine map (recomputed when the sensor changes).
     adc: AdcTransfer,
+    /// The winding's mean-model current halfway through the last step, A.
+    mid_current: f64,
+    /// The current at which the comparator's pin reaches its threshold, A (infinite
+    /// without one; recomputed when the sensor changes).
+    break_current: f64,
+    /// PWM period over the winding inductance, A per volt of ripple factor d (1 - d) V.
+    ripple_per_volt: f64,
+    /// 1 / the output's inertia (load included).
+    inv_i_hat: f64,
     /// The cam torque over whole revolutions, and the revolution under way: its start
     /// angle, seconds and torque integral.
     cam_ledger: CamTorqueLedger,
@@ -253,7 +262,7 @@ impl Plant {
             },
             rng: NoiseSource::new(seed),
             energy: EnergyLedger::default(),
-            decay_cache: (f64::NAN, f64::NAN, [0.0; 3]),
+            decay_cache: (f64::NAN, f64::NAN, [0.0; 4]),
             trig_cache: (0.0, 0.0, 1.0, 0),
             axial_per_torque: params.drive.gear.axial_force_per_torque(),
             thermal: [
@@ -265,6 +274,14 @@ impl Plant {
             ripple_sample: 0.0,
             ripple_shape: (0.0, 0.0),
             adc: params.sensors.adc_transfer(),
+            mid_current: 0.0,
+            break_current: break_current(&params),
+            ripple_per_volt: if params.motor.inductance > 0.0 {
+                pwm::PERIOD_S / params.motor.inductance
+            } else {
+                0.0
+            },
+            inv_i_hat: 1.0 / params.output_shaft().i_hat,
             cam_ledger: CamTorqueLedger::default(),
             cam_rev: (0.0, 0.0, 0.0),
             params,
@@ -272,16 +289,22 @@ impl Plant {
     }
 
     /// The winding's step response over `dt` at `resistance`: [exp(-dt / tau), the
-    /// mean-current factor tau / dt (1 - exp(-dt / tau)), 1 / R]. Recomputed only when dt or R
-    /// moved by more than 1e-4 relative (the error that leaves is below 1e-8 of a step).
-    fn winding(&mut self, dt: f64, resistance: f64) -> [f64; 3] {
+    /// mean-current factor tau / dt (1 - exp(-dt / tau)), 1 / R, exp(-dt / (2 tau))].
+    /// Recomputed only when dt or R moved by more than 1e-4 relative (the error that leaves
+    /// is below 1e-8 of a step).
+    fn winding(&mut self, dt: f64, resistance: f64) -> [f64; 4] {
         let (cdt, cr, value) = self.decay_cache;
         if cdt == dt && (resistance - cr).abs() <= 1e-4 * cr {
             return value;
         }
         let tau = self.params.motor.inductance / resistance;
         let decay = libm::exp(-dt / tau);
-        let value = [decay, tau / dt * (1.0 - decay), 1.0 / resistance];
+        let value = [
+            decay,
+            tau / dt * (1.0 - decay),
+            1.0 / resistance,
+            libm::sqrt(decay),
+        ];
         self.decay_cache = (dt, resistance, value);
         value
     }
@@ -298,8 +321,9 @@ impl Plant {
         }
         let (s, c, left) = if d.abs() < 0.05 && left > 0 {
             let d2 = d * d;
-            let sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
-            let cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0);
+            // Multiplications by the reciprocals: no divisions in the step's chain.
+            let sd = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0)));
+            let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0));
             (s0 * cd + c0 * sd, c0 * cd - s0 * sd, left - 1)
         } else {
             (sin(angle), cos(angle), 64)
@@ -317,6 +341,7 @@ impl Plant {
     pub fn set_load(&mut self, load: Load) {
         self.params.load = load;
         self.shaft = self.params.output_shaft();
+        self.inv_i_hat = 1.0 / self.shaft.i_hat;
     }
 
     /// Changes the cam setup (coupled, uncoupled, blocked on the gauge).
@@ -368,10 +393,23 @@ impl Plant {
         self.adc.code(i, &mut self.rng)
     }
 
+    /// ADC code of the current sensor halfway through the last step: a caller that steps
+    /// the plant at half the ADC's rate takes this sample, then [`Plant::current_adc`].
+    /// The winding's response within the step is exact (the R-L exponential for the
+    /// step's back-EMF), so this is the sample a step of half the length would have given.
+    pub fn current_adc_mid_step(&mut self) -> u16 {
+        let i = self.instantaneous(self.mid_current);
+        self.adc.code(i, &mut self.rng)
+    }
+
     /// The instantaneous winding current at the ADC's sampling instant, A.
     pub fn sampled_current(&self) -> f64 {
+        self.instantaneous(self.state.current)
+    }
+
+    /// The winding current at the ADC's sampling instant for the mean-model current `mean`.
+    fn instantaneous(&self, mean: f64) -> f64 {
         let pp = self.ripple.1;
-        let mean = self.state.current;
         if pp == 0.0 {
             return mean;
         }
@@ -408,6 +446,7 @@ impl Plant {
     pub fn set_sensor_supply(&mut self, volts: f64) {
         self.params.sensors.acs_supply = volts;
         self.adc = self.params.sensors.adc_transfer();
+        self.break_current = break_current(&self.params);
     }
 
     /// The true cam torque over the whole revolutions completed so far.
@@ -464,17 +503,20 @@ impl Plant {
         };
         let v_bridge = duty * bus;
         let (i1, i_mean, v_motor) = if drive.enabled {
-            let [decay, mean_factor, conductance] = winding;
+            let [decay, mean_factor, conductance, half_decay] = winding;
             let i_ss = (v_bridge - m.ke_cam() * omega) * conductance;
             let i1 = i_ss + (i0 - i_ss) * decay;
             let mean = i_ss + (i0 - i_ss) * mean_factor;
             if !p.regeneration && (i1 < 0.0) != (v_bridge < 0.0) && i1 != 0.0 {
                 // Diode-clamped bridge: current cannot flow against the applied voltage.
+                self.mid_current = 0.5 * i0.max(0.0);
                 (0.0, 0.5 * i0.max(0.0), m.ke_cam() * omega)
             } else {
+                self.mid_current = i_ss + (i0 - i_ss) * half_decay;
                 (i1, mean, v_bridge)
             }
         } else {
+            self.mid_current = 0.0;
             (0.0, 0.0, m.ke_cam() * omega)
         };
 
@@ -543,7 +585,7 @@ impl Plant {
             0.0
         } else {
             // Eq. (6) with the friction computed above (the same as `OutputShaft::acceleration`).
-            let a = (tau_rot + out_friction) / self.shaft.i_hat;
+            let a = (tau_rot + out_friction) * self.inv_i_hat;
             let w = wt + a * dt;
             if wt.abs() >= STANDSTILL && w.signum() != wt.signum() {
                 0.0
@@ -596,7 +638,9 @@ impl Plant {
         self.state.current = i1;
         // The PWM ripple around the mean (the average model's current) for the sampling.
         self.ripple = if drive.enabled && v_motor == v_bridge {
-            let pp = pwm::ripple_peak_to_peak(duty, bus, m.inductance);
+            // pwm::ripple_peak_to_peak, with T / L computed once.
+            let d = duty.abs().min(1.0);
+            let pp = (bus * d * (1.0 - d) * self.ripple_per_volt).max(0.0);
             (duty.abs(), if duty < 0.0 { -pp } else { pp })
         } else {
             (0.0, 0.0)
@@ -612,13 +656,7 @@ impl Plant {
         // The comparator watches the pin continuously, the ripple's peaks included: past
         // its threshold the break cuts the bridge within microseconds, modelled as from the
         // end of this step.
-        if let Some(threshold) = self.params.break_threshold_v
-            && self
-                .params
-                .sensors
-                .pin_voltage(i1 + 0.5 * self.ripple.1.abs())
-                > threshold
-        {
+        if i1 + 0.5 * self.ripple.1.abs() > self.break_current {
             self.break_tripped = true;
         }
         self.state.cam_speed = new_omega;
@@ -628,6 +666,23 @@ impl Plant {
         self.state.motor_voltage = v_motor;
         self.state.bus_voltage = bus;
         self.state.time += dt;
+    }
+}
+
+/// The winding current at which the comparator's input reaches its threshold, A: the
+/// sensor's pin voltage is affine in the current ([`SensorParams::pin_voltage`]).
+/// Infinite without a comparator.
+fn break_current(params: &PlantParams) -> f64 {
+    let Some(threshold) = params.break_threshold_v else {
+        return f64::INFINITY;
+    };
+    let s = &params.sensors;
+    let at_zero = s.pin_voltage(0.0);
+    let per_amp = s.pin_voltage(1.0) - at_zero;
+    if per_amp > 0.0 {
+        (threshold - at_zero) / per_amp
+    } else {
+        f64::INFINITY
     }
 }
 

@@ -389,3 +389,25 @@ fn the_true_cam_torque_over_revolutions_is_eq10s_mean() {
     assert!((got / want - 1.0).abs() < 0.03, "{got} vs {want}");
     assert_eq!(after.mean_since(&after), None);
 }
+
+#[test]
+fn the_mid_step_current_is_a_half_step_current() {
+    // The electrical response within a step is exact for the step's back-EMF: halfway
+    // through a 0.2 ms step the winding carries what a 0.1 ms step ends with.
+    let mut a = paper_plant(paper::RIG_Z, Load::Torque(1.84));
+    run(&mut a, 6.2, 0.5);
+    let mut b = a.clone();
+    let drive = Drive {
+        duty: 0.7,
+        enabled: true,
+    };
+    a.step(2.0 * DT, drive);
+    b.step(DT, drive);
+    // Up to the winding cache's tolerance (R within 1e-4 of the cached value).
+    assert!(
+        (a.mid_current - b.state().current).abs() < 1e-4,
+        "{} vs {}",
+        a.mid_current,
+        b.state().current
+    );
+}
