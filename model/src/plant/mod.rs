@@ -388,6 +388,7 @@ impl Plant {
     /// ADC code of the current sensor now (with noise and quantisation), sampled at the
     /// ADC's instant in the PWM period ([`SensorParams::sampling`]): the mean current plus
     /// the ripple there ([`pwm`]).
+    #[inline]
     pub fn current_adc(&mut self) -> u16 {
         let i = self.sampled_current();
         self.adc.code(i, &mut self.rng)
@@ -397,17 +398,20 @@ impl Plant {
     /// the plant at half the ADC's rate takes this sample, then [`Plant::current_adc`].
     /// The winding's response within the step is exact (the R-L exponential for the
     /// step's back-EMF), so this is the sample a step of half the length would have given.
+    #[inline]
     pub fn current_adc_mid_step(&mut self) -> u16 {
         let i = self.instantaneous(self.mid_current);
         self.adc.code(i, &mut self.rng)
     }
 
     /// The instantaneous winding current at the ADC's sampling instant, A.
+    #[inline]
     pub fn sampled_current(&self) -> f64 {
         self.instantaneous(self.state.current)
     }
 
     /// The winding current at the ADC's sampling instant for the mean-model current `mean`.
+    #[inline]
     fn instantaneous(&self, mean: f64) -> f64 {
         let pp = self.ripple.1;
         if pp == 0.0 {

@@ -18,6 +18,7 @@ impl NoiseSource {
     }
 
     /// Next uniformly distributed 64-bit value.
+    #[inline]
     pub fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.state;
@@ -52,6 +53,7 @@ impl NoiseSource {
     /// the sum of four uniforms (16 bits each, from one draw) scaled to unit variance
     /// (Irwin-Hall). Its shape is the normal's to within a few percent of density out to
     /// 2.5 sigma, bounded at 3.46 sigma, with no logarithm, square root or rejection loop.
+    #[inline]
     pub fn normal_fast(&mut self) -> f64 {
         let r = self.next_u64();
         let sum = (r & 0xFFFF) + ((r >> 16) & 0xFFFF) + ((r >> 32) & 0xFFFF) + (r >> 48);

@@ -126,6 +126,7 @@ pub struct AdcTransfer {
 impl AdcTransfer {
     /// ADC code for `current` (A), with noise from `rng` and quantisation; the pin clamps
     /// to the ADC's range.
+    #[inline]
     pub fn code(&self, current: f64, rng: &mut NoiseSource) -> u16 {
         let counts = self.zero + self.per_amp * current + self.noise * rng.normal_fast();
         // Rounded half up; in range, so truncating the shifted value is the floor.
