@@ -216,7 +216,7 @@ pub struct Plant {
     shaft: OutputShaft,
     /// For the (dt, R) they were computed at (R drifts slowly with temperature): the step's
     /// decay exp(-dt R / L), the mean-current factor tau / dt (1 - decay) and 1 / R.
-    decay_cache: (f64, f64, [f64; 4]),
+    decay_cache: (f64, u32, f64, [f64; 4]),
     /// sin and cos of the cam angle they were computed at, and steps until a full
     /// evaluation.
     trig_cache: (f64, f64, f64, u32),
@@ -235,8 +235,12 @@ pub struct Plant {
     ripple_shape: (f64, f64),
     /// The current sensor chain as one affine map (recomputed when the sensor changes).
     adc: AdcTransfer,
-    /// The winding's mean-model current halfway through the last step, A.
-    mid_current: f64,
+    /// The winding's mean-model current within the last step: the start and steady-state
+    /// currents and the decay per sample interval (`samples` per step), or `None` when the
+    /// bridge was off or clamped (then the step's mean stands for every sample).
+    within: Option<(f64, f64, f64)>,
+    /// ADC samples per step ([`Plant::step_sampled`]).
+    samples: u32,
     /// The current at which the comparator's pin reaches its threshold, A (infinite
     /// without one; recomputed when the sensor changes).
     break_current: f64,
@@ -262,7 +266,7 @@ impl Plant {
             },
             rng: NoiseSource::new(seed),
             energy: EnergyLedger::default(),
-            decay_cache: (f64::NAN, f64::NAN, [0.0; 4]),
+            decay_cache: (f64::NAN, 0, f64::NAN, [0.0; 4]),
             trig_cache: (0.0, 0.0, 1.0, 0),
             axial_per_torque: params.drive.gear.axial_force_per_torque(),
             thermal: [
@@ -274,7 +278,8 @@ impl Plant {
             ripple_sample: 0.0,
             ripple_shape: (0.0, 0.0),
             adc: params.sensors.adc_transfer(),
-            mid_current: 0.0,
+            within: None,
+            samples: 1,
             break_current: break_current(&params),
             ripple_per_volt: if params.motor.inductance > 0.0 {
                 pwm::PERIOD_S / params.motor.inductance
@@ -289,12 +294,13 @@ impl Plant {
     }
 
     /// The winding's step response over `dt` at `resistance`: [exp(-dt / tau), the
-    /// mean-current factor tau / dt (1 - exp(-dt / tau)), 1 / R, exp(-dt / (2 tau))].
-    /// Recomputed only when dt or R moved by more than 1e-4 relative (the error that leaves
-    /// is below 1e-8 of a step).
+    /// mean-current factor tau / dt (1 - exp(-dt / tau)), 1 / R, exp(-dt / (n tau))] for
+    /// `n` ADC samples per step. Recomputed only when dt, n or R moved (R by more than 1e-4
+    /// relative: the error that leaves is below 1e-8 of a step).
     fn winding(&mut self, dt: f64, resistance: f64) -> [f64; 4] {
-        let (cdt, cr, value) = self.decay_cache;
-        if cdt == dt && (resistance - cr).abs() <= 1e-4 * cr {
+        let n = self.samples;
+        let (cdt, cn, cr, value) = self.decay_cache;
+        if cdt == dt && cn == n && (resistance - cr).abs() <= 1e-4 * cr {
             return value;
         }
         let tau = self.params.motor.inductance / resistance;
@@ -303,9 +309,13 @@ impl Plant {
             decay,
             tau / dt * (1.0 - decay),
             1.0 / resistance,
-            libm::sqrt(decay),
+            if n > 1 {
+                libm::exp(-dt / (f64::from(n) * tau))
+            } else {
+                decay
+            },
         ];
-        self.decay_cache = (dt, resistance, value);
+        self.decay_cache = (dt, n, resistance, value);
         value
     }
 
@@ -394,14 +404,29 @@ impl Plant {
         self.adc.code(i, &mut self.rng)
     }
 
-    /// ADC code of the current sensor halfway through the last step: a caller that steps
-    /// the plant at half the ADC's rate takes this sample, then [`Plant::current_adc`].
-    /// The winding's response within the step is exact (the R-L exponential for the
-    /// step's back-EMF), so this is the sample a step of half the length would have given.
-    #[inline]
-    pub fn current_adc_mid_step(&mut self) -> u16 {
-        let i = self.instantaneous(self.mid_current);
-        self.adc.code(i, &mut self.rng)
+    /// Advances the plant by `dt` seconds under `drive` with the ADC sampling `samples`
+    /// times at even intervals through the step (the last at its end, [`Plant::current_adc`]),
+    /// handing each code to `sink` in order: a caller whose ADC runs `samples` times faster
+    /// than it steps the plant. The winding's response within the step is exact (the R-L
+    /// exponential for the step's back-EMF), so each sample is the one a step ending there
+    /// would have given; the mechanics take one step of `dt`.
+    pub fn step_sampled(&mut self, dt: f64, drive: Drive, samples: u32, mut sink: impl FnMut(u16)) {
+        self.samples = samples.max(1);
+        self.step(dt, drive);
+        if let Some((i0, i_ss, sample_decay)) = self.within {
+            let mut left = i0 - i_ss;
+            for _ in 1..self.samples {
+                left *= sample_decay;
+                let i = self.instantaneous(i_ss + left);
+                sink(self.adc.code(i, &mut self.rng));
+            }
+        } else {
+            for _ in 1..self.samples {
+                let i = self.instantaneous(self.state.current);
+                sink(self.adc.code(i, &mut self.rng));
+            }
+        }
+        sink(self.current_adc());
     }
 
     /// The instantaneous winding current at the ADC's sampling instant, A.
@@ -507,20 +532,20 @@ impl Plant {
         };
         let v_bridge = duty * bus;
         let (i1, i_mean, v_motor) = if drive.enabled {
-            let [decay, mean_factor, conductance, half_decay] = winding;
+            let [decay, mean_factor, conductance, sample_decay] = winding;
             let i_ss = (v_bridge - m.ke_cam() * omega) * conductance;
             let i1 = i_ss + (i0 - i_ss) * decay;
             let mean = i_ss + (i0 - i_ss) * mean_factor;
             if !p.regeneration && (i1 < 0.0) != (v_bridge < 0.0) && i1 != 0.0 {
                 // Diode-clamped bridge: current cannot flow against the applied voltage.
-                self.mid_current = 0.5 * i0.max(0.0);
+                self.within = None;
                 (0.0, 0.5 * i0.max(0.0), m.ke_cam() * omega)
             } else {
-                self.mid_current = i_ss + (i0 - i_ss) * half_decay;
+                self.within = Some((i0, i_ss, sample_decay));
                 (i1, mean, v_bridge)
             }
         } else {
-            self.mid_current = 0.0;
+            self.within = None;
             (0.0, 0.0, m.ke_cam() * omega)
         };
 

@@ -391,23 +391,25 @@ fn the_true_cam_torque_over_revolutions_is_eq10s_mean() {
 }
 
 #[test]
-fn the_mid_step_current_is_a_half_step_current() {
-    // The electrical response within a step is exact for the step's back-EMF: halfway
-    // through a 0.2 ms step the winding carries what a 0.1 ms step ends with.
-    let mut a = paper_plant(paper::RIG_Z, Load::Torque(1.84));
-    run(&mut a, 6.2, 0.5);
-    let mut b = a.clone();
+fn samples_within_a_step_are_those_of_shorter_steps() {
+    // The electrical response within a step is exact for the step's back-EMF: the k-th of
+    // five samples through a 0.5 ms step is what a step of k x 0.1 ms ends with.
+    let mut base = paper_plant(paper::RIG_Z, Load::Torque(1.84));
+    base.params.sensors.acs_noise = 0.0;
+    base.adc = base.params.sensors.adc_transfer();
+    run(&mut base, 6.2, 0.5);
     let drive = Drive {
         duty: 0.7,
         enabled: true,
     };
-    a.step(2.0 * DT, drive);
-    b.step(DT, drive);
-    // Up to the winding cache's tolerance (R within 1e-4 of the cached value).
-    assert!(
-        (a.mid_current - b.state().current).abs() < 1e-4,
-        "{} vs {}",
-        a.mid_current,
-        b.state().current
-    );
+    let mut codes = Vec::new();
+    base.clone()
+        .step_sampled(5.0 * DT, drive, 5, |c| codes.push(c));
+    assert_eq!(codes.len(), 5);
+    for (k, code) in codes.iter().enumerate() {
+        let mut short = base.clone();
+        short.step((k + 1) as f64 * DT, drive);
+        let want = short.current_adc();
+        assert!(code.abs_diff(want) <= 1, "sample {k}: {code} vs {want}");
+    }
 }
