@@ -203,7 +203,7 @@ impl SimRig {
 
     /// Runs the closed loop for `seconds` of virtual time.
     ///
-    /// The plant steps once per [`SAMPLES_PER_PLANT_STEP`] ADC samples wherever no control
+    /// The plant steps once per `SAMPLES_PER_PLANT_STEP` ADC samples wherever no control
     /// step falls between them (always at the default 1 kHz control rate: 2 kHz plant
     /// steps, five samples each, [`Plant::step_sampled`], exact for the winding within the
     /// step); elsewhere once per sample. The mechanics' semi-implicit step of 0.5 ms turns
