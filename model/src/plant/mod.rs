@@ -643,8 +643,8 @@ impl Plant {
         led.output_friction += -out_friction * wt_mean * dt;
 
         // The true cam torque (Eq. 9 on the carrier side, with the carrier's share of the
-        // cam's acceleration), over whole revolutions.
-        if coupled {
+        // cam's acceleration), over whole revolutions; a cam at rest starts a new one.
+        if coupled && new_omega != 0.0 {
             let accel = (new_omega - omega) / dt;
             let tau = t_axial + t_carrier + mass * e * e * s * s * accel;
             let (start, secs, integral) = &mut self.cam_rev;
