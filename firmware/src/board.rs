@@ -14,6 +14,8 @@
 //! | Cam motor enable        | PA9  | D8           | GPIO out               | low = off; 10 kΩ pull-down on the driver (¹); the safe state's BSRR write |
 //! | Encoder A (AMT102-V)    | PB6  | D10          | TIM4_CH1 (AF2)         | quadrature, x4 decoding, digital filter (²)      |
 //! | Encoder B (AMT102-V)    | PB7  | CN7-21       | TIM4_CH2 (AF2)         | (²)                                              |
+//! | Output encoder A        | PC6  | CN10-4       | TIM3_CH1 (AF2)         | second AMT102-V on the output shaft, x4, same filter (⁸) |
+//! | Output encoder B        | PC7  | D9 (CN10-19) | TIM3_CH2 (AF2)         | (⁸)                                              |
 //! | Motor current (ACS714)  | PA0  | A0           | ADC1_IN1 and COMP3_INP | through a divider to ≤ 3.3 V (³); the comparator trips TIM1's break (⁴) |
 //! | Bridge supply voltage   | PA1  | A1           | ADC1_IN2               | 100 kΩ over 10 kΩ, 100 nF at the pin: 12–24 V reads 1.09–2.18 V, 36 V full scale (⁵) |
 //! | Motor NTC (optional)    | PB0  | A3           | ADC1_IN15              | 10 kΩ NTC to GND, 10 kΩ pull-up to 3V3 (VDDA), 100 nF; open = not fitted (⁶) |
@@ -31,6 +33,7 @@
 //! | COMP3, DAC3_CH1     | hardware overcurrent trip ([`crate::trip`]): PA0 against an internal DAC threshold, no pin |
 //! | ADC1 + DMA1_CH1     | scan of PA0, PA1, PB0, VREFINT per TIM1 trigger ([`crate::analog`]); VDDA from VREFINT and its factory calibration (`VREFINTCAL`, 0x1FFF_75AA) |
 //! | TIM4                | encoder, input filter fDTS/16 × 8 (0.75 µs)                          |
+//! | TIM3                | output encoder, the same mode and filter                             |
 //! | TIM2                | embassy's time driver (`time-driver-tim2`): TIM15, `time-driver-any`'s pick, shares its vector with TIM1_BRK |
 //! | TIM1_BRK_TIM15 IRQ  | break: drops the bridge enable ~1 µs after the hardware trip (P0)    |
 //! | WWDG + its IRQ      | control-loop deadline, 2 ms ([`crate::safety::StallWatchdog`], P0)  |
@@ -79,6 +82,14 @@
 //! board checks the phase at boot and logs it; the other extreme is as unbiased. The
 //! ACS714's own lag (~2 µs) is roughly undone by the 2.2 µs sampling window that follows the
 //! trigger; what is left (< 0.1 µs of slope) is for a scope on the real board to confirm.
+//! (⁸) The optional output-shaft encoder ([`OUTPUT_ENCODER`]; `firmware_core`'s
+//! `output-encoder` feature): TIM3 on PC6/PC7 (RM0440 / DS12288 alternate functions: AF2 is
+//! TIM3_CH1/CH2 on both; the metapac's STM32G474RE pin map agrees). TIM3 is otherwise unused
+//! (the time driver is TIM2), PC6/PC7 are not analog or DAC pins and clash with nothing
+//! above (TIM3's other channels, PB0 and PB5, stay GPIO/analog: only CH1/CH2 are taken).
+//! TIM3 on PA6/PA7 was avoided as for the cam encoder (²). The output turns far slower
+//! than the cam (Fig. 5's load falls at about 1 rad/s, 1.3 kHz of x4 edges): the filter
+//! costs nothing. Confirm FT for PC6/PC7 and the CN10 positions (UM2505) before wiring.
 
 use embassy_stm32::adc::{Adc, AdcChannel as _, AdcConfig, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::exti::{self, ExtiInput};
@@ -88,7 +99,7 @@ use embassy_stm32::mode::Async;
 use embassy_stm32::pac::timer::vals::{Bkinp, Bkp, Dir, FilterValue, Lock, Mms, Ossi};
 use embassy_stm32::peripherals::{
     ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, EXTI13, IWDG, PA0, PA1, PA2, PA3, PA8, PA9, PB0, PB5, PB6,
-    PB7, PC13, TIM1, TIM4, USART2,
+    PB7, PC6, PC7, PC13, TIM1, TIM3, TIM4, USART2,
 };
 use embassy_stm32::time::{Hertz, khz};
 use embassy_stm32::timer::low_level::CountingMode;
@@ -100,7 +111,7 @@ use embassy_stm32::{Config, Peri, Peripherals, bind_interrupts, dma, interrupt, 
 use firmware_core::CoreConfig;
 
 use crate::analog;
-use crate::safety::{EccChecked, StallWatchdog};
+use crate::safety::StallWatchdog;
 use crate::trip::OvercurrentTrip;
 
 bind_interrupts!(struct Irqs {
@@ -188,8 +199,21 @@ pub const BRIDGE: BridgeBoard = if cfg!(feature = "bridge-coast-decay") {
 pub fn core_config() -> CoreConfig {
     let mut config = CoreConfig::default();
     config.estimator.carrier_power_returned = BRIDGE.decay.returns_power();
+    config.output_encoder = OUTPUT_ENCODER;
     config
 }
+
+/// The output-shaft encoder on TIM3 (PC6/PC7, see (⁸)): an AMT102-V at 2048 pulses per
+/// revolution, as on the cam. `None` for a board without one: then telemetry reports NaN
+/// for the output angle and `Info` leaves `OUTPUT_ENCODER` clear (a floating input would
+/// read as an output at rest, which the procedures would believe).
+pub const OUTPUT_ENCODER: Option<firmware_core::OutputEncoderConfig> =
+    Some(firmware_core::OutputEncoderConfig {
+        counts_per_rev: model::hardware::amt102::COUNTS_PER_REV,
+        moving_rad_s: 0.01,
+        overspeed_rad_s: 20.0,
+        speed_window_us: 50_000,
+    });
 
 /// Clock tree: 170 MHz SYSCLK from HSI16 (16 MHz / 4 × 85 / 2), range-1 boost, ADC12 on SYSCLK.
 ///
@@ -476,6 +500,35 @@ impl CamEncoder {
     }
 }
 
+/// The optional output-shaft encoder (see (⁸)) on TIM3 in encoder mode 3 (x4).
+pub struct OutputEncoder {
+    qei: Qei<'static, TIM3>,
+}
+
+impl OutputEncoder {
+    /// Starts TIM3 counting both edges of A and B over the full 16-bit range, through the
+    /// input filter [`ENCODER_FILTER`]. Pulled up: an unplugged encoder reads still.
+    pub fn new(tim: Peri<'static, TIM3>, a: Peri<'static, PC6>, b: Peri<'static, PC7>) -> Self {
+        let config = qei::Config {
+            ch1_pull: Pull::Up,
+            ch2_pull: Pull::Up,
+            mode: qei::QeiMode::Mode3,
+            auto_reload: u16::MAX,
+        };
+        let qei = Qei::new(tim, a, b, config);
+        pac::TIM3.ccmr_input(0).modify(|w| {
+            w.set_icf(0, ENCODER_FILTER);
+            w.set_icf(1, ENCODER_FILTER);
+        });
+        Self { qei }
+    }
+
+    /// Raw count, wrapping at 2^16 (the core takes the differences).
+    pub fn count(&self) -> u16 {
+        self.qei.count()
+    }
+}
+
 /// The ADC DMA lapped the reader: at least one block of samples was lost.
 #[derive(Clone, Copy, Debug, defmt::Format)]
 pub struct SampleOverrun;
@@ -590,19 +643,15 @@ impl ReleaseButton {
     }
 }
 
-/// The STORAGE region of `memory.x` (last 16 KiB of bank 2) as a flash of its own, with
-/// double-ECC reads reported as errors.
-pub type CalibrationFlash = EccChecked<firmware_core::storage::Partition<Flash<'static, Blocking>>>;
+/// The STORAGE region of `memory.x` (last 16 KiB of bank 2) as a flash of its own; the
+/// store's ECC hook ([`crate::safety::take_flash_ecc_error`]) reports double-ECC reads.
+pub type CalibrationFlash = firmware_core::storage::Partition<Flash<'static, Blocking>>;
 
 /// Wraps the whole-chip flash driver into the STORAGE window. Erasing its 2 KiB pages in
 /// bank 2 does not stall code running from bank 1 (dual-bank read-while-write).
 fn calibration_flash(flash: Flash<'static, Blocking>) -> CalibrationFlash {
     let (start, end) = crate::safety::storage_region();
-    EccChecked::new(firmware_core::storage::Partition::new(
-        flash,
-        start - FLASH_BASE as u32,
-        end - start,
-    ))
+    firmware_core::storage::Partition::new(flash, start - FLASH_BASE as u32, end - start)
 }
 
 /// Every driver of the rig, in its safe state.
@@ -613,6 +662,8 @@ pub struct Board {
     pub trip: OvercurrentTrip,
     /// Cam shaft encoder.
     pub encoder: CamEncoder,
+    /// Output shaft encoder (read only when [`OUTPUT_ENCODER`] is set).
+    pub output_encoder: OutputEncoder,
     /// Motor current, bus voltage, motor NTC and VDDA samples.
     pub sense: AnalogSense,
     /// Host link over the ST-LINK virtual COM port.
@@ -654,6 +705,7 @@ impl Board {
             motor,
             trip,
             encoder: CamEncoder::new(p.TIM4, p.PB6, p.PB7),
+            output_encoder: OutputEncoder::new(p.TIM3, p.PC6, p.PC7),
             sense,
             host_link: HostLink::new(p.USART2, p.PA2, p.PA3, p.DMA1_CH2, p.DMA1_CH3, host_rx_buf),
             release_button: ReleaseButton::new(p.PC13, p.EXTI13),

@@ -214,6 +214,7 @@ mod app {
             motor,
             trip,
             encoder,
+            output_encoder,
             sense,
             host_link,
             release_button,
@@ -245,7 +246,8 @@ mod app {
         let stalled =
             reset.window_watchdog || crash.is_some_and(|c| c.cause == CrashCause::ControlStall);
 
-        let mut store = CalibrationStore::new(storage);
+        // A read that raised a double-ECC NMI in the store counts as a corrupt slot.
+        let mut store = CalibrationStore::with_ecc_check(storage, safety::take_flash_ecc_error);
         let loaded = store.load();
         match loaded.status {
             ParametersStatus::Valid => info!("calibration loaded from flash"),
@@ -293,6 +295,7 @@ mod app {
                 motor,
                 trip,
                 encoder,
+                output_encoder,
                 sense,
                 button: release_button,
                 stall,
@@ -310,6 +313,7 @@ mod app {
         motor: CamMotor,
         trip: OvercurrentTrip,
         encoder: CamEncoder,
+        output_encoder: board::OutputEncoder,
         sense: AnalogSense,
         button: board::ReleaseButton,
         stall: StallWatchdog,
@@ -406,13 +410,16 @@ mod app {
                     f32::NAN
                 },
                 motor_temp_c: health.motor_temp_c.unwrap_or(f32::NAN),
-                // Storage reads go through `EccChecked`, which turns an ECC NMI into a read
-                // error the store already counts as a corrupt slot.
+                // Storage reads are checked by the store's ECC hook
+                // (`safety::take_flash_ecc_error`), which counts the slot as corrupt.
                 flash_ecc_error: false,
             };
             let out = core.lock(|c| {
                 let mut c = c.borrow_mut();
                 c.set_board_inputs(board_inputs);
+                if board::OUTPUT_ENCODER.is_some() {
+                    c.set_output_encoder_count(Some(io.output_encoder.count()));
+                }
                 let start = DWT::cycle_count();
                 let out = c.step(&inputs);
                 c.record_step_cycles(DWT::cycle_count().wrapping_sub(start));

@@ -38,9 +38,6 @@ use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac::wwdg::vals::Wdgtb;
 use embassy_stm32::peripherals::WWDG;
 use embassy_stm32::{Peri, interrupt, pac};
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
 
 /// TIM1_BDTR (the metapac's `TIM1.bdtr()`, 0x4001_2C44): break and dead-time register.
 /// (A function: pointer arithmetic on an address is not allowed in a `const`; it folds to a
@@ -216,7 +213,7 @@ unsafe fn NonMaskableInt() {
     let eccr = pac::FLASH.eccr().read();
     if (eccr.eccd() || eccr.eccd2()) && !eccr.sysf_ecc() && in_storage(ecc_address(eccr.0)) {
         // A torn double word in the calibration store: count it, clear the flag and let the
-        // read return; the store's flash wrapper turns it into a corrupt slot.
+        // read return; the store's ECC hook turns it into a corrupt slot.
         pac::FLASH.eccr().write(|w| {
             w.set_eccd(true);
             w.set_eccd2(true);
@@ -329,9 +326,16 @@ impl StallWatchdog {
     }
 }
 
-/// Double-ECC errors the NMI handler saw in the STORAGE region since the last read through
-/// [`EccChecked`].
+/// Double-ECC errors the NMI handler saw in the STORAGE region since
+/// [`take_flash_ecc_error`] last took them.
 pub static FLASH_ECC_ERRORS: AtomicU32 = AtomicU32::new(0);
+
+/// Whether the NMI handler saw a double-ECC error in the STORAGE region since the last
+/// call, clearing the record: the calibration store's ECC hook
+/// (`CalibrationStore::with_ecc_check`), which then counts the slot it read as corrupt.
+pub fn take_flash_ecc_error() -> bool {
+    FLASH_ECC_ERRORS.swap(0, Ordering::Relaxed) != 0
+}
 
 // Declaring linker symbols takes an `unsafe extern` block; only their addresses are taken.
 unsafe extern "C" {
@@ -361,71 +365,4 @@ const BANK2_OFFSET: u32 = 0x4_0000;
 fn ecc_address(eccr: u32) -> u32 {
     let reg = pac::flash::regs::Eccr(eccr);
     FLASH_BASE + if reg.bk_ecc() { BANK2_OFFSET } else { 0 } + reg.addr_ecc()
-}
-
-/// A read during which the flash raised a double-ECC error (a torn write).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EccError<E> {
-    /// The flash driver's own error.
-    Flash(E),
-    /// The data read contained a double word whose ECC could not correct it.
-    DoubleEcc,
-}
-
-impl<E: NorFlashError> NorFlashError for EccError<E> {
-    fn kind(&self) -> NorFlashErrorKind {
-        match self {
-            Self::Flash(e) => e.kind(),
-            Self::DoubleEcc => NorFlashErrorKind::Other,
-        }
-    }
-}
-
-/// The calibration store's flash with the NMI's ECC record folded in: a read that raised a
-/// double-ECC NMI in the STORAGE region returns [`EccError::DoubleEcc`], so the store counts
-/// that slot as corrupt and uses the other one (or the defaults) instead of believing it.
-#[derive(Debug)]
-pub struct EccChecked<F> {
-    flash: F,
-}
-
-impl<F> EccChecked<F> {
-    /// Wraps `flash`.
-    pub fn new(flash: F) -> Self {
-        Self { flash }
-    }
-}
-
-impl<F: ErrorType> ErrorType for EccChecked<F> {
-    type Error = EccError<F::Error>;
-}
-
-impl<F: ReadNorFlash> ReadNorFlash for EccChecked<F> {
-    const READ_SIZE: usize = F::READ_SIZE;
-
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        FLASH_ECC_ERRORS.swap(0, Ordering::Relaxed);
-        self.flash.read(offset, bytes).map_err(EccError::Flash)?;
-        if FLASH_ECC_ERRORS.swap(0, Ordering::Relaxed) != 0 {
-            return Err(EccError::DoubleEcc);
-        }
-        Ok(())
-    }
-
-    fn capacity(&self) -> usize {
-        self.flash.capacity()
-    }
-}
-
-impl<F: NorFlash> NorFlash for EccChecked<F> {
-    const WRITE_SIZE: usize = F::WRITE_SIZE;
-    const ERASE_SIZE: usize = F::ERASE_SIZE;
-
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        self.flash.erase(from, to).map_err(EccError::Flash)
-    }
-
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        self.flash.write(offset, bytes).map_err(EccError::Flash)
-    }
 }

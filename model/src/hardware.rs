@@ -21,7 +21,12 @@ pub mod rs735 {
 
     /// Winding resistance at [`AMBIENT_C`], ohm.
     pub const RESISTANCE_OHM: f64 = 0.44;
-    /// Winding inductance, H.
+    /// Winding inductance, H. Not on Mabuchi's RS-735 data sheet (it gives R, Kt and the
+    /// no-load and stall points only): 0.2 mH is the typical terminal inductance of a
+    /// 12 V 735-frame ferrite motor (0.15-0.3 mH measured at 1 kHz with the rotor
+    /// blocked, e.g. with an LCR meter; measure the rig's motor so). It sets the PWM
+    /// ripple, V T / (4 L) = 0.75 A peak to peak at d = 1/2 on 12 V and 20 kHz
+    /// ([`crate::plant::pwm`]), and the electrical time constant L / R = 0.45 ms.
     pub const INDUCTANCE_H: f64 = 0.2e-3;
     /// Gearhead reduction N (motor turns per cam turn).
     pub const GEAR_RATIO: f64 = 8.5;
@@ -166,6 +171,12 @@ pub mod board {
     pub const PWM_FREQUENCY_HZ: f64 = 20_000.0;
     /// H-bridge supply, V.
     pub const BRIDGE_SUPPLY_V: f64 = 12.0;
+    /// Internal resistance of the bridge's supply as the bridge sees it, ohm: a regulated
+    /// bench supply's own output resistance is milliohms, its leads are not: 2 x 1 m of
+    /// 0.75 mm^2 copper is 0.046 ohm, with connectors 0.05 ohm. The bus sags by this times
+    /// the supply current d i (0.1 V at 8.8 V and 3 A); the firmware measures the bus, so
+    /// its feed-forward sees the sag.
+    pub const SUPPLY_RESISTANCE_OHM: f64 = 0.05;
     /// Current-sensor sample rate, Hz (the paper logged at the same rate).
     pub const CURRENT_SAMPLE_RATE_HZ: f64 = 10_000.0;
     /// Highest vibration frequency the board's controller accepts, Hz.

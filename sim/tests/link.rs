@@ -55,6 +55,10 @@ fn supplies_are_recorded_and_acknowledged() {
     assert_eq!(bench.supply_v, Some(6.2));
     assert_eq!(bench.sensor_supply_v, Some(4.75));
     assert_eq!(bench.commands, 2);
+    // Applied to the plant, not only recorded: the bridge's supply and the ACS714's.
+    let plant = link.rig.plant().params();
+    assert_eq!(plant.supply, 6.2f32 as f64);
+    assert_eq!(plant.sensors.acs_supply, 4.75);
 }
 
 #[test]

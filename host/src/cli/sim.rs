@@ -134,6 +134,18 @@ fn check_freq(hz: f64) -> Result<f32, RigError> {
     })
 }
 
+/// What `rig sim torque-sweep --json` prints: the sweep's summary and how far the
+/// firmware's estimate is from the plant's truth.
+#[derive(Debug, serde::Serialize)]
+struct SweepJson {
+    #[serde(flatten)]
+    summary: sweep::SweepSummary,
+    /// RMS over all points of the firmware's per-revolution tau_cam estimate (the row's
+    /// `tau_cam_est_nm`) minus the plant's true mean cam torque over the revolutions of
+    /// the same window, N m (PWM ripple, sensor tolerances and noise modelled).
+    estimate_rms_error_nm: f64,
+}
+
 /// Runs `rig sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
     let mut out = std::io::stdout().lock();
@@ -220,13 +232,18 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
-            let points = crate::experiment::paper::torque_sweep(&opts)?;
+            let (points, estimate_rms_error_nm) =
+                crate::experiment::paper::torque_sweep_with_error(&opts)?;
             if let Some(path) = &a.csv {
                 crate::sweep_report::write_csv(&points, path)?;
             }
             let summary = sweep::summarise(&points, &opts);
             if a.json {
-                super::print_json(&mut out, &summary)?;
+                let json = SweepJson {
+                    summary,
+                    estimate_rms_error_nm,
+                };
+                super::print_json(&mut out, &json)?;
             } else {
                 writeln!(out, "torque sweep: {} points", summary.points)?;
                 for (v, hz) in &summary.mean_hz_per_voltage {
@@ -246,6 +263,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                     out,
                     "  RMS(tau_cam measured - Eq. 10) = {:.2} N mm",
                     summary.rmse_tau_cam_vs_eq10_nm * 1e3
+                )?;
+                writeln!(
+                    out,
+                    "  RMS(firmware's tau_cam estimate - plant's true cam torque) = {:.2} N mm",
+                    estimate_rms_error_nm * 1e3
                 )?;
             }
             Ok(ExitCode::SUCCESS)

@@ -141,6 +141,9 @@ pub struct SimBench {
     info: DeviceInfo,
     rate_hz: f64,
     last_seq: Option<u32>,
+    /// The plant's true cam torque over whole revolutions, read at every telemetry
+    /// sample with the device time, s, when a revolution completed since the last reading.
+    cam_torque: Vec<(f64, model::plant::CamTorqueLedger)>,
 }
 
 impl SimBench {
@@ -164,7 +167,25 @@ impl SimBench {
             info,
             rate_hz: 50.0,
             last_seq: None,
+            cam_torque: Vec::new(),
         })
+    }
+
+    /// The plant's true mean cam torque over the whole revolutions completed between
+    /// device times `from_s` and `to_s` (as read at telemetry samples), N m: what the
+    /// firmware's per-revolution estimates of that window stand for. `None` when no
+    /// revolution completed in it.
+    pub fn true_cam_torque_nm(&self, from_s: f64, to_s: f64) -> Option<f64> {
+        let first = self.cam_torque.iter().find(|(t, _)| *t >= from_s)?;
+        let last = self.cam_torque.iter().rev().find(|(t, _)| *t <= to_s)?;
+        last.1.mean_since(&first.1)
+    }
+
+    fn note_cam_torque(&mut self) {
+        let ledger = self.link.rig.plant().cam_torque_ledger();
+        if self.cam_torque.last().map(|(_, l)| l.revolutions) != Some(ledger.revolutions) {
+            self.cam_torque.push((self.link.rig.time(), ledger));
+        }
     }
 }
 
@@ -198,6 +219,7 @@ impl Bench for SimBench {
         while waited < 0.5 {
             self.link.wait(step);
             waited += step;
+            self.note_cam_torque();
             if let Some(t) = self.link.last_telemetry
                 && Some(t.seq) != self.last_seq
             {

@@ -8,13 +8,15 @@
 
 mod effects;
 mod motor;
+pub mod pwm;
 mod rng;
 mod sensors;
 
 pub use effects::PlantEffects;
 pub use motor::MotorParams;
+pub use pwm::AdcSampling;
 pub use rng::NoiseSource;
-pub use sensors::SensorParams;
+pub use sensors::{AdcTransfer, SensorParams};
 
 use crate::effects::{
     axial_corner_speed, axial_friction_speed_factor, carrier_inertia_torque,
@@ -64,8 +66,13 @@ pub struct PlantParams {
     pub i_hat: f64,
     /// The load.
     pub load: Load,
-    /// H-bridge supply, V.
+    /// H-bridge supply, V (open-circuit: the bus sags under load through
+    /// `supply_resistance`).
     pub supply: f64,
+    /// Internal resistance of the supply and its leads, ohm
+    /// ([`crate::hardware::board::SUPPLY_RESISTANCE_OHM`]).
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub supply_resistance: f64,
     /// Whether the drive can take power back (synchronous H-bridge, backdrivable gearhead).
     /// Without it the current cannot reverse and the carrier's inertial power is lost, so the
     /// inertia term of Eq. (9) no longer averages out (`inertia-rectification`).
@@ -95,6 +102,7 @@ impl PlantParams {
             i_hat: paper::I_HAT,
             load,
             supply: board::BRIDGE_SUPPLY_V,
+            supply_resistance: board::SUPPLY_RESISTANCE_OHM,
             // The paper's bench supply cannot sink current, and actuators in general do not
             // return negative power (the paper's ref. [18]).
             regeneration: board::REGENERATIVE_DECAY,
@@ -147,6 +155,9 @@ pub struct PlantState {
     pub gauge_torque: f64,
     /// Voltage across the motor over the last step, V.
     pub motor_voltage: f64,
+    /// Bridge supply at the board over the last step (after the supply's internal
+    /// resistance), V: what the bus divider measures.
+    pub bus_voltage: f64,
 }
 
 /// Energy bookkeeping, J, for the balance check.
@@ -170,6 +181,31 @@ pub struct EnergyLedger {
     pub unreturned: f64,
 }
 
+/// The true torque the cam delivers to the carrier (tooth and bush friction against the
+/// axial motion and the carrier's inertia, Eq. (9)), summed over whole cam revolutions
+/// since the start: what the firmware's per-revolution tau_cam estimate stands for. Two
+/// readings give the mean over the revolutions between them
+/// ([`CamTorqueLedger::mean_since`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CamTorqueLedger {
+    /// Whole cam revolutions completed.
+    pub revolutions: u64,
+    /// Time those revolutions took, s.
+    pub seconds: f64,
+    /// Integral of the cam torque over that time, N m s.
+    pub torque_seconds: f64,
+}
+
+impl CamTorqueLedger {
+    /// Mean cam torque over the revolutions completed between `earlier` and this reading,
+    /// N m; `None` when none completed.
+    pub fn mean_since(&self, earlier: &CamTorqueLedger) -> Option<f64> {
+        let dt = self.seconds - earlier.seconds;
+        (self.revolutions > earlier.revolutions && dt > 0.0)
+            .then(|| (self.torque_seconds - earlier.torque_seconds) / dt)
+    }
+}
+
 /// The simulated rig.
 #[derive(Debug, Clone)]
 pub struct Plant {
@@ -180,7 +216,7 @@ pub struct Plant {
     shaft: OutputShaft,
     /// For the (dt, R) they were computed at (R drifts slowly with temperature): the step's
     /// decay exp(-dt R / L), the mean-current factor tau / dt (1 - decay) and 1 / R.
-    decay_cache: (f64, f64, [f64; 3]),
+    decay_cache: (f64, u32, f64, [f64; 4]),
     /// sin and cos of the cam angle they were computed at, and steps until a full
     /// evaluation.
     trig_cache: (f64, f64, f64, u32),
@@ -190,6 +226,32 @@ pub struct Plant {
     thermal: [f64; 2],
     /// The comparator tripped the timer's break: the bridge is off.
     break_tripped: bool,
+    /// The PWM ripple at the end of the last step: duty magnitude and the signed
+    /// peak-to-peak (negative in reverse; zero with the bridge off).
+    ripple: (f64, f64),
+    /// The ripple's value at the ADC's sampling instant (signed, A), and the triangle's
+    /// shape there per ampere of ripple for the duty it was computed at: (duty, shape).
+    ripple_sample: f64,
+    ripple_shape: (f64, f64),
+    /// The current sensor chain as one affine map (recomputed when the sensor changes).
+    adc: AdcTransfer,
+    /// The winding's mean-model current within the last step: the start and steady-state
+    /// currents and the decay per sample interval (`samples` per step), or `None` when the
+    /// bridge was off or clamped (then the step's mean stands for every sample).
+    within: Option<(f64, f64, f64)>,
+    /// ADC samples per step ([`Plant::step_sampled`]).
+    samples: u32,
+    /// The current at which the comparator's pin reaches its threshold, A (infinite
+    /// without one; recomputed when the sensor changes).
+    break_current: f64,
+    /// PWM period over the winding inductance, A per volt of ripple factor d (1 - d) V.
+    ripple_per_volt: f64,
+    /// 1 / the output's inertia (load included).
+    inv_i_hat: f64,
+    /// The cam torque over whole revolutions, and the revolution under way: its start
+    /// angle, seconds and torque integral.
+    cam_ledger: CamTorqueLedger,
+    cam_rev: (f64, f64, f64),
 }
 
 impl Plant {
@@ -199,11 +261,12 @@ impl Plant {
             shaft: params.output_shaft(),
             state: PlantState {
                 temperature: params.motor.ambient_c,
+                bus_voltage: params.supply,
                 ..Default::default()
             },
             rng: NoiseSource::new(seed),
             energy: EnergyLedger::default(),
-            decay_cache: (f64::NAN, f64::NAN, [0.0; 3]),
+            decay_cache: (f64::NAN, 0, f64::NAN, [0.0; 4]),
             trig_cache: (0.0, 0.0, 1.0, 0),
             axial_per_torque: params.drive.gear.axial_force_per_torque(),
             thermal: [
@@ -211,22 +274,48 @@ impl Plant {
                 1.0 / params.motor.thermal_capacity,
             ],
             break_tripped: false,
+            ripple: (0.0, 0.0),
+            ripple_sample: 0.0,
+            ripple_shape: (0.0, 0.0),
+            adc: params.sensors.adc_transfer(),
+            within: None,
+            samples: 1,
+            break_current: break_current(&params),
+            ripple_per_volt: if params.motor.inductance > 0.0 {
+                pwm::PERIOD_S / params.motor.inductance
+            } else {
+                0.0
+            },
+            inv_i_hat: 1.0 / params.output_shaft().i_hat,
+            cam_ledger: CamTorqueLedger::default(),
+            cam_rev: (0.0, 0.0, 0.0),
             params,
         }
     }
 
     /// The winding's step response over `dt` at `resistance`: [exp(-dt / tau), the
-    /// mean-current factor tau / dt (1 - exp(-dt / tau)), 1 / R]. Recomputed only when dt or R
-    /// moved by more than 1e-4 relative (the error that leaves is below 1e-8 of a step).
-    fn winding(&mut self, dt: f64, resistance: f64) -> [f64; 3] {
-        let (cdt, cr, value) = self.decay_cache;
-        if cdt == dt && (resistance - cr).abs() <= 1e-4 * cr {
+    /// mean-current factor tau / dt (1 - exp(-dt / tau)), 1 / R, exp(-dt / (n tau))] for
+    /// `n` ADC samples per step. Recomputed only when dt, n or R moved (R by more than 1e-4
+    /// relative: the error that leaves is below 1e-8 of a step).
+    fn winding(&mut self, dt: f64, resistance: f64) -> [f64; 4] {
+        let n = self.samples;
+        let (cdt, cn, cr, value) = self.decay_cache;
+        if cdt == dt && cn == n && (resistance - cr).abs() <= 1e-4 * cr {
             return value;
         }
         let tau = self.params.motor.inductance / resistance;
         let decay = libm::exp(-dt / tau);
-        let value = [decay, tau / dt * (1.0 - decay), 1.0 / resistance];
-        self.decay_cache = (dt, resistance, value);
+        let value = [
+            decay,
+            tau / dt * (1.0 - decay),
+            1.0 / resistance,
+            if n > 1 {
+                libm::exp(-dt / (f64::from(n) * tau))
+            } else {
+                decay
+            },
+        ];
+        self.decay_cache = (dt, n, resistance, value);
         value
     }
 
@@ -242,8 +331,9 @@ impl Plant {
         }
         let (s, c, left) = if d.abs() < 0.05 && left > 0 {
             let d2 = d * d;
-            let sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
-            let cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0);
+            // Multiplications by the reciprocals: no divisions in the step's chain.
+            let sd = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0)));
+            let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0));
             (s0 * cd + c0 * sd, c0 * cd - s0 * sd, left - 1)
         } else {
             (sin(angle), cos(angle), 64)
@@ -261,6 +351,7 @@ impl Plant {
     pub fn set_load(&mut self, load: Load) {
         self.params.load = load;
         self.shaft = self.params.output_shaft();
+        self.inv_i_hat = 1.0 / self.shaft.i_hat;
     }
 
     /// Changes the cam setup (coupled, uncoupled, blocked on the gauge).
@@ -309,10 +400,92 @@ impl Plant {
             + 0.5 * self.shaft.i_hat * s.output_speed * s.output_speed
     }
 
-    /// ADC code of the current sensor now (with noise and quantisation).
+    /// ADC code of the current sensor now (with noise and quantisation), sampled at the
+    /// ADC's instant in the PWM period ([`SensorParams::sampling`]): the mean current plus
+    /// the ripple there ([`pwm`]).
+    #[inline]
     pub fn current_adc(&mut self) -> u16 {
-        let i = self.state.current;
-        self.params.sensors.current_to_adc(i, &mut self.rng)
+        let i = self.sampled_current();
+        self.adc.code(i, &mut self.rng)
+    }
+
+    /// Advances the plant by `dt` seconds under `drive` with the ADC sampling `samples`
+    /// times at even intervals through the step (the last at its end, [`Plant::current_adc`]),
+    /// handing each code to `sink` in order: a caller whose ADC runs `samples` times faster
+    /// than it steps the plant. The winding's response within the step is exact (the R-L
+    /// exponential for the step's back-EMF), so each sample is the one a step ending there
+    /// would have given; the mechanics take one step of `dt`.
+    pub fn step_sampled(&mut self, dt: f64, drive: Drive, samples: u32, mut sink: impl FnMut(u16)) {
+        self.samples = samples.max(1);
+        self.step(dt, drive);
+        if let Some((i0, i_ss, sample_decay)) = self.within {
+            let mut left = i0 - i_ss;
+            for _ in 1..self.samples {
+                left *= sample_decay;
+                let i = self.instantaneous(i_ss + left);
+                sink(self.adc.code(i, &mut self.rng));
+            }
+        } else {
+            for _ in 1..self.samples {
+                let i = self.instantaneous(self.state.current);
+                sink(self.adc.code(i, &mut self.rng));
+            }
+        }
+        sink(self.current_adc());
+    }
+
+    /// The instantaneous winding current at the ADC's sampling instant, A.
+    #[inline]
+    pub fn sampled_current(&self) -> f64 {
+        self.instantaneous(self.state.current)
+    }
+
+    /// The winding current at the ADC's sampling instant for the mean-model current `mean`.
+    #[inline]
+    fn instantaneous(&self, mean: f64) -> f64 {
+        let pp = self.ripple.1;
+        if pp == 0.0 {
+            return mean;
+        }
+        let i = mean + self.ripple_sample;
+        // Without regeneration the current does not cross zero against the drive (the
+        // discontinuous conduction this implies for the mean is not modelled).
+        if !self.params.regeneration && (i < 0.0) != (pp < 0.0) && i != 0.0 {
+            0.0
+        } else {
+            i
+        }
+    }
+
+    /// Peak-to-peak PWM ripple of the winding current now, A (zero with the bridge off).
+    pub fn ripple_peak_to_peak(&self) -> f64 {
+        self.ripple.1.abs()
+    }
+
+    /// The bridge supply at the board now, V (what the firmware's bus divider reads).
+    pub fn bus_voltage(&self) -> f64 {
+        self.state.bus_voltage
+    }
+
+    /// Changes the bridge's supply (open-circuit) voltage, V (the bench turns its knob).
+    pub fn set_supply(&mut self, volts: f64) {
+        self.params.supply = volts;
+        if self.ripple.1 == 0.0 {
+            self.state.bus_voltage = volts;
+        }
+    }
+
+    /// Changes the current sensor's supply, V (the ACS714 is ratiometric: its zero and
+    /// sensitivity follow).
+    pub fn set_sensor_supply(&mut self, volts: f64) {
+        self.params.sensors.acs_supply = volts;
+        self.adc = self.params.sensors.adc_transfer();
+        self.break_current = break_current(&self.params);
+    }
+
+    /// The true cam torque over the whole revolutions completed so far.
+    pub fn cam_torque_ledger(&self) -> CamTorqueLedger {
+        self.cam_ledger
     }
 
     /// The current a logger on the sensor reads (the `current-sensor-offset` effect included), A.
@@ -352,21 +525,32 @@ impl Plant {
         let m = &p.motor;
         let omega = self.state.cam_speed;
 
-        // Electrical: exact R-L response for this step's back-EMF.
-        let v_bridge = drive.duty.clamp(-1.0, 1.0) * p.supply;
+        // Electrical: exact R-L response for this step's back-EMF, on the bus the supply's
+        // internal resistance leaves at the last step's supply current d i (sign-magnitude:
+        // the supply carries the winding current during the on-time only).
+        let duty = drive.duty.clamp(-1.0, 1.0);
         let i0 = self.state.current;
+        let bus = if drive.enabled {
+            p.supply - p.supply_resistance * duty * i0
+        } else {
+            p.supply
+        };
+        let v_bridge = duty * bus;
         let (i1, i_mean, v_motor) = if drive.enabled {
-            let [decay, mean_factor, conductance] = winding;
+            let [decay, mean_factor, conductance, sample_decay] = winding;
             let i_ss = (v_bridge - m.ke_cam() * omega) * conductance;
             let i1 = i_ss + (i0 - i_ss) * decay;
             let mean = i_ss + (i0 - i_ss) * mean_factor;
             if !p.regeneration && (i1 < 0.0) != (v_bridge < 0.0) && i1 != 0.0 {
                 // Diode-clamped bridge: current cannot flow against the applied voltage.
+                self.within = None;
                 (0.0, 0.5 * i0.max(0.0), m.ke_cam() * omega)
             } else {
+                self.within = Some((i0, i_ss, sample_decay));
                 (i1, mean, v_bridge)
             }
         } else {
+            self.within = None;
             (0.0, 0.0, m.ke_cam() * omega)
         };
 
@@ -435,7 +619,7 @@ impl Plant {
             0.0
         } else {
             // Eq. (6) with the friction computed above (the same as `OutputShaft::acceleration`).
-            let a = (tau_rot + out_friction) / self.shaft.i_hat;
+            let a = (tau_rot + out_friction) * self.inv_i_hat;
             let w = wt + a * dt;
             if wt.abs() >= STANDSTILL && w.signum() != wt.signum() {
                 0.0
@@ -463,12 +647,50 @@ impl Plant {
         led.load_work += tau_rot * wt_mean * dt;
         led.output_friction += -out_friction * wt_mean * dt;
 
+        // The true cam torque (Eq. 9 on the carrier side, with the carrier's share of the
+        // cam's acceleration), over whole revolutions; a cam at rest starts a new one.
+        if coupled && new_omega != 0.0 {
+            let accel = (new_omega - omega) / dt;
+            let tau = t_axial + t_carrier + mass * e * e * s * s * accel;
+            let (start, secs, integral) = &mut self.cam_rev;
+            *secs += dt;
+            *integral += tau * dt;
+            let turned = self.state.cam_angle + dtheta - *start;
+            if turned.abs() >= core::f64::consts::TAU {
+                let led = &mut self.cam_ledger;
+                led.revolutions += 1;
+                led.seconds += *secs;
+                led.torque_seconds += *integral;
+                *start += core::f64::consts::TAU * turned.signum();
+                *secs = 0.0;
+                *integral = 0.0;
+            }
+        } else {
+            self.cam_rev = (self.state.cam_angle + dtheta, 0.0, 0.0);
+        }
+
         self.state.current = i1;
-        // The comparator watches the pin continuously: past its threshold the break cuts
-        // the bridge within microseconds, modelled as from the end of this step.
-        if let Some(threshold) = self.params.break_threshold_v
-            && self.params.sensors.pin_voltage(i1) > threshold
-        {
+        // The PWM ripple around the mean (the average model's current) for the sampling.
+        self.ripple = if drive.enabled && v_motor == v_bridge {
+            // pwm::ripple_peak_to_peak, with T / L computed once.
+            let d = duty.abs().min(1.0);
+            let pp = (bus * d * (1.0 - d) * self.ripple_per_volt).max(0.0);
+            (duty.abs(), if duty < 0.0 { -pp } else { pp })
+        } else {
+            (0.0, 0.0)
+        };
+        // The triangle's shape at the sampling phase changes with the duty only (once per
+        // control step), its height with the bus at every step.
+        let (d, pp) = self.ripple;
+        if self.ripple_shape.0 != d {
+            let phase = self.params.sensors.sampling.phase();
+            self.ripple_shape = (d, pwm::ripple_at(phase, d, 1.0));
+        }
+        self.ripple_sample = pp * self.ripple_shape.1;
+        // The comparator watches the pin continuously, the ripple's peaks included: past
+        // its threshold the break cuts the bridge within microseconds, modelled as from the
+        // end of this step.
+        if i1 + 0.5 * self.ripple.1.abs() > self.break_current {
             self.break_tripped = true;
         }
         self.state.cam_speed = new_omega;
@@ -476,7 +698,25 @@ impl Plant {
         self.state.output_speed = new_wt;
         self.state.output_angle += wt_mean * dt;
         self.state.motor_voltage = v_motor;
+        self.state.bus_voltage = bus;
         self.state.time += dt;
+    }
+}
+
+/// The winding current at which the comparator's input reaches its threshold, A: the
+/// sensor's pin voltage is affine in the current ([`SensorParams::pin_voltage`]).
+/// Infinite without a comparator.
+fn break_current(params: &PlantParams) -> f64 {
+    let Some(threshold) = params.break_threshold_v else {
+        return f64::INFINITY;
+    };
+    let s = &params.sensors;
+    let at_zero = s.pin_voltage(0.0);
+    let per_amp = s.pin_voltage(1.0) - at_zero;
+    if per_amp > 0.0 {
+        (threshold - at_zero) / per_amp
+    } else {
+        f64::INFINITY
     }
 }
 

@@ -1,6 +1,7 @@
 //! The rig's sensors as the firmware sees them: an ACS714 hall current sensor through a
 //! divider into a 12-bit ADC, and a quadrature encoder (CUI AMT102-V) on the cam shaft.
 
+use super::pwm::AdcSampling;
 use super::rng::NoiseSource;
 use crate::hardware::{acs714, adc, amt102, divider};
 
@@ -25,6 +26,9 @@ pub struct SensorParams {
     pub adc_bits: u32,
     /// Encoder pulses per revolution per channel (the AMT102-V is set to 2048).
     pub encoder_ppr: u32,
+    /// When in the bridge's PWM period the ADC samples the current (the ripple it sees).
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub sampling: AdcSampling,
 }
 
 impl Default for SensorParams {
@@ -38,6 +42,7 @@ impl Default for SensorParams {
             adc_reference: adc::VREF_V,
             adc_bits: adc::BITS,
             encoder_ppr: amt102::PPR,
+            sampling: AdcSampling::Synchronous,
         }
     }
 }
@@ -55,19 +60,20 @@ impl SensorParams {
 
     /// ADC code for motor current `current` (A), with noise from `rng` and quantisation.
     pub fn current_to_adc(&self, current: f64, rng: &mut NoiseSource) -> u16 {
-        let v_sensor = self.acs_supply / 2.0
-            + self.acs_zero_error
-            + self.sensitivity_at_supply() * current
-            + self.acs_noise * rng.normal_fast();
-        let v_pin = (v_sensor * self.divider).clamp(0.0, self.adc_reference);
+        self.adc_transfer().code(current, rng)
+    }
+
+    /// The sensor chain from amperes to ADC counts as one affine map, for a caller that
+    /// converts at every step ([`AdcTransfer::code`]).
+    pub fn adc_transfer(&self) -> AdcTransfer {
         let full = self.adc_full_scale() as f64;
-        #[allow(
-            clippy::cast_possible_truncation,
-            clippy::cast_sign_loss,
-            reason = "clamped to 0..=full, a u16"
-        )]
-        let code = libm::round(v_pin / self.adc_reference * full).clamp(0.0, full) as u16;
-        code
+        let counts_per_volt = self.divider / self.adc_reference * full;
+        AdcTransfer {
+            zero: (self.acs_supply / 2.0 + self.acs_zero_error) * counts_per_volt,
+            per_amp: self.sensitivity_at_supply() * counts_per_volt,
+            noise: self.acs_noise * counts_per_volt,
+            full,
+        }
     }
 
     /// Noise-free voltage at the ADC pin (and the comparator's input) for `current`, V.
@@ -100,6 +106,37 @@ impl SensorParams {
         )]
         let count = (counts as i64) as u16;
         count
+    }
+}
+
+/// The sensor chain (ACS714, divider, ADC) from amperes to counts at fixed parameters:
+/// code = round(zero + per_amp i + noise z) within 0..=full, z a unit normal draw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdcTransfer {
+    /// Counts (unrounded) at zero current.
+    pub zero: f64,
+    /// Counts per ampere.
+    pub per_amp: f64,
+    /// RMS noise, counts.
+    pub noise: f64,
+    /// Largest code.
+    pub full: f64,
+}
+
+impl AdcTransfer {
+    /// ADC code for `current` (A), with noise from `rng` and quantisation; the pin clamps
+    /// to the ADC's range.
+    #[inline]
+    pub fn code(&self, current: f64, rng: &mut NoiseSource) -> u16 {
+        let counts = self.zero + self.per_amp * current + self.noise * rng.normal_fast();
+        // Rounded half up; in range, so truncating the shifted value is the floor.
+        #[allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "clamped to 0..=full, a u16"
+        )]
+        let code = (counts + 0.5).clamp(0.0, self.full + 0.25) as u16;
+        code
     }
 }
 
