@@ -19,6 +19,9 @@ pub const CAPTURE_IN_FLIGHT: usize = 256;
 #[derive(Debug, Clone)]
 pub struct TxQueue {
     buf: [u8; TX_QUEUE_LEN],
+    /// Where a frame is encoded before it is copied in (kept between pushes: never zeroed,
+    /// `encode_frame` overwrites what it uses).
+    scratch: [u8; MAX_DEVICE_FRAME_SIZE],
     head: usize,
     len: usize,
     next_seq: u16,
@@ -30,6 +33,7 @@ impl TxQueue {
     pub const fn new() -> Self {
         Self {
             buf: [0; TX_QUEUE_LEN],
+            scratch: [0; MAX_DEVICE_FRAME_SIZE],
             head: 0,
             len: 0,
             next_seq: 0,
@@ -69,9 +73,9 @@ impl TxQueue {
     pub fn push<M: Serialize + ?Sized>(&mut self, msg: &M, reserve: usize) -> bool {
         let seq = self.next_seq;
         self.next_seq = self.next_seq.wrapping_add(1);
-        let mut scratch = [0u8; MAX_DEVICE_FRAME_SIZE];
-        let fits = match encode_frame(seq, msg, &mut scratch) {
-            Ok(frame) if frame.len() + reserve <= self.free() => {
+        let free = self.free();
+        let fits = match encode_frame(seq, msg, &mut self.scratch) {
+            Ok(frame) if frame.len() + reserve <= free => {
                 // At most two contiguous copies: up to the ring's end, then from its start.
                 let tail = (self.head + self.len) % TX_QUEUE_LEN;
                 let first = frame.len().min(TX_QUEUE_LEN - tail);
