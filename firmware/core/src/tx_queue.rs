@@ -112,6 +112,12 @@ impl Default for TxQueue {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
     use protocol::{DeviceDeframer, DeviceMessage, Frame};

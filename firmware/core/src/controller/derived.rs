@@ -211,6 +211,12 @@ pub fn check_rules(
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
 
