@@ -134,7 +134,7 @@ pub fn frame_body(frame: &mut [u8]) -> Result<&[u8], Error> {
     if frame.is_empty() || frame.contains(&FRAME_DELIMITER) {
         return Err(Error::Framing);
     }
-    let len = cobs::decode_in_place(frame).map_err(|_| Error::Framing)?;
+    let len = cobs_decode_in_place(frame).ok_or(Error::Framing)?;
     let decoded = frame.get(..len).ok_or(Error::Framing)?;
     let Some(body_len) = len.checked_sub(CRC_LEN).filter(|&n| n > 0) else {
         return Err(Error::Framing);
@@ -145,6 +145,28 @@ pub fn frame_body(frame: &mut [u8]) -> Result<&[u8], Error> {
         return Err(Error::Crc);
     }
     Ok(body)
+}
+
+/// COBS-decodes `buf` (no delimiters in it) in place, block by block (one `copy_within`
+/// per block rather than a state machine per byte: receive runs under the firmware's core
+/// lock); the decoded length, or `None` when a block runs past the end or is empty.
+fn cobs_decode_in_place(buf: &mut [u8]) -> Option<usize> {
+    let (mut r, mut w) = (0, 0);
+    while r < buf.len() {
+        let code = usize::from(buf[r]);
+        let end = r + code;
+        if code == 0 || end > buf.len() {
+            return None;
+        }
+        buf.copy_within(r + 1..end, w);
+        w += code - 1;
+        r = end;
+        if code != 0xFF && r < buf.len() {
+            buf[w] = 0;
+            w += 1;
+        }
+    }
+    Some(w)
 }
 
 /// Decodes a CRC-checked body (from [`frame_body`]) into a frame of `M`.
@@ -234,8 +256,8 @@ mod tests {
         // Long non-zero runs (full blocks, a block ending the data) and zeros anywhere.
         let mut cases: Vec<Vec<u8>> = vec![vec![], vec![0], vec![1], vec![0, 0]];
         for n in [253, 254, 255, 300, 507, 508, 509, 600] {
-            cases.push((0..n).map(|k| (k % 255 + 1) as u8).collect());
-            let mut v: Vec<u8> = (0..n).map(|k| (k % 255 + 1) as u8).collect();
+            cases.push((0..n).map(|k| u8::try_from(k % 255 + 1).unwrap()).collect());
+            let mut v: Vec<u8> = (0..n).map(|k| u8::try_from(k % 255 + 1).unwrap()).collect();
             v[n / 2] = 0;
             cases.push(v.clone());
             v.push(0);
@@ -251,6 +273,35 @@ mod tests {
             let len = cobs_encode_in_place(&mut buf, start, data.len());
             assert_eq!(&buf[1..1 + len], &want[..], "{} bytes", data.len());
         }
+    }
+
+    #[test]
+    fn in_place_decode_matches_the_cobs_crate() {
+        for n in [0usize, 1, 2, 100, 253, 254, 255, 300, 508, 509] {
+            for zero_every in [0usize, 1, 3, 97, 254] {
+                let data: Vec<u8> = (0..n)
+                    .map(|k| {
+                        if zero_every > 0 && k % zero_every == 0 {
+                            0
+                        } else {
+                            u8::try_from(k % 255 + 1).unwrap()
+                        }
+                    })
+                    .collect();
+                let mut enc = vec![0; crate::cobs_max_encoded_len(n)];
+                let len = cobs::encode(&data, &mut enc);
+                enc.truncate(len);
+                let got = cobs_decode_in_place(&mut enc).expect("valid COBS");
+                assert_eq!(&enc[..got], &data[..], "{n} bytes, zero every {zero_every}");
+            }
+        }
+        assert_eq!(
+            cobs_decode_in_place(&mut [3, 1]),
+            None,
+            "block past the end"
+        );
+        assert_eq!(cobs_decode_in_place(&mut [1, 0]), None, "a zero code");
+        assert_eq!(cobs_decode_in_place(&mut []), Some(0));
     }
 
     proptest::proptest! {

@@ -164,7 +164,9 @@ pub(crate) fn check_board_caps(
 }
 
 /// The record's limits against `caps` and its constants against `motor`: the first field
-/// refused, as the wire names it.
+/// refused, as the wire names it. The constants go through the model's rules in `f32`
+/// ([`model::check_constants`], the rules of [`model::Calibration::check`]): the target has
+/// no double-precision FPU, and host and firmware both call this function, so they agree.
 pub fn check_rules(
     p: &RigParameters,
     caps: &model::BoardLimits,
@@ -189,8 +191,24 @@ pub fn check_rules(
         };
         return Err(ParameterRejection::new(field, reason));
     }
-    let vibrator = model::Calibration::from_paper_units(p.constants());
-    if let Err(issue) = vibrator.check(motor) {
+    // The model's rules in f32 (no software double maths on the target).
+    let si = [
+        p.c1_nmm_per_a * 1e-3,
+        p.c2_nmm * 1e-3,
+        p.c3_nmm_s_per_rad * 1e-3,
+        p.c4_nmm * 1e-3,
+        p.c5_a_s_per_rad,
+        p.c6_a,
+    ];
+    let of = <f32 as model::CheckFloat>::of;
+    let checked = model::check_constants(
+        si,
+        // eta N Kt (`MotorConstants::cam_torque_constant`), multiplied in f32.
+        of(motor.gearhead_efficiency) * of(motor.gear_ratio) * of(motor.kt_motor),
+        of(motor.no_load_current),
+        of(motor.no_load_speed),
+    );
+    if let Err(issue) = checked {
         let field = match issue.field {
             C::C1 => ParameterField::C1,
             C::C2 => ParameterField::C2,
