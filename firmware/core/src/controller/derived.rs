@@ -110,9 +110,20 @@ impl GearFactors {
     }
 }
 
-/// Square root on the FPU (`VSQRT.F32`) on the target, the standard library's on the host.
+/// Square root of `x` > 0 (here (z + 2)^2 - (z cos a)^2, at least 4 z + 4): Newton's
+/// iteration from the exponent-halving first guess (within 4 %; each step squares the
+/// relative error, so four reach f32's rounding). libm's `sqrtf` is software on this
+/// target with a 256-byte table; this runs once per parameter record. NaN for `x` <= 0 or
+/// not finite (never the case for a gear set that passed validation).
 fn sqrtf(x: f32) -> f32 {
-    libm::sqrtf(x)
+    if !(x > 0.0 && x.is_finite()) {
+        return f32::NAN;
+    }
+    let mut y = f32::from_bits((x.to_bits() >> 1) + 0x1FBD_1DF5);
+    for _ in 0..4 {
+        y = 0.5 * (y + x / y);
+    }
+    y
 }
 
 /// cos and sin of `x` in 0..=pi/4 by their Taylor series to x^14 / x^15 (truncation error
@@ -280,6 +291,24 @@ mod tests {
                 && model::Calibration::from_paper_units(p.constants()).is_plausible();
             assert_eq!(Derived::new(&p, &config).is_ok(), model_ok, "{p:?}");
         }
+    }
+
+    #[test]
+    fn sqrt_matches_libm() {
+        let mut x = 1e-6f32;
+        while x < 1e9 {
+            let (got, want) = (sqrtf(x), libm::sqrtf(x));
+            assert!(
+                (got - want).abs() <= 2.0 * f32::EPSILON * want,
+                "sqrt {x}: {got} vs {want}"
+            );
+            x *= 1.37;
+        }
+        for z in 4..200u16 {
+            let x = f32::from((z + 2) * (z + 2)) - 0.88 * f32::from(z * z);
+            assert!((sqrtf(x) - libm::sqrtf(x)).abs() <= 2.0 * f32::EPSILON * libm::sqrtf(x));
+        }
+        assert!(sqrtf(0.0).is_nan() && sqrtf(-1.0).is_nan() && sqrtf(f32::INFINITY).is_nan());
     }
 
     #[test]
