@@ -148,90 +148,179 @@ impl Calibration {
     /// Table 2 passes (its C4 is 1.69 N mm against C1 C6 + C2 = 1.725); a C1 of 2258 N mm/A
     /// (36 times Table 2) fails naming C1.
     pub fn check(&self, motor: &MotorConstants) -> Result<(), CalibrationIssue> {
-        let values = [self.c1, self.c2, self.c3, self.c4, self.c5, self.c6];
-        for (field, v) in CalibrationField::ALL.into_iter().zip(values) {
-            if !v.is_finite() {
-                return Err(CalibrationIssue::new(field, v, IssueKind::NotFinite));
-            }
-        }
-        let sign = |field, ok: bool, must_be| {
-            if ok {
-                Ok(())
-            } else {
-                let v = values[field as usize];
-                Err(CalibrationIssue::new(
-                    field,
-                    v,
-                    IssueKind::WrongSign { must_be },
-                ))
-            }
-        };
-        sign(CalibrationField::C1, self.c1 > 0.0, "positive")?;
-        sign(CalibrationField::C2, self.c2 <= 0.0, "zero or negative")?;
-        sign(CalibrationField::C3, self.c3 >= 0.0, "zero or positive")?;
-        sign(CalibrationField::C5, self.c5 >= 0.0, "zero or positive")?;
-        sign(CalibrationField::C6, self.c6 > 0.0, "positive")?;
-
-        let range = |field, v: f64, low: f64, high: f64| {
-            if v >= low && v <= high {
-                Ok(())
-            } else {
-                Err(CalibrationIssue::new(
-                    field,
-                    v,
-                    IssueKind::Implausible { low, high },
-                ))
-            }
-        };
-        let kt = motor.cam_torque_constant();
-        range(
-            CalibrationField::C1,
-            self.c1,
-            kt / C1_PLAUSIBLE_FACTOR,
-            kt * C1_PLAUSIBLE_FACTOR,
-        )?;
-        let (i0, w0) = (motor.no_load_current, motor.no_load_speed);
-        let high = i0 * NO_LOAD_PLAUSIBLE_FACTOR;
-        range(CalibrationField::C6, self.c6, 0.0, high)?;
-        range(CalibrationField::C5, self.c5, 0.0, high / w0)?;
-        let viscous = self.c5 * w0;
-        range(
-            CalibrationField::C6,
-            self.c6,
-            i0 / NO_LOAD_PLAUSIBLE_FACTOR - viscous,
-            high - viscous,
-        )?;
-
-        let c = self.consistency();
-        let c3_tol = CONSISTENCY_TOLERANCE * self.c3.abs().max(c.c3_implied.abs());
-        if (self.c3 - c.c3_implied).abs() > c3_tol {
-            return Err(CalibrationIssue::new(
-                CalibrationField::C3,
-                self.c3,
-                IssueKind::Inconsistent {
-                    implied: c.c3_implied,
-                    tolerance: c3_tol,
-                },
-            ));
-        }
-        let c4_scale = self
-            .c4
-            .abs()
-            .max(c.c4_implied.abs())
-            .max(0.05 * (self.c1 * self.c6).abs());
-        let c4_tol = CONSISTENCY_TOLERANCE * c4_scale;
-        if (self.c4 - c.c4_implied).abs() > c4_tol {
-            return Err(CalibrationIssue::new(
-                CalibrationField::C4,
-                self.c4,
-                IssueKind::Inconsistent {
-                    implied: c.c4_implied,
-                    tolerance: c4_tol,
-                },
-            ));
-        }
-        Ok(())
+        check_constants(
+            [self.c1, self.c2, self.c3, self.c4, self.c5, self.c6],
+            motor.cam_torque_constant(),
+            motor.no_load_current,
+            motor.no_load_speed,
+        )
     }
+}
+
+/// The arithmetic of [`check_constants`]: `f64` on the host, `f32` on the target, whose FPU
+/// has no double precision (the same rules, no software double maths in the firmware).
+pub trait CheckFloat:
+    Copy
+    + PartialOrd
+    + core::ops::Add<Output = Self>
+    + core::ops::Sub<Output = Self>
+    + core::ops::Mul<Output = Self>
+    + core::ops::Div<Output = Self>
+{
+    /// Zero.
+    const ZERO: Self;
+    /// A constant of the rules (folded at compile time).
+    fn of(v: f64) -> Self;
+    /// The value for a [`CalibrationIssue`], SI.
+    fn to_f64(self) -> f64;
+    /// Neither NaN nor infinite.
+    fn finite(self) -> bool;
+    /// Absolute value.
+    fn magnitude(self) -> Self;
+    /// The larger of two (NaN-ignoring, as `f64::max`).
+    fn larger(self, other: Self) -> Self;
+}
+
+impl CheckFloat for f64 {
+    const ZERO: Self = 0.0;
+    fn of(v: f64) -> Self {
+        v
+    }
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+    fn magnitude(self) -> Self {
+        self.abs()
+    }
+    fn larger(self, other: Self) -> Self {
+        self.max(other)
+    }
+}
+
+impl CheckFloat for f32 {
+    const ZERO: Self = 0.0;
+    #[allow(
+        clippy::cast_possible_truncation,
+        reason = "the rules' constants and the motor's, well inside f32's range; rounded to nearest"
+    )]
+    fn of(v: f64) -> Self {
+        v as f32
+    }
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+    fn magnitude(self) -> Self {
+        self.abs()
+    }
+    fn larger(self, other: Self) -> Self {
+        self.max(other)
+    }
+}
+
+/// [`Calibration::check`]'s rules for C1-C6 `c` (SI) against a motor's cam torque constant
+/// eta N Kt `kt` (N m/A), no-load current `i0` (A) and speed `w0` (rad/s), in the precision
+/// `T`: the firmware evaluates them in `f32`, the host's [`Calibration::check`] in `f64`.
+/// The first rule broken, naming the constant (values reported in SI as `f64`), or `Ok`.
+pub fn check_constants<T: CheckFloat>(
+    c: [T; 6],
+    kt: T,
+    i0: T,
+    w0: T,
+) -> Result<(), CalibrationIssue> {
+    let [c1, c2, c3, c4, c5, c6] = c;
+    for (field, v) in CalibrationField::ALL.into_iter().zip(c) {
+        if !v.finite() {
+            return Err(CalibrationIssue::new(
+                field,
+                v.to_f64(),
+                IssueKind::NotFinite,
+            ));
+        }
+    }
+    let zero = T::ZERO;
+    let sign = |field, ok: bool, must_be| {
+        if ok {
+            Ok(())
+        } else {
+            let v = c[field as usize];
+            Err(CalibrationIssue::new(
+                field,
+                v.to_f64(),
+                IssueKind::WrongSign { must_be },
+            ))
+        }
+    };
+    sign(CalibrationField::C1, c1 > zero, "positive")?;
+    sign(CalibrationField::C2, c2 <= zero, "zero or negative")?;
+    sign(CalibrationField::C3, c3 >= zero, "zero or positive")?;
+    sign(CalibrationField::C5, c5 >= zero, "zero or positive")?;
+    sign(CalibrationField::C6, c6 > zero, "positive")?;
+
+    let range = |field, v: T, low: T, high: T| {
+        if v >= low && v <= high {
+            Ok(())
+        } else {
+            Err(CalibrationIssue::new(
+                field,
+                v.to_f64(),
+                IssueKind::Implausible {
+                    low: low.to_f64(),
+                    high: high.to_f64(),
+                },
+            ))
+        }
+    };
+    let c1_factor = T::of(C1_PLAUSIBLE_FACTOR);
+    range(CalibrationField::C1, c1, kt / c1_factor, kt * c1_factor)?;
+    let no_load_factor = T::of(NO_LOAD_PLAUSIBLE_FACTOR);
+    let high = i0 * no_load_factor;
+    range(CalibrationField::C6, c6, zero, high)?;
+    range(CalibrationField::C5, c5, zero, high / w0)?;
+    let viscous = c5 * w0;
+    range(
+        CalibrationField::C6,
+        c6,
+        i0 / no_load_factor - viscous,
+        high - viscous,
+    )?;
+
+    // The consistency of Calibration::consistency.
+    let c3_implied = c1 * c5;
+    let c4_implied = c1 * c6 + c2;
+    let tolerance = T::of(CONSISTENCY_TOLERANCE);
+    let c3_tol = tolerance * c3.magnitude().larger(c3_implied.magnitude());
+    if (c3 - c3_implied).magnitude() > c3_tol {
+        return Err(CalibrationIssue::new(
+            CalibrationField::C3,
+            c3.to_f64(),
+            IssueKind::Inconsistent {
+                implied: c3_implied.to_f64(),
+                tolerance: c3_tol.to_f64(),
+            },
+        ));
+    }
+    let c4_scale = c4
+        .magnitude()
+        .larger(c4_implied.magnitude())
+        .larger(T::of(0.05) * (c1 * c6).magnitude());
+    let c4_tol = tolerance * c4_scale;
+    if (c4 - c4_implied).magnitude() > c4_tol {
+        return Err(CalibrationIssue::new(
+            CalibrationField::C4,
+            c4.to_f64(),
+            IssueKind::Inconsistent {
+                implied: c4_implied.to_f64(),
+                tolerance: c4_tol.to_f64(),
+            },
+        ));
+    }
+    Ok(())
 }
 
 impl Default for Calibration {
@@ -647,6 +736,43 @@ mod tests {
         // The plant's motor, calibrated, passes too.
         let plant = crate::plant::MotorParams::default().calibration();
         assert_eq!(plant.check(&MotorConstants::RS735), Ok(()));
+    }
+
+    #[test]
+    fn f32_rules_agree_with_f64() {
+        let m = MotorConstants::default();
+        let mut cases = vec![Calibration::PAPER.to_paper_units()];
+        for (k, f) in [(0, 36.0), (1, -1.0), (2, 1.5), (3, 0.5), (4, 3.0), (5, 0.1)] {
+            let mut p = Calibration::PAPER.to_paper_units();
+            p[k] *= f;
+            cases.push(p);
+        }
+        for p in cases {
+            let f64_verdict = Calibration::from_paper_units(p)
+                .check(&m)
+                .map_err(|e| e.field);
+            #[allow(clippy::cast_possible_truncation, reason = "test values")]
+            let si = Calibration::from_paper_units(p)
+                .to_paper_units()
+                .map(|v| v as f32);
+            let si = [
+                si[0] * 1e-3,
+                si[1] * 1e-3,
+                si[2] * 1e-3,
+                si[3] * 1e-3,
+                si[4],
+                si[5],
+            ];
+            let of = <f32 as CheckFloat>::of;
+            let f32_verdict = check_constants(
+                si,
+                of(m.cam_torque_constant()),
+                of(m.no_load_current),
+                of(m.no_load_speed),
+            )
+            .map_err(|e| e.field);
+            assert_eq!(f32_verdict, f64_verdict, "{p:?}");
+        }
     }
 
     #[test]

@@ -40,7 +40,7 @@ pub mod plant;
 
 pub use calibration::{
     BoardLimits, Calibration, CalibrationConsistency, CalibrationField, CalibrationIssue,
-    IssueKind, LimitField, LimitIssue, LimitIssueKind,
+    CheckFloat, IssueKind, LimitField, LimitIssue, LimitIssueKind, check_constants,
 };
 pub use dynamics::{Inertias, OutputShaft};
 pub use excitation::CamDrive;

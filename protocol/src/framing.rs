@@ -7,12 +7,13 @@
 //!
 //! The delimiter both opens and closes every frame, so a stray byte on the line between
 //! two frames is cut off by the next frame's opening delimiter instead of corrupting it.
-//! Postcard streams the body through a CRC digest into a COBS encoder, so encoding needs
-//! no scratch buffer beyond the output.
+//!
+//! Encoding needs no scratch buffer beyond the output and does bounded, byte-linear work
+//! (it runs under the firmware's core lock): postcard writes the body into the back of the
+//! output, the CRC is appended, and COBS then encodes that in place, front to back, into
+//! the output's start (see [`encode_frame`]).
 
-use cobs::CobsEncoder;
-use crc::{CRC_32_ISO_HDLC, Crc, Digest};
-use postcard::ser_flavors::Flavor;
+use crc::{CRC_32_ISO_HDLC, Crc};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -37,58 +38,72 @@ pub const FRAME_DELIMITERS: usize = 2;
 /// Length of the CRC-32 trailer, bytes.
 pub const CRC_LEN: usize = 4;
 
+/// Longest run of non-zero bytes one COBS block carries.
+const COBS_BLOCK: usize = 254;
+
 static CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
-
-/// Postcard flavor: CRC over the body, COBS into the output slice.
-struct CobsCrc<'a> {
-    cobs: CobsEncoder<'a>,
-    crc: Digest<'static, u32>,
-}
-
-impl Flavor for CobsCrc<'_> {
-    type Output = usize;
-
-    fn try_push(&mut self, byte: u8) -> postcard::Result<()> {
-        self.try_extend(&[byte])
-    }
-
-    fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
-        self.crc.update(bytes);
-        self.cobs
-            .push(bytes)
-            .map_err(|_| postcard::Error::SerializeBufferFull)
-    }
-
-    fn finalize(mut self) -> postcard::Result<usize> {
-        let crc = self.crc.finalize().to_le_bytes();
-        self.cobs
-            .push(&crc)
-            .map_err(|_| postcard::Error::SerializeBufferFull)?;
-        Ok(self.cobs.finalize())
-    }
-}
 
 /// Encodes `msg` with sequence number `seq` into `out` and returns the frame, both
 /// delimiters included. An `out` of [`crate::MAX_FRAME_SIZE`] bytes always suffices for
 /// [`crate::Request`] and [`crate::DeviceMessage`].
+///
+/// The body (postcard of `(seq, msg)`) and its CRC are written at offset
+/// `2 + out.len() / 254` and COBS-encoded in place into `out[1..]`: the encoder writes at
+/// most one byte ahead of what it reads per 254-byte block, so that head start keeps the
+/// write position behind the read position. Nothing is zeroed, nothing copied twice.
 pub fn encode_frame<'o, M: Serialize + ?Sized>(
     seq: u16,
     msg: &M,
     out: &'o mut [u8],
 ) -> Result<&'o [u8], Error> {
-    let (first, rest) = out.split_first_mut().ok_or(Error::BufferTooSmall)?;
-    *first = FRAME_DELIMITER;
-    let flavor = CobsCrc {
-        cobs: CobsEncoder::new(&mut *rest),
-        crc: CRC32.digest(),
-    };
-    let len = postcard::serialize_with_flavor(&(seq, msg), flavor).map_err(|e| match e {
-        postcard::Error::SerializeBufferFull => Error::BufferTooSmall,
-        _ => Error::Serialize,
-    })?;
-    // The COBS encoder reports lengths up to one past a full buffer.
-    *rest.get_mut(len).ok_or(Error::BufferTooSmall)? = FRAME_DELIMITER;
+    let start = 2 + out.len() / COBS_BLOCK;
+    let raw = out.get_mut(start..).ok_or(Error::BufferTooSmall)?;
+    let body = postcard::to_slice(&(seq, msg), raw)
+        .map_err(|e| match e {
+            postcard::Error::SerializeBufferFull => Error::BufferTooSmall,
+            _ => Error::Serialize,
+        })?
+        .len();
+    let crc = CRC32.checksum(&raw[..body]).to_le_bytes();
+    raw.get_mut(body..body + CRC_LEN)
+        .ok_or(Error::BufferTooSmall)?
+        .copy_from_slice(&crc);
+    let len = cobs_encode_in_place(out, start, body + CRC_LEN);
+    out[0] = FRAME_DELIMITER;
+    *out.get_mut(len + 1).ok_or(Error::BufferTooSmall)? = FRAME_DELIMITER;
     Ok(&out[..len + FRAME_DELIMITERS])
+}
+
+/// COBS-encodes `buf[src..src + len]` into `buf[1..]` (byte for byte what `cobs::encode`
+/// writes: a full 254-byte block at the end gets no empty block after it) and returns the
+/// encoded length. Needs `src >= 2 + len / 254`, which keeps every write at or behind the
+/// byte just read.
+fn cobs_encode_in_place(buf: &mut [u8], src: usize, len: usize) -> usize {
+    debug_assert!(src >= 2 + len / COBS_BLOCK);
+    let mut code_at = 1;
+    let mut w = 2;
+    let mut code: u8 = 1;
+    for r in src..src + len {
+        if code == 0xFF {
+            buf[code_at] = code;
+            code_at = w;
+            w += 1;
+            code = 1;
+        }
+        let b = buf[r];
+        if b == 0 {
+            buf[code_at] = code;
+            code_at = w;
+            w += 1;
+            code = 1;
+        } else {
+            buf[w] = b;
+            w += 1;
+            code += 1;
+        }
+    }
+    buf[code_at] = code;
+    w - 1
 }
 
 /// Encodes a frame into a new `Vec` of exactly the frame's length (host side).
@@ -119,7 +134,7 @@ pub fn frame_body(frame: &mut [u8]) -> Result<&[u8], Error> {
     if frame.is_empty() || frame.contains(&FRAME_DELIMITER) {
         return Err(Error::Framing);
     }
-    let len = cobs::decode_in_place(frame).map_err(|_| Error::Framing)?;
+    let len = cobs_decode_in_place(frame).ok_or(Error::Framing)?;
     let decoded = frame.get(..len).ok_or(Error::Framing)?;
     let Some(body_len) = len.checked_sub(CRC_LEN).filter(|&n| n > 0) else {
         return Err(Error::Framing);
@@ -130,6 +145,28 @@ pub fn frame_body(frame: &mut [u8]) -> Result<&[u8], Error> {
         return Err(Error::Crc);
     }
     Ok(body)
+}
+
+/// COBS-decodes `buf` (no delimiters in it) in place, block by block (one `copy_within`
+/// per block rather than a state machine per byte: receive runs under the firmware's core
+/// lock); the decoded length, or `None` when a block runs past the end or is empty.
+fn cobs_decode_in_place(buf: &mut [u8]) -> Option<usize> {
+    let (mut r, mut w) = (0, 0);
+    while r < buf.len() {
+        let code = usize::from(buf[r]);
+        let end = r + code;
+        if code == 0 || end > buf.len() {
+            return None;
+        }
+        buf.copy_within(r + 1..end, w);
+        w += code - 1;
+        r = end;
+        if code != 0xFF && r < buf.len() {
+            buf[w] = 0;
+            w += 1;
+        }
+    }
+    Some(w)
 }
 
 /// Decodes a CRC-checked body (from [`frame_body`]) into a frame of `M`.
@@ -212,6 +249,92 @@ mod tests {
         expected.extend(reference_frame(&body(&(513u16, &msg))));
         expected.push(0);
         assert_eq!(frame, expected);
+    }
+
+    #[test]
+    fn in_place_cobs_matches_the_cobs_crate() {
+        // Long non-zero runs (full blocks, a block ending the data) and zeros anywhere.
+        let mut cases: Vec<Vec<u8>> = vec![vec![], vec![0], vec![1], vec![0, 0]];
+        for n in [253, 254, 255, 300, 507, 508, 509, 600] {
+            cases.push((0..n).map(|k| u8::try_from(k % 255 + 1).unwrap()).collect());
+            let mut v: Vec<u8> = (0..n).map(|k| u8::try_from(k % 255 + 1).unwrap()).collect();
+            v[n / 2] = 0;
+            cases.push(v.clone());
+            v.push(0);
+            cases.push(v);
+        }
+        for data in cases {
+            let mut want = vec![0; crate::cobs_max_encoded_len(data.len())];
+            let want_len = cobs::encode(&data, &mut want);
+            want.truncate(want_len);
+            let start = 2 + data.len() / COBS_BLOCK;
+            let mut buf = vec![0xAA; start + data.len()];
+            buf[start..].copy_from_slice(&data);
+            let len = cobs_encode_in_place(&mut buf, start, data.len());
+            assert_eq!(&buf[1..1 + len], &want[..], "{} bytes", data.len());
+        }
+    }
+
+    #[test]
+    fn in_place_decode_matches_the_cobs_crate() {
+        for n in [0usize, 1, 2, 100, 253, 254, 255, 300, 508, 509] {
+            for zero_every in [0usize, 1, 3, 97, 254] {
+                let data: Vec<u8> = (0..n)
+                    .map(|k| {
+                        if zero_every > 0 && k % zero_every == 0 {
+                            0
+                        } else {
+                            u8::try_from(k % 255 + 1).unwrap()
+                        }
+                    })
+                    .collect();
+                let mut enc = vec![0; crate::cobs_max_encoded_len(n)];
+                let len = cobs::encode(&data, &mut enc);
+                enc.truncate(len);
+                let got = cobs_decode_in_place(&mut enc).expect("valid COBS");
+                assert_eq!(&enc[..got], &data[..], "{n} bytes, zero every {zero_every}");
+            }
+        }
+        assert_eq!(
+            cobs_decode_in_place(&mut [3, 1]),
+            None,
+            "block past the end"
+        );
+        assert_eq!(cobs_decode_in_place(&mut [1, 0]), None, "a zero code");
+        assert_eq!(cobs_decode_in_place(&mut []), Some(0));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn frames_round_trip_through_any_buffer(
+            seq: u16,
+            text in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..120),
+            extra in 0usize..40,
+        ) {
+            // A capture chunk carries arbitrary bytes through the varints.
+            let samples = text
+                .chunks(2)
+                .map(|c| crate::CaptureSample {
+                    current_adc: u16::from(c[0]) << 4,
+                    encoder_count: i32::from(*c.last().unwrap_or(&0)) * 1000 - 9,
+                })
+                .take(crate::CAPTURE_CHUNK_SAMPLES)
+                .collect();
+            let msg = DeviceMessage::CaptureChunk(crate::CaptureChunk {
+                capture_id: seq,
+                first_sample: 7,
+                total_samples: 1_000_000,
+                samples,
+            });
+            let mut expected = vec![0];
+            expected.extend(reference_frame(&body(&(seq, &msg))));
+            expected.push(0);
+            let mut buf = vec![0x55; expected.len() + extra];
+            let frame = encode_frame(seq, &msg, &mut buf).unwrap();
+            proptest::prop_assert_eq!(frame, &expected[..]);
+            let mut short = vec![0x55; expected.len() - 1];
+            proptest::prop_assert_eq!(encode_frame(seq, &msg, &mut short), Err(Error::BufferTooSmall));
+        }
     }
 
     #[test]

@@ -4,7 +4,8 @@
 //! denied), docs (warnings denied), every host test, and a 10 s smoke run of each fuzz target
 //! in `fuzz/` when a nightly toolchain and cargo-fuzz are installed. `cargo xtask
 //! target-bench` counts the control core's cycles in an emulated Cortex-M4F (see
-//! `target_bench`).
+//! `target_bench`); `test` runs it with `--check` right after the firmware build (skipped
+//! with a message only when its Python packages cannot be installed).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -14,10 +15,7 @@ mod target_bench;
 
 /// The firmware's target.
 const THUMB: &str = "thumbv7em-none-eabihf";
-/// Flash budget of the release firmware, bytes.
-const FLASH_BUDGET: u64 = 64 * 1024;
-/// Static RAM budget of the release firmware (capture buffer included), bytes.
-const RAM_BUDGET: u64 = 64 * 1024;
+use size::{FLASH_BUDGET, RAM_BUDGET};
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -29,7 +27,7 @@ fn main() -> ExitCode {
         Some("target-bench") => target_bench(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]"
+                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, target bench --check, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]"
             );
             Err("no task given".into())
         }
@@ -166,11 +164,20 @@ fn target_bench(args: &[String]) -> Result {
     let options = target_bench::Options::parse(args)?;
     setup()?;
     let firmware_elf = thumb_release_build("firmware")?;
-    let usage = size::measure(&firmware_elf)?;
-    let image = thumb_release_build("firmware-bench")?;
     let python = target_bench::python_env(&target_dir())?;
+    bench_run(options, &firmware_elf, &python)
+}
+
+/// The emulator run of `target_bench`, the firmware already built.
+fn bench_run(options: target_bench::Options, firmware_elf: &Path, python: &Path) -> Result {
+    let usage = size::measure(firmware_elf)?;
+    let board = root().join("firmware").join("src").join("board.rs");
+    let board = std::fs::read_to_string(&board)
+        .map_err(|e| format!("cannot read {}: {e}", board.display()))?;
+    let enable = target_bench::bridge_enable_bsrr(&board)?;
+    let image = thumb_release_build("firmware-bench")?;
     let driver = root().join("xtask").join("target_bench").join("driver.py");
-    let output = target_bench::run_driver(&python, &driver, &image)?;
+    let output = target_bench::run_driver(python, &driver, &image, Some((firmware_elf, enable)))?;
     let result = target_bench::result(&output, usage, &image)?;
     if options.json {
         println!("{result}");
@@ -188,6 +195,25 @@ fn target_bench(args: &[String]) -> Result {
     Ok(())
 }
 
+/// CI's target bench (`target-bench --check`) after the firmware build; skipped, saying
+/// why, only when the emulator's Python packages cannot be installed (no python3, no venv
+/// module, no network for pip).
+fn bench_check() -> Result {
+    let python = match target_bench::python_env(&target_dir()) {
+        Ok(python) => python,
+        Err(e) => {
+            println!("target bench: SKIPPED, the emulator cannot be installed: {e}");
+            return Ok(());
+        }
+    };
+    eprintln!("\n==> target bench (--check)");
+    let options = target_bench::Options {
+        json: false,
+        check: true,
+    };
+    bench_run(options, &firmware_elf(), &python)
+}
+
 fn test() -> Result {
     setup()?;
     run("rustfmt check", {
@@ -196,6 +222,7 @@ fn test() -> Result {
         c
     })?;
     firmware()?;
+    bench_check()?;
     run(
         "model, protocol and firmware-core build for the thumb target",
         {

@@ -4,6 +4,12 @@ use std::path::Path;
 
 use object::{Object, ObjectSection, SectionFlags, SectionKind};
 
+/// Flash budget of the release firmware, bytes (issue 11: 48 KiB). `cargo xtask firmware`
+/// and `cargo xtask target-bench` check the same number.
+pub const FLASH_BUDGET: u64 = 48 * 1024;
+/// Static RAM budget of the release firmware (capture buffer included), bytes.
+pub const RAM_BUDGET: u64 = 64 * 1024;
+
 /// Memory use of a firmware image, bytes.
 #[derive(Debug, Clone, Copy)]
 pub struct Usage {

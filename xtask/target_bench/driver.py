@@ -719,9 +719,114 @@ def summarise(calls, overhead, image_stack, costing, elapsed):
     }
 
 
+# --- Panic to safe state (the firmware ELF itself) ----------------------------------
+TIM1_BDTR = 0x4001_2C44
+BDTR_MOE = 1 << 15
+EXCEPTION_ENTRY = 12  # cycles from an exception to its handler's first instruction (TRM 3.3)
+SAFE_STATE_LIMIT = 170_000  # budget: 1 ms at 170 MHz
+# (name in the result, symbol, entered as an exception)
+SAFE_STATE_PATHS = [
+    ("panic", "rust_begin_unwind", False),
+    ("hard_fault", "HardFault", True),
+    ("unhandled_interrupt", "DefaultHandler", True),
+    ("control_stall", "WWDG", True),
+]
+
+
+def safe_state_paths(elf_path, enable_bsrr, enable_bit):
+    """Runs each failure handler of the real firmware from its entry, peripherals as plain
+    memory (pages mapped on first touch), until both writes of the safe state happened:
+    TIM1_BDTR written with MOE clear (it reads as set before) and the bridge enable's
+    GPIO BSRR written with its reset bit. Returns {path: {cycles, instructions, ...}}."""
+    segments, symbols = read_elf(elf_path)
+
+    def find(name):
+        for sym, (value, _, kind) in symbols.items():
+            if kind == 2 and (sym == name or sym.endswith(name)):
+                return value & ~1
+        raise Failure(f"{elf_path} has no `{name}` symbol: not the rig firmware?")
+
+    costing = Costing()
+    results = {}
+    for label, symbol, exception in SAFE_STATE_PATHS:
+        entry = find(symbol)
+        uc = unicorn.Uc(unicorn.UC_ARCH_ARM, unicorn.UC_MODE_THUMB | unicorn.UC_MODE_MCLASS)
+        uc.ctl_set_cpu_model(U.UC_CPU_ARM_CORTEX_M4)
+        for base, size in (FLASH, RAM, SCS):
+            uc.mem_map(base, size)
+        for addr, data in segments:
+            uc.mem_write(addr, data)
+
+        def map_page(uc, _access, address, _size, _value, _user):
+            uc.mem_map(address & ~0xFFF, 0x1000)
+            return True
+
+        uc.hook_add(unicorn.UC_HOOK_MEM_UNMAPPED, map_page)
+        # Peripherals as the running firmware left them: MOE set.
+        uc.mem_map(TIM1_BDTR & ~0xFFF, 0x1000)
+        uc.mem_write(TIM1_BDTR, struct.pack("<I", BDTR_MOE))
+        initial_sp = struct.unpack("<I", bytes(uc.mem_read(FLASH[0], 4)))[0]
+        # A PanicInfo (and anything it points to) that points at itself, all zero lengths
+        # aside: the handler must reach the safe state before it reads any of it.
+        fake = RAM[0] + RAM[1] - 0x4000
+        uc.mem_write(fake, struct.pack("<16I", *([fake] * 16)))
+        uc.reg_write(U.UC_ARM_REG_SP, initial_sp)
+        uc.reg_write(U.UC_ARM_REG_R0, fake)
+        uc.reg_write(U.UC_ARM_REG_LR, 0xFFFF_FFF9 if exception else 0)
+        state = {"cycles": EXCEPTION_ENTRY if exception else 0, "insns": 0, "pending": None,
+                 "moe_at": None, "enable_at": None, "writes": []}
+
+        def on_block(uc, addr, size, _user):
+            if state["pending"] is not None:
+                fall, _ = state["pending"]
+                if addr != fall:
+                    state["cycles"] += P
+                state["pending"] = None
+            b = costing.block(bytes(uc.mem_read(addr, size)), addr)
+            state["cycles"] += b.cycles
+            state["insns"] += b.insns
+            if b.cond_fallthrough is not None:
+                state["pending"] = (b.cond_fallthrough, addr)
+            if state["insns"] > 1_000_000:
+                uc.emu_stop()
+
+        def on_write(uc, _access, address, size, value, _user):
+            if address >= 0x4000_0000:
+                state["writes"].append((address, value & 0xFFFF_FFFF))
+            if address == TIM1_BDTR and not value & BDTR_MOE and state["moe_at"] is None:
+                state["moe_at"] = state["cycles"]
+            if address == enable_bsrr and value >> enable_bit & 1 and state["enable_at"] is None:
+                state["enable_at"] = state["cycles"]
+            if state["moe_at"] is not None and state["enable_at"] is not None:
+                uc.emu_stop()
+
+        uc.hook_add(unicorn.UC_HOOK_BLOCK, on_block)
+        uc.hook_add(unicorn.UC_HOOK_MEM_WRITE, on_write)
+        try:
+            uc.emu_start(entry | 1, 0, timeout=10_000_000, count=2_000_000)
+        except unicorn.UcError as e:
+            at = uc.reg_read(U.UC_ARM_REG_PC)
+            raise Failure(f"the {label} path stopped at {at:#010x} before the safe state: {e}")
+        done = state["moe_at"] is not None and state["enable_at"] is not None
+        if not done:
+            missing = [w for w, k in (("TIM1 BDTR.MOE clear", "moe_at"),
+                                      (f"bridge enable low (BSRR {enable_bsrr:#010x} bit "
+                                       f"{enable_bit})", "enable_at")) if state[k] is None]
+            seen = ", ".join(f"{a:#010x}={v:#x}" for a, v in state["writes"][:8]) or "none"
+            raise Failure(f"the firmware's {label} path ({symbol}) never wrote "
+                          f"{' and '.join(missing)}; peripheral writes seen: {seen}")
+        results[label] = {"symbol": symbol, "cycles": state["cycles"],
+                          "instructions": state["insns"],
+                          "moe_clear_at": state["moe_at"], "enable_low_at": state["enable_at"],
+                          "exception_entry": EXCEPTION_ENTRY if exception else 0}
+    return results
+
+
 def main(argv):
-    if len(argv) != 2:
-        print("usage: driver.py FIRMWARE_BENCH_ELF", file=sys.stderr)
+    usage = ("usage: driver.py FIRMWARE_BENCH_ELF "
+             "[--safe-state FIRMWARE_ELF ENABLE_BSRR_ADDRESS ENABLE_BSRR_BIT]")
+    if len(argv) not in (2, 6) or (len(argv) == 6 and argv[2] != "--safe-state"):
+        print(usage, file=sys.stderr)
         return 2
     start = time.time()
     errors = self_test()
@@ -730,9 +835,15 @@ def main(argv):
               "change?):\n  " + "\n  ".join(errors), file=sys.stderr)
         return 1
     try:
+        safe = None
+        if len(argv) == 6:
+            safe = safe_state_paths(argv[3], int(argv[4], 0), int(argv[5], 0))
         driver = Driver(argv[1])
         calls, overhead, image_stack = driver.session()
         result = summarise(calls, overhead, image_stack, driver.costing, time.time() - start)
+        if safe is not None:
+            result["safe_state"] = safe
+            result["panic_to_safe_cycles"] = safe["panic"]["cycles"]
     except (Failure, OSError, ValueError) as e:
         print(f"target bench: {e}", file=sys.stderr)
         return 1

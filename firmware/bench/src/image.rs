@@ -251,7 +251,7 @@ impl Bench {
         let boundary = u32::from(after.revolutions > before.revolutions);
         bench_marker(code::NOTE, boundary | (after.state as u32) << 8);
         if !after.latched_faults.is_empty() {
-            return Err(Failed(fail::FAULT, u32::from(after.latched_faults.bits())));
+            return Err(Failed(fail::FAULT, after.latched_faults.bits()));
         }
         self.drive = Drive {
             duty: f64::from(out.duty),

@@ -103,9 +103,9 @@ impl Capture {
         }
         let rate = u32::from(sample_rate_hz).min(adc_hz).max(1);
         self.decimation = ((adc_hz + rate / 2) / rate).max(1);
-        self.sample_rate_hz = (adc_hz / self.decimation).min(u32::from(u16::MAX)) as u16;
+        self.sample_rate_hz = u16::try_from(adc_hz / self.decimation).unwrap_or(u16::MAX);
         self.id = self.id.wrapping_add(1);
-        self.total = samples.min(CAPTURE_CAPACITY as u32);
+        self.total = samples.min(u32::try_from(CAPTURE_CAPACITY).unwrap_or(u32::MAX));
         self.recorded = 0;
         self.sent = 0;
         self.countdown = 0;
@@ -123,18 +123,19 @@ impl Capture {
         if self.phase != CapturePhase::Recording || adc.is_empty() {
             return;
         }
-        let delta = i32::from(encoder_now.wrapping_sub(encoder_prev) as i16);
-        let n = adc.len() as i32;
+        let delta = i32::from(encoder_now.wrapping_sub(encoder_prev).cast_signed());
+        let n = i32::try_from(adc.len()).unwrap_or(i32::MAX);
         for (j, &code) in adc.iter().enumerate() {
             if self.countdown > 0 {
                 self.countdown -= 1;
                 continue;
             }
             self.countdown = self.decimation - 1;
-            let step = delta * (j as i32 + 1) / n;
+            let step = delta * i32::try_from(j + 1).unwrap_or(n) / n;
             self.buf[self.recorded as usize] = RawSample {
                 adc: code,
-                encoder: encoder_prev.wrapping_add(step as u16),
+                // |step| <= |delta|, an i16.
+                encoder: encoder_prev.wrapping_add_signed(i16::try_from(step).unwrap_or(0)),
             };
             self.recorded += 1;
             if self.recorded == self.total {
@@ -167,7 +168,7 @@ impl Capture {
         };
         let end = (self.sent as usize + UPLOAD_CHUNK_SAMPLES).min(self.total as usize);
         for raw in &self.buf[self.sent as usize..end] {
-            let delta = raw.encoder.wrapping_sub(self.upload_last_raw) as i16;
+            let delta = raw.encoder.wrapping_sub(self.upload_last_raw).cast_signed();
             self.upload_last_raw = raw.encoder;
             self.upload_position = self.upload_position.wrapping_add(i32::from(delta));
             // Cannot fail: the chunk holds CAPTURE_CHUNK_SAMPLES and `end` bounds the run.
@@ -176,7 +177,7 @@ impl Capture {
                 encoder_count: self.upload_position,
             });
         }
-        self.sent = end as u32;
+        self.sent = u32::try_from(end).unwrap_or(self.total);
         Some(DeviceMessage::CaptureChunk(chunk))
     }
 }
@@ -188,6 +189,12 @@ impl Default for Capture {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
 

@@ -67,6 +67,11 @@ impl CurrentSensorConfig {
 }
 
 impl Default for CurrentSensorConfig {
+    #[allow(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        reason = "the model's f64 hardware constants, well inside f32's range and precision needs"
+    )]
     fn default() -> Self {
         Self {
             sensitivity_v_per_a: acs714::SENSITIVITY_V_PER_A as f32,
@@ -106,6 +111,11 @@ pub struct MotorConfig {
 }
 
 impl Default for MotorConfig {
+    #[allow(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        reason = "the model's f64 hardware constants, well inside f32's range and precision needs"
+    )]
     fn default() -> Self {
         Self {
             resistance_ohm: rs735::RESISTANCE_OHM as f32,
@@ -199,6 +209,11 @@ pub struct SupervisorConfig {
 }
 
 impl Default for SupervisorConfig {
+    #[allow(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        reason = "the model's f64 hardware constants, well inside f32's range and precision needs"
+    )]
     fn default() -> Self {
         Self {
             default_freq_hz: 10.0,
@@ -327,7 +342,8 @@ impl CoreConfig {
 
     /// Current (and capture) sample rate, Hz.
     pub fn sample_rate_hz(&self) -> u32 {
-        self.control_hz * self.samples_per_step as u32
+        self.control_hz
+            .saturating_mul(u32::try_from(self.samples_per_step).unwrap_or(u32::MAX))
     }
 
     /// Quadrature counts per cam revolution.
@@ -352,6 +368,11 @@ impl CoreConfig {
 const CONTROL_HZ: u32 = 1000;
 
 impl Default for CoreConfig {
+    #[allow(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        reason = "the model's f64 hardware constants, well inside f32's range and precision needs"
+    )]
     fn default() -> Self {
         Self {
             control_hz: CONTROL_HZ,
@@ -373,6 +394,12 @@ impl Default for CoreConfig {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
     use model::plant::SensorParams;

@@ -106,7 +106,7 @@ impl CurrentSense {
         }
         let (acc, n) = self.zeroing.as_mut()?;
         *acc += u64::from(sum);
-        *n += samples.len() as u32;
+        *n = n.saturating_add(u32::try_from(samples.len()).unwrap_or(u32::MAX));
         if *n < self.zero_samples {
             return None;
         }
@@ -149,6 +149,12 @@ impl CurrentSense {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
 

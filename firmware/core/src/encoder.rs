@@ -45,13 +45,18 @@ impl CamEncoder {
     /// Takes the raw timer count read at `now_us`; returns the counts moved since the last call.
     pub fn update(&mut self, now_us: u64, raw: u16) -> i32 {
         let delta = match self.last_raw {
-            Some(last) => i32::from(raw.wrapping_sub(last) as i16),
+            Some(last) => i32::from(raw.wrapping_sub(last).cast_signed()),
             None => 0,
         };
         self.last_raw = Some(raw);
         self.position += i64::from(delta);
         self.head = (self.head + 1) % HISTORY;
-        self.history[self.head] = (now_us as u32, self.position as i32);
+        #[allow(
+            clippy::cast_possible_truncation,
+            reason = "kept modulo 2^32: the speed window takes wrapping differences only"
+        )]
+        let entry = (now_us as u32, self.position as i32);
+        self.history[self.head] = entry;
         self.filled = (self.filled + 1).min(HISTORY);
         self.speed_rad_s = self.window_speed();
         delta
@@ -96,6 +101,12 @@ impl CamEncoder {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
 

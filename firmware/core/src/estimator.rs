@@ -76,9 +76,9 @@ impl EstimatorModel {
                 self.vibrator.c3,
                 self.vibrator.c4,
             ]
-            .map(|c| c as f32),
-            slope as f32,
-            (self.drive.required_inertia_torque(1.0)) as f32,
+            .map(to_f32),
+            to_f32(slope),
+            to_f32(self.drive.required_inertia_torque(1.0)),
             self.carrier_power_returned,
         )
     }
@@ -233,10 +233,20 @@ impl TorqueEstimator {
             let frac = (self.next_boundary - step.prev_position) as f32
                 / (step.position - step.prev_position) as f32;
             let frac = frac.clamp(0.0, 1.0);
+            #[allow(
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss,
+                reason = "frac is clamped to [0, 1]: a sample index 0..=n"
+            )]
             let split = (frac * n as f32 + 0.5) as usize;
             let (before, after) = step.current_adc.split_at(split.min(n));
             self.add(before);
             let offset = frac * step.now_us.saturating_sub(step.prev_us) as f32;
+            #[allow(
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss,
+                reason = "0 <= offset <= the step's length in us"
+            )]
             let whole = offset as u64;
             let cross_us = (step.prev_us + whole, offset - whole as f32);
             let period_us = cross_us.0.saturating_sub(self.last_cross_us.0) as f32
@@ -277,11 +287,28 @@ impl TorqueEstimator {
             sum += u32::from(s);
         }
         self.sum_counts += u64::from(sum);
-        self.samples += samples.len() as u32;
+        self.samples = self
+            .samples
+            .saturating_add(u32::try_from(samples.len()).unwrap_or(u32::MAX));
     }
 }
 
+/// An f64 coefficient of the model in the target's f32 (derived once per parameter record).
+#[allow(
+    clippy::cast_possible_truncation,
+    reason = "the estimator runs in f32 on the target; rounding to nearest is the intent"
+)]
+fn to_f32(x: f64) -> f32 {
+    x as f32
+}
+
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
     use crate::config::CurrentSensorConfig;

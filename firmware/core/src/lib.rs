@@ -56,6 +56,14 @@
 //! in place (`MaybeUninit::write(Core::new(..))` into a static slot, as the binary does)
 //! rather than on the stack.
 #![cfg_attr(not(test), no_std)]
+// No silent numeric narrowing on the target (as in `model` and `protocol`): every cast that
+// can truncate, lose a sign or wrap is written so it cannot, or carries an `allow` with its
+// reason.
+#![deny(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap
+)]
 
 mod capture;
 mod config;
@@ -72,6 +80,12 @@ mod supervisor;
 mod tx_queue;
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests;
 
 pub use capture::{CAPTURE_CAPACITY, MIN_SAMPLE_RATE_HZ};

@@ -65,7 +65,7 @@ impl OutputEncoder {
     pub fn update(&mut self, now_us: u64, count: u16) {
         match self.last_count {
             None => self.window_start = (now_us, 0),
-            Some(last) => self.position += i64::from(count.wrapping_sub(last) as i16),
+            Some(last) => self.position += i64::from(count.wrapping_sub(last).cast_signed()),
         }
         self.last_count = Some(count);
         let (t0, p0) = self.window_start;
@@ -135,6 +135,12 @@ impl crate::Core {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
 

@@ -32,6 +32,19 @@ const PAYLOAD_LEN: usize = 68;
 const BODY_LEN: usize = 12 + PAYLOAD_LEN;
 const CRC_END: usize = BODY_LEN + 4;
 const COMMIT_AT: usize = 96;
+/// [`PAYLOAD_LEN`] and [`COMMIT_AT`] as the record's u16 field and a flash offset.
+#[allow(
+    clippy::cast_possible_truncation,
+    reason = "small constants, asserted below"
+)]
+const PAYLOAD_LEN_U16: u16 = PAYLOAD_LEN as u16;
+#[allow(
+    clippy::cast_possible_truncation,
+    reason = "small constants, asserted below"
+)]
+const COMMIT_AT_U32: u32 = COMMIT_AT as u32;
+const _: () = assert!(PAYLOAD_LEN < COMMIT_AT);
+const _: () = assert!(COMMIT_AT <= 0xFFFF);
 const COMMIT: [u8; 16] = *b"RCAL-COMMITTED!\n";
 const RECORD_LEN: usize = COMMIT_AT + COMMIT.len();
 
@@ -108,7 +121,8 @@ impl<F: NorFlash> CalibrationStore<F> {
     }
 
     fn slot_offset(slot: usize) -> u32 {
-        (slot * F::ERASE_SIZE) as u32
+        // Two slots of a page: far below 4 GiB (an impossible overflow fails the flash call).
+        u32::try_from(slot * F::ERASE_SIZE).unwrap_or(u32::MAX)
     }
 
     fn fits(&self) -> bool {
@@ -165,7 +179,7 @@ impl<F: NorFlash> CalibrationStore<F> {
         let mut best: Option<(usize, u32, RigParameters)> = None;
         for (i, slot) in slots.iter().enumerate() {
             if let Slot::Valid { seq, calibration } = *slot {
-                let newer = best.is_none_or(|(_, b, _)| seq.wrapping_sub(b) as i32 > 0);
+                let newer = best.is_none_or(|(_, b, _)| seq.wrapping_sub(b).cast_signed() > 0);
                 if newer {
                     best = Some((i, seq, calibration));
                 }
@@ -196,7 +210,7 @@ impl<F: NorFlash> CalibrationStore<F> {
         let mut body = [0xFFu8; COMMIT_AT];
         body[..4].copy_from_slice(&MAGIC);
         body[4..6].copy_from_slice(&STORAGE_SCHEMA.to_le_bytes());
-        body[6..8].copy_from_slice(&(PAYLOAD_LEN as u16).to_le_bytes());
+        body[6..8].copy_from_slice(&PAYLOAD_LEN_U16.to_le_bytes());
         body[8..12].copy_from_slice(&seq.to_le_bytes());
         encode(calibration, &mut body[12..BODY_LEN]);
         let crc = CRC32.checksum(&body[..BODY_LEN]);
@@ -205,7 +219,10 @@ impl<F: NorFlash> CalibrationStore<F> {
         let offset = Self::slot_offset(slot);
         let flash_err = |e: F::Error| StorageError::Flash(e.kind());
         self.flash
-            .erase(offset, offset + F::ERASE_SIZE as u32)
+            .erase(
+                offset,
+                offset.saturating_add(u32::try_from(F::ERASE_SIZE).unwrap_or(u32::MAX)),
+            )
             .map_err(flash_err)?;
         self.flash.write(offset, &body).map_err(flash_err)?;
         let mut check = [0u8; COMMIT_AT];
@@ -214,7 +231,7 @@ impl<F: NorFlash> CalibrationStore<F> {
             return Err(StorageError::Verify);
         }
         self.flash
-            .write(offset + COMMIT_AT as u32, &COMMIT)
+            .write(offset + COMMIT_AT_U32, &COMMIT)
             .map_err(flash_err)?;
         self.newest = Some((slot, seq));
         Ok(())
@@ -356,4 +373,10 @@ impl<F: NorFlash> NorFlash for Partition<F> {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests;

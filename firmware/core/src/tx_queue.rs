@@ -19,6 +19,9 @@ pub const CAPTURE_IN_FLIGHT: usize = 256;
 #[derive(Debug, Clone)]
 pub struct TxQueue {
     buf: [u8; TX_QUEUE_LEN],
+    /// Where a frame is encoded when the free space after the tail is too short for one
+    /// (kept between pushes: never zeroed, `encode_frame` overwrites what it uses).
+    scratch: [u8; MAX_DEVICE_FRAME_SIZE],
     head: usize,
     len: usize,
     next_seq: u16,
@@ -30,6 +33,7 @@ impl TxQueue {
     pub const fn new() -> Self {
         Self {
             buf: [0; TX_QUEUE_LEN],
+            scratch: [0; MAX_DEVICE_FRAME_SIZE],
             head: 0,
             len: 0,
             next_seq: 0,
@@ -69,18 +73,31 @@ impl TxQueue {
     pub fn push<M: Serialize + ?Sized>(&mut self, msg: &M, reserve: usize) -> bool {
         let seq = self.next_seq;
         self.next_seq = self.next_seq.wrapping_add(1);
-        let mut scratch = [0u8; MAX_DEVICE_FRAME_SIZE];
-        let fits = match encode_frame(seq, msg, &mut scratch) {
-            Ok(frame) if frame.len() + reserve <= self.free() => {
-                // At most two contiguous copies: up to the ring's end, then from its start.
-                let tail = (self.head + self.len) % TX_QUEUE_LEN;
-                let first = frame.len().min(TX_QUEUE_LEN - tail);
-                let (a, b) = frame.split_at(first);
-                self.buf[tail..tail + first].copy_from_slice(a);
-                self.buf[..b.len()].copy_from_slice(b);
-                self.len += frame.len();
+        let free = self.free();
+        let tail = (self.head + self.len) % TX_QUEUE_LEN;
+        // Free bytes from the tail on without wrapping: encoded there directly when any
+        // frame fits, else in `scratch` and copied in.
+        let contiguous = (TX_QUEUE_LEN - tail).min(free);
+        let direct = contiguous >= MAX_DEVICE_FRAME_SIZE;
+        let out = if direct {
+            &mut self.buf[tail..tail + contiguous]
+        } else {
+            &mut self.scratch[..]
+        };
+        let fits = match encode_frame(seq, msg, out) {
+            Ok(frame) if frame.len() + reserve <= free => {
+                let n = frame.len();
+                if !direct {
+                    // At most two contiguous copies: up to the ring's end, then from its start.
+                    let first = n.min(TX_QUEUE_LEN - tail);
+                    let (a, b) = self.scratch[..n].split_at(first);
+                    self.buf[tail..tail + first].copy_from_slice(a);
+                    self.buf[..b.len()].copy_from_slice(b);
+                }
+                self.len += n;
                 true
             }
+            // A frame written straight into the free space and refused stays unqueued.
             _ => false,
         };
         if !fits {
@@ -108,6 +125,12 @@ impl Default for TxQueue {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
     use protocol::{DeviceDeframer, DeviceMessage, Frame};

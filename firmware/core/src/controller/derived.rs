@@ -110,9 +110,20 @@ impl GearFactors {
     }
 }
 
-/// Square root on the FPU (`VSQRT.F32`) on the target, the standard library's on the host.
+/// Square root of `x` > 0 (here (z + 2)^2 - (z cos a)^2, at least 4 z + 4): Newton's
+/// iteration from the exponent-halving first guess (within 4 %; each step squares the
+/// relative error, so four reach f32's rounding). libm's `sqrtf` is software on this
+/// target with a 256-byte table; this runs once per parameter record. NaN for `x` <= 0 or
+/// not finite (never the case for a gear set that passed validation).
 fn sqrtf(x: f32) -> f32 {
-    libm::sqrtf(x)
+    if !(x > 0.0 && x.is_finite()) {
+        return f32::NAN;
+    }
+    let mut y = f32::from_bits((x.to_bits() >> 1) + 0x1FBD_1DF5);
+    for _ in 0..4 {
+        y = 0.5 * (y + x / y);
+    }
+    y
 }
 
 /// cos and sin of `x` in 0..=pi/4 by their Taylor series to x^14 / x^15 (truncation error
@@ -164,7 +175,9 @@ pub(crate) fn check_board_caps(
 }
 
 /// The record's limits against `caps` and its constants against `motor`: the first field
-/// refused, as the wire names it.
+/// refused, as the wire names it. The constants go through the model's rules in `f32`
+/// ([`model::check_constants`], the rules of [`model::Calibration::check`]): the target has
+/// no double-precision FPU, and host and firmware both call this function, so they agree.
 pub fn check_rules(
     p: &RigParameters,
     caps: &model::BoardLimits,
@@ -189,8 +202,24 @@ pub fn check_rules(
         };
         return Err(ParameterRejection::new(field, reason));
     }
-    let vibrator = model::Calibration::from_paper_units(p.constants());
-    if let Err(issue) = vibrator.check(motor) {
+    // The model's rules in f32 (no software double maths on the target).
+    let si = [
+        p.c1_nmm_per_a * 1e-3,
+        p.c2_nmm * 1e-3,
+        p.c3_nmm_s_per_rad * 1e-3,
+        p.c4_nmm * 1e-3,
+        p.c5_a_s_per_rad,
+        p.c6_a,
+    ];
+    let of = <f32 as model::CheckFloat>::of;
+    let checked = model::check_constants(
+        si,
+        // eta N Kt (`MotorConstants::cam_torque_constant`), multiplied in f32.
+        of(motor.gearhead_efficiency) * of(motor.gear_ratio) * of(motor.kt_motor),
+        of(motor.no_load_current),
+        of(motor.no_load_speed),
+    );
+    if let Err(issue) = checked {
         let field = match issue.field {
             C::C1 => ParameterField::C1,
             C::C2 => ParameterField::C2,
@@ -211,6 +240,12 @@ pub fn check_rules(
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: values in range by construction"
+)]
 mod tests {
     use super::*;
 
@@ -256,6 +291,24 @@ mod tests {
                 && model::Calibration::from_paper_units(p.constants()).is_plausible();
             assert_eq!(Derived::new(&p, &config).is_ok(), model_ok, "{p:?}");
         }
+    }
+
+    #[test]
+    fn sqrt_matches_libm() {
+        let mut x = 1e-6f32;
+        while x < 1e9 {
+            let (got, want) = (sqrtf(x), libm::sqrtf(x));
+            assert!(
+                (got - want).abs() <= 2.0 * f32::EPSILON * want,
+                "sqrt {x}: {got} vs {want}"
+            );
+            x *= 1.37;
+        }
+        for z in 4..200u16 {
+            let x = f32::from((z + 2) * (z + 2)) - 0.88 * f32::from(z * z);
+            assert!((sqrtf(x) - libm::sqrtf(x)).abs() <= 2.0 * f32::EPSILON * libm::sqrtf(x));
+        }
+        assert!(sqrtf(0.0).is_nan() && sqrtf(-1.0).is_nan() && sqrtf(f32::INFINITY).is_nan());
     }
 
     #[test]

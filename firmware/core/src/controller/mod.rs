@@ -210,12 +210,14 @@ impl Core {
 
     /// Drains pending outgoing frame bytes into `out`; returns the count (0: nothing pending).
     /// The stream samples the steps took are framed here, and capture chunks are
-    /// generated here, one per call, so replies and telemetry still go out while a
-    /// capture uploads.
+    /// generated here, one per call and only in a call that framed no stream sample (so
+    /// one call's work stays bounded: `cargo xtask target-bench`'s `lock_cycles_worst`),
+    /// so replies and telemetry still go out while a capture uploads.
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
-        self.frame_streams();
-        // One capture message per call: each is framed here, under the binary's core lock.
-        if self.capture.phase() == CapturePhase::Uploading
+        // Bounded work under the binary's core lock: the stream samples the steps took, or
+        // else one capture message.
+        if !self.frame_streams()
+            && self.capture.phase() == CapturePhase::Uploading
             && self.tx.len() < CAPTURE_IN_FLIGHT
             && self.tx.free() >= protocol::MAX_DEVICE_FRAME_SIZE + REPLY_RESERVE
             && let Some(msg) = self.capture.next_message()

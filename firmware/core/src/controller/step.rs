@@ -39,7 +39,7 @@ impl Core {
         let dir = self.direction();
         let speed = self.encoder.speed_rad_s() * dir;
         self.capture
-            .record_step(inputs.current_adc, prev_position as u16, position as u16);
+            .record_step(inputs.current_adc, low16(prev_position), low16(position));
 
         let supply = self.bus_supply_v();
         self.speed_loop.set_supply_v(supply);
@@ -48,7 +48,7 @@ impl Core {
         self.check_hardware(now, position);
 
         if self.supervisor.state() == SupervisorState::Vibrating {
-            let dir_i = dir as i64;
+            let dir_i: i64 = if dir < 0.0 { -1 } else { 1 };
             let step = StepSamples {
                 current_adc: inputs.current_adc,
                 prev_us,
@@ -59,7 +59,8 @@ impl Core {
             self.estimate_revolution(&step, now);
         }
 
-        self.run_supervisor(now, speed, position * dir as i64);
+        let dir_i: i64 = if dir < 0.0 { -1 } else { 1 };
+        self.run_supervisor(now, speed, position * dir_i);
 
         if self.supervisor.drives_motor() && self.faults.latched().is_empty() {
             self.duty = self.drive_duty(speed, dt);
@@ -279,4 +280,15 @@ impl Core {
         }
         self.open_loop_steady
     }
+}
+
+/// The low 16 bits of an unwrapped encoder count, as the capture keeps them (the capture
+/// takes wrapping differences only).
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "keeps the low 16 bits on purpose: wraps modulo 2^16"
+)]
+fn low16(count: i64) -> u16 {
+    count as u16
 }

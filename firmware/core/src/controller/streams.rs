@@ -141,15 +141,20 @@ impl Core {
         }
     }
 
-    /// Frames the samples the steps took (health first), for `transmit`.
-    pub(super) fn frame_streams(&mut self) {
+    /// Frames the samples the steps took (health first), for `transmit`; whether there
+    /// were any.
+    pub(super) fn frame_streams(&mut self) -> bool {
+        let mut any = false;
         if let Some(health) = self.streams.pending_health.take() {
             self.tx.push(&DeviceMessage::Health(health), REPLY_RESERVE);
+            any = true;
         }
         if let Some(sample) = self.streams.pending_telemetry.take() {
             self.tx
                 .push(&DeviceMessage::Telemetry(sample), REPLY_RESERVE);
+            any = true;
         }
+        any
     }
 
     fn health(&self, now: u64) -> HealthSample {
