@@ -116,7 +116,11 @@ impl SpeedMap {
             });
         if vmax - vmin < 0.5 {
             let n = rows.len() as f64;
-            let shift = rows.iter().map(|r| r.2 - paper.speed(r.0, 0.0)).sum::<f64>() / n;
+            let shift = rows
+                .iter()
+                .map(|r| r.2 - paper.speed(r.0, 0.0))
+                .sum::<f64>()
+                / n;
             return Self {
                 a: paper.a + shift,
                 ..paper
@@ -554,8 +558,7 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
     for g in grid {
         let op = OperatingPoint::new(g.omega, g.load, thermal);
         let i: Vec<f64> = models.iter().map(|m| m.model.current(&op)).collect();
-        if i
-            .iter()
+        if i.iter()
             .all(|x| x.is_finite() && *x <= space.max_current_a && *x > 0.0)
         {
             preds.push((g, i));
@@ -566,8 +569,7 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
     let mut chosen: Vec<(GridPoint, Vec<f64>, u32, f64)> = Vec::new();
     let mut bought = vec![0.0; pairs.len()];
     let mut used = 0usize;
-    while chosen.len() < options.max_points && used < options.max_test_points && !pairs.is_empty()
-    {
+    while chosen.len() < options.max_points && used < options.max_test_points && !pairs.is_empty() {
         let mut best: Option<(usize, f64)> = None;
         for (k, (g, i)) in preds.iter().enumerate() {
             if chosen.iter().any(|c| c.0.unit == g.unit) {
@@ -602,10 +604,7 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
             break;
         }
         let (g, i) = preds[k].clone();
-        let sep = pairs
-            .iter()
-            .map(|&p| z(&i, p).abs())
-            .fold(0.0, f64::max);
+        let sep = pairs.iter().map(|&p| z(&i, p).abs()).fold(0.0, f64::max);
         let want = if sep > 0.0 {
             (options.target_sigmas / sep).powi(2).ceil()
         } else {
@@ -637,7 +636,10 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
         })
         .collect();
     let names: Vec<String> = effects.iter().map(|e| e.name().to_string()).collect();
-    let best = points.iter().map(|p| p.separation_sigma).fold(0.0, f64::max);
+    let best = points
+        .iter()
+        .map(|p| p.separation_sigma)
+        .fold(0.0, f64::max);
     let reason = match goal {
         Goal::Separate => format!(
             "separates {} (the data cannot tell them apart): up to {best:.1} noise sd per test between their predictions",
@@ -707,26 +709,108 @@ mod separation_tests {
         m
     }
 
-    #[test]
-    fn explore() {
-        let t = truth(Effect::CurrentSensorOffset, |p| p.current_offset = 0.05);
-        let loads: Vec<f64> = (1..=10).map(|k| 0.368 * k as f64).collect();
-        let rows = synth::generate(&t, &plan(loads, vec![6.2], 5, 0.01), 3);
-        let data = Dataset::from_rows("one voltage", rows.clone()).unwrap();
+    /// Data the selection cannot settle (few loads, two close voltages), from `truth`;
+    /// explained again with the proposed points measured on the same truth.
+    fn before_and_after(
+        truth: &CurrentModel,
+        loads: &[f64],
+        seed: u64,
+    ) -> (Outcome, Proposal, Outcome) {
         let rig = RigFile::paper();
-        let opts = Options { replicates: 100, ..Options::default() };
-        let o = explain(&data, &rig, &opts).unwrap();
-        eprintln!("{:?} {:?} {:?}", o.explanation.verdict, o.explanation.ambiguous, o.explanation.effects.iter().map(|e| &e.name).collect::<Vec<_>>());
-        for c in &o.explanation.candidates { eprintln!("  {} {:?}", c.name, c.delta_bic); }
+        let opts = Options {
+            replicates: 100,
+            ..Options::default()
+        };
+        let rows = synth::generate(truth, &plan(loads.to_vec(), vec![5.8, 6.6], 4, 0.01), seed);
+        let data = Dataset::from_rows("narrow", rows.clone()).unwrap();
+        let before = explain(&data, &rig, &opts).unwrap();
         let space = Space::for_rig(&rig, &data);
-        let p = propose(&o, &space, &DesignOptions::default());
-        eprintln!("{}", p.to_plan_toml("x", 1));
+        let proposal = propose(&before, &space, &DesignOptions::default());
         let mut all: Vec<MeasuredRow> = rows;
-        for (k, pt) in p.points.iter().enumerate() {
-            all.extend(synth::generate(&t, &plan(vec![pt.load_nm], vec![pt.volts.unwrap()], pt.repeats as usize, 0.01), 100 + k as u64));
+        for (k, pt) in proposal.points.iter().enumerate() {
+            let volts = pt.volts.expect("the data logs the voltage: open loop");
+            let p = plan(vec![pt.load_nm], vec![volts], pt.repeats as usize, 0.01);
+            all.extend(synth::generate(truth, &p, 100 + k as u64));
         }
-        let data2 = Dataset::from_rows("more", all).unwrap();
-        let o2 = explain(&data2, &rig, &opts).unwrap();
-        eprintln!("{:?} {:?} {:?}", o2.explanation.verdict, o2.explanation.ambiguous, o2.explanation.effects.iter().map(|e| &e.name).collect::<Vec<_>>());
+        let more = Dataset::from_rows("narrow + proposed", all).unwrap();
+        let after = explain(&more, &rig, &opts).unwrap();
+        (before, proposal, after)
+    }
+
+    #[test]
+    fn proposed_points_separate_candidates_the_data_cannot() {
+        // (truth, its loads, seeds where the first data cannot separate the leaders)
+        let ldf = truth(Effect::LoadDependentFriction, |p| p.load_exponent = 0.25);
+        let offset = truth(Effect::CurrentSensorOffset, |p| p.current_offset = 0.05);
+        let cases = [
+            (&ldf, "load-dependent-friction", [1.5, 1.8, 2.1, 2.4], 2),
+            (&ldf, "load-dependent-friction", [1.5, 1.8, 2.1, 2.4], 3),
+            (&offset, "current-sensor-offset", [0.368, 1.5, 2.4, 3.68], 1),
+        ];
+        for (t, name, loads, seed) in cases {
+            let (before, proposal, after) = before_and_after(t, &loads, seed);
+            let b = &before.explanation;
+            assert_eq!(b.verdict, Verdict::Ambiguous, "{name} seed {seed}: {b:?}");
+            assert!(b.ambiguous.iter().any(|n| n == name), "{:?}", b.ambiguous);
+            assert_eq!(proposal.goal, Goal::Separate);
+            assert!(proposal.candidates.iter().any(|n| n == name));
+            assert!(proposal.test_points() <= DesignOptions::default().max_test_points);
+            assert!(proposal.reason.contains(name), "{}", proposal.reason);
+            // Spread over the space: not all at one voltage or one load.
+            let volts: Vec<f64> = proposal.points.iter().filter_map(|p| p.volts).collect();
+            assert!(
+                volts.iter().any(|v| (v - volts[0]).abs() > 1.0),
+                "{volts:?}"
+            );
+            // Within the caps.
+            for p in &proposal.points {
+                assert!((MIN_LOAD_NM..=3.68).contains(&p.load_nm));
+                assert!(p.omega_n_rad_s <= 2.0 * PI * 15.0 + 1e-9);
+            }
+            let a = &after.explanation;
+            assert_eq!(a.verdict, Verdict::Explained, "{name} seed {seed}: {a:?}");
+            assert_eq!(a.effects[0].name, name);
+        }
+    }
+
+    #[test]
+    fn a_clear_finding_gets_points_that_pin_it_and_the_plan_text_is_complete() {
+        let t = truth(Effect::VibratorViscousLoss, |p| p.viscous_loss = 0.15e-3);
+        let rows = synth::generate(
+            &t,
+            &plan(vec![0.368, 1.5, 2.4, 3.68], vec![3.6, 6.2, 8.8], 3, 0.01),
+            1,
+        );
+        let data = Dataset::from_rows("x", rows).unwrap();
+        let rig = RigFile::paper();
+        let o = explain(
+            &data,
+            &rig,
+            &Options {
+                replicates: 50,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(o.explanation.verdict, Verdict::Explained);
+        let p = propose(&o, &Space::for_rig(&rig, &data), &DesignOptions::default());
+        assert_eq!(p.goal, Goal::Pin);
+        assert_eq!(p.candidates, vec!["vibrator-viscous-loss".to_string()]);
+        assert!(!p.points.is_empty());
+        // A viscous loss shows most at the highest speed.
+        let top = p.points[0].omega_n_rad_s;
+        assert!(top > 2.0 * PI * 12.0, "{top}");
+        let text = p.to_plan_toml("pin", 7);
+        for key in [
+            "name = \"pin\"",
+            "mode = \"open-loop\"",
+            "seed = 7",
+            "[[points]]",
+            "volts = ",
+            "reason = \"pins",
+        ] {
+            assert!(text.contains(key), "{key} in {text}");
+        }
+        assert_eq!(text.matches("[[points]]").count(), p.points.len());
     }
 }
