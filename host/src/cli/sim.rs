@@ -36,6 +36,10 @@ pub enum Scenario {
 /// Arguments of `rig sim fig5`.
 #[derive(Debug, Args)]
 pub struct Fig5Args {
+    /// A rig file with a fitted [model] (`rig explain --write-model`): the plant runs with
+    /// its mu and effects instead of the preset's.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
     /// Hold phase without vibration, s (the paper held 14.5 s).
     #[arg(long, default_value_t = 14.5, value_parser = crate::args::positive)]
     pub hold: f64,
@@ -56,6 +60,10 @@ pub struct Fig5Args {
 /// Arguments of `rig sim table1`.
 #[derive(Debug, Args)]
 pub struct Table1Args {
+    /// A rig file with a fitted [model] (`rig explain --write-model`): the plant runs with
+    /// its mu and effects instead of the preset's.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
     /// Vibration frequency of the release, Hz (1 to 15).
     #[arg(long, default_value_t = 10.0, value_parser = crate::args::positive)]
     pub freq: f64,
@@ -70,6 +78,10 @@ pub struct Table1Args {
 /// Arguments of `rig sim torque-sweep`.
 #[derive(Debug, Args)]
 pub struct SweepArgs {
+    /// A rig file with a fitted [model] (`rig explain --write-model`): the plant runs with
+    /// its mu and effects instead of the preset's.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
     /// Number of load levels from 0.368 to 3.68 N m (at least 2).
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(2..=100))]
     pub levels: u32,
@@ -129,13 +141,19 @@ fn check_freq(hz: f64) -> Result<f32, RigError> {
 /// The torque sweep as `rig experiment torque-sweep` runs it (one implementation), on the
 /// in-process virtual rig in virtual time, its rows with the simulator's extra columns
 /// (the torque measured by Eqs. (15)-(17) and Eq. (10) at the mean cam speed).
-fn sweep_procedure(opts: &sweep::SweepOptions) -> Result<Vec<sweep::SweepPoint>, RigError> {
+fn sweep_procedure(
+    opts: &sweep::SweepOptions,
+    fitted: Option<&rigfile::RigFile>,
+) -> Result<Vec<sweep::SweepPoint>, RigError> {
     use crate::experiment::{Operator, Plan, SimBench, sweep as procedure};
     let z = opts.z;
     let mut config = sim::SimConfig::for_gear(z, model::plant::Load::Torque(0.0))
         .map_err(|source| sim::SimError::Gear { z, source })?;
     config.seed = opts.seed;
     config.plant.effects = opts.effects;
+    if let Some(rig) = fitted {
+        sim::preset::apply_model(rig, &mut config.plant)?;
+    }
     let drive = config.plant.drive;
     let mu = config.plant.mu_s;
     let mut plan = Plan::grid(
@@ -182,6 +200,7 @@ fn table1_procedure(
     sets: &[[u32; 4]],
     hz: f64,
     seed: u64,
+    fitted: Option<&rigfile::RigFile>,
 ) -> Result<Vec<table1::Table1Row>, RigError> {
     use crate::experiment::{Operator, SimBench, backdrive};
     let opts = backdrive::Backdrive {
@@ -194,6 +213,9 @@ fn table1_procedure(
         let mut config = sim::SimConfig::for_gear(z, model::plant::Load::Torque(0.0))
             .map_err(|source| sim::SimError::Gear { z, source })?;
         config.seed = seed;
+        if let Some(rig) = fitted {
+            sim::preset::apply_model(rig, &mut config.plant)?;
+        }
         let gear = config.plant.drive.gear;
         let mut bench = SimBench::new(config)?;
         let mut operator = Operator::scripted(b"", false);
@@ -217,12 +239,18 @@ fn table1_procedure(
 
 /// Fig. 5 as `rig experiment hold-release` runs it (one implementation), on the
 /// in-process virtual rig with Fig. 5's gear set and its 1.0 kg mass on 75 mm.
-fn fig5_procedure(opts: &fig5::Fig5Options) -> Result<fig5::Fig5Result, RigError> {
+fn fig5_procedure(
+    opts: &fig5::Fig5Options,
+    fitted: Option<&rigfile::RigFile>,
+) -> Result<fig5::Fig5Result, RigError> {
     use crate::experiment::{Operator, SimBench, hold_release};
     let z = model::paper::FIG5_Z;
     let mut config = sim::SimConfig::for_gear(z, model::paper::FIG5_LOAD)
         .map_err(|source| sim::SimError::Gear { z, source })?;
     config.seed = opts.seed;
+    if let Some(rig) = fitted {
+        sim::preset::apply_model(rig, &mut config.plant)?;
+    }
     let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
     let mut bench = SimBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
@@ -260,7 +288,8 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 sensor_supply_v: a.sensor_supply_v,
                 ..Default::default()
             };
-            let r = fig5_procedure(&opts)?;
+            let fitted = fitted_model(a.model.as_deref())?;
+            let r = fig5_procedure(&opts, fitted.as_ref())?;
             if a.json {
                 super::print_json(&mut out, &r)?;
             } else {
@@ -283,7 +312,13 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
         Scenario::Table1(a) => {
-            let rows = table1_procedure(&model::TABLE1, f64::from(check_freq(a.freq)?), a.seed)?;
+            let fitted = fitted_model(a.model.as_deref())?;
+            let rows = table1_procedure(
+                &model::TABLE1,
+                f64::from(check_freq(a.freq)?),
+                a.seed,
+                fitted.as_ref(),
+            )?;
             if a.json {
                 super::print_json(&mut out, &rows)?;
             } else {
@@ -328,7 +363,8 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
-            let points = sweep_procedure(&opts)?;
+            let fitted = fitted_model(a.model.as_deref())?;
+            let points = sweep_procedure(&opts, fitted.as_ref())?;
             if let Some(path) = &a.csv {
                 crate::sweep_report::write_csv(&points, path)?;
             }
@@ -386,6 +422,21 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             })
         }
     }
+}
+
+/// The rig file of `--model`, which must have a fitted `[model]`.
+fn fitted_model(path: Option<&std::path::Path>) -> Result<Option<rigfile::RigFile>, RigError> {
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    let rig = rigfile::RigFile::load(path)?;
+    if rig.model.is_none() {
+        return Err(RigError::BadValue {
+            what: format!("--model {}", path.display()),
+            why: "the rig file has no fitted [model]: write one with `rig explain --measured X --write-model FILE`".into(),
+        });
+    }
+    Ok(Some(rig))
 }
 
 /// `--sensor-supply-v`: the ACS714's specified supply range, 4.5 to 5.5 V.
