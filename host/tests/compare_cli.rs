@@ -40,7 +40,16 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
     hidden(&truth, "vibrator-viscous-loss", "c_v_n_mm_s_per_rad = 0.15");
     let measured = dir.path().join("measured.csv");
     rig()
-        .args(["sim", "torque-sweep", "--levels", "5", "--repeats", "2", "--rest", "1"])
+        .args([
+            "sim",
+            "torque-sweep",
+            "--levels",
+            "5",
+            "--repeats",
+            "2",
+            "--rest",
+            "1",
+        ])
         .args(["--seed", "5", "--model"])
         .arg(&truth)
         .arg("--csv")
@@ -50,7 +59,14 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
     let model = dir.path().join("fitted.toml");
     let e = json(
         rig()
-            .args(["explain", "--json", "--no-report", "--replicates", "50", "--measured"])
+            .args([
+                "explain",
+                "--json",
+                "--no-report",
+                "--replicates",
+                "50",
+                "--measured",
+            ])
             .arg(&measured)
             .arg("--write-model")
             .arg(&model),
@@ -73,12 +89,19 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
     // The base model misses c_v w_n / C1: 15-25 mA at 10-15 Hz; with the fitted loss the gap
     // is the two runs' noise (a few mA): well under half.
     assert!(base > 0.008, "the hidden loss shows: {base}");
-    assert!(with < 0.5 * base, "gap {with} A with the model vs {base} A without");
+    assert!(
+        with < 0.5 * base,
+        "gap {with} A with the model vs {base} A without"
+    );
     assert_eq!(c["model_effects"][0], "vibrator-viscous-loss");
     let plot = std::fs::read_to_string(&svg).unwrap();
     assert!(plot.contains("<svg") && plot.contains("base model"));
     // Without a model: the base gap only.
-    let b = json(rig().args(["compare", "--json", "--measured"]).arg(&measured));
+    let b = json(
+        rig()
+            .args(["compare", "--json", "--measured"])
+            .arg(&measured),
+    );
     assert!(b["gap_rmse_model_a"].is_null());
 }
 
@@ -90,8 +113,20 @@ fn model_runs_in_the_simulators_procedures_or_names_what_it_cannot() {
     let csv = |name: &str| dir.path().join(name);
     for (file, model) in [("base.csv", None), ("offset.csv", Some(&offset))] {
         let mut c = rig();
-        c.args(["sim", "torque-sweep", "--levels", "2", "--repeats", "1", "--rest", "0.5", "--preset", "ideal", "--csv"])
-            .arg(csv(file));
+        c.args([
+            "sim",
+            "torque-sweep",
+            "--levels",
+            "2",
+            "--repeats",
+            "1",
+            "--rest",
+            "0.5",
+            "--preset",
+            "ideal",
+            "--csv",
+        ])
+        .arg(csv(file));
         if let Some(m) = model {
             c.arg("--model").arg(m);
         }
@@ -102,13 +137,22 @@ fn model_runs_in_the_simulators_procedures_or_names_what_it_cannot() {
         let mut lines = text.lines().filter(|l| !l.starts_with('#'));
         let head: Vec<&str> = lines.next().unwrap().split(',').collect();
         let k = head.iter().position(|h| *h == "i_in_a").unwrap();
-        let v: Vec<f64> = lines.map(|l| l.split(',').nth(k).unwrap().parse().unwrap()).collect();
+        let v: Vec<f64> = lines
+            .map(|l| l.split(',').nth(k).unwrap().parse().unwrap())
+            .collect();
         v.iter().sum::<f64>() / v.len() as f64
     };
     let shift = mean_current(&csv("offset.csv")) - mean_current(&csv("base.csv"));
-    assert!((shift - 0.1).abs() < 0.02, "the 0.1 A offset shows: {shift}");
+    assert!(
+        (shift - 0.1).abs() < 0.02,
+        "the 0.1 A offset shows: {shift}"
+    );
     // Fig. 5 and Table 1 take it too.
-    rig().args(["sim", "fig5", "--json", "--hold", "2", "--model"]).arg(&offset).assert().success();
+    rig()
+        .args(["sim", "fig5", "--json", "--hold", "2", "--model"])
+        .arg(&offset)
+        .assert()
+        .success();
     // An effect the plant cannot run is named.
     let tooth = dir.path().join("tooth.toml");
     hidden(&tooth, "tooth-compliance", "");
@@ -125,7 +169,14 @@ fn model_runs_in_the_simulators_procedures_or_names_what_it_cannot() {
     // A rig file without a fitted model is refused with what to do.
     let plain = dir.path().join("plain.toml");
     std::fs::write(&plain, "[friction]\nmu_s = 0.271\n").unwrap();
-    let out = rig().args(["sim", "fig5", "--model"]).arg(&plain).assert().failure().get_output().stderr.clone();
+    let out = rig()
+        .args(["sim", "fig5", "--model"])
+        .arg(&plain)
+        .assert()
+        .failure()
+        .get_output()
+        .stderr
+        .clone();
     assert!(String::from_utf8_lossy(&out).contains("--write-model"));
 }
 
@@ -135,7 +186,17 @@ fn proposed_plan_loads_in_the_experiments_plan_parser() {
     let plan = dir.path().join("next.toml");
     let v = json(
         rig()
-            .args(["explain", "--synthetic", "vibrator-viscous-loss", "--seed", "2", "--json", "--replicates", "50", "--propose"])
+            .args([
+                "explain",
+                "--synthetic",
+                "vibrator-viscous-loss",
+                "--seed",
+                "2",
+                "--json",
+                "--replicates",
+                "50",
+                "--propose",
+            ])
             .arg(&plan),
     );
     let p = &v["proposal"];
@@ -147,7 +208,12 @@ fn proposed_plan_loads_in_the_experiments_plan_parser() {
     let parsed = host::experiment::Plan::parse(&text, "next.toml").unwrap();
     assert_eq!(parsed.points.len(), n);
     assert_eq!(parsed.reason, p["reason"].as_str().unwrap());
-    let runs: u64 = p["points"].as_array().unwrap().iter().map(|q| q["repeats"].as_u64().unwrap()).sum();
+    let runs: u64 = p["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|q| q["repeats"].as_u64().unwrap())
+        .sum();
     assert_eq!(parsed.runs().len() as u64, runs);
     for (q, r) in p["points"].as_array().unwrap().iter().zip(&parsed.points) {
         assert_eq!(q["load_nm"].as_f64().unwrap(), r.load_nm);
@@ -156,7 +222,15 @@ fn proposed_plan_loads_in_the_experiments_plan_parser() {
     // And `rig experiment torque-sweep --plan FILE` runs it.
     let csv = dir.path().join("more.csv");
     rig()
-        .args(["--sim", "--speed", "20", "experiment", "torque-sweep", "--json", "--plan"])
+        .args([
+            "--sim",
+            "--speed",
+            "20",
+            "experiment",
+            "torque-sweep",
+            "--json",
+            "--plan",
+        ])
         .arg(&plan)
         .arg("--csv")
         .arg(&csv)

@@ -46,12 +46,20 @@ fn assert_named(v: &Value, effect: &str, csv: &Path) {
         assert!(rounds[0].get(key).is_some(), "{key}");
     }
     // explain's keys are there too.
-    for key in ["confidence", "outliers", "inclusion_probabilities", "rmse_after_a"] {
+    for key in [
+        "confidence",
+        "outliers",
+        "inclusion_probabilities",
+        "rmse_after_a",
+    ] {
         assert!(v.get(key).is_some(), "{key}");
     }
     assert_eq!(data_rows(csv) as u64, used);
     let text = std::fs::read_to_string(csv).unwrap();
-    assert!(text.starts_with("# rig experiment torque-sweep"), "provenance first");
+    assert!(
+        text.starts_with("# rig experiment torque-sweep"),
+        "provenance first"
+    );
 }
 
 #[test]
@@ -60,10 +68,20 @@ fn discover_names_a_hidden_effect_on_the_in_process_virtual_rig() {
     let csv = dir.path().join("loop.csv");
     let v = json(
         rig()
-            .args(["--sim", "discover", "--effect", "vibrator-viscous-loss", "--json", "--no-report", "--replicates", "50", "--csv"])
+            .args([
+                "--sim",
+                "discover",
+                "--effect",
+                "speed-dependent-axial-friction",
+                "--json",
+                "--no-report",
+                "--replicates",
+                "50",
+                "--csv",
+            ])
             .arg(&csv),
     );
-    assert_named(&v, "vibrator-viscous-loss", &csv);
+    assert_named(&v, "speed-dependent-axial-friction", &csv);
 }
 
 /// A running `rig sim serve --json`, killed if a test fails before it ends.
@@ -102,13 +120,29 @@ impl Drop for Server {
 
 #[test]
 fn discover_names_a_hidden_effect_on_a_served_virtual_rig() {
-    let server = Server::start("20", &["--preset", "ideal", "--effect", "speed-dependent-axial-friction"]);
+    let server = Server::start(
+        "20",
+        &[
+            "--preset",
+            "ideal",
+            "--effect",
+            "speed-dependent-axial-friction",
+        ],
+    );
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("served.csv");
     let report = dir.path().join("report");
     let v = json(
         rig()
-            .args(["--port", &server.port, "discover", "--json", "--replicates", "50", "--report"])
+            .args([
+                "--port",
+                &server.port,
+                "discover",
+                "--json",
+                "--replicates",
+                "50",
+                "--report",
+            ])
             .arg(&report)
             .arg("--csv")
             .arg(&csv),
@@ -120,7 +154,15 @@ fn discover_names_a_hidden_effect_on_a_served_virtual_rig() {
 #[test]
 fn discover_refuses_plant_options_without_sim() {
     let out = rig()
-        .args(["discover", "--port", "/dev/null-no-such", "--effect", "thermal-drift", "--csv", "x.csv"])
+        .args([
+            "discover",
+            "--port",
+            "/dev/null-no-such",
+            "--effect",
+            "thermal-drift",
+            "--csv",
+            "x.csv",
+        ])
         .assert()
         .failure()
         .get_output()
@@ -157,7 +199,10 @@ fn ctrl_c_locks_the_gear_and_keeps_completed_rounds() {
         if let Some(s) = child.try_wait().unwrap() {
             break s;
         }
-        assert!(t0.elapsed() < Duration::from_secs(30), "discover did not stop");
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "discover did not stop"
+        );
         std::thread::sleep(Duration::from_millis(50));
     };
     let mut err = String::new();

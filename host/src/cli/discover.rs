@@ -7,7 +7,7 @@
 //! procedure's path) and keeps the completed rounds' rows.
 //!
 //! Settled: `explained` with a confidence of at least [`SETTLED_CONFIDENCE`] (or no
-//! bootstrap), or `no-missing-effect` with that confidence once at least
+//! bootstrap), or with its leading effect's inclusion probability at least that, or `no-missing-effect` with that confidence once at least
 //! [`MIN_POINTS_FOR_NONE`] test points are in (a short sweep's silence is weak evidence).
 
 use std::io::Write;
@@ -96,7 +96,11 @@ pub struct Round {
 fn bench_for(a: &DiscoverArgs, dev: &DeviceOpts) -> Result<Box<dyn Bench>, RigError> {
     if dev.sim {
         let preset = sim::Preset::by_name(&a.preset)?;
-        let mut config = crate::device::VirtualDevice::paper_config(&preset);
+        // The simulator's own rig (`rig sim torque-sweep`'s): backdrive is read from the
+        // plant's output, as the in-process bench does.
+        let mut config = sim::SimConfig::paper();
+        config.core.board_name = "virtual";
+        preset.apply(&mut config.plant);
         for e in &a.effects {
             sim::EffectSpec::parse(e)?.apply(&mut config.plant)?;
         }
@@ -190,7 +194,15 @@ fn append(path: &Path, head: Option<&str>, rows: &[Row]) -> Result<(), RigError>
 fn settled(e: &explain::Explanation, used: usize) -> bool {
     let sure = e.confidence.is_none_or(|c| c >= SETTLED_CONFIDENCE);
     match e.verdict {
-        Verdict::Explained => sure,
+        // The leading finding is what the loop looks for: settled when it is selected in
+        // enough of the resamples, whatever the smaller effects beside it.
+        Verdict::Explained => {
+            sure || e
+                .effects
+                .first()
+                .and_then(|f| f.inclusion_probability)
+                .is_some_and(|p| p >= SETTLED_CONFIDENCE)
+        }
         Verdict::NoMissingEffect => sure && used >= MIN_POINTS_FOR_NONE,
         Verdict::Ambiguous => false,
     }
