@@ -263,7 +263,7 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
         why,
     };
     let setup = rig.plant_effects().map_err(|e| bad(e.to_string()))?;
-    let (_, params) = rig.effects().map_err(bad)?;
+    let (list, params) = rig.effects().map_err(bad)?;
     let mut missing = Vec::new();
     let mut effects = setup.effects;
     for e in setup.not_in_plant {
@@ -289,7 +289,10 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
     }
     plant.mu_ax = m.mu;
     plant.effects = effects;
-    plant.regeneration = setup.regeneration;
+    // The drive's regeneration is the board's unless the model fitted it.
+    if list.contains(&Effect::InertiaRectification) {
+        plant.regeneration = setup.regeneration;
+    }
     Ok(())
 }
 
