@@ -40,15 +40,14 @@ use serde::Serialize;
 use crate::fit::{self, Fit};
 use crate::{Dataset, Outcome, Verdict, library};
 
-/// Lightest load a proposal hangs, N m: half the paper's lightest (0.368 N m), where the
-/// load-dependent laws differ most and the rope still hangs straight.
-pub const MIN_LOAD_NM: f64 = 0.184;
-/// Lowest vibration frequency a proposal drives, Hz: a little below the paper's lowest
-/// (5 Hz at 3.6 V); slower, a heavy load backdriven at release outruns the output's
-/// overspeed limit.
-pub const MIN_FREQ_HZ: f64 = 4.0;
-/// Lowest supply voltage a proposal gives, V (the paper's lowest is 3.6 V).
-pub const MIN_SUPPLY_V: f64 = 3.2;
+/// Lightest load a proposal hangs, N m: the paper's lightest (Figs. 8-9).
+pub const MIN_LOAD_NM: f64 = model::paper::TAU_ROT_MIN_TESTED;
+/// Lowest vibration frequency a proposal drives, Hz: the paper's lowest (5 Hz at 3.6 V);
+/// slower, a heavy load released during the long spin-up can outrun the output's overspeed
+/// limit (seen on the virtual rig at 4 Hz and 2.8 N m).
+pub const MIN_FREQ_HZ: f64 = 5.0;
+/// Lowest supply voltage a proposal gives, V (the paper's lowest).
+pub const MIN_SUPPLY_V: f64 = 3.6;
 /// Share of the current limit a proposed point may be predicted to draw.
 pub const CURRENT_MARGIN: f64 = 0.8;
 
@@ -277,8 +276,11 @@ fn lerp((lo, hi): (f64, f64), s: f64) -> f64 {
     lo + (hi - lo) * s
 }
 
+/// `v` to a multiple of `step` (1e-3, 0.01), as a person writes it: 0.475, not
+/// 0.47500000000000003.
 fn round_to(v: f64, step: f64) -> f64 {
-    (v / step).round() * step
+    let per = (1.0 / step).round();
+    (v * per).round() / per
 }
 
 #[derive(Debug, Clone, Copy)]

@@ -191,6 +191,62 @@ fn append(path: &Path, head: Option<&str>, rows: &[Row]) -> Result<(), RigError>
     file.sync_data().map_err(fail)
 }
 
+/// Faults a virtual rig's round recovers from (clear, resume) before giving up.
+pub const VIRTUAL_FAULT_RETRIES: usize = 3;
+
+/// Runs one round's plan through the sweep procedure into a sidecar CSV (so every completed
+/// row survives an error) and returns its rows (with the error, the rows it completed). On a virtual rig a latched fault (a load
+/// running away at release, say) is cleared and the round resumed, at most
+/// [`VIRTUAL_FAULT_RETRIES`] times; on a real rig it ends the loop (the gear is locked;
+/// the operator looks at the rig).
+fn run_round(
+    bench: &mut dyn Bench,
+    operator: &mut Operator,
+    mut setup: SweepSetup,
+    csv: &Path,
+    round: usize,
+    say: &dyn Fn(&str),
+) -> Result<Vec<Row>, (Vec<Row>, RigError)> {
+    let side = csv.with_extension(format!("round{round}.csv"));
+    let _ = std::fs::remove_file(&side);
+    let mut retries = 0;
+    let result = loop {
+        let r = sweep::run(bench, operator, &setup, &side, &mut |l| {
+            say(&format!("  {l}"))
+        });
+        match r {
+            Ok(_) => break Ok(()),
+            Err(e)
+                if bench.is_virtual()
+                    && !operator.interrupted()
+                    && retries < VIRTUAL_FAULT_RETRIES
+                    && matches!(e, RigError::DeviceFault { .. } | RigError::Refused { .. }) =>
+            {
+                retries += 1;
+                say(&format!(
+                    "  {e}: the virtual rig's fault is cleared and the round resumed"
+                ));
+                // Let the output come to rest (the gear is locked) so the fault's cause is
+                // gone, then clear.
+                let cleared = bench
+                    .wait(2.0)
+                    .and_then(|()| bench.request(&protocol::Request::ClearFaults));
+                if let Err(e) = cleared {
+                    break Err(e);
+                }
+                setup.resume = true;
+            }
+            Err(e) => break Err(e),
+        }
+    };
+    let rows = sweep::read_rows(&side).map(|r| r.0).unwrap_or_default();
+    let _ = std::fs::remove_file(&side);
+    match result {
+        Ok(()) => Ok(rows),
+        Err(e) => Err((rows, e)),
+    }
+}
+
 fn settled(e: &explain::Explanation, used: usize) -> bool {
     let sure = e.confidence.is_none_or(|c| c >= SETTLED_CONFIDENCE);
     match e.verdict {
@@ -265,16 +321,20 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                 "round {round}: {} test points ({kind})",
                 plan.runs().len()
             ));
-            let done = sweep::run_to(bench.as_mut(), &mut operator, &setup, None, &mut |l| {
-                say(&format!("  {l}"))
-            })?;
             let offset = all.len();
-            let mut rows = done.rows;
+            let (mut rows, failed) =
+                match run_round(bench.as_mut(), &mut operator, setup, &a.csv, round, &say) {
+                    Ok(rows) => (rows, None),
+                    Err((rows, e)) => (rows, Some(e)),
+                };
             for r in &mut rows {
                 r.point += offset;
             }
             append(&a.csv, head.as_deref(), &rows)?;
             all.extend(rows);
+            if let Some(e) = failed {
+                return Err(e);
+            }
             let data = Dataset::from_rows(&source, all.iter().map(measured).collect())?;
             let o = explain::explain(&data, &rig, &options)?;
             let e = &o.explanation;
