@@ -178,7 +178,7 @@ fn solve3(m: [[f64; 3]; 3], y: [f64; 3]) -> Option<[f64; 3]> {
     };
     let d = det(m);
     let scale = m[0][0] * m[1][1] * m[2][2];
-    if !(d.abs() > 1e-10 * scale.abs()) {
+    if d.is_nan() || d.abs() <= 1e-10 * scale.abs() {
         return None;
     }
     let mut out = [0.0; 3];
@@ -704,12 +704,12 @@ mod separation_tests {
         }
     }
 
-    fn truth(effect: Effect, set: impl Fn(&mut EffectParams)) -> CurrentModel {
+    /// The paper's model with one effect set by `set`.
+    fn truth(set: impl Fn(&mut EffectParams)) -> CurrentModel {
         let rig = RigFile::paper();
         let mut m = rig.current_model().unwrap();
         m.effects = EffectParams::default();
         set(&mut m.effects);
-        let _ = effect;
         m
     }
 
@@ -744,8 +744,8 @@ mod separation_tests {
     #[test]
     fn proposed_points_separate_candidates_the_data_cannot() {
         // (truth, its loads, seeds where the first data cannot separate the leaders)
-        let ldf = truth(Effect::LoadDependentFriction, |p| p.load_exponent = 0.25);
-        let offset = truth(Effect::CurrentSensorOffset, |p| p.current_offset = 0.05);
+        let ldf = truth(|p| p.load_exponent = 0.25);
+        let offset = truth(|p| p.current_offset = 0.05);
         let cases = [
             (&ldf, "load-dependent-friction", [1.5, 1.8, 2.1, 2.4], 2),
             (&ldf, "load-dependent-friction", [1.5, 1.8, 2.1, 2.4], 3),
@@ -779,7 +779,7 @@ mod separation_tests {
 
     #[test]
     fn a_clear_finding_gets_points_that_pin_it_and_the_plan_text_is_complete() {
-        let t = truth(Effect::VibratorViscousLoss, |p| p.viscous_loss = 0.15e-3);
+        let t = truth(|p| p.viscous_loss = 0.15e-3);
         let rows = synth::generate(
             &t,
             &plan(vec![0.368, 1.5, 2.4, 3.68], vec![3.6, 6.2, 8.8], 3, 0.01),
