@@ -48,6 +48,9 @@ pub const MIN_LOAD_NM: f64 = model::paper::TAU_ROT_MIN_TESTED;
 pub const MIN_FREQ_HZ: f64 = 5.0;
 /// Lowest supply voltage a proposal gives, V (the paper's lowest).
 pub const MIN_SUPPLY_V: f64 = 3.6;
+/// Share of the board's load cap (3.68 N m) a proposed point may hang: at the cap itself the
+/// firmware's load estimate, noisy around it, can trip the overload guard mid-run.
+pub const LOAD_MARGIN: f64 = 0.9;
 /// Share of the current limit a proposed point may be predicted to draw.
 pub const CURRENT_MARGIN: f64 = 0.8;
 
@@ -217,7 +220,7 @@ impl Space {
     pub fn for_rig(rig: &RigFile, data: &Dataset) -> Self {
         let board = model::BoardLimits::PAPER;
         let max_hz = rig.limits.max_freq_hz.min(board.max_freq_hz);
-        let max_load = board.max_release_load_nm.min(model::paper::TAU_ROT_MAX);
+        let max_load = LOAD_MARGIN * board.max_release_load_nm.min(model::paper::TAU_ROT_MAX);
         let max_current = rig.limits.max_current_a.min(board.max_current_a);
         let speed = SpeedMap::from_data(data);
         let v_hi = speed
