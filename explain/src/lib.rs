@@ -26,6 +26,7 @@
 
 pub mod bootstrap;
 pub mod data;
+pub mod design;
 pub mod fit;
 pub mod gap;
 pub mod library;

@@ -205,6 +205,97 @@ impl EffectSpec {
     }
 }
 
+/// Cam speeds over which a fitted Eq. (40) speed factor is matched by the plant's own law,
+/// rad/s: 3 to 20 Hz, the board's range.
+const AXIAL_MATCH_RANGE: (f64, f64) = (
+    2.0 * std::f64::consts::PI * 3.0,
+    2.0 * std::f64::consts::PI * 20.0,
+);
+
+/// The plant's law for `speed-dependent-axial-friction`, mu (1 - depth exp(-w / omega0)),
+/// closest (least squares over 3-20 Hz) to the fitted Eq. (40) factor
+/// w / sqrt(w^2 + w_c^2) with corner `omega_c` (rad/s): `(depth, omega0)`.
+pub fn axial_dip_for_corner(omega_c: f64) -> (f64, f64) {
+    use model::effects::{AxialSpeedLaw, axial_friction_speed_factor};
+    if !(omega_c.is_finite() && omega_c > 0.0) {
+        return (0.0, PAPER_AXIAL_DIP_OMEGA0);
+    }
+    let (lo, hi) = AXIAL_MATCH_RANGE;
+    let speeds: Vec<f64> = (0..=60).map(|k| lo + (hi - lo) * k as f64 / 60.0).collect();
+    let mut best = (f64::INFINITY, 0.0, PAPER_AXIAL_DIP_OMEGA0);
+    // omega0 on a log grid; depth in closed form for each (the law is linear in it).
+    for j in 0..=400 {
+        let omega0 = 2.0 * 10f64.powf(3.0 * j as f64 / 400.0);
+        let (mut num, mut den) = (0.0, 0.0);
+        for &w in &speeds {
+            let e = (-w / omega0).exp();
+            num += (1.0 - axial_friction_speed_factor(w, omega_c)) * e;
+            den += e * e;
+        }
+        let depth = if den > 0.0 {
+            (num / den).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let law = AxialSpeedLaw::ExponentialDip { depth, omega0 };
+        let sse: f64 = speeds
+            .iter()
+            .map(|&w| (law.factor(w) - axial_friction_speed_factor(w, omega_c)).powi(2))
+            .sum();
+        if sse < best.0 {
+            best = (sse, depth, omega0);
+        }
+    }
+    (best.1, best.2)
+}
+
+/// Runs the fitted `[model]` of `rig` in `plant`: mu (the axial friction's) and every
+/// effect, each at its physical place (`rigfile`'s mapping, and the speed-dependent axial
+/// friction's Eq. (40) corner matched by the plant's own law, [`axial_dip_for_corner`]).
+/// An effect the plant cannot run is an error naming it. Without a `[model]`, nothing
+/// changes.
+pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<(), SimError> {
+    let Some(m) = &rig.model else {
+        return Ok(());
+    };
+    let bad = |why: String| SimError::BadValue {
+        what: "the rig file's [model]".into(),
+        why,
+    };
+    let setup = rig.plant_effects().map_err(|e| bad(e.to_string()))?;
+    let (list, params) = rig.effects().map_err(bad)?;
+    let mut missing = Vec::new();
+    let mut effects = setup.effects;
+    for e in setup.not_in_plant {
+        match e {
+            Effect::SpeedDependentAxialFriction => {
+                let (depth, omega0) = axial_dip_for_corner(params.axial_corner_speed);
+                effects.axial_friction_speed = (depth > 0.0).then_some((depth, omega0));
+            }
+            Effect::ThermalDrift => missing.push(format!(
+                "{} against time (k_per_s: the plant drifts with its winding temperature; log temp_c and refit)",
+                e.name()
+            )),
+            other => missing.push(other.name().to_string()),
+        }
+    }
+    if !missing.is_empty() {
+        return Err(bad(format!(
+            "the virtual rig's plant cannot run {} (it runs: {}); remove {} from [model] to simulate the rest",
+            missing.join(", "),
+            PLANT_EFFECTS.join(", "),
+            if missing.len() == 1 { "it" } else { "them" }
+        )));
+    }
+    plant.mu_ax = m.mu;
+    plant.effects = effects;
+    // The drive's regeneration is the board's unless the model fitted it.
+    if list.contains(&Effect::InertiaRectification) {
+        plant.regeneration = setup.regeneration;
+    }
+    Ok(())
+}
+
 /// The effects the plant can run (`--effect`).
 pub const PLANT_EFFECTS: [&str; 7] = [
     "speed-dependent-axial-friction",
@@ -227,6 +318,48 @@ fn plant_keys(effect: Effect) -> Vec<&'static str> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_fitted_model_runs_in_the_plant_or_names_what_cannot() {
+        use model::effects::{AxialSpeedLaw, axial_friction_speed_factor};
+        // The matched dip follows Eq. (40) within a few per cent over the board's range.
+        for wc in [12.0, 20.0, 30.0] {
+            let (depth, omega0) = axial_dip_for_corner(wc);
+            let law = AxialSpeedLaw::ExponentialDip { depth, omega0 };
+            for hz in [5.0, 10.0, 15.0] {
+                let w = 2.0 * std::f64::consts::PI * hz;
+                let err = law.factor(w) - axial_friction_speed_factor(w, wc);
+                assert!(err.abs() < 0.03, "w_c {wc}, {hz} Hz: {err}");
+            }
+        }
+        let rig = rigfile::RigFile::paper().with_model(
+            0.25,
+            vec![
+                rigfile::EffectEntry {
+                    name: "speed-dependent-axial-friction".into(),
+                    params: [("omega_c_rad_s".to_string(), 20.0)].into(),
+                },
+                rigfile::EffectEntry {
+                    name: "current-sensor-offset".into(),
+                    params: [("offset_a".to_string(), 0.04)].into(),
+                },
+            ],
+        );
+        let mut plant = crate::SimConfig::paper().plant;
+        apply_model(&rig, &mut plant).unwrap();
+        assert_eq!(plant.mu_ax, 0.25);
+        assert!((plant.effects.current_offset - 0.04).abs() < 1e-12);
+        assert!(plant.effects.axial_friction_speed.is_some());
+        let tooth = rigfile::RigFile::paper().with_model(
+            0.25,
+            vec![rigfile::EffectEntry {
+                name: "tooth-compliance".into(),
+                params: Default::default(),
+            }],
+        );
+        let e = apply_model(&tooth, &mut plant).unwrap_err().to_string();
+        assert!(e.contains("cannot run tooth-compliance"), "{e}");
+    }
 
     #[test]
     fn presets_and_effects_parse() {

@@ -101,6 +101,34 @@ pub struct ExplainArgs {
     /// Folds of the held-out validation over blocks of test points.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u8).range(2..=20))]
     pub folds: u8,
+    /// Write a test plan (docs/plans.md) with the points that best separate the leading
+    /// candidates (or pin the finding) for `rig experiment torque-sweep --plan FILE`; JSON
+    /// gains `proposal`.
+    #[arg(long, value_name = "FILE.toml")]
+    pub propose: Option<PathBuf>,
+}
+
+/// The test points that best separate `outcome`'s leading candidates (or pin its finding)
+/// on the rig of `rig`, for data like `data` ([`explain::design`]).
+pub fn proposal_for(
+    outcome: &explain::Outcome,
+    data: &Dataset,
+    rig: &RigFile,
+    options: &explain::design::DesignOptions,
+) -> explain::design::Proposal {
+    let space = explain::design::Space::for_rig(rig, data);
+    explain::design::propose(outcome, &space, options)
+}
+
+/// Writes `proposal` as a plan file (atomically).
+pub fn write_plan(
+    path: &Path,
+    proposal: &explain::design::Proposal,
+    source: &str,
+) -> Result<(), RigError> {
+    let text = proposal.to_plan_toml(&format!("proposed by rig explain for {source}"), 1);
+    reporting::write_atomic(path, text.as_bytes())?;
+    Ok(())
 }
 
 /// The hidden effect of `--synthetic`.
@@ -294,9 +322,36 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
             &format!("Written by `rig explain --write-model` from {source}."),
         )?;
     }
+    // A proposal on request, and offered when the data cannot separate the leaders.
+    let ambiguous = outcome.explanation.verdict == explain::Verdict::Ambiguous;
+    let proposal = (args.propose.is_some() || ambiguous).then(|| {
+        proposal_for(
+            &outcome,
+            &data,
+            &rig,
+            &explain::design::DesignOptions::default(),
+        )
+    });
+    if let (Some(path), Some(p)) = (&args.propose, &proposal) {
+        write_plan(path, p, &source)?;
+    }
     let mut out = std::io::stdout().lock();
     if args.json {
-        serde_json::to_writer_pretty(&mut out, &outcome.explanation)?;
+        let mut value = serde_json::to_value(&outcome.explanation)?;
+        if let (Some(p), Some(map)) = (&proposal, value.as_object_mut()) {
+            let mut v = serde_json::to_value(p)?;
+            if let Some(m) = v.as_object_mut() {
+                m.insert(
+                    "plan_written".into(),
+                    args.propose
+                        .as_ref()
+                        .map(|p| p.display().to_string())
+                        .into(),
+                );
+            }
+            map.insert("proposal".into(), v);
+        }
+        serde_json::to_writer_pretty(&mut out, &value)?;
         writeln!(out)?;
     } else {
         write!(
@@ -304,6 +359,49 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
             "{}",
             report_files::render_text(&outcome.explanation, &source)
         )?;
+        if let Some(p) = &proposal {
+            write!(
+                out,
+                "{}",
+                proposal_text(p, args.propose.as_deref(), &source)
+            )?;
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The proposal in words: where it was written, or how to get it.
+fn proposal_text(p: &explain::design::Proposal, written: Option<&Path>, source: &str) -> String {
+    let mut t = format!(
+        "\nNext test points ({} points, {} test points): {}\n",
+        p.points.len(),
+        p.test_points(),
+        p.reason
+    );
+    for q in &p.points {
+        let drive = match (q.volts, q.hz) {
+            (Some(v), _) => format!("{} V", reporting::human(v)),
+            (_, Some(hz)) => format!("{} Hz", reporting::human(hz)),
+            _ => String::new(),
+        };
+        t += &format!(
+            "  {} N m at {drive} x {} ({:.1} noise sd per test)\n",
+            reporting::human(q.load_nm),
+            q.repeats,
+            q.separation_sigma
+        );
+    }
+    match written {
+        Some(path) => {
+            t += &format!(
+                "Plan written to {}: run `rig experiment torque-sweep --plan {} --csv MORE.csv`, then explain {source} and MORE.csv together.\n",
+                path.display(),
+                path.display()
+            );
+        }
+        None => {
+            t += "Write them as a plan with `--propose FILE.toml` and run it with `rig experiment torque-sweep --plan FILE.toml`.\n";
+        }
+    }
+    t
 }

@@ -13,9 +13,11 @@ pub mod calibrate;
 pub mod calibration;
 pub mod capture;
 pub mod clear;
+pub mod compare;
 pub mod connect;
 pub mod demo;
 pub mod design;
+pub mod discover;
 pub mod experiment;
 pub mod explain;
 pub mod faults;
@@ -69,6 +71,17 @@ pub enum Command {
     },
     /// Find where the current model and measured data disagree, name the missing effect, add it.
     Explain(explain::ExplainArgs),
+    /// The closed loop on a rig: sweep, explain, run the proposed points, until the verdict settles.
+    Discover {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: discover::DiscoverArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
+    /// Replay a measured sweep on the virtual rig with the base and a fitted model: the gap before and after.
+    Compare(compare::CompareArgs),
     /// List serial ports, marking ST-LINK virtual COM ports (Nucleo boards).
     Ports(ports::PortsArgs),
     /// Device identity: firmware and protocol versions, board, calibration source.
@@ -173,6 +186,11 @@ impl Cli {
                 before.refuse_for("explain")?;
                 explain::run(a)
             }
+            Command::Compare(a) => {
+                before.refuse_for("compare")?;
+                compare::run(a)
+            }
+            Command::Discover { args, device } => discover::run(args, &before.resolve(&device)?),
             Command::Ports(a) => {
                 before.refuse_for("ports")?;
                 ports::run(a)

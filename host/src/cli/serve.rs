@@ -70,9 +70,12 @@ pub fn config(a: &ServeArgs) -> Result<SimConfig, RigError> {
             let rig = rigfile::RigFile::load(path)?;
             let mut c = SimConfig::from_rig_file(&rig)?;
             c.core.board_name = "virtual";
-            // The file's fitted model is the plant; without one, the preset.
+            // The file's fitted model is the plant (every effect, or an error naming the one
+            // it cannot run); without one, the preset.
             if rig.model.is_none() {
                 preset.apply(&mut c.plant);
+            } else {
+                sim::preset::apply_model(&rig, &mut c.plant)?;
             }
             c
         }

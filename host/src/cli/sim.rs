@@ -36,6 +36,10 @@ pub enum Scenario {
 /// Arguments of `rig sim fig5`.
 #[derive(Debug, Args)]
 pub struct Fig5Args {
+    /// A rig file with a fitted [model] (`rig explain --write-model`): the plant runs with
+    /// its mu and effects instead of the preset's.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
     /// Hold phase without vibration, s (the paper held 14.5 s).
     #[arg(long, default_value_t = 14.5, value_parser = crate::args::positive)]
     pub hold: f64,
@@ -60,6 +64,10 @@ pub struct Fig5Args {
 /// Arguments of `rig sim table1`.
 #[derive(Debug, Args)]
 pub struct Table1Args {
+    /// A rig file with a fitted [model] (`rig explain --write-model`): the plant runs with
+    /// its mu and effects instead of the preset's.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
     /// Vibration frequency of the release, Hz (1 to 15).
     #[arg(long, default_value_t = 10.0, value_parser = crate::args::positive)]
     pub freq: f64,
@@ -78,6 +86,10 @@ pub struct Table1Args {
 /// Arguments of `rig sim torque-sweep`.
 #[derive(Debug, Args)]
 pub struct SweepArgs {
+    /// A rig file with a fitted [model] (`rig explain --write-model`): the plant runs with
+    /// its mu and effects instead of the preset's.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
     /// Number of load levels from 0.368 to 3.68 N m (at least 2).
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(2..=100))]
     pub levels: u32,
@@ -159,7 +171,8 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
-            let r = crate::experiment::paper::fig5(&opts)?;
+            let fitted = fitted_model(a.model.as_deref())?;
+            let r = crate::experiment::paper::fig5_fitted(&opts, fitted.as_ref())?;
             if a.json {
                 super::print_json(&mut out, &r)?;
             } else {
@@ -182,11 +195,13 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
         Scenario::Table1(a) => {
-            let rows = crate::experiment::paper::table1(
+            let fitted = fitted_model(a.model.as_deref())?;
+            let rows = crate::experiment::paper::table1_fitted(
                 &model::TABLE1,
                 f64::from(check_freq(a.freq)?),
                 a.seed,
                 sim::Preset::by_name(&a.preset)?.effects,
+                fitted.as_ref(),
             )?;
             if a.json {
                 super::print_json(&mut out, &rows)?;
@@ -232,8 +247,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
+            let fitted = fitted_model(a.model.as_deref())?;
             let (points, estimate_rms_error_nm) =
-                crate::experiment::paper::torque_sweep_with_error(&opts)?;
+                crate::experiment::paper::torque_sweep_with_error(&opts, fitted.as_ref())?;
             if let Some(path) = &a.csv {
                 crate::sweep_report::write_csv(&points, path)?;
             }
@@ -300,6 +316,21 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             })
         }
     }
+}
+
+/// The rig file of `--model`, which must have a fitted `[model]`.
+fn fitted_model(path: Option<&std::path::Path>) -> Result<Option<rigfile::RigFile>, RigError> {
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    let rig = rigfile::RigFile::load(path)?;
+    if rig.model.is_none() {
+        return Err(RigError::BadValue {
+            what: format!("--model {}", path.display()),
+            why: "the rig file has no fitted [model]: write one with `rig explain --measured X --write-model FILE`".into(),
+        });
+    }
+    Ok(Some(rig))
 }
 
 /// `--sensor-supply-v`: the ACS714's specified supply range, 4.5 to 5.5 V.

@@ -30,20 +30,25 @@ fn config(
 /// supply; its rows with the simulator's extra columns (the torque measured by Eqs.
 /// (15)-(17) and Eq. (10) at the mean cam speed).
 pub fn torque_sweep(opts: &sweep::SweepOptions) -> Result<Vec<sweep::SweepPoint>, RigError> {
-    Ok(torque_sweep_with_error(opts)?.0)
+    Ok(torque_sweep_with_error(opts, None)?.0)
 }
 
 /// [`torque_sweep`], and the RMS over all points of the firmware's per-revolution tau_cam
 /// estimate (the row's `tau_cam_est_nm`) minus the plant's true mean cam torque over the
 /// revolutions of the same window, N m, with the PWM ripple, the sensor chain at its
 /// tolerances ([`toleranced_sensors`]) and the noise modelled (NaN when a point has no
-/// whole revolution to compare with).
+/// whole revolution to compare with). With `fitted` (a rig file with a fitted `[model]`)
+/// the plant runs with its mu and effects ([`sim::preset::apply_model`]).
 pub fn torque_sweep_with_error(
     opts: &sweep::SweepOptions,
+    fitted: Option<&rigfile::RigFile>,
 ) -> Result<(Vec<sweep::SweepPoint>, f64), RigError> {
     use super::sweep as procedure;
     let mut config = config(opts.z, Load::Torque(0.0), opts.seed, opts.sensor_supply_v)?;
     config.plant.effects = opts.effects;
+    if let Some(rig) = fitted {
+        sim::preset::apply_model(rig, &mut config.plant)?;
+    }
     toleranced_sensors(&mut config.plant.sensors);
     let drive = config.plant.drive;
     let mu = config.plant.mu_s;
@@ -121,6 +126,18 @@ pub fn table1(
     seed: u64,
     effects: model::plant::PlantEffects,
 ) -> Result<Vec<table1::Table1Row>, RigError> {
+    table1_fitted(sets, hz, seed, effects, None)
+}
+
+/// [`table1`], the plant running with `fitted`'s mu and effects when given (a rig file with
+/// a fitted `[model]`, [`sim::preset::apply_model`]).
+pub fn table1_fitted(
+    sets: &[[u32; 4]],
+    hz: f64,
+    seed: u64,
+    effects: model::plant::PlantEffects,
+    fitted: Option<&rigfile::RigFile>,
+) -> Result<Vec<table1::Table1Row>, RigError> {
     let opts = backdrive::Backdrive {
         load_nm: table1::TAU_ROT,
         hz,
@@ -135,6 +152,9 @@ pub fn table1(
             model::hardware::acs714::SUPPLY_NOMINAL_V,
         )?;
         config.plant.effects = effects;
+        if let Some(rig) = fitted {
+            sim::preset::apply_model(rig, &mut config.plant)?;
+        }
         let gear = config.plant.drive.gear;
         let mut bench = SimBench::new(config)?;
         let mut operator = Operator::scripted(b"", false);
@@ -159,9 +179,21 @@ pub fn table1(
 /// Fig. 5 as `rig experiment hold-release` runs it, on a virtual rig with Fig. 5's gear set
 /// and its 1.0 kg mass on 75 mm.
 pub fn fig5(opts: &fig5::Fig5Options) -> Result<fig5::Fig5Result, RigError> {
+    fig5_fitted(opts, None)
+}
+
+/// [`fig5`], the plant running with `fitted`'s mu and effects when given (a rig file with a
+/// fitted `[model]`, [`sim::preset::apply_model`]).
+pub fn fig5_fitted(
+    opts: &fig5::Fig5Options,
+    fitted: Option<&rigfile::RigFile>,
+) -> Result<fig5::Fig5Result, RigError> {
     let z = model::paper::FIG5_Z;
     let mut config = config(z, model::paper::FIG5_LOAD, opts.seed, opts.sensor_supply_v)?;
     config.plant.effects = opts.effects;
+    if let Some(rig) = fitted {
+        sim::preset::apply_model(rig, &mut config.plant)?;
+    }
     let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
     let mut bench = SimBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
