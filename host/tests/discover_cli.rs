@@ -37,7 +37,7 @@ fn assert_named(v: &Value, effect: &str, csv: &Path) {
     let used = v["points_used"].as_u64().unwrap();
     assert!(used <= 60, "{used} test points");
     let rounds = v["rounds"].as_array().unwrap();
-    assert_eq!(rounds[0]["points"], 12, "the initial quick sweep");
+    assert_eq!(rounds[0]["points"], 30, "the initial quick sweep");
     assert_eq!(rounds[0]["plan"], "initial");
     let total: u64 = rounds.iter().map(|r| r["points"].as_u64().unwrap()).sum();
     assert_eq!(total, used);

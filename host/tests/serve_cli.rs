@@ -172,7 +172,7 @@ fn served_rig_keeps_calibration_and_faults_between_clients_and_stops_on_sigint()
 #[test]
 fn issue_12_done_when_served_rig_sweep_through_line_noise_explained() {
     let server = Server::start_at(
-        "10",
+        "20",
         &[
             "--preset",
             "ideal",
@@ -213,7 +213,7 @@ fn issue_12_done_when_served_rig_sweep_through_line_noise_explained() {
         .lines()
         .filter(|l| !l.starts_with('#') && !l.starts_with("point"))
         .count();
-    assert_eq!(rows, 12, "{body}");
+    assert_eq!(rows, 30, "{body}");
 
     let out = rig()
         .args(["explain", "--no-report", "--json", "--measured"])
@@ -224,12 +224,9 @@ fn issue_12_done_when_served_rig_sweep_through_line_noise_explained() {
         .stdout
         .clone();
     let e: Value = serde_json::from_slice(&out).unwrap();
-    // Named first: the effect the verdict adds, or (12 rows may not be enough to be sure of
-    // it) the best candidate of the first step.
-    let first = e["effects"][0]["name"]
-        .as_str()
-        .or(e["candidates"][0]["name"].as_str())
-        .unwrap_or_default();
+    // Named first: the first effect the verdict adds.
+    assert_eq!(e["verdict"], "explained", "{e}");
+    let first = e["effects"][0]["name"].as_str().unwrap_or_default();
     assert_eq!(first, "speed-dependent-axial-friction", "{e}");
 
     assert_eq!(

@@ -294,7 +294,8 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     };
 
     let mut plan = Plan::quick();
-    plan.name = "rig discover: initial quick sweep (4 loads x 3 supply voltages)".into();
+    plan.name =
+        "rig discover: initial quick sweep (5 loads x 3 supply voltages x 2 repeats)".into();
     plan.seed = a.seed;
     let mut kind = "initial".to_string();
     let mut all: Vec<Row> = Vec::new();

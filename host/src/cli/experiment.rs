@@ -41,7 +41,7 @@ pub enum Procedure {
 /// Arguments of `rig experiment torque-sweep`.
 #[derive(Debug, Args)]
 pub struct SweepArgs {
-    /// `paper` (150 runs: Figs. 8-9), `quick` (12 runs) or a plan file (docs/plans.md).
+    /// `paper` (150 runs: Figs. 8-9), `quick` (30 runs) or a plan file (docs/plans.md).
     #[arg(long, default_value = "paper")]
     pub plan: String,
     /// The short plan (same as `--plan quick`).
