@@ -727,21 +727,21 @@ mod tests {
     use super::*;
     use crate::data::{Dataset, MeasuredRow};
     use model::plant::NoiseSource;
-    use model::{Calibration, CamDrive, GearSet};
+    use model::{CamDrive, paper};
 
     fn paper_model() -> CurrentModel {
-        let drive = CamDrive::paper(GearSet::paper([49, 51, 50, 50]).unwrap());
-        CurrentModel::paper(drive, Calibration::PAPER, 0.271)
+        let drive = CamDrive::paper(paper::RIG_GEARS);
+        CurrentModel::paper(drive, paper::CALIBRATION, paper::MU_S)
     }
 
     fn sweep(truth: &CurrentModel, noise: f64, seed: u64) -> TestPoints {
         let mut rng = NoiseSource::new(seed);
         let mut rows = Vec::new();
         for rep in 0..5 {
-            for hz in [5.0, 10.0, 15.0] {
+            for hz in paper::VIBRATION_HZ {
                 for l in 1..=10 {
                     let w = 2.0 * std::f64::consts::PI * hz;
-                    let tau = 0.368 * l as f64;
+                    let tau = paper::TAU_ROT_MIN_TESTED * l as f64;
                     let t = (rep * 30 + l) as f64 * 20.0;
                     let op = OperatingPoint::new(w, tau, t);
                     rows.push(MeasuredRow {
@@ -810,10 +810,10 @@ mod tests {
     #[test]
     fn hold_threshold_separates_light_slow_points() {
         let mut holds = Vec::new();
-        for hz in [5.0, 10.0, 15.0] {
+        for hz in paper::VIBRATION_HZ {
             for l in 1..=10 {
                 let w = 2.0 * std::f64::consts::PI * hz;
-                let tau = 0.368 * l as f64;
+                let tau = paper::TAU_ROT_MIN_TESTED * l as f64;
                 let held = tau <= 0.8 / (1.0 + w / 40.0);
                 holds.push(HoldCheck {
                     omega_n: w,

@@ -1,6 +1,8 @@
-//! The library of candidate effects: for each [`Effect`] of `model::effects`, the parameters
-//! as reports and rig files name them, the bounds the fit keeps them in, and what the data
-//! must contain for the effect to show.
+//! The library of candidate effects, as `rig explain` uses it: a thin layer over the model's
+//! one table of effects ([`model::effects::EFFECTS`]: name, law, parameters with units and
+//! bounds, the data each needs, how the plant takes it) that adds what only a data set
+//! knows, its thermal driver, and the one-sentence descriptions of the report. The laws
+//! themselves are the model's ([`model::effects`]); adding an effect is a row of that table.
 //!
 //! | effect | parameters (report and rig-file names) | enters |
 //! |---|---|---|
@@ -13,10 +15,16 @@
 //! | `linear-bush-friction` | `force_n`, `hold_nm`, `omega_b_rad_s` | cam torque (2/pi) F_b e; the load holds while tau_rot <= hold / (1 + w_n / w_b) |
 //! | `tooth-compliance` | `compliance_um_per_n` | sliding stroke e - c F_ax in the friction term (seed 004) |
 //! | `mesh-load-sharing-ripple` | `ripple_rms` | scatter of the friction term, rms ripple x friction current (seed 003, Eq. 11) |
+//!
+//! (This table is the model table's summary; a test checks their names and keys agree.)
 
 use std::collections::BTreeMap;
 
-use model::effects::{Effect, EffectParams, Param};
+use model::effects::{
+    DataSummary, Effect, EffectParam, EffectParams, KAPPA_EQ10, KAPPA_POWER_NOT_RETURNED, Param,
+    ParamValue, ReportMap, kappa_returns_power,
+};
+use model::paper;
 
 /// What drives the thermal drift in a data set.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -47,165 +55,116 @@ pub struct DataTraits {
     pub held_rows: usize,
 }
 
-/// Why an effect cannot show in the data, or `None` when it can.
-pub fn not_applicable(effect: Effect, data: &DataTraits) -> Option<&'static str> {
-    match effect {
-        Effect::SpeedDependentAxialFriction
-        | Effect::VibratorViscousLoss
-        | Effect::InertiaRectification
-            if data.speed_levels < 2 =>
-        {
-            Some("needs tests at two or more cam speeds")
+impl DataTraits {
+    /// The summary the model's table judges ([`model::effects::DataNeeds::unmet`]).
+    pub fn summary(&self) -> DataSummary {
+        DataSummary {
+            speed_levels: self.speed_levels,
+            load_levels: self.load_levels,
+            rows: self.rows,
+            thermal_driver: self.thermal != ThermalDriver::Unavailable,
+            held_rows: self.held_rows,
         }
-        Effect::LoadDependentFriction | Effect::ToothCompliance if data.load_levels < 3 => {
-            Some("needs tests at three or more loads")
-        }
-        Effect::MeshLoadSharingRipple if data.load_levels < 3 || data.rows < 20 => {
-            Some("needs repeated tests at three or more loads")
-        }
-        Effect::ThermalDrift if data.thermal == ThermalDriver::Unavailable => {
-            Some("needs a temp_c or t_s column")
-        }
-        Effect::LinearBushFriction if data.held_rows == 0 => Some(
-            "needs non-backdriven points (backdriven = 0); without them its constant torque cannot be told from a current offset",
-        ),
-        _ => None,
     }
 }
 
-/// Bounds of a parameter in the fit.
+/// Why an effect cannot show in the data, or `None` when it can.
+pub fn not_applicable(effect: Effect, data: &DataTraits) -> Option<&'static str> {
+    effect.info().needs.unmet(&data.summary())
+}
+
+/// Bounds of a parameter in the fit (the model table's, [`Param::bounds`]).
 pub fn bounds(param: Param) -> (f64, f64) {
-    match param {
-        Param::Mu => (0.0, 3.0),
-        Param::AxialCornerSq => (0.0, 1.0e6),
-        Param::LoadExponent => (-0.9, 0.9),
-        Param::ToothCompliance => (0.0, 1.0e-3),
-        Param::Rectification => (-1.0, 20.0),
-        Param::ViscousLoss => (-1.0, 1.0),
-        Param::BushForce => (0.0, 1.0e4),
-        Param::ThermalCoeff => (-1.0, 1.0),
-        Param::CurrentOffset => (-100.0, 100.0),
-    }
+    param.bounds()
 }
 
 /// Whether the effect's null value (zero) sits on the bound of its parameter, so the data
 /// can only push it one way (a one-sided test).
 pub fn one_sided(effect: Effect) -> bool {
-    matches!(
-        effect,
-        Effect::SpeedDependentAxialFriction
-            | Effect::LinearBushFriction
-            | Effect::ToothCompliance
-            | Effect::MeshLoadSharingRipple
-    )
+    effect.info().one_sided
 }
 
 /// Parameters the effect adds to the model's likelihood (mean, noise and hold parameters).
 pub fn parameter_count(effect: Effect) -> usize {
-    match effect {
-        Effect::LinearBushFriction => 3,
-        _ => 1,
+    effect.info().likelihood_params
+}
+
+/// Whether the reported parameter `key` belongs to a data set with thermal driver
+/// `thermal`: the drift's coefficient is per kelvin against a temperature (with its
+/// reference), per second against the time.
+fn shown_with(key: &str, thermal: ThermalDriver) -> bool {
+    let temperature = matches!(thermal, ThermalDriver::Temperature { .. });
+    match key {
+        "k_per_c" | "reference_c" => temperature,
+        "k_per_s" => !temperature,
+        _ => true,
+    }
+}
+
+/// The value of a reported parameter in `p` for a data set with thermal driver `thermal`.
+fn reported_value(param: &EffectParam, p: &EffectParams, thermal: ThermalDriver) -> Option<f64> {
+    match (param.value, thermal) {
+        (ParamValue::DataProperty, ThermalDriver::Temperature { reference_c }) => Some(reference_c),
+        _ => param.report(p),
     }
 }
 
 /// The effect's parameters as reported and stored in rig files (SI with the unit in the name,
-/// the viscous loss in C3's N mm s/rad).
+/// the viscous loss in C3's N mm s/rad; the model table's names and units).
 pub fn report_params(
     effect: Effect,
     p: &EffectParams,
     thermal: ThermalDriver,
 ) -> BTreeMap<String, f64> {
-    let mut m = BTreeMap::new();
-    let mut put = |k: &str, v: f64| {
-        m.insert(k.to_string(), v);
-    };
-    match effect {
-        Effect::SpeedDependentAxialFriction => put("omega_c_rad_s", p.axial_corner_speed),
-        Effect::LoadDependentFriction => {
-            put("exponent", p.load_exponent);
-            put("tau_ref_nm", model::effects::LOAD_FRICTION_REFERENCE_NM);
-        }
-        Effect::CurrentSensorOffset => put("offset_a", p.current_offset),
-        Effect::ThermalDrift => match thermal {
-            ThermalDriver::Temperature { reference_c } => {
-                put("k_per_c", p.thermal_coeff);
-                put("reference_c", reference_c);
-            }
-            _ => put("k_per_s", p.thermal_coeff),
-        },
-        Effect::VibratorViscousLoss => put("c_v_n_mm_s_per_rad", p.viscous_loss * 1e3),
-        Effect::InertiaRectification => put("kappa", p.rectification),
-        Effect::LinearBushFriction => {
-            put("force_n", p.bush_force);
-            put("hold_nm", p.bush_hold_torque);
-            put("omega_b_rad_s", p.bush_corner_speed);
-        }
-        Effect::ToothCompliance => put("compliance_um_per_n", p.tooth_compliance * 1e6),
-        Effect::MeshLoadSharingRipple => put("ripple_rms", p.mesh_ripple_rms),
-    }
-    m
+    effect
+        .info()
+        .params
+        .iter()
+        .filter(|q| shown_with(q.key, thermal))
+        .filter_map(|q| Some((q.key.to_string(), reported_value(q, p, thermal)?)))
+        .collect()
 }
 
 /// Scale from the fitted parameter (see [`Param`]) to the reported one, for intervals;
 /// `None` when the reported value is not a linear image (the corner speed is reported as the
 /// square root of the fitted w_c^2).
 pub fn report_scale(param: Param) -> Option<f64> {
-    match param {
-        Param::ViscousLoss => Some(1e3),
-        Param::ToothCompliance => Some(1e6),
-        Param::AxialCornerSq => None,
-        _ => Some(1.0),
+    match param.report_map() {
+        ReportMap::Scale(s) => Some(s),
+        ReportMap::SquareRoot => None,
     }
 }
 
 /// The reported name of the effect's main parameter.
 pub fn main_param_name(effect: Effect, thermal: ThermalDriver) -> &'static str {
-    match effect {
-        Effect::SpeedDependentAxialFriction => "omega_c_rad_s",
-        Effect::LoadDependentFriction => "exponent",
-        Effect::CurrentSensorOffset => "offset_a",
-        Effect::ThermalDrift => match thermal {
-            ThermalDriver::Temperature { .. } => "k_per_c",
-            _ => "k_per_s",
-        },
-        Effect::VibratorViscousLoss => "c_v_n_mm_s_per_rad",
-        Effect::InertiaRectification => "kappa",
-        Effect::LinearBushFriction => "force_n",
-        Effect::ToothCompliance => "compliance_um_per_n",
-        Effect::MeshLoadSharingRipple => "ripple_rms",
+    let info = effect.info();
+    let main = info.mean.map_or(info.params[0].key, |m| m.key);
+    if shown_with(main, thermal) {
+        return main;
     }
+    // The thermal drift against time: its coefficient per second.
+    info.keys()
+        .find(|k| *k != main && shown_with(k, thermal))
+        .unwrap_or(main)
 }
 
 pub use rigfile::apply_params;
 
 /// Clears the effect's parameters in `p` (back to the paper's model for this effect).
 pub fn clear_params(effect: Effect, p: &mut EffectParams) {
-    match effect {
-        Effect::SpeedDependentAxialFriction => p.axial_corner_speed = 0.0,
-        Effect::LoadDependentFriction => p.load_exponent = 0.0,
-        Effect::CurrentSensorOffset => p.current_offset = 0.0,
-        Effect::ThermalDrift => p.thermal_coeff = 0.0,
-        Effect::VibratorViscousLoss => p.viscous_loss = 0.0,
-        Effect::InertiaRectification => p.rectification = 0.0,
-        Effect::LinearBushFriction => {
-            p.bush_force = 0.0;
-            p.bush_hold_torque = 0.0;
-            p.bush_corner_speed = 0.0;
-        }
-        Effect::ToothCompliance => p.tooth_compliance = 0.0,
-        Effect::MeshLoadSharingRipple => p.mesh_ripple_rms = 0.0,
-    }
+    effect.info().clear(p);
 }
 
 /// One sentence on what the effect means physically at the fitted values.
 pub fn describe(effect: Effect, p: &EffectParams, thermal: ThermalDriver) -> String {
-    let w5 = 2.0 * std::f64::consts::PI * 5.0;
+    // The paper's slowest and fastest vibration, 5 and 15 Hz.
+    let [slow, _, fast] = paper::VIBRATION_HZ.map(|hz| 2.0 * std::f64::consts::PI * hz);
     match effect {
         Effect::SpeedDependentAxialFriction => format!(
             "the axial friction coefficient falls at low cam speed (Eq. 40 with w_c = {:.1} rad/s: mu_ax/mu = {:.2} at 5 Hz, {:.2} at 15 Hz), the paper's own explanation of the low torque at 3.6 V",
             p.axial_corner_speed,
-            model::effects::axial_friction_speed_factor(w5, p.axial_corner_speed),
-            model::effects::axial_friction_speed_factor(3.0 * w5, p.axial_corner_speed)
+            model::effects::axial_friction_speed_factor(slow, p.axial_corner_speed),
+            model::effects::axial_friction_speed_factor(fast, p.axial_corner_speed)
         ),
         Effect::LoadDependentFriction => format!(
             "the tooth friction coefficient changes with load as (tau_rot / 1 N m)^{:.3} ({} with load, as seed 003's average friction coefficient with exponent 0.2)",
@@ -237,9 +196,9 @@ pub fn describe(effect: Effect, p: &EffectParams, thermal: ThermalDriver) -> Str
         Effect::InertiaRectification => format!(
             "the inertia term is (1 {:+.2}) M w^2 e^2 / pi: {}",
             p.rectification,
-            if p.rectification < -0.75 {
+            if kappa_returns_power(p.rectification) {
                 "the drive takes the carrier's inertial power back, the term averages out over a turn"
-            } else if p.rectification < -0.25 {
+            } else if p.rectification < 0.5 * (KAPPA_POWER_NOT_RETURNED + KAPPA_EQ10) {
                 "only the positive half of the inertial power is paid (the drive cannot take power back)"
             } else if p.rectification < 0.0 {
                 "a little less than Eq. (10) assumes"
@@ -248,9 +207,10 @@ pub fn describe(effect: Effect, p: &EffectParams, thermal: ThermalDriver) -> Str
             }
         ),
         Effect::LinearBushFriction => format!(
-            "the carrier's linear bush rubs with {:.1} N (adding {:.2} N mm of cam torque at e = 1 mm) and holds loads below {} from backdriving",
+            "the carrier's linear bush rubs with {:.1} N (adding {:.2} N mm of cam torque at e = {} mm) and holds loads below {} from backdriving",
             p.bush_force,
-            model::effects::bush_cam_torque(p.bush_force, 1e-3) * 1e3,
+            model::effects::bush_cam_torque(p.bush_force, paper::ECCENTRICITY) * 1e3,
+            paper::ECCENTRICITY * 1e3,
             if p.bush_corner_speed >= 2999.0 {
                 format!("{:.2} N m at every tested cam speed", p.bush_hold_torque)
             } else {
@@ -326,5 +286,52 @@ mod tests {
         assert!(not_applicable(Effect::LinearBushFriction, &d).is_none());
         d.speed_levels = 1;
         assert!(not_applicable(Effect::InertiaRectification, &d).is_some());
+    }
+
+    #[test]
+    fn the_docs_table_is_the_models() {
+        let docs = include_str!("library.rs");
+        for info in model::effects::EFFECTS {
+            let row = docs
+                .lines()
+                .find(|l| l.starts_with(&format!("//! | `{}` |", info.name)))
+                .unwrap_or_else(|| panic!("no docs row for {}", info.name));
+            for key in info.keys() {
+                let in_row = row.contains(&format!("`{key}`"));
+                assert!(in_row || key == "reference_c", "{}: {key}", info.name);
+            }
+        }
+        // The reported names per driver, as rig files have always had them.
+        let temp = ThermalDriver::Temperature { reference_c: 25.0 };
+        assert_eq!(main_param_name(Effect::ThermalDrift, temp), "k_per_c");
+        assert_eq!(
+            main_param_name(Effect::ThermalDrift, ThermalDriver::Time),
+            "k_per_s"
+        );
+        assert_eq!(
+            main_param_name(Effect::MeshLoadSharingRipple, temp),
+            "ripple_rms"
+        );
+        assert_eq!(
+            main_param_name(Effect::SpeedDependentAxialFriction, temp),
+            "omega_c_rad_s"
+        );
+        let keys = |e, t| {
+            report_params(e, &EffectParams::default(), t)
+                .into_keys()
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(keys(Effect::ThermalDrift, temp), ["k_per_c", "reference_c"]);
+        assert_eq!(
+            keys(Effect::ThermalDrift, ThermalDriver::Unavailable),
+            ["k_per_s"]
+        );
+        assert_eq!(
+            keys(Effect::LoadDependentFriction, temp),
+            ["exponent", "tau_ref_nm"]
+        );
+        assert_eq!(report_scale(Param::ViscousLoss), Some(1e3));
+        assert_eq!(report_scale(Param::AxialCornerSq), None);
+        assert_eq!(bounds(Param::ToothCompliance), (0.0, 1.0e-3));
     }
 }

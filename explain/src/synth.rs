@@ -51,9 +51,11 @@ impl Default for SweepPlan {
     /// noise, every optional column.
     fn default() -> Self {
         Self {
-            loads_nm: (1..=10).map(|k| 0.368 * k as f64).collect(),
-            voltages_v: vec![3.6, 6.2, 8.8],
-            repeats: 5,
+            loads_nm: (1..=10)
+                .map(|k| model::paper::TAU_ROT_MIN_TESTED * k as f64)
+                .collect(),
+            voltages_v: model::paper::SUPPLY_VOLTAGES.to_vec(),
+            repeats: model::paper::REQUIRED_TORQUE_REPEATS as usize,
             noise_a: 0.020,
             test_seconds: (15.0, 25.0),
             ambient_c: 25.0,
@@ -280,11 +282,11 @@ pub fn generate_session(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use model::{Calibration, CamDrive, GearSet};
+    use model::CamDrive;
 
     fn paper() -> CurrentModel {
-        let drive = CamDrive::paper(GearSet::paper([49, 51, 50, 50]).unwrap());
-        CurrentModel::paper(drive, Calibration::PAPER, 0.271)
+        let drive = CamDrive::paper(model::paper::RIG_GEARS);
+        CurrentModel::paper(drive, model::paper::CALIBRATION, model::paper::MU_S)
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! that term as a known effect (a rig file with `[model]`).
 
 use explain::{self, Dataset, MeasuredRow, Options, Verdict};
-use model::GearSet;
+use model::paper;
 use model::plant::{Drive, Load, NoiseSource, Plant, PlantEffects, PlantParams};
 use rigfile::{EffectEntry, RigFile};
 
@@ -30,17 +30,16 @@ fn sweep_with_drive(
     repeats: usize,
     seed: u64,
 ) -> Vec<MeasuredRow> {
-    let gear = GearSet::paper([49, 51, 50, 50]).unwrap();
-    let mut params = PlantParams::paper(gear, Load::Torque(0.368));
+    let mut params = PlantParams::paper(paper::RIG_GEARS, Load::Torque(paper::TAU_ROT_MIN_TESTED));
     params.effects = effects;
     params.regeneration = regeneration;
     let mut plant = Plant::new(params, seed);
     let mut rng = NoiseSource::new(seed ^ 0xabcd);
     let mut tests = Vec::new();
     for _ in 0..repeats {
-        for v in [3.6, 6.2, 8.8] {
+        for v in paper::SUPPLY_VOLTAGES {
             for k in 1..=10 {
-                tests.push((0.368 * k as f64, v));
+                tests.push((paper::TAU_ROT_MIN_TESTED * k as f64, v));
             }
         }
     }
@@ -86,7 +85,7 @@ fn regenerating_model() -> RigFile {
     let mut params = std::collections::BTreeMap::new();
     params.insert("kappa".to_string(), -1.0);
     RigFile::paper().with_model(
-        model::MU_S_PAPER,
+        paper::MU_S,
         vec![EffectEntry {
             name: "inertia-rectification".into(),
             params,

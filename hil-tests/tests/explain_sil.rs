@@ -15,7 +15,7 @@ fn rig_model() -> RigFile {
     let mut params = BTreeMap::new();
     params.insert("kappa".to_string(), -0.5);
     RigFile::paper().with_model(
-        model::MU_S_PAPER,
+        model::paper::MU_S,
         vec![EffectEntry {
             name: "inertia-rectification".into(),
             params,

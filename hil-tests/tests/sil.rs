@@ -21,7 +21,7 @@ fn fig5_load_held_without_vibration_and_falls_once_released() {
 
 #[test]
 fn table1_agrees_with_the_paper() {
-    let rows = table1::run(&model::TABLE1, 10.0, 3).expect("table1 runs");
+    let rows = table1::run(&model::paper::TABLE1, 10.0, 3).expect("table1 runs");
     assert_eq!(rows.len(), 6);
     for r in &rows {
         assert_eq!(r.backdriven_without_vibration, r.n >= 2, "{r:?}");
@@ -33,7 +33,13 @@ fn table1_agrees_with_the_paper() {
 #[test]
 fn torque_sweep_current_and_torque_grow_with_load_and_speed() {
     let opts = sweep::SweepOptions {
-        loads: vec![0.368, 1.2, 2.0, 2.8, 3.68],
+        loads: vec![
+            model::paper::TAU_ROT_MIN_TESTED,
+            1.2,
+            2.0,
+            2.8,
+            model::paper::TAU_ROT_MAX,
+        ],
         repeats: 2,
         rest_s: 2.0,
         seed: 7,

@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use model::paper;
 use serde::Serialize;
 
 use crate::RigError;
@@ -158,7 +159,7 @@ pub fn run_simulated(
     progress("torque sweep: 0.368-3.68 N m at 3.6, 6.2, 8.8 V");
     let sweep_opts = if opts.quick {
         sweep::SweepOptions {
-            loads: vec![0.368, 1.84, 3.68],
+            loads: vec![paper::TAU_ROT_MIN_TESTED, 1.84, paper::TAU_ROT_MAX],
             repeats: 1,
             rest_s: 5.0,
             seed: opts.seed,
@@ -300,8 +301,10 @@ pub fn run_on_device(dev: &DeviceOpts, out: &Path) -> Result<DemoSummary, RigErr
 pub fn render_text(s: &DemoSummary) -> String {
     use std::fmt::Write;
     let mut out = format!(
-        "rig demo on the {}\n\ndesign check, paper's Table 1 (mu_s = 0.271, mu_d = 0.174):\n",
-        s.device
+        "rig demo on the {}\n\ndesign check, paper's Table 1 (mu_s = {}, mu_d = {}):\n",
+        s.device,
+        paper::MU_S,
+        paper::MU_D
     );
     let _ = writeln!(
         out,

@@ -1,6 +1,6 @@
 //! `rig design`: the design calculator over the paper's model (Eqs. 1-4, 6, 7, 10, 12, 41).
 
-use model::{CamDrive, GearSet, Inertias, OutputShaft, friction};
+use model::{CamDrive, GearSet, Inertias, OutputShaft, friction, paper};
 use serde::Serialize;
 
 use crate::RigError;
@@ -35,12 +35,12 @@ impl Default for RigParams {
         Self {
             module: GearSet::MODULE_PAPER,
             pressure_angle: GearSet::PRESSURE_ANGLE_STANDARD,
-            mu_s: model::MU_S_PAPER,
-            mu_d: model::MU_D_PAPER,
-            eccentricity: model::ECCENTRICITY_PAPER,
-            carrier_mass: model::CARRIER_MASS_PAPER,
-            tau_rot: model::TAU_ROT_MAX_PAPER,
-            vibration_hz: 10.0,
+            mu_s: paper::MU_S,
+            mu_d: paper::MU_D,
+            eccentricity: paper::ECCENTRICITY,
+            carrier_mass: paper::CARRIER_MASS,
+            tau_rot: paper::TAU_ROT_MAX,
+            vibration_hz: paper::VIBRATION_HZ[1],
             inertias: None,
         }
     }
@@ -206,7 +206,12 @@ mod tests {
 
     #[test]
     fn mu_from_eta_matches_the_paper() {
-        let r = evaluate([50, 50, 51, 49], &RigParams::default(), Some(0.423)).unwrap();
+        let r = evaluate(
+            paper::FIG5_Z,
+            &RigParams::default(),
+            Some(paper::ETA_GROSS_STATIC),
+        )
+        .unwrap();
         assert!((r.mu_from_eta.unwrap() - 0.271).abs() < 0.001);
         assert!(render_text(&r).contains("mu from eta_gross"));
     }

@@ -295,9 +295,11 @@ fn calibrate_dry_run_writes_nothing_and_takes_gauge_readings_from_csv() {
     let dir = tempfile::tempdir().unwrap();
     // The paper's torque line at the currents a blocked RS-735 draws (V / 0.44 ohm).
     let mut gauge = String::from("volts,gauge_nmm\n");
+    let [c1, c2, ..] = model::paper::TABLE2;
+    let ohm = model::hardware::rs735::RESISTANCE_OHM;
     for k in 0..9 {
         let volts = 1.05 + 0.1 * f64::from(k);
-        gauge.push_str(&format!("{volts:.2},{:.3}\n", 62.1 * volts / 0.44 - 138.0));
+        gauge.push_str(&format!("{volts:.2},{:.3}\n", c1 * volts / ohm + c2));
     }
     let path = dir.path().join("gauge.csv");
     std::fs::write(&path, gauge).unwrap();

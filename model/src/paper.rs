@@ -91,7 +91,7 @@ pub const TAU_ROT_MAX: f64 = 3.68;
 /// 3.6 and 6.2 V the output did not backdrive under it (linear-bush friction).
 pub const TAU_ROT_MIN_TESTED: f64 = 0.368;
 /// Repeats of each required-torque test.
-pub const REQUIRED_TORQUE_REPEATS: usize = 5;
+pub const REQUIRED_TORQUE_REPEATS: u32 = 5;
 
 /// Vibrator supply voltages of the required-torque tests, V; they give about
 /// [`VIBRATION_HZ`].

@@ -23,11 +23,22 @@ pub enum Error {
         /// Sequence number of the undecodable frame, if its header was readable.
         seq: Option<u16>,
     },
-    /// A calibration field is out of its plausible range.
-    InvalidCalibration {
-        /// Name of the offending [`crate::Calibration`] field.
-        field: &'static str,
+    /// A [`crate::RigParameters`] record failed its checks: the field and why.
+    InvalidParameters(crate::ParameterRejection),
+    /// The device speaks another protocol version or schema; the message says which side
+    /// to update ([`crate::check_peer`]).
+    VersionMismatch {
+        /// The device's protocol version.
+        device_protocol: u16,
+        /// The device's schema hash, when it said (a v1 device's refusal does not).
+        device_schema_hash: Option<u32>,
     },
+}
+
+impl From<crate::ParameterRejection> for Error {
+    fn from(r: crate::ParameterRejection) -> Self {
+        Self::InvalidParameters(r)
+    }
 }
 
 impl fmt::Display for Error {
@@ -59,10 +70,14 @@ impl fmt::Display for Error {
                     "has a valid CRC but an unknown layout; update host and firmware to the same protocol version"
                 )
             }
-            Self::InvalidCalibration { field } => write!(
+            Self::InvalidParameters(r) => write!(
                 f,
-                "calibration field `{field}` is out of range; fix it or restore Calibration::paper()"
+                "rig parameter {r}; fix it in the rig file (the paper's values are RigParameters::paper())"
             ),
+            Self::VersionMismatch {
+                device_protocol,
+                device_schema_hash,
+            } => crate::compat::write_mismatch(f, *device_protocol, *device_schema_hash),
         }
     }
 }

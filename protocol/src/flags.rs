@@ -1,5 +1,8 @@
 //! A small bit-set newtype generator, so the wire carries a plain integer and no
 //! `bitflags` dependency is needed. Unknown bits (from a newer peer) are kept, not dropped.
+//!
+//! The types serialise as serde newtype structs: postcard writes just the inner integer
+//! (a varint), and the layout generator still sees the type's name.
 
 /// Defines a `#[serde(transparent)]` bit-set newtype with named flag constants.
 macro_rules! flag_set {
@@ -11,7 +14,6 @@ macro_rules! flag_set {
     ) => {
         $(#[$meta])*
         #[derive(Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
-        #[serde(transparent)]
         pub struct $name($repr);
 
         impl $name {

@@ -6,7 +6,7 @@ pub const DEFAULT_BAUD_RATE: u32 = 921_600;
 /// Highest telemetry rate the device accepts in `StartTelemetry`, Hz.
 pub const MAX_TELEMETRY_RATE_HZ: u16 = 1000;
 
-/// A release lapses (vibration stops) when no request arrives for this long, ms.
+/// A release lapses (vibration stops) when no accepted request arrives for this long, ms.
 pub const COMMS_TIMEOUT_MS: u32 = 500;
 
 /// How often the host sends `Heartbeat` while a release is live, ms.

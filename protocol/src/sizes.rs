@@ -2,31 +2,49 @@
 //!
 //! Postcard writes integers as varints and `f32` as 4 bytes, so each type's
 //! `MAX_WIRE_SIZE` is the sum of its fields' worst cases. Tests serialise worst-case
-//! values and require the exact sum, so adding a field without updating a constant fails.
+//! values and require the exact sum, and the layout generator (`src/golden/layout.rs`)
+//! derives the same maxima from the types, so adding a field without updating a constant
+//! fails.
 
-use crate::framing::CRC_LEN;
+use crate::framing::{CRC_LEN, FRAME_DELIMITERS};
 use crate::link::{DEFAULT_BAUD_RATE, MAX_TELEMETRY_RATE_HZ};
-use crate::{CAPTURE_CHUNK_SAMPLES, DeviceMessage, Request, TelemetrySample};
+use crate::{
+    BOARD_NAME_LEN, CAPTURE_CHUNK_SAMPLES, DeviceInfo, DeviceMessage, FIRMWARE_BUILD_LEN, NackCode,
+    Reply, Request, RigParameters, TelemetrySample,
+};
 
 pub(crate) const U8: usize = 1;
-pub(crate) const U16: usize = 3;
-pub(crate) const U32: usize = 5;
-pub(crate) const I32: usize = 5;
-pub(crate) const U64: usize = 10;
+pub(crate) const U16: usize = varint_len(u16::MAX as u64);
+pub(crate) const U32: usize = varint_len(u32::MAX as u64);
+pub(crate) const I32: usize = U32;
+pub(crate) const U64: usize = varint_len(u64::MAX);
 pub(crate) const F32: usize = 4;
 /// Enum discriminants and collection lengths below 128 take one varint byte.
 pub(crate) const TAG: usize = 1;
 /// The frame header: the sequence number.
 pub(crate) const SEQ: usize = U16;
 
+/// Bytes of the LEB128 varint of `value` (7 bits per byte).
+pub const fn varint_len(value: u64) -> usize {
+    let mut len = 1;
+    let mut rest = value >> 7;
+    while rest != 0 {
+        len += 1;
+        rest >>= 7;
+    }
+    len
+}
+
 /// Largest COBS encoding of `len` bytes (one overhead byte per started 254-byte block),
-/// not counting the delimiter.
+/// not counting the delimiters.
 pub const fn cobs_max_encoded_len(len: usize) -> usize {
     len + len.div_ceil(254) + if len == 0 { 1 } else { 0 }
 }
 
+/// Bytes on the wire for a message of `message` bytes: sequence number, CRC, COBS and
+/// both delimiters.
 const fn frame_size(message: usize) -> usize {
-    cobs_max_encoded_len(SEQ + message + CRC_LEN) + 1
+    cobs_max_encoded_len(SEQ + message + CRC_LEN) + FRAME_DELIMITERS
 }
 
 const fn max(a: usize, b: usize) -> usize {
@@ -36,24 +54,55 @@ const fn max(a: usize, b: usize) -> usize {
 /// Largest frame body before CRC and COBS: sequence number plus message, bytes.
 pub const MAX_MESSAGE_SIZE: usize = SEQ + max(Request::MAX_WIRE_SIZE, DeviceMessage::MAX_WIRE_SIZE);
 
-/// Largest host-to-device frame on the wire, COBS overhead and delimiter included.
+/// Largest host-to-device frame on the wire, COBS overhead and both delimiters included.
 pub const MAX_REQUEST_FRAME_SIZE: usize = frame_size(Request::MAX_WIRE_SIZE);
 
-/// Largest device-to-host frame on the wire, COBS overhead and delimiter included.
+/// Largest device-to-host frame on the wire, COBS overhead and both delimiters included.
 pub const MAX_DEVICE_FRAME_SIZE: usize = frame_size(DeviceMessage::MAX_WIRE_SIZE);
 
 /// Largest frame in either direction: size encode and receive buffers with it.
-pub const MAX_FRAME_SIZE: usize = cobs_max_encoded_len(MAX_MESSAGE_SIZE + CRC_LEN) + 1;
+pub const MAX_FRAME_SIZE: usize =
+    cobs_max_encoded_len(MAX_MESSAGE_SIZE + CRC_LEN) + FRAME_DELIMITERS;
 
 // The size sums above assume one-byte length prefixes and discriminants.
-const _: () = assert!(CAPTURE_CHUNK_SAMPLES < 128 && crate::BOARD_NAME_LEN < 128);
+const _: () =
+    assert!(CAPTURE_CHUNK_SAMPLES < 128 && BOARD_NAME_LEN < 128 && FIRMWARE_BUILD_LEN < 128);
 const _: () = assert!(MAX_FRAME_SIZE == max(MAX_REQUEST_FRAME_SIZE, MAX_DEVICE_FRAME_SIZE));
 // Small enough for a static DMA buffer on the device.
 const _: () = assert!(MAX_FRAME_SIZE <= 512);
-// Telemetry at the top rate (10 bits per byte at 8N1) must leave room on the link for replies and capture chunks.
+// A reply is at most a parameter record (the largest reply), inside the capture-chunk budget.
+const _: () = assert!(DeviceInfo::MAX_WIRE_SIZE <= RigParameters::MAX_WIRE_SIZE);
+const _: () = assert!(NackCode::MAX_WIRE_SIZE <= RigParameters::MAX_WIRE_SIZE);
+const _: () = assert!(TAG + U16 + Reply::MAX_WIRE_SIZE <= DeviceMessage::MAX_WIRE_SIZE);
+
+/// A telemetry frame at its worst case (every varint at its maximum).
 const TELEMETRY_FRAME: usize = frame_size(TAG + TelemetrySample::MAX_WIRE_SIZE);
+
+/// A telemetry frame as it is sent in practice: within 50 days of boot (device clock below
+/// 2^42 us), fewer than 2^28 samples, named fault and status bits only, control steps
+/// below 2^21 cycles (12 ms at 170 MHz).
+const TELEMETRY_FRAME_TYPICAL: usize = frame_size(
+    TAG + varint_len((1 << 28) - 1)
+        + varint_len((1 << 42) - 1)
+        + 9 * F32
+        + TAG
+        + varint_len(u16::MAX as u64)
+        + varint_len(u8::MAX as u64)
+        + 2 * varint_len((1 << 21) - 1),
+);
+
+/// Bits on the line per byte at 8N1.
+const BITS_PER_BYTE: usize = 10;
+
+// Telemetry alone can never fill the link, even at its worst case and the top rate.
 const _: () = assert!(
-    TELEMETRY_FRAME * 10 * MAX_TELEMETRY_RATE_HZ as usize <= DEFAULT_BAUD_RATE as usize * 3 / 4
+    TELEMETRY_FRAME * BITS_PER_BYTE * MAX_TELEMETRY_RATE_HZ as usize <= DEFAULT_BAUD_RATE as usize
+);
+// In practice, telemetry at the top rate leaves a quarter of the link for replies and
+// capture chunks.
+const _: () = assert!(
+    TELEMETRY_FRAME_TYPICAL * BITS_PER_BYTE * MAX_TELEMETRY_RATE_HZ as usize
+        <= DEFAULT_BAUD_RATE as usize * 3 / 4
 );
 
 #[cfg(test)]
@@ -74,10 +123,46 @@ mod tests {
     }
 
     #[test]
+    fn varint_lengths() {
+        assert_eq!((U16, U32, U64), (3, 5, 10));
+        assert_eq!(varint_len(0), 1);
+        assert_eq!(varint_len(127), 1);
+        assert_eq!(varint_len(128), 2);
+        assert_eq!(varint_len((1 << 42) - 1), 6);
+        for v in [0u64, 127, 128, 16_383, 16_384, 1 << 42, u64::MAX] {
+            let mut buf = [0u8; 16];
+            assert_eq!(
+                postcard::to_slice(&v, &mut buf).unwrap().len(),
+                varint_len(v),
+                "{v}"
+            );
+        }
+    }
+
+    #[test]
     fn budget_values() {
-        // Pinned so a change is a deliberate, reviewed decision.
+        // Pinned so a change is a deliberate, reviewed decision. v2 added the opening
+        // delimiter (one byte per frame) and grew the request to the same record.
         assert_eq!(MAX_MESSAGE_SIZE, 274);
-        assert_eq!(MAX_FRAME_SIZE, 281);
-        assert_eq!(MAX_REQUEST_FRAME_SIZE, 82);
+        assert_eq!(MAX_FRAME_SIZE, 282);
+        assert_eq!(MAX_REQUEST_FRAME_SIZE, 83);
+        assert_eq!(TELEMETRY_FRAME, 81);
+        assert_eq!(TELEMETRY_FRAME_TYPICAL, 69);
+    }
+
+    #[test]
+    fn typical_telemetry_frame_is_what_the_bound_says() {
+        // A sample 50 days after boot with every named bit set and 2^21 - 1 cycles.
+        let sample = TelemetrySample {
+            seq: (1 << 28) - 1,
+            device_time_us: (1 << 42) - 1,
+            faults: crate::FaultFlags::all(),
+            status: crate::StatusFlags::all(),
+            step_cycles_mean: (1 << 21) - 1,
+            step_cycles_max: (1 << 21) - 1,
+            ..crate::golden::examples::telemetry()
+        };
+        let frame = crate::encode_frame_vec(u16::MAX, &DeviceMessage::Telemetry(sample)).unwrap();
+        assert!(frame.len() <= TELEMETRY_FRAME_TYPICAL, "{}", frame.len());
     }
 }

@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::FaultFlags;
 use crate::flags::flag_set;
-use crate::sizes::{F32, TAG, U8, U16, U32, U64};
+use crate::sizes::{F32, TAG, U16, U32, U64};
 
 /// State of the firmware's release supervisor. Only `SpinUp` and `Vibrating` shake the
 /// carrier; every other state holds the motor off.
@@ -37,8 +37,8 @@ impl SupervisorState {
 }
 
 flag_set! {
-    /// Status bits of a telemetry sample, a `u8` on the wire.
-    pub struct StatusFlags(u8) {
+    /// Status bits of a telemetry sample, a `u16` varint on the wire.
+    pub struct StatusFlags(u16) {
         /// mu_d * Lambda < 1: once moving, the output keeps moving after vibration stops.
         const COASTS_AFTER_STOP = 0;
         /// mu_s * Lambda <= 1: the gear does not hold its load even without vibration.
@@ -51,10 +51,18 @@ flag_set! {
         const CAPTURE_RUNNING = 4;
         /// The paper's default calibration is in use (none stored, or stored one invalid).
         const CALIBRATION_DEFAULTS = 5;
+        /// The output shaft turns (output encoder fitted); while the gear is locked this is
+        /// backdrive.
+        const OUTPUT_MOVING = 6;
+        /// An open-loop drive (`Request::OpenLoop`) is running.
+        const OPEN_LOOP = 7;
     }
 }
 
 /// One telemetry sample, sent at the rate set by `StartTelemetry`. SI units.
+///
+/// A quantity the board does not sense (no output encoder, no bus-voltage divider, no
+/// motor thermistor: see [`crate::Capabilities`]) is NaN, never a made-up 0.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TelemetrySample {
     /// Sample counter since boot; a gap means samples were lost.
@@ -77,9 +85,22 @@ pub struct TelemetrySample {
     pub faults: FaultFlags,
     /// Status bits.
     pub status: StatusFlags,
+    /// Output shaft angle since boot, rad (not wrapped); NaN without an output encoder.
+    pub output_angle_rad: f32,
+    /// Output shaft speed, rad/s; NaN without an output encoder.
+    pub output_speed_rad_s: f32,
+    /// Motor supply (bridge bus) voltage, V; NaN when not sensed.
+    pub bus_voltage_v: f32,
+    /// Motor temperature, degrees C; NaN without a thermistor.
+    pub motor_temp_c: f32,
+    /// Mean CPU cycles (DWT CYCCNT) of one control step over the last full second; 0 until
+    /// a second has passed, or where not measured (the virtual rig).
+    pub step_cycles_mean: u32,
+    /// Largest CPU cycle count of one control step over the last full second (0 as above).
+    pub step_cycles_max: u32,
 }
 
 impl TelemetrySample {
     /// Largest serialised size, bytes.
-    pub const MAX_WIRE_SIZE: usize = U32 + U64 + 5 * F32 + TAG + U16 + U8;
+    pub const MAX_WIRE_SIZE: usize = U32 + U64 + 9 * F32 + TAG + U32 + U16 + 2 * U32;
 }

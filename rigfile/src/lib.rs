@@ -45,7 +45,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use model::effects::{CurrentModel, Effect, EffectParams};
+use model::effects::{CurrentModel, Effect, EffectParams, ParamValue};
 use model::{Calibration, CamDrive, GearSet};
 use serde::{Deserialize, Serialize};
 
@@ -85,7 +85,7 @@ pub struct GearSection {
 impl Default for GearSection {
     fn default() -> Self {
         Self {
-            z: [49, 51, 50, 50],
+            z: model::paper::RIG_Z,
             module_mm: 1.0,
             pressure_angle_deg: 20.0,
         }
@@ -404,55 +404,37 @@ impl RigFile {
     }
 }
 
-/// Sets the effect's parameters in `p` from reported (rig-file) names; unknown names are an
-/// error naming the expected ones. Missing names keep their value in `p`.
+/// Sets the effect's parameters in `p` from reported (rig-file) names, as the model's effect
+/// table ([`model::effects::EFFECTS`]) names them with their units; unknown names are an
+/// error naming the expected ones, a fixed parameter must keep its value. Missing names keep
+/// their value in `p`.
 pub fn apply_params(
     effect: Effect,
     params: &BTreeMap<String, f64>,
     p: &mut EffectParams,
 ) -> Result<(), String> {
-    let expected: &[&str] = match effect {
-        Effect::SpeedDependentAxialFriction => &["omega_c_rad_s"],
-        Effect::LoadDependentFriction => &["exponent", "tau_ref_nm"],
-        Effect::CurrentSensorOffset => &["offset_a"],
-        Effect::ThermalDrift => &["k_per_c", "k_per_s", "reference_c"],
-        Effect::VibratorViscousLoss => &["c_v_n_mm_s_per_rad"],
-        Effect::InertiaRectification => &["kappa"],
-        Effect::LinearBushFriction => &["force_n", "hold_nm", "omega_b_rad_s"],
-        Effect::ToothCompliance => &["compliance_um_per_n"],
-        Effect::MeshLoadSharingRipple => &["ripple_rms"],
-    };
+    let info = effect.info();
     for (k, &v) in params {
-        if !expected.contains(&k.as_str()) {
+        let Some(param) = info.param(k) else {
             return Err(format!(
                 "effect {} has no parameter {k} (it takes {})",
                 effect.name(),
-                expected.join(", ")
+                info.keys().collect::<Vec<_>>().join(", ")
             ));
-        }
+        };
         if !v.is_finite() {
             return Err(format!("{} {k} = {v} is not finite", effect.name()));
         }
-        match k.as_str() {
-            "omega_c_rad_s" => p.axial_corner_speed = v.abs(),
-            "exponent" => p.load_exponent = v,
-            "tau_ref_nm" if (v - model::effects::LOAD_FRICTION_REFERENCE_NM).abs() > 1e-12 => {
-                return Err(format!(
-                    "load-dependent-friction tau_ref_nm is fixed at {} N m",
-                    model::effects::LOAD_FRICTION_REFERENCE_NM
-                ));
-            }
-            "offset_a" => p.current_offset = v,
-            "k_per_c" | "k_per_s" => p.thermal_coeff = v,
-            "c_v_n_mm_s_per_rad" => p.viscous_loss = v * 1e-3,
-            "kappa" => p.rectification = v,
-            "force_n" => p.bush_force = v.max(0.0),
-            "hold_nm" => p.bush_hold_torque = v.max(0.0),
-            "omega_b_rad_s" => p.bush_corner_speed = v.max(0.0),
-            "compliance_um_per_n" => p.tooth_compliance = v.max(0.0) * 1e-6,
-            "ripple_rms" => p.mesh_ripple_rms = v.max(0.0),
-            _ => {}
+        if let ParamValue::Fixed(fixed) = param.value
+            && (v - fixed).abs() > 1e-12
+        {
+            return Err(format!(
+                "{} {k} is fixed at {fixed} {}",
+                effect.name(),
+                param.unit
+            ));
         }
+        param.apply(p, v);
     }
     Ok(())
 }

@@ -14,7 +14,7 @@ fn sixty_seconds_vibrating(c: &mut Criterion) {
     group.bench_function("60 s closed loop, 10 Hz release, 2 N m", |b| {
         b.iter(|| {
             let config =
-                SimConfig::for_gear([49, 51, 50, 50], Load::Torque(2.0)).expect("valid gear");
+                SimConfig::for_gear(model::paper::RIG_Z, Load::Torque(2.0)).expect("valid gear");
             let mut link = SimLink::new(SimRig::new(config));
             hello(&mut link).expect("hello");
             release(&mut link, 10.0).expect("release");
@@ -25,7 +25,7 @@ fn sixty_seconds_vibrating(c: &mut Criterion) {
     group.bench_function("60 s plant alone at 10 kHz", |b| {
         b.iter(|| {
             let config =
-                SimConfig::for_gear([49, 51, 50, 50], Load::Torque(2.0)).expect("valid gear");
+                SimConfig::for_gear(model::paper::RIG_Z, Load::Torque(2.0)).expect("valid gear");
             let mut plant = model::plant::Plant::new(config.plant, 1);
             let drive = model::plant::Drive {
                 duty: 6.2 / 12.0,

@@ -39,7 +39,8 @@ pub struct SimConfig {
 impl SimConfig {
     /// The paper's (Z1, Z4) = (49, 50) rig with no load, booting with Table 2 stored.
     pub fn paper() -> Self {
-        Self::for_gear([49, 51, 50, 50], Load::Torque(0.0)).expect("the paper's gear set is valid")
+        Self::for_gear(model::paper::RIG_Z, Load::Torque(0.0))
+            .expect("the paper's gear set is valid")
     }
 
     /// The paper's rig built around gear set `z` with `load`; the stored calibration names `z`.

@@ -2,7 +2,10 @@
 //! calibration: sensor scaling, motor model, loop gains, supervisor and fault limits.
 //!
 //! [`CoreConfig::default`] is the real rig (Nucleo-G474RE, ACS714 +-5 A through a 2/3
-//! divider, AMT102-V at 2048 PPR, RS-735 with an 8.5:1 gearhead on a 12 V H-bridge).
+//! divider, AMT102-V at 2048 PPR, RS-735 with an 8.5:1 gearhead on a 12 V H-bridge): its
+//! hardware numbers are read from [`model::hardware`], the one place they are written.
+
+use model::hardware::{acs714, adc, amt102, board, divider, rs735};
 
 /// The ACS714 hall current sensor and the ADC that samples it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,11 +45,11 @@ impl CurrentSensorConfig {
 impl Default for CurrentSensorConfig {
     fn default() -> Self {
         Self {
-            sensitivity_v_per_a: 0.185,
-            supply_v: 5.0,
-            divider: 2.0 / 3.0,
-            adc_reference_v: 3.3,
-            adc_bits: 12,
+            sensitivity_v_per_a: acs714::SENSITIVITY_V_PER_A as f32,
+            supply_v: acs714::SUPPLY_NOMINAL_V as f32,
+            divider: divider::RATIO as f32,
+            adc_reference_v: adc::VREF_V as f32,
+            adc_bits: adc::BITS,
             zero_tolerance_a: 0.3,
             zero_samples: 1000,
             display_time_constant_s: 0.02,
@@ -57,9 +60,10 @@ impl Default for CurrentSensorConfig {
 /// The vibrator motor as the speed loop's feed-forward sees it (cam-shaft side).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MotorConfig {
-    /// Winding resistance, ohm (model::plant::MotorParams: 0.44).
+    /// Winding resistance, ohm (`model::hardware::rs735`: 0.44).
     pub resistance_ohm: f32,
-    /// Back-EMF constant at the cam shaft, V s/rad (0.078 for the RS-735 with 8.5:1).
+    /// Back-EMF constant at the cam shaft, V s/rad (0.078 for the RS-735 with 8.5:1,
+    /// `model::hardware::rs735`).
     pub ke_cam_v_s_per_rad: f32,
     /// Largest duty the loop commands (keeps the bridge's bootstrap alive).
     pub max_duty: f32,
@@ -72,8 +76,8 @@ pub struct MotorConfig {
 impl Default for MotorConfig {
     fn default() -> Self {
         Self {
-            resistance_ohm: 0.44,
-            ke_cam_v_s_per_rad: 0.078,
+            resistance_ohm: rs735::RESISTANCE_OHM as f32,
+            ke_cam_v_s_per_rad: rs735::KE_CAM_V_S_PER_RAD as f32,
             max_duty: 0.95,
             // 0.5/s accelerates the cam at ~77 rad/s^2 at most: ~1 A above the running
             // current, which itself is 2.3-2.7 A (C6 = 2.25 A) under a 4.5 A limit.
@@ -152,7 +156,7 @@ impl Default for SupervisorConfig {
         Self {
             default_freq_hz: 10.0,
             min_freq_hz: 1.0,
-            max_freq_hz: 20.0,
+            max_freq_hz: board::MAX_FREQ_HZ as f32,
             at_speed_tolerance: 0.1,
             at_speed_time_us: 100_000,
             spin_up_timeout_us: 3_000_000,
@@ -269,13 +273,16 @@ impl CoreConfig {
     }
 }
 
+/// Control step rate of the real rig, Hz.
+const CONTROL_HZ: u32 = 1000;
+
 impl Default for CoreConfig {
     fn default() -> Self {
         Self {
-            control_hz: 1000,
-            samples_per_step: 10,
-            encoder_ppr: 2048,
-            supply_v: 12.0,
+            control_hz: CONTROL_HZ,
+            samples_per_step: (board::CURRENT_SAMPLE_RATE_HZ as u32 / CONTROL_HZ) as usize,
+            encoder_ppr: amt102::PPR,
+            supply_v: board::BRIDGE_SUPPLY_V as f32,
             comms_timeout_us: protocol::COMMS_TIMEOUT_MS as u64 * 1000,
             board_name: "nucleo-g474re",
             current: CurrentSensorConfig::default(),
@@ -292,6 +299,25 @@ impl Default for CoreConfig {
 mod tests {
     use super::*;
     use model::plant::SensorParams;
+
+    #[test]
+    fn defaults_are_the_rigs_hardware() {
+        let c = CoreConfig::default();
+        // 10 kHz current samples, ten per 1 kHz step; 8192 counts per cam turn.
+        assert_eq!(
+            (c.control_hz, c.samples_per_step, c.sample_rate_hz()),
+            (1000, 10, 10_000)
+        );
+        assert_eq!(c.counts_per_rev(), 8192);
+        assert_eq!(c.current.adc_bits, 12);
+        // One ampere is 0.185 V * 2/3 / 3.3 V * 4095 = 153 counts.
+        assert!((1.0 / c.current.amps_per_count() - 153.0).abs() < 0.1);
+        assert_eq!(c.supervisor.max_freq_hz, 20.0);
+        assert_eq!(
+            (c.motor.resistance_ohm, c.motor.ke_cam_v_s_per_rad),
+            (0.44, 0.078)
+        );
+    }
 
     #[test]
     fn current_scaling_matches_the_plant_sensor() {

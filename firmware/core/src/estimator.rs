@@ -7,14 +7,18 @@
 //!
 //! Eq. (9)'s inertia term exchanges power with the carrier and averages to zero over a
 //! turn when the drive takes power back; the paper's Eq. (10) is the mean over the
-//! acceleration phase and carries `M w^2 e^2 / pi`. With
-//! [`crate::config::EstimatorConfig::carrier_power_returned`] that term is added to the
+//! acceleration phase and carries `M w^2 e^2 / pi`. How much of it a revolution mean holds
+//! is the model's inertia-rectification law ([`model::effects::rectified_inertia_torque`])
+//! with the drive's kappa ([`model::effects::drive_kappa`] of
+//! [`crate::config::EstimatorConfig::carrier_power_returned`]: -1 returned, -1/2 not): the
+//! plant and `rig explain` use the same law. The rest of Eq. (10)'s term is added to the
 //! measured mean before Eq. (10) is inverted, and left out of the requirement the
 //! supervisor compares against.
 
 use core::f64::consts::TAU;
 
 use model::CamDrive;
+use model::effects::{drive_kappa, rectified_inertia_torque};
 
 /// Calibration and geometry the estimator works with, SI.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -37,13 +41,10 @@ impl EstimatorModel {
 
     /// Inertia share present in a revolution mean at speed `w`, N m: none when the drive
     /// takes the carrier's power back; otherwise the rectified half of Eq. (9)'s inertia
-    /// term, M w^2 e^2 / (2 pi), half of Eq. (10)'s acceleration-phase mean.
+    /// term, M w^2 e^2 / (2 pi), half of Eq. (10)'s acceleration-phase mean (the model's
+    /// inertia-rectification law with the drive's kappa).
     fn inertia_in_mean(&self, w: f64) -> f64 {
-        if self.carrier_power_returned {
-            0.0
-        } else {
-            0.5 * self.drive.required_inertia_torque(w)
-        }
+        rectified_inertia_torque(&self.drive, w, drive_kappa(self.carrier_power_returned))
     }
 
     /// Load torque explaining a revolution-mean cam torque at speed `w`, by inverting Eq. (10).
@@ -212,15 +213,17 @@ impl TorqueEstimator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use model::GearSet;
+    use crate::config::CurrentSensorConfig;
+    use model::effects::carrier_inertia_torque;
+    use model::{hardware, paper};
 
-    const CPR: u32 = 8192;
+    const CPR: u32 = hardware::amt102::COUNTS_PER_REV;
 
     fn model() -> EstimatorModel {
         EstimatorModel {
-            drive: CamDrive::paper(GearSet::paper([49, 51, 50, 50]).unwrap()),
-            vibrator: model::Calibration::PAPER,
-            mu: 0.271,
+            drive: CamDrive::paper(paper::RIG_GEARS),
+            vibrator: paper::CALIBRATION,
+            mu: paper::MU_S,
             carrier_power_returned: true,
         }
     }
@@ -233,7 +236,9 @@ mod tests {
         revs: f64,
         current: impl Fn(f64) -> f64,
     ) -> Vec<RevolutionEstimate> {
-        let (zero, apc) = (2068.0f64, 0.006_525f64);
+        let sensor = CurrentSensorConfig::default();
+        let zero = f64::from(sensor.nominal_zero_counts());
+        let apc = f64::from(sensor.amps_per_count());
         let mut out = Vec::new();
         let steps = (revs * TAU / w * 1000.0) as u64;
         est.start(0, 0);
@@ -275,10 +280,10 @@ mod tests {
             // friction |sin| (twice per turn) and the inertia term sin cos.
             let tau_mean = m.required(tau_rot, w);
             let friction = tau_mean * core::f64::consts::PI / 2.0;
-            let inertia = 3.82 * w * w * 1e-6;
+            let (mass, e) = (m.drive.carrier_mass, m.drive.eccentricity);
             let i = |theta: f64| {
-                let tau = friction * libm::fabs(libm::sin(theta))
-                    + inertia * libm::sin(theta) * libm::cos(theta);
+                let (s, c) = (libm::sin(theta), libm::cos(theta));
+                let tau = friction * libm::fabs(s) + carrier_inertia_torque(mass, e, s, c, w);
                 m.vibrator.current_for(tau, w)
             };
             let est = feed(&mut TorqueEstimator::new(CPR, 2_000_000), w, 6.3, i);

@@ -134,17 +134,18 @@ impl SpeedLoop {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use model::hardware::{board, rs735};
+    use model::paper;
     use model::plant::{Drive, Load, Plant, PlantParams};
-    use model::{Calibration, GearSet};
 
     fn feed_forward() -> FeedForward {
-        let c = Calibration::PAPER;
+        let c = paper::CALIBRATION;
         FeedForward {
-            resistance_ohm: 0.44,
-            ke: 0.078,
+            resistance_ohm: rs735::RESISTANCE_OHM as f32,
+            ke: rs735::KE_CAM_V_S_PER_RAD as f32,
             c5: c.c5 as f32,
             c6: c.c6 as f32,
-            supply_v: 12.0,
+            supply_v: board::BRIDGE_SUPPLY_V as f32,
         }
     }
 
@@ -175,8 +176,10 @@ mod tests {
     }
 
     fn plant(load_nm: f64) -> Plant {
-        let gear = GearSet::paper([49, 51, 50, 50]).unwrap();
-        Plant::new(PlantParams::paper(gear, Load::Torque(load_nm)), 7)
+        Plant::new(
+            PlantParams::paper(paper::RIG_GEARS, Load::Torque(load_nm)),
+            7,
+        )
     }
 
     #[test]

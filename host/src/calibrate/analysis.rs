@@ -259,7 +259,7 @@ mod tests {
     #[test]
     fn plan_on_the_plant_gives_table2() {
         use model::plant::{CamSetup, Drive, Load, Plant, PlantParams};
-        let gear = model::GearSet::paper([49, 51, 50, 50]).unwrap();
+        let gear = model::paper::RIG_GEARS;
         let mut plant = Plant::new(PlantParams::paper(gear, Load::Torque(0.0)), 7);
         let plan = Plan::default();
         let dt = 1e-4;

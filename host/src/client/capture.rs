@@ -296,8 +296,12 @@ mod tests {
         // 2.5 V * 2/3 = 1.667 V of 3.3 V: mid-scale code 2068 is zero current.
         assert!(current_amps(2068).abs() < 0.004);
         // One LSB: 3.3 / 4095 / (2/3) / 0.185 A.
+        use model::hardware::{acs714, adc, amt102, divider};
         let lsb = current_amps(2069) - current_amps(2068);
-        assert!((lsb - 3.3 / 4095.0 / (2.0 / 3.0) / 0.185).abs() < 1e-9);
-        assert!((cam_angle_rad(8192) - std::f64::consts::TAU).abs() < 1e-12);
+        let expected =
+            adc::VREF_V / f64::from(adc::FULL_SCALE) / divider::RATIO / acs714::SENSITIVITY_V_PER_A;
+        assert!((lsb - expected).abs() < 1e-9);
+        let turn = amt102::COUNTS_PER_REV as i32;
+        assert!((cam_angle_rad(turn) - std::f64::consts::TAU).abs() < 1e-12);
     }
 }

@@ -6,13 +6,13 @@ use proptest::collection::vec;
 use proptest::prelude::*;
 use protocol::*;
 
-pub fn calibration() -> impl Strategy<Value = Calibration> {
+pub fn parameters() -> impl Strategy<Value = RigParameters> {
     (
         proptest::array::uniform6(any::<f32>()),
         proptest::array::uniform4(any::<u16>()),
         proptest::array::uniform9(any::<f32>()),
     )
-        .prop_map(|(c, z, g)| Calibration {
+        .prop_map(|(c, z, g)| RigParameters {
             c1_nmm_per_a: c[0],
             c2_nmm: c[1],
             c3_nmm_s_per_rad: c[2],
@@ -33,7 +33,7 @@ pub fn calibration() -> impl Strategy<Value = Calibration> {
 }
 
 pub fn faults() -> impl Strategy<Value = FaultFlags> {
-    any::<u16>().prop_map(FaultFlags::from_bits_retain)
+    any::<u32>().prop_map(FaultFlags::from_bits_retain)
 }
 
 fn supervisor_state() -> impl Strategy<Value = SupervisorState> {
@@ -50,13 +50,14 @@ fn telemetry() -> impl Strategy<Value = TelemetrySample> {
     (
         any::<u32>(),
         any::<u64>(),
-        proptest::array::uniform5(any::<f32>()),
+        proptest::array::uniform9(any::<f32>()),
         supervisor_state(),
         faults(),
-        any::<u8>(),
+        any::<u16>(),
+        any::<[u32; 2]>(),
     )
         .prop_map(
-            |(seq, device_time_us, f, state, faults, status)| TelemetrySample {
+            |(seq, device_time_us, f, state, faults, status, cycles)| TelemetrySample {
                 seq,
                 device_time_us,
                 cam_speed_rad_s: f[0],
@@ -67,6 +68,12 @@ fn telemetry() -> impl Strategy<Value = TelemetrySample> {
                 state,
                 faults,
                 status: StatusFlags::from_bits_retain(status),
+                output_angle_rad: f[5],
+                output_speed_rad_s: f[6],
+                bus_voltage_v: f[7],
+                motor_temp_c: f[8],
+                step_cycles_mean: cycles[0],
+                step_cycles_max: cycles[1],
             },
         )
 }
@@ -93,44 +100,88 @@ fn capture_chunk() -> impl Strategy<Value = CaptureChunk> {
         )
 }
 
+fn parameter_rejection() -> impl Strategy<Value = ParameterRejection> {
+    let reason = prop_oneof![
+        Just(RejectReason::NotFinite),
+        Just(RejectReason::OutOfRange),
+        Just(RejectReason::AboveBoardCap),
+        Just(RejectReason::Inconsistent),
+        Just(RejectReason::Implausible),
+    ];
+    (
+        proptest::sample::select(ParameterField::ALL.to_vec()),
+        reason,
+    )
+        .prop_map(|(field, reason)| ParameterRejection::new(field, reason))
+}
+
 fn nack_code() -> impl Strategy<Value = NackCode> {
     prop_oneof![
+        (any::<u16>(), any::<u32>()).prop_map(|(device_protocol, device_schema_hash)| {
+            NackCode::VersionMismatch {
+                device_protocol,
+                device_schema_hash,
+            }
+        }),
         Just(NackCode::UnknownMessage),
         Just(NackCode::BadArgument),
         Just(NackCode::InFaultHold),
-        Just(NackCode::VersionMismatch),
-        Just(NackCode::CalibrationRejected),
+        parameter_rejection().prop_map(NackCode::ParametersRejected),
         Just(NackCode::Busy),
         Just(NackCode::StorageFailed),
+        Just(NackCode::SimulationOnly),
     ]
 }
 
 fn device_info() -> impl Strategy<Value = DeviceInfo> {
     let status = prop_oneof![
-        Just(CalibrationStatus::Valid),
-        Just(CalibrationStatus::Defaults),
-        Just(CalibrationStatus::Invalid),
+        Just(ParametersStatus::Valid),
+        Just(ParametersStatus::Defaults),
+        Just(ParametersStatus::Invalid),
+    ];
+    let reset = prop_oneof![
+        Just(ResetCause::PowerOn),
+        Just(ResetCause::Pin),
+        Just(ResetCause::Software),
+        Just(ResetCause::Watchdog),
+        Just(ResetCause::BrownOut),
+        Just(ResetCause::Lockup),
+        Just(ResetCause::Other),
     ];
     (
-        any::<[u8; 3]>(),
-        any::<u16>(),
-        any::<u32>(),
-        "[a-z0-9µ-]{0,8}",
-        status,
+        (any::<[u8; 3]>(), any::<u16>(), any::<u32>()),
+        ("[0-9a-f]{0,12}(-dirty)?", "[a-z0-9µ-]{0,8}"),
+        (status, reset, any::<u32>(), any::<u16>()),
     )
         .prop_map(
-            |(v, protocol_version, schema_hash, board, calibration_status)| DeviceInfo {
+            |(
+                (v, protocol_version, schema_hash),
+                (build, board),
+                (parameters_status, reset_cause, uptime_s, capabilities),
+            )| DeviceInfo {
+                protocol_version,
+                schema_hash,
                 firmware_version: FirmwareVersion {
                     major: v[0],
                     minor: v[1],
                     patch: v[2],
                 },
-                protocol_version,
-                schema_hash,
+                firmware_build: String::try_from(build.as_str()).unwrap(),
                 board: String::try_from(board.as_str()).unwrap(),
-                calibration_status,
+                parameters_status,
+                reset_cause,
+                uptime_s,
+                capabilities: Capabilities::from_bits_retain(capabilities),
             },
         )
+}
+
+fn sim_command() -> impl Strategy<Value = SimCommand> {
+    prop_oneof![
+        any::<f32>().prop_map(|tau_rot_nm| SimCommand::SetLoad { tau_rot_nm }),
+        any::<f32>().prop_map(|volts| SimCommand::SetSupplyVoltage { volts }),
+        any::<f32>().prop_map(|volts| SimCommand::SetSensorSupply { volts }),
+    ]
 }
 
 pub fn request() -> impl Strategy<Value = Request> {
@@ -143,8 +194,8 @@ pub fn request() -> impl Strategy<Value = Request> {
         (any::<bool>(), any::<f32>())
             .prop_map(|(on, target_hz)| Request::Release { on, target_hz }),
         Just(Request::Heartbeat),
-        Just(Request::GetCalibration),
-        calibration().prop_map(Request::SetCalibration),
+        Just(Request::GetParameters),
+        parameters().prop_map(Request::SetParameters),
         any::<u16>().prop_map(|rate_hz| Request::StartTelemetry { rate_hz }),
         Just(Request::StopTelemetry),
         (any::<u16>(), any::<u32>()).prop_map(|(sample_rate_hz, samples)| {
@@ -156,14 +207,24 @@ pub fn request() -> impl Strategy<Value = Request> {
         Just(Request::GetFaults),
         Just(Request::ClearFaults),
         Just(Request::RezeroCurrent),
+        any::<f32>().prop_map(|volts| Request::OpenLoop { volts }),
+        sim_command().prop_map(Request::Simulation),
+    ]
+}
+
+pub fn reply() -> impl Strategy<Value = Reply> {
+    prop_oneof![
+        device_info().prop_map(Reply::Info),
+        nack_code().prop_map(Reply::Nack),
+        Just(Reply::Ack),
+        (faults(), faults()).prop_map(|(active, latched)| Reply::Faults { active, latched }),
+        parameters().prop_map(Reply::Parameters),
     ]
 }
 
 pub fn device_message() -> impl Strategy<Value = DeviceMessage> {
     prop_oneof![
-        device_info().prop_map(DeviceMessage::Info),
-        any::<u16>().prop_map(|seq| DeviceMessage::Ack { seq }),
-        (any::<u16>(), nack_code()).prop_map(|(seq, code)| DeviceMessage::Nack { seq, code }),
+        (any::<u16>(), reply()).prop_map(|(seq, reply)| DeviceMessage::reply(seq, reply)),
         telemetry().prop_map(DeviceMessage::Telemetry),
         capture_chunk().prop_map(DeviceMessage::CaptureChunk),
         (any::<u16>(), any::<u32>(), any::<u16>()).prop_map(
@@ -177,9 +238,6 @@ pub fn device_message() -> impl Strategy<Value = DeviceMessage> {
             flags,
             device_time_us
         }),
-        (faults(), faults())
-            .prop_map(|(active, latched)| DeviceMessage::Faults { active, latched }),
-        calibration().prop_map(DeviceMessage::Calibration),
     ]
 }
 

@@ -50,9 +50,9 @@ pub fn run(names: &[String], seed: u64) -> Result<Vec<FaultOutcome>, SimError> {
 
 fn rig(seed: u64, setup: impl FnOnce(&mut SimConfig)) -> Result<SimLink, SimError> {
     let mut config =
-        SimConfig::for_gear([49, 51, 50, 50], Load::Torque(1.0)).map_err(|source| {
+        SimConfig::for_gear(model::paper::RIG_Z, Load::Torque(1.0)).map_err(|source| {
             SimError::Gear {
-                z: [49, 51, 50, 50],
+                z: model::paper::RIG_Z,
                 source,
             }
         })?;

@@ -2,7 +2,7 @@
 //! still without vibration (14.5 s in the paper) and falls once vibration starts (3.6 V,
 //! about 5 Hz); with mu_d Lambda < 1 it keeps falling after the vibration stops.
 
-use model::plant::Load;
+use model::paper;
 use serde::Serialize;
 
 use super::{hello, lock, output_moved, release};
@@ -27,8 +27,8 @@ pub struct Fig5Options {
 impl Default for Fig5Options {
     fn default() -> Self {
         Self {
-            hold_s: 14.5,
-            vibration_hz: 5.0,
+            hold_s: paper::FIG5_HOLD_S,
+            vibration_hz: paper::VIBRATION_HZ[0] as f32,
             release_s: 2.0,
             after_stop_s: 0.5,
             seed: 1,
@@ -59,10 +59,10 @@ pub struct Fig5Result {
 
 /// Runs the scenario.
 pub fn run(opts: &Fig5Options) -> Result<Fig5Result, SimError> {
-    let z = [50, 50, 51, 49];
-    let radius = 0.075;
-    let mut config = SimConfig::for_gear(z, Load::Mass { mass: 1.0, radius })
-        .map_err(|source| SimError::Gear { z, source })?;
+    let z = paper::FIG5_Z;
+    let radius = paper::R_OUT;
+    let mut config =
+        SimConfig::for_gear(z, paper::FIG5_LOAD).map_err(|source| SimError::Gear { z, source })?;
     config.seed = opts.seed;
     let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
     let mut link = SimLink::new(SimRig::new(config));

@@ -13,8 +13,9 @@ use crate::SimLink;
 
 pub use crate::riglink::HEARTBEAT_S;
 
-/// Output rotation (rad) that counts as "the load moved": 0.1 mm of rope on a 75 mm pulley.
-pub const MOTION_RAD: f64 = 0.1e-3 / 0.075;
+/// Output rotation (rad) that counts as "the load moved": 0.1 mm of rope on the paper's
+/// 75 mm pulley.
+pub const MOTION_RAD: f64 = 0.1e-3 / model::paper::R_OUT;
 
 /// Sends `req` and requires an `Ack`.
 pub fn expect_ack(link: &mut SimLink, req: &Request) -> Result<(), SimError> {

@@ -3,6 +3,7 @@
 //! point: the mean current over 0.5 s from the start of constant cam speed (as the paper),
 //! the cam speed, the firmware's tau_cam estimate and Eq. (10).
 
+use model::paper;
 use model::plant::{Load, NoiseSource, PlantEffects};
 use protocol::Request;
 use serde::Serialize;
@@ -35,11 +36,13 @@ pub struct SweepOptions {
 impl Default for SweepOptions {
     fn default() -> Self {
         Self {
-            z: [49, 51, 50, 50],
-            loads: (1..=10).map(|k| 0.368 * k as f64).collect(),
-            voltages: vec![3.6, 6.2, 8.8],
-            repeats: 5,
-            window_s: 0.5,
+            z: paper::RIG_Z,
+            loads: (1..=10)
+                .map(|k| paper::TAU_ROT_MIN_TESTED * k as f64)
+                .collect(),
+            voltages: paper::SUPPLY_VOLTAGES.to_vec(),
+            repeats: paper::REQUIRED_TORQUE_REPEATS,
+            window_s: paper::CURRENT_AVERAGING_S,
             rest_s: 10.0,
             seed: 1,
             effects: PlantEffects::default(),
@@ -112,7 +115,7 @@ pub fn run(opts: &SweepOptions) -> Result<Vec<SweepPoint>, SimError> {
         .max_release_load_nm
         .max((1.25 * top) as f32);
     let drive = config.plant.drive;
-    let calibration = model::Calibration::PAPER;
+    let calibration = paper::CALIBRATION;
     let mu = config.plant.mu_s;
     let mut link = SimLink::new(SimRig::new(config));
     hello(&mut link)?;

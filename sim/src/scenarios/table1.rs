@@ -9,7 +9,7 @@ use crate::SimError;
 use crate::{SimConfig, SimLink, SimRig};
 
 /// Load torque of the test, N m (the teeth's limit).
-pub const TAU_ROT: f64 = model::TAU_ROT_MAX_PAPER;
+pub const TAU_ROT: f64 = model::paper::TAU_ROT_MAX;
 
 /// One row of `rig sim table1 --json`.
 #[derive(Debug, Clone, Serialize)]
@@ -52,7 +52,7 @@ fn run_one(z: [u32; 4], hz: f32, seed: u64) -> Result<Table1Row, SimError> {
     Ok(Table1Row {
         z,
         n: gear.n(),
-        mu_s_lambda: model::MU_S_PAPER * gear.big_lambda(),
+        mu_s_lambda: model::paper::MU_S * gear.big_lambda(),
         backdriven_without_vibration,
         backdriven_with_vibration,
         paper_non_backdriven_point,

@@ -22,7 +22,7 @@ fn core_fits_its_ram_share() {
 }
 
 /// The paper's (49, 51, 50, 50) gear set.
-pub(crate) const PAPER_Z: [u32; 4] = [49, 51, 50, 50];
+pub(crate) const PAPER_Z: [u32; 4] = model::paper::RIG_Z;
 
 /// Core + plant + a host end of the link, in virtual time (1 ms steps).
 pub(crate) struct Rig {
@@ -90,7 +90,8 @@ impl Rig {
         let mut adc = [0u16; 10];
         for a in adc.iter_mut() {
             self.plant.step(1e-4, self.drive);
-            *a = (i32::from(self.plant.current_adc()) + self.adc_offset).clamp(0, 4095) as u16;
+            *a = (i32::from(self.plant.current_adc()) + self.adc_offset)
+                .clamp(0, i32::from(model::hardware::adc::FULL_SCALE)) as u16;
         }
         self.now_us += 1000;
         let out = self.step_with(&adc);

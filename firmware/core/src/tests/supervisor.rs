@@ -4,7 +4,7 @@ use core::f32::consts::TAU;
 
 use protocol::{Calibration, CalibrationStatus, FaultFlags, Request, StatusFlags, SupervisorState};
 
-use super::Rig;
+use super::{PAPER_Z, Rig};
 use crate::BootInfo;
 
 fn release(hz: f32) -> Request {
@@ -267,16 +267,18 @@ fn coasting_and_self_locking_flags_follow_the_gear_set() {
         let s = rig.core.status();
         (s.keeps_moving_after_stop, s.holds_at_rest, s.flags)
     };
+    let rig_z = PAPER_Z.map(|z| z as u16);
+    let (mu_s, mu_d) = (model::paper::MU_S as f32, model::paper::MU_D as f32);
     // (49, 50): mu_s Lambda = 1.34 holds; mu_d Lambda = 0.86 < 1 keeps moving.
-    let (moving, holds, f) = flags([49, 51, 50, 50], 0.174);
+    let (moving, holds, f) = flags(rig_z, mu_d);
     assert!(moving && holds);
     assert!(f.contains(StatusFlags::COASTS_AFTER_STOP));
     assert!(!f.contains(StatusFlags::NOT_SELF_LOCKING));
     // With mu_d = mu_s it stops with the vibration.
-    let (moving, _, f) = flags([49, 51, 50, 50], 0.271);
+    let (moving, _, f) = flags(rig_z, mu_s);
     assert!(!moving && !f.contains(StatusFlags::COASTS_AFTER_STOP));
     // n = 2: never self-locking.
-    let (moving, holds, f) = flags([50, 50, 48, 52], 0.174);
+    let (moving, holds, f) = flags(model::paper::TABLE1[2].map(|z| z as u16), mu_d);
     assert!(moving && !holds && f.contains(StatusFlags::NOT_SELF_LOCKING));
 }
 

@@ -1,0 +1,216 @@
+//! Host-to-device requests and the facts each one carries: its name, the reply it
+//! expects and whether sending it again after a timeout is safe.
+//!
+//! Variant order is the wire discriminant: append new variants at the end only, and keep
+//! `Hello` first.
+
+use serde::{Deserialize, Serialize};
+
+use crate::sizes::TAG;
+use crate::{Reply, RigParameters};
+
+/// Host-to-device requests. Each is answered by exactly one [`crate::DeviceMessage::Reply`]
+/// carrying the request's frame `seq`: the reply of its [`Request::reply_kind`], or a
+/// [`Reply::Nack`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum Request {
+    /// Opens a session; answered by `Info`, or `Nack(VersionMismatch)` naming the device's
+    /// version. Its layout never changes, so a device recognises any host's `Hello`.
+    Hello {
+        /// The host's [`crate::PROTOCOL_VERSION`].
+        protocol_version: u16,
+        /// The host's [`crate::SCHEMA_HASH`].
+        schema_hash: u32,
+    },
+    /// Asks for `Info`.
+    GetInfo,
+    /// Starts (`on`) or stops vibration. A release stays live only while accepted
+    /// requests (heartbeats) keep arriving within [`crate::COMMS_TIMEOUT_MS`].
+    Release {
+        /// True to vibrate (make the gear backdrivable), false to lock.
+        on: bool,
+        /// Vibration (cam) frequency, Hz; ignored when `on` is false.
+        target_hz: f32,
+    },
+    /// Keeps a release alive; answered by `Ack`.
+    Heartbeat,
+    /// Asks for the active [`RigParameters`]; answered by `Parameters`.
+    GetParameters,
+    /// Validates, stores and activates a parameter record; `Ack` once stored, or
+    /// `Nack(ParametersRejected)` naming the field, or `Nack(Busy)` while the motor runs.
+    SetParameters(RigParameters),
+    /// Streams `Telemetry` at `rate_hz` (at most [`crate::MAX_TELEMETRY_RATE_HZ`]).
+    StartTelemetry {
+        /// Samples per second.
+        rate_hz: u16,
+    },
+    /// Stops the telemetry stream.
+    StopTelemetry,
+    /// Records a raw capture, then sends it as `CaptureChunk`s and a `CaptureDone`.
+    StartCapture {
+        /// Sample rate, Hz (the paper logged at 10 kHz).
+        sample_rate_hz: u16,
+        /// Number of samples to record (the device may clamp to its buffer).
+        samples: u32,
+    },
+    /// Asks for `Faults`.
+    GetFaults,
+    /// Clears latched faults whose condition is gone; answered by `Faults`.
+    ClearFaults,
+    /// Re-measures the current-sensor zero (motor must be off); `Ack` or `Nack`.
+    RezeroCurrent,
+    /// Drives the vibrator at a fixed bridge voltage without the speed loop, as the paper's
+    /// bench supply did for the calibration and the required-torque tests. Kept alive by
+    /// heartbeats like a release; `volts` 0 ends it. `Nack(InFaultHold)` with a fault
+    /// latched, `Nack(Busy)` while a release runs, `Nack(BadArgument)` beyond the supply.
+    OpenLoop {
+        /// Mean voltage across the motor, V (sign: direction).
+        volts: f32,
+    },
+    /// An operator action on the virtual rig (hang a load, change a supply). Real firmware
+    /// answers `Nack(SimulationOnly)`; the virtual rig `Ack`.
+    Simulation(SimCommand),
+}
+
+/// The simulated operator's and bench's actions, for procedures that run unchanged on the
+/// real and the virtual rig (on a real rig the operator does them by hand).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum SimCommand {
+    /// Hangs a load torque on the output shaft, N m (0 removes it; the sign is the
+    /// direction the load pulls).
+    SetLoad {
+        /// Load torque on the output, N m.
+        tau_rot_nm: f32,
+    },
+    /// Sets the bench supply feeding the motor bridge, V.
+    SetSupplyVoltage {
+        /// Supply voltage, V.
+        volts: f32,
+    },
+    /// Sets the current sensor's supply (the ACS714 is ratiometric to it), V; nominal 5.0.
+    SetSensorSupply {
+        /// Sensor supply voltage, V.
+        volts: f32,
+    },
+}
+
+impl SimCommand {
+    /// The command's name, e.g. `SetLoad`.
+    pub const fn name(&self) -> &'static str {
+        match self {
+            Self::SetLoad { .. } => "SetLoad",
+            Self::SetSupplyVoltage { .. } => "SetSupplyVoltage",
+            Self::SetSensorSupply { .. } => "SetSensorSupply",
+        }
+    }
+}
+
+/// The kind of [`Reply`] a request expects when the device accepts it. Any request may
+/// instead be refused with [`Reply::Nack`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ReplyKind {
+    /// [`Reply::Info`].
+    Info,
+    /// [`Reply::Ack`].
+    Ack,
+    /// [`Reply::Faults`].
+    Faults,
+    /// [`Reply::Parameters`].
+    Parameters,
+}
+
+impl ReplyKind {
+    /// The reply's name, e.g. `Info`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Info => "Info",
+            Self::Ack => "Ack",
+            Self::Faults => "Faults",
+            Self::Parameters => "Parameters",
+        }
+    }
+}
+
+impl Request {
+    /// Largest serialised size, bytes.
+    pub const MAX_WIRE_SIZE: usize = TAG + RigParameters::MAX_WIRE_SIZE;
+
+    /// The request's name for messages: the variant, with `Release(on)` / `Release(off)`
+    /// and `Simulation(SetLoad)` etc. spelled out.
+    pub const fn name(&self) -> &'static str {
+        match self {
+            Self::Hello { .. } => "Hello",
+            Self::GetInfo => "GetInfo",
+            Self::Release { on: true, .. } => "Release(on)",
+            Self::Release { on: false, .. } => "Release(off)",
+            Self::Heartbeat => "Heartbeat",
+            Self::GetParameters => "GetParameters",
+            Self::SetParameters(_) => "SetParameters",
+            Self::StartTelemetry { .. } => "StartTelemetry",
+            Self::StopTelemetry => "StopTelemetry",
+            Self::StartCapture { .. } => "StartCapture",
+            Self::GetFaults => "GetFaults",
+            Self::ClearFaults => "ClearFaults",
+            Self::RezeroCurrent => "RezeroCurrent",
+            Self::OpenLoop { .. } => "OpenLoop",
+            Self::Simulation(SimCommand::SetLoad { .. }) => "Simulation(SetLoad)",
+            Self::Simulation(SimCommand::SetSupplyVoltage { .. }) => "Simulation(SetSupplyVoltage)",
+            Self::Simulation(SimCommand::SetSensorSupply { .. }) => "Simulation(SetSensorSupply)",
+        }
+    }
+
+    /// The reply the device sends when it accepts this request.
+    pub const fn reply_kind(&self) -> ReplyKind {
+        match self {
+            Self::Hello { .. } | Self::GetInfo => ReplyKind::Info,
+            Self::GetFaults | Self::ClearFaults => ReplyKind::Faults,
+            Self::GetParameters => ReplyKind::Parameters,
+            Self::Release { .. }
+            | Self::Heartbeat
+            | Self::SetParameters(_)
+            | Self::StartTelemetry { .. }
+            | Self::StopTelemetry
+            | Self::StartCapture { .. }
+            | Self::RezeroCurrent
+            | Self::OpenLoop { .. }
+            | Self::Simulation(_) => ReplyKind::Ack,
+        }
+    }
+
+    /// Whether `reply` answers this request: a `Nack`, or the reply of its
+    /// [`Request::reply_kind`]. Match the reply's `request_seq` first.
+    pub fn is_answered_by(&self, reply: &Reply) -> bool {
+        match reply.kind() {
+            None => true,
+            Some(kind) => kind == self.reply_kind(),
+        }
+    }
+
+    /// Whether the host may send this request again when its reply did not arrive.
+    ///
+    /// The reply may have been lost after the device acted, so a retry is safe only when
+    /// acting twice ends the same as acting once and the second reply tells the truth:
+    ///
+    /// * Queries (`Hello`, `GetInfo`, `GetParameters`, `GetFaults`) and `Heartbeat`: yes.
+    /// * State assignments (`Release`, `OpenLoop`, `StartTelemetry`, `StopTelemetry`,
+    ///   `Simulation`): yes. Each sets a state rather than stepping it, so a repeat lands in
+    ///   the same state, and a repeat that the device now refuses (a fault latched in
+    ///   between) reports that refusal truthfully. Repeating a lock (`Release(off)`,
+    ///   `OpenLoop` 0 V) is the safe direction; a repeated release is still only live while
+    ///   heartbeats arrive, so it cannot outlast the host.
+    /// * `ClearFaults`: yes. It clears only faults whose condition is gone, and any fault
+    ///   that rose between the tries was announced by its own `FaultEvent`.
+    /// * `SetParameters`: no. Its reply comes after the flash write, so a retry can find the
+    ///   first write still running (`Nack(Busy)`) and report a failure for a record that was
+    ///   stored; read it back with `GetParameters` instead.
+    /// * `StartCapture`: no. A second start discards the first capture and records anew.
+    /// * `RezeroCurrent`: no. A second re-zero restarts the measurement; ask `GetFaults`.
+    pub const fn retry_safe(&self) -> bool {
+        !matches!(
+            self,
+            Self::SetParameters(_) | Self::StartCapture { .. } | Self::RezeroCurrent
+        )
+    }
+}
