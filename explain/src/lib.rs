@@ -36,6 +36,7 @@ pub mod robust;
 pub mod select;
 pub mod stats;
 pub mod synth;
+pub mod terms;
 
 use std::collections::BTreeMap;
 

@@ -40,7 +40,20 @@
 //! ```
 //!
 //! The effect names and their parameters are those of `rig explain` (see
-//! `explain::library`); an effect listed without a parameter starts at zero.
+//! `explain::library`); an effect listed without a parameter starts at zero. An entry with
+//! `form = "..."` is a library effect in one of its family forms, and an entry named after a
+//! `[[user_effects]]` definition is that user effect (both are `rig explain`'s terms,
+//! `explain::terms`; [`RigFile::term_entries`]).
+//!
+//! ```toml
+//! # A user-defined effect: an expression over w, tau, t, temp, i, i_f, i_m and f_ax (see
+//! # `rig explain --help`) giving an extra current in A, with its parameters.
+//! [[user_effects]]
+//! name = "brush-drag"
+//! expression = "c * (w / 100)^2"
+//! params = { c = { unit = "A", bounds = [-0.5, 0.5] } }   # null (the value without the
+//!                                                         # effect) 0, start = null
+//! ```
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -68,6 +81,43 @@ pub struct RigFile {
     /// The fitted model, when `rig explain` wrote one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelSection>,
+    /// User-defined effects (`[[user_effects]]`), candidates of `rig explain`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub user_effects: Vec<UserEffectDef>,
+}
+
+/// `[[user_effects]]`: an effect of the user's own: a named expression for an extra current.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UserEffectDef {
+    /// Its name (not a library effect's).
+    pub name: String,
+    /// The extra current in A, an expression over the model's quantities and the parameters
+    /// (checked by `rig explain`).
+    pub expression: String,
+    /// Its parameters by name.
+    #[serde(default)]
+    pub params: BTreeMap<String, UserParamDef>,
+}
+
+/// One parameter of a user effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UserParamDef {
+    /// Its unit (for reports).
+    #[serde(default)]
+    pub unit: String,
+    /// The range the fit keeps it in, [low, high].
+    pub bounds: [f64; 2],
+    /// The value at which the effect vanishes (default 0).
+    #[serde(default)]
+    pub null: f64,
+    /// The fit's start (default: `null`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start: Option<f64>,
+    /// Fit the parameter in ln (a positive scale; bounds must be positive).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub log: bool,
 }
 
 /// `[gear]`: tooth counts, module and pressure angle.
@@ -186,6 +236,9 @@ pub struct ModelSection {
     /// The effects on top of the paper's model, strongest first.
     #[serde(default)]
     pub effects: Vec<EffectEntry>,
+    /// Effects in a family form or of the user's own (`rig explain`'s terms).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub terms: Vec<TermEntry>,
 }
 
 /// `[[model.effects]]`: one effect with its parameters.
@@ -195,6 +248,21 @@ pub struct EffectEntry {
     /// The effect's name (e.g. `speed-dependent-axial-friction`).
     pub name: String,
     /// Its parameters by name (e.g. `omega_c_rad_s`).
+    #[serde(default)]
+    pub params: BTreeMap<String, f64>,
+}
+
+/// `[[model.terms]]`: an effect of `rig explain`'s terms (`explain::terms`): a library effect
+/// in one of its family forms, or a user effect of `[[user_effects]]`, with its parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TermEntry {
+    /// The effect's name (a library effect's with `form`, else a user effect's).
+    pub name: String,
+    /// The family form of a library effect (e.g. `warm-up-in-time`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub form: Option<String>,
+    /// Its parameters by name.
     #[serde(default)]
     pub params: BTreeMap<String, f64>,
 }
@@ -280,6 +348,51 @@ impl RigFile {
         if self.friction.mu_s < 0.0 || self.friction.mu_d < 0.0 {
             return Err(bad("friction coefficients must not be negative".into()));
         }
+        let mut names: Vec<&str> = Vec::new();
+        for u in &self.user_effects {
+            let what = format!("[[user_effects]] {}", u.name);
+            if u.name.is_empty()
+                || Effect::from_name(&u.name).is_some()
+                || names.contains(&u.name.as_str())
+            {
+                return Err(bad(format!(
+                    "{what}: give each user effect a name of its own, not empty and not a library effect's"
+                )));
+            }
+            names.push(&u.name);
+            for (k, p) in &u.params {
+                let [lo, hi] = p.bounds;
+                let start = p.start.unwrap_or(p.null);
+                if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                    return Err(bad(format!(
+                        "{what}: parameter {k} bounds = [{lo}, {hi}]: give finite bounds, low < high"
+                    )));
+                }
+                if !(lo..=hi).contains(&p.null) || !(lo..=hi).contains(&start) {
+                    return Err(bad(format!(
+                        "{what}: parameter {k}: null {} and start {start} must lie within [{lo}, {hi}]",
+                        p.null
+                    )));
+                }
+                if p.log && lo <= 0.0 {
+                    return Err(bad(format!(
+                        "{what}: parameter {k} is fitted in ln (log = true): its bounds must be positive"
+                    )));
+                }
+            }
+        }
+        for t in self.term_entries() {
+            let known = match &t.form {
+                Some(_) => Effect::from_name(&t.name).is_some(),
+                None => names.contains(&t.name.as_str()),
+            };
+            if !known {
+                return Err(bad(format!(
+                    "[[model.terms]] {}: give a library effect's name with a form, or the name of a [[user_effects]] definition",
+                    t.name
+                )));
+            }
+        }
         if let Some(m) = &self.model {
             if !(m.mu.is_finite() && m.mu >= 0.0) {
                 return Err(bad(format!("[model] mu = {} must be a number >= 0", m.mu)));
@@ -311,11 +424,24 @@ impl RigFile {
         Calibration::from_paper_units([c.c1, c.c2, c.c3, c.c4, c.c5, c.c6])
     }
 
-    /// The effects of `[model]` with their parameters, in file order.
+    /// The `[[model.terms]]` entries (`rig explain` checks their forms and parameters).
+    pub fn term_entries(&self) -> &[TermEntry] {
+        self.model.as_ref().map_or(&[], |m| m.terms.as_slice())
+    }
+
+    /// The library effects of `[model]` in their own laws with their parameters, in file
+    /// order (the terms, [`RigFile::term_entries`], aside).
     pub fn effects(&self) -> Result<(Vec<Effect>, EffectParams), String> {
         let mut list = Vec::new();
         let mut params = EffectParams::default();
+        let terms = self.term_entries();
         for entry in self.model.iter().flat_map(|m| &m.effects) {
+            if terms.iter().any(|t| t.name == entry.name) {
+                return Err(format!(
+                    "effect {} is listed twice (once under [[model.terms]])",
+                    entry.name
+                ));
+            }
             let effect = Effect::from_name(&entry.name).ok_or_else(|| {
                 format!(
                     "unknown effect '{}' (known: {})",
@@ -398,8 +524,18 @@ impl RigFile {
 
     /// This rig with `[model]` set to `mu` and `effects` (name and parameters each).
     pub fn with_model(&self, mu: f64, effects: Vec<EffectEntry>) -> Self {
+        self.with_model_terms(mu, effects, Vec::new())
+    }
+
+    /// This rig with `[model]` set to `mu`, `effects` and `terms`.
+    pub fn with_model_terms(
+        &self,
+        mu: f64,
+        effects: Vec<EffectEntry>,
+        terms: Vec<TermEntry>,
+    ) -> Self {
         let mut r = self.clone();
-        r.model = Some(ModelSection { mu, effects });
+        r.model = Some(ModelSection { mu, effects, terms });
         r
     }
 }
@@ -514,5 +650,37 @@ mod tests {
         let m = back.current_model().unwrap();
         assert_eq!(m.mu, 0.25);
         assert_eq!(m.effects.axial_corner_speed, 21.0);
+    }
+
+    #[test]
+    fn user_effects_and_terms_round_trip() {
+        let text = "[[user_effects]]\nname = \"brush-drag\"\nexpression = \"c * (w / 100)^2\"\nparams = { c = { unit = \"A\", bounds = [-0.5, 0.5] } }\n[model]\nmu = 0.27\n[[model.effects]]\nname = \"current-sensor-offset\"\nparams = { offset_a = 0.01 }\n[[model.terms]]\nname = \"brush-drag\"\nparams = { c = 0.1 }\n[[model.terms]]\nname = \"thermal-drift\"\nform = \"warm-up-in-time\"\nparams = { k_per_s = 1e-6, tau_s = 900.0 }\n";
+        let r = RigFile::parse(text, "rig.toml").unwrap();
+        assert_eq!(r.user_effects[0].params["c"].bounds, [-0.5, 0.5]);
+        assert_eq!(r.term_entries().len(), 2);
+        let (effects, p) = r.effects().unwrap();
+        assert_eq!(effects, [Effect::CurrentSensorOffset]);
+        assert_eq!(p.current_offset, 0.01);
+        let back = RigFile::parse(&r.to_toml().unwrap(), "back.toml").unwrap();
+        assert_eq!(back, r);
+        // A term that names nothing known, a library name used twice, bad bounds.
+        let e = RigFile::parse(
+            "[model]\nmu = 0.27\n[[model.terms]]\nname = \"gremlin\"\n",
+            "r.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("gremlin") && e.contains("[[user_effects]]"),
+            "{e}"
+        );
+        let e = RigFile::parse("[model]\nmu = 0.27\n[[model.effects]]\nname = \"thermal-drift\"\n[[model.terms]]\nname = \"thermal-drift\"\nform = \"warm-up-in-time\"\n", "r.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("listed twice"), "{e}");
+        let e = RigFile::parse("[[user_effects]]\nname = \"x\"\nexpression = \"c\"\nparams = { c = { bounds = [1.0, -1.0] } }\n", "r.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("low < high"), "{e}");
     }
 }
