@@ -110,8 +110,9 @@ struct Lin {
     /// Backdrive errors and observations per block.
     hold_errors: Vec<f64>,
     hold_total: Vec<f64>,
-    /// Parameters counted by the BIC.
+    /// Parameters counted by the BIC, and the shapes among them.
     k: usize,
+    shapes: usize,
 }
 
 impl Lin {
@@ -135,6 +136,7 @@ impl Lin {
             hold_errors: vec![0.0; blocks],
             hold_total: vec![0.0; blocks],
             k: fit.k,
+            shapes: fit.shapes,
         };
         for k in 0..points.len() {
             let op = &points.ops[k];
@@ -222,7 +224,9 @@ impl Lin {
             } else {
                 0.0
             };
-        let bic = -2.0 * ll + self.k as f64 * n.ln();
+        let bic = -2.0 * ll
+            + (self.k - self.shapes) as f64 * n.ln()
+            + self.shapes as f64 * crate::terms::SHAPE_PENALTY;
         let held_out = (folds > 1).then(|| {
             let (mut sse, mut nlpd, mut rows) = (0.0, 0.0, 0.0);
             for test in per_fold.iter().filter(|s| s.n > 0.0) {

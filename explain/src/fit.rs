@@ -67,6 +67,14 @@ impl ModelSpec {
         p
     }
 
+    /// BIC penalty for `n` rows: ln n per parameter (noise level included), the terms'
+    /// shapes at [`crate::terms::SHAPE_PENALTY`].
+    pub fn penalty(&self, terms: &[Term], n: f64) -> f64 {
+        let shapes: usize = self.terms.iter().map(|&t| terms[t].shape_count()).sum();
+        (self.parameter_count(terms) - shapes) as f64 * n.ln()
+            + shapes as f64 * crate::terms::SHAPE_PENALTY
+    }
+
     /// Parameters counted by the information criterion (noise level included), the terms of
     /// `terms`.
     pub fn parameter_count(&self, terms: &[Term]) -> usize {
@@ -110,6 +118,8 @@ pub struct Fit {
     pub n: usize,
     /// Number of parameters.
     pub k: usize,
+    /// Shape parameters among them (penalised at [`crate::terms::SHAPE_PENALTY`]).
+    pub shapes: usize,
     /// Bayesian information criterion, -2 ln L + k ln n.
     pub bic: f64,
     /// Covariance of the free parameters then the terms' coordinates (row-major), NaN where
@@ -388,15 +398,8 @@ pub fn fit_from(
                 }
                 w
             };
-            result = levenberg_marquardt(
-                points,
-                subset,
-                &w,
-                &mut state,
-                &free,
-                &spec.terms,
-                &bounds,
-            );
+            result =
+                levenberg_marquardt(points, subset, &w, &mut state, &free, &spec.terms, &bounds);
         }
     }
     let (residuals, fric) = residuals_of(&state);
@@ -428,16 +431,10 @@ pub fn fit_from(
         let (hold, omega_b, errors) = fit_hold(&points.holds);
         model.effects.bush_hold_torque = hold;
         model.effects.bush_corner_speed = omega_b;
-        (
-            errors,
-            hold_loglik(hold_rows(&points.holds), errors as f64),
-        )
+        (errors, hold_loglik(hold_rows(&points.holds), errors as f64))
     } else {
         let errors = held_rows(&points.holds);
-        (
-            errors,
-            hold_loglik(hold_rows(&points.holds), errors as f64),
-        )
+        (errors, hold_loglik(hold_rows(&points.holds), errors as f64))
     };
 
     // Covariance of the unknowns off their bounds: s^2 (J^T W J)^-1.
@@ -467,6 +464,11 @@ pub fn fit_from(
     }
 
     let k = spec.parameter_count(&points.terms);
+    let shapes: usize = spec
+        .terms
+        .iter()
+        .map(|&t| points.terms[t].shape_count())
+        .sum();
     let loglik = loglik_current + loglik_hold;
     Fit {
         spec: spec.clone(),
@@ -481,7 +483,8 @@ pub fn fit_from(
         hold_errors,
         n: n.round() as usize,
         k,
-        bic: -2.0 * loglik + k as f64 * n.ln(),
+        shapes,
+        bic: -2.0 * loglik + spec.penalty(&points.terms, n),
         cov,
         converged: result.converged,
     }
@@ -946,7 +949,14 @@ pub fn scores(points: &TestPoints, fit: &Fit, extra: &[Column]) -> Scores {
     };
     let bounds = bounds_of(points, &fit.free, &fit.spec.terms);
     let own = bounds.len();
-    let (f, jac) = mean_jacobian(points, &points.all, &state, &fit.free, &fit.spec.terms, &bounds);
+    let (f, jac) = mean_jacobian(
+        points,
+        &points.all,
+        &state,
+        &fit.free,
+        &fit.spec.terms,
+        &bounds,
+    );
     let mut grad = [0.0; PARAM_COUNT];
     let ev = fit.model.evaluator();
     let term_cols: Vec<Option<Vec<f64>>> = extra
@@ -1023,7 +1033,14 @@ pub fn jacobian(points: &TestPoints, fit: &Fit) -> (Vec<f64>, Vec<f64>, usize) {
         term_x: fit.term_x.clone(),
     };
     let bounds = bounds_of(points, &fit.free, &fit.spec.terms);
-    let (f, jac) = mean_jacobian(points, &points.all, &state, &fit.free, &fit.spec.terms, &bounds);
+    let (f, jac) = mean_jacobian(
+        points,
+        &points.all,
+        &state,
+        &fit.free,
+        &fit.spec.terms,
+        &bounds,
+    );
     (f, jac, bounds.len())
 }
 

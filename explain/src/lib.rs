@@ -103,8 +103,8 @@ pub struct EffectReport {
     /// Share of the block-bootstrap replicates of the whole selection that select it (null
     /// without a bootstrap).
     pub inclusion_probability: Option<f64>,
-    /// BIC weight of the model with it among the models of its step (the model without it
-    /// and every candidate).
+    /// BIC weight of the models with it (in any of its laws) among the models of its step
+    /// (the model without it and every candidate).
     pub bic_weight: f64,
 }
 
@@ -351,19 +351,26 @@ pub fn term_registry(rig: &RigFile) -> Result<Vec<Term>, ExplainError> {
                 log: p.log,
             })
             .collect();
-        out.push(Term::user(&u.name, &u.expression, params).map(|t| Term {
-            note: format!("user effect {} = {}", u.name, u.expression),
-            ..t
-        }).map_err(|why| ExplainError::RigFile {
-            file: "(--model)".into(),
-            why,
-        })?);
+        out.push(
+            Term::user(&u.name, &u.expression, params)
+                .map(|t| Term {
+                    note: format!("user effect {} = {}", u.name, u.expression),
+                    ..t
+                })
+                .map_err(|why| ExplainError::RigFile {
+                    file: "(--model)".into(),
+                    why,
+                })?,
+        );
     }
     Ok(out)
 }
 
 /// The rig file's `[[model.terms]]` as registry indices and fit coordinates.
-fn known_terms(rig: &RigFile, registry: &[Term]) -> Result<(Vec<usize>, Vec<Vec<f64>>), ExplainError> {
+fn known_terms(
+    rig: &RigFile,
+    registry: &[Term],
+) -> Result<(Vec<usize>, Vec<Vec<f64>>), ExplainError> {
     let mut idx = Vec::new();
     let mut coords = Vec::new();
     for entry in rig.term_entries() {
@@ -376,7 +383,9 @@ fn known_terms(rig: &RigFile, registry: &[Term]) -> Result<(Vec<usize>, Vec<Vec<
                 let f = Form::from_name(form).ok_or_else(|| {
                     bad(format!(
                         "unknown form '{form}' (known: {})",
-                        Form::ALL.map(|f| format!("{} of {}", f.name(), f.effect().name())).join(", ")
+                        Form::ALL
+                            .map(|f| format!("{} of {}", f.name(), f.effect().name()))
+                            .join(", ")
                     ))
                 })?;
                 if f.effect().name() != entry.name {
@@ -396,12 +405,20 @@ fn known_terms(rig: &RigFile, registry: &[Term]) -> Result<(Vec<usize>, Vec<Vec<
         let term = &registry[t];
         let mut x = term.start_point();
         for (k, &v) in &entry.params {
-            let c = term.params.iter().position(|p| &p.key == k).ok_or_else(|| {
-                bad(format!(
-                    "no parameter {k} (it takes {})",
-                    term.params.iter().map(|p| p.key.as_str()).collect::<Vec<_>>().join(", ")
-                ))
-            })?;
+            let c = term
+                .params
+                .iter()
+                .position(|p| &p.key == k)
+                .ok_or_else(|| {
+                    bad(format!(
+                        "no parameter {k} (it takes {})",
+                        term.params
+                            .iter()
+                            .map(|p| p.key.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
             let p = &term.params[c];
             if !(v.is_finite() && v >= p.bounds.0 && v <= p.bounds.1) {
                 return Err(bad(format!(
@@ -740,7 +757,14 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             holdout_rmse_a: best.held_out.map(|h| h.rmse),
             description: cand_description(&points, best.cand, source, thermal),
             inclusion_probability: inclusion_of(best.cand.name(&points)),
-            bic_weight: weights_by_step[k][0].unwrap_or(0.0),
+            // The effect's weight: all its laws'.
+            bic_weight: step
+                .candidates
+                .iter()
+                .zip(&weights_by_step[k])
+                .filter(|(c, _)| c.cand.name(&points) == best.cand.name(&points))
+                .filter_map(|(_, w)| *w)
+                .sum(),
         });
     }
     let named = selection.added();
@@ -828,13 +852,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
                     .iter()
                     .zip(w)
                     .map(|(c, &w)| {
-                        candidate_report(
-                            &points,
-                            c,
-                            thermal,
-                            w,
-                            inclusion_of(c.cand.name(&points)),
-                        )
+                        candidate_report(&points, c, thermal, w, inclusion_of(c.cand.name(&points)))
                     })
                     .collect(),
             ),

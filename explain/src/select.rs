@@ -121,6 +121,14 @@ impl Cand {
         }
     }
 
+    /// Its BIC penalty for `n` rows.
+    pub fn penalty(&self, points: &TestPoints, n: f64) -> f64 {
+        match *self {
+            Cand::Effect(e) => library::parameter_count(e) as f64 * n.ln(),
+            Cand::Term(t) => points.terms[t].penalty(n),
+        }
+    }
+
     /// Whether `spec` carries it.
     pub fn in_spec(&self, spec: &ModelSpec) -> bool {
         match *self {
@@ -449,9 +457,7 @@ fn score_tests(points: &TestPoints, current: &Fit, mean: &[Cand]) -> ScoreTests 
     let mut proj = vec![0.0; k * p];
     for a in 0..k {
         for j in 0..p {
-            proj[a * p + j] = (0..p)
-                .map(|i| gram[(p + a) * m + i] * inv[i * p + j])
-                .sum();
+            proj[a * p + j] = (0..p).map(|i| gram[(p + a) * m + i] * inv[i * p + j]).sum();
         }
     }
     let mut schur = vec![0.0; k * k];
@@ -460,7 +466,9 @@ fn score_tests(points: &TestPoints, current: &Fit, mean: &[Cand]) -> ScoreTests 
         projected[a] = sc.score[p + a] - (0..p).map(|j| proj[a * p + j] * sc.score[j]).sum::<f64>();
         for b in 0..k {
             schur[a * k + b] = gram[(p + a) * m + p + b]
-                - (0..p).map(|j| proj[a * p + j] * gram[j * m + p + b]).sum::<f64>();
+                - (0..p)
+                    .map(|j| proj[a * p + j] * gram[j * m + p + b])
+                    .sum::<f64>();
         }
     }
     let identifiable =
@@ -547,10 +555,7 @@ fn null_best_improvements(
     let ln_n = (n as f64).ln();
     let q = tests.q;
     let l = &tests.chol;
-    let penalty: Vec<f64> = mean
-        .iter()
-        .map(|c| c.parameter_count(points) as f64 * ln_n)
-        .collect();
+    let penalty: Vec<f64> = mean.iter().map(|c| c.penalty(points, n as f64)).collect();
     let mut rng = NoiseSource::new(NULL_SEED);
     let mut z = vec![0.0; q];
     let mut u = vec![0.0; q];
@@ -672,10 +677,9 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
         .collect();
     let ripple = applicable.contains(&ripple_cand);
     let tests = score_tests(points, current, &mean);
-    let ln_n = (current.n as f64).ln();
     // Score-test estimate of each candidate's BIC improvement, for screening.
     let estimate = |c: Cand| -> f64 {
-        let k = c.parameter_count(points) as f64 * ln_n;
+        let k = c.penalty(points, current.n as f64);
         if c == ripple_cand {
             return tests.ripple_lr - k;
         }
@@ -801,6 +805,7 @@ fn improvement_without_top_point(points: &TestPoints, current: &Fit, with: &Fit)
     let b = PointParts::of(points, with);
     let (ta, tb) = (a.totals(), b.totals());
     let dk = (with.k as f64 - current.k as f64).max(0.0);
+    let dshapes = (with.shapes as f64 - current.shapes as f64).max(0.0);
     let mut worst = (f64::INFINITY, 0usize);
     for k in 0..points.len() {
         let n = ta.0 - a.rows[k];
@@ -811,7 +816,8 @@ fn improvement_without_top_point(points: &TestPoints, current: &Fit, with: &Fit)
             * (b.loglik_without(tb, k) + with.loglik_hold
                 - a.loglik_without(ta, k)
                 - current.loglik_hold)
-            - dk * n.ln();
+            - (dk - dshapes) * n.ln()
+            - dshapes * crate::terms::SHAPE_PENALTY;
         if gain < worst.0 {
             worst = (gain, k);
         }
@@ -887,16 +893,15 @@ pub fn select_from(
         let best = &candidates[0];
         let best_fit = best.fit.as_ref().expect("fitted");
         let hold_gain = best_fit.hold_errors + 2 <= current.hold_errors;
-        let (ok_held_out, held_note) =
-            confirmed(
-                match best.cand {
-                    Cand::Effect(e) => Some(e),
-                    Cand::Term(_) => None,
-                },
-                current_held_out,
-                best.held_out,
-                hold_gain,
-            );
+        let (ok_held_out, held_note) = confirmed(
+            match best.cand {
+                Cand::Effect(e) => Some(e),
+                Cand::Term(_) => None,
+            },
+            current_held_out,
+            best.held_out,
+            hold_gain,
+        );
         let (accepted, reason) = if best_improvement <= 0.0 {
             (
                 false,
@@ -982,12 +987,7 @@ pub fn select_from(
                 current = f;
                 current_held_out = match h {
                     Some(h) => Some(h),
-                    None => fit::held_out(
-                        points,
-                        &current.spec,
-                        &current.model,
-                        &current.term_x,
-                    ),
+                    None => fit::held_out(points, &current.spec, &current.model, &current.term_x),
                 };
             }
             _ => break,

@@ -28,7 +28,13 @@ use model::effects::{CurrentModel, Effect, OperatingPoint};
 
 use crate::library::{DataTraits, ThermalDriver};
 
-/// Variables a user effect may use, in the order of [`Inputs::vars`].
+/// BIC penalty of a shape parameter: 2 ln 3, the price of choosing among the three shapes
+/// its fit starts from and its score test looks along (a shape is a nuisance the null
+/// simulation of the guard accounts for; counting it as a full parameter, ln n, would let a
+/// simpler impostor beat the true law whenever the data cannot pin the shape).
+pub const SHAPE_PENALTY: f64 = 2.197_224_577_336_219_4;
+
+/// Variables a user effect may use, in the order of the data vector of [`Term::add`].
 pub const USER_VARIABLES: [&str; 8] = ["w", "tau", "t", "temp", "i", "i_f", "i_m", "f_ax"];
 
 /// A family member of a library law.
@@ -284,6 +290,18 @@ impl Term {
     /// Parameters the term adds to the likelihood.
     pub fn parameter_count(&self) -> usize {
         self.params.len()
+    }
+
+    /// Its shape parameters (fitted in ln): a shape costs [`SHAPE_PENALTY`] in the BIC
+    /// rather than ln n.
+    pub fn shape_count(&self) -> usize {
+        self.params.iter().filter(|p| p.log).count()
+    }
+
+    /// Its BIC penalty for `n` rows: ln n per linear parameter, [`SHAPE_PENALTY`] per shape.
+    pub fn penalty(&self, n: f64) -> f64 {
+        let shapes = self.shape_count();
+        (self.params.len() - shapes) as f64 * n.ln() + shapes as f64 * SHAPE_PENALTY
     }
 
     /// The fit coordinates at the term's null (start values for shape parameters).
