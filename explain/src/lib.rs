@@ -366,6 +366,31 @@ pub fn term_registry(rig: &RigFile) -> Result<Vec<Term>, ExplainError> {
     Ok(out)
 }
 
+/// Every user effect must vanish at its parameters' null values on this data, so the model
+/// without it is nested in the model with it.
+fn check_user_terms(points: &TestPoints, start: &model::effects::CurrentModel) -> Result<(), ExplainError> {
+    for term in points.terms.iter().filter(|t| t.form().is_none()) {
+        let mut out = vec![0.0; points.len()];
+        term.add(start, &points.inputs(), &term.null_point(), &mut out);
+        let worst = out.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if !(worst <= 1e-9) {
+            return Err(ExplainError::RigFile {
+                file: "(--model)".into(),
+                why: format!(
+                    "user effect {} gives {worst:.3e} A at its null parameters ({}): it must vanish there (0 A), so that the model without it is nested in the model with it; set each parameter's null to the value without the effect",
+                    term.name,
+                    term.params
+                        .iter()
+                        .map(|p| format!("{} = {}", p.key, p.null))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// The rig file's `[[model.terms]]` as registry indices and fit coordinates.
 fn known_terms(
     rig: &RigFile,
@@ -691,6 +716,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     let (mut points, outliers, data_warnings) =
         screened_points(data, rig, &base_spec, &start, options)?;
     points.terms = registry;
+    check_user_terms(&points, &start)?;
     warnings.extend(data_warnings);
     let selection = select::select_from(&points, &spec, &start, &known_x, options);
     let boot = bootstrap::bootstrap(&points, &selection, options);
