@@ -368,7 +368,10 @@ pub fn term_registry(rig: &RigFile) -> Result<Vec<Term>, ExplainError> {
 
 /// Every user effect must vanish at its parameters' null values on this data, so the model
 /// without it is nested in the model with it.
-fn check_user_terms(points: &TestPoints, start: &model::effects::CurrentModel) -> Result<(), ExplainError> {
+fn check_user_terms(
+    points: &TestPoints,
+    start: &model::effects::CurrentModel,
+) -> Result<(), ExplainError> {
     for term in points.terms.iter().filter(|t| t.form().is_none()) {
         let mut out = vec![0.0; points.len()];
         term.add(start, &points.inputs(), &term.null_point(), &mut out);

@@ -225,7 +225,9 @@ impl Term {
     /// (what to fix) when the expression does not parse, uses an unknown name, or leaves a
     /// parameter out.
     pub fn user(name: &str, expression: &str, params: Vec<TermParam>) -> Result<Self, String> {
-        let expr = exmex::parse::<f64>(expression).map_err(|e| {
+        let rewritten = leading_minus(expression)
+            .map_err(|why| format!("user effect {name}: expression '{expression}': {why}"))?;
+        let expr = exmex::parse::<f64>(&rewritten).map_err(|e| {
             format!("user effect {name}: expression '{expression}' does not parse: {e}")
         })?;
         let mut slots = Vec::new();
@@ -435,6 +437,37 @@ impl Term {
     }
 }
 
+/// `expression` with each leading (unary) minus written as `(-1)*`, so that it binds as in
+/// mathematics (`-x^2` is `-(x^2)`; exmex itself binds a unary operator tighter than `^`).
+/// A minus right after `/` or `^` is refused (what to write instead), since no such
+/// rewriting keeps its meaning.
+fn leading_minus(expression: &str) -> Result<String, String> {
+    let mut out = String::with_capacity(expression.len() + 8);
+    let mut previous: Option<char> = None;
+    for c in expression.chars() {
+        if c == '-' {
+            match previous {
+                None | Some('(' | ',' | '+' | '-' | '*') => {
+                    out.push_str("(-1)*");
+                    previous = Some('*');
+                    continue;
+                }
+                Some(p @ ('/' | '^')) => {
+                    return Err(format!(
+                        "a minus right after '{p}' is ambiguous: put the negative in parentheses (x{p}(-2), not x{p}-2)"
+                    ));
+                }
+                _ => {}
+            }
+        }
+        out.push(c);
+        if !c.is_whitespace() {
+            previous = Some(c);
+        }
+    }
+    Ok(out)
+}
+
 /// The inertia term's current at `op` (the paper's M_hat w^2 e^2 / pi over the torque
 /// constant), A.
 pub fn inertia_current(model: &CurrentModel, op: &OperatingPoint) -> f64 {
@@ -563,5 +596,17 @@ mod tests {
         let e = Term::user("brush", "c * w", vec![p("c"), p("d")]).unwrap_err();
         assert!(e.contains("parameter d is not used"), "{e}");
         assert!(Term::user("brush", "c * (w", vec![p("c")]).is_err());
+        // A leading minus binds as in mathematics: -x^2 is -(x^2).
+        let t = Term::user("bump", "c * exp(-(w / 50)^2)", vec![p("c")]).unwrap();
+        let mut out = [0.0];
+        t.add(&model(), &inputs, &[1.0], &mut out);
+        assert!((out[0] - (-1.0f64).exp()).abs() < 1e-12, "{}", out[0]);
+        assert_eq!(leading_minus("-x^2").unwrap(), "(-1)*x^2");
+        assert_eq!(leading_minus("a - -b * 1e-3").unwrap(), "a - (-1)*b * 1e-3");
+        let e = Term::user("bump", "c * w^-2", vec![p("c")]).unwrap_err();
+        assert!(
+            e.contains("bump") && e.contains("expression") && e.contains("x^(-2)"),
+            "{e}"
+        );
     }
 }

@@ -52,7 +52,12 @@ fn a_user_effect_is_named_and_written_into_the_model() {
         assert_eq!(e.verdict, Verdict::Explained, "{}", e.finding);
         assert_eq!(e.effects[0].name, "frame-resonance", "{}", e.finding);
         let fitted = e.effects[0].params["c"];
-        assert!((fitted - c).abs() < 0.3 * c.abs(), "c {fitted} vs {c}: {:?} {}", e.effects[0].params, e.finding);
+        assert!(
+            (fitted - c).abs() < 0.3 * c.abs(),
+            "c {fitted} vs {c}: {:?} {}",
+            e.effects[0].params,
+            e.finding
+        );
         let w_r = e.effects[0].params["w_r"];
         assert!((w_r - 62.8).abs() < 5.0, "w_r {w_r}");
         assert!(e.holdout_rmse_after_a.unwrap() < e.holdout_rmse_before_a.unwrap());
@@ -60,7 +65,10 @@ fn a_user_effect_is_named_and_written_into_the_model() {
         // The written model carries the definition and the fitted values, and explains the
         // same data.
         let text = out.augmented_rig().to_toml().unwrap();
-        assert!(text.contains("[[model.terms]]") && text.contains("frame-resonance"), "{text}");
+        assert!(
+            text.contains("[[model.terms]]") && text.contains("frame-resonance"),
+            "{text}"
+        );
         let back = RigFile::parse(&text, "augmented.toml").unwrap();
         let again = explain::explain(&d, &back, &Options::default())
             .unwrap()
@@ -79,7 +87,12 @@ fn a_user_effect_makes_no_finding_in_effect_free_data() {
         let e = explain::explain(&d, &rig, &Options::default())
             .unwrap()
             .explanation;
-        assert_eq!(e.verdict, Verdict::NoMissingEffect, "seed {seed}: {}", e.finding);
+        assert_eq!(
+            e.verdict,
+            Verdict::NoMissingEffect,
+            "seed {seed}: {}",
+            e.finding
+        );
         assert!(e.candidates.iter().any(|c| c.name == "frame-resonance"));
     }
 }
@@ -92,7 +105,10 @@ fn bad_user_effects_are_refused_naming_the_fix() {
     let e = explain::explain(&d, &rig, &Options::default())
         .unwrap_err()
         .to_string();
-    assert!(e.contains("'speed'") && e.contains("frame-resonance"), "{e}");
+    assert!(
+        e.contains("'speed'") && e.contains("frame-resonance"),
+        "{e}"
+    );
     // An effect that does not vanish at its null is refused: the model without it must be
     // nested in the model with it.
     let offset = RESONANCE.replace("c * exp", "0.1 + c * exp");

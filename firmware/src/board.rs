@@ -9,24 +9,37 @@
 //!
 //! | Signal                  | Pin  | Header       | Peripheral (AF)        | Notes                                            |
 //! |-------------------------|------|--------------|------------------------|--------------------------------------------------|
-//! | Cam motor PWM           | PA8  | D7           | TIM1_CH1 (AF6), 20 kHz | H-bridge PWM input; 10 kΩ pull-down on the driver |
+//! | Cam motor PWM           | PA8  | D7           | TIM1_CH1 (AF6), 20 kHz centre-aligned | H-bridge PWM input; 10 kΩ pull-down on the driver; idle (break, MOE off) = low |
 //! | Cam motor direction     | PB5  | D4           | GPIO out               | low = [`Direction::Forward`]                     |
-//! | Cam motor enable        | PA9  | D8           | GPIO out               | low = off; 10 kΩ pull-down on the driver (¹)     |
-//! | Encoder A (AMT102-V)    | PB6  | D10          | TIM4_CH1 (AF2)         | quadrature, x4 decoding (²)                      |
+//! | Cam motor enable        | PA9  | D8           | GPIO out               | low = off; 10 kΩ pull-down on the driver (¹); the safe state's BSRR write |
+//! | Encoder A (AMT102-V)    | PB6  | D10          | TIM4_CH1 (AF2)         | quadrature, x4 decoding, digital filter (²)      |
 //! | Encoder B (AMT102-V)    | PB7  | CN7-21       | TIM4_CH2 (AF2)         | (²)                                              |
-//! | Motor current (ACS714)  | PA0  | A0           | ADC1_IN1               | through a divider to ≤ 3.3 V (³)                 |
+//! | Motor current (ACS714)  | PA0  | A0           | ADC1_IN1 and COMP3_INP | through a divider to ≤ 3.3 V (³); the comparator trips TIM1's break (⁴) |
+//! | Bridge supply voltage   | PA1  | A1           | ADC1_IN2               | 100 kΩ over 10 kΩ, 100 nF at the pin: 12–24 V reads 1.09–2.18 V, 36 V full scale (⁵) |
+//! | Motor NTC (optional)    | PB0  | A3           | ADC1_IN15              | 10 kΩ NTC to GND, 10 kΩ pull-up to 3V3 (VDDA), 100 nF; open = not fitted (⁶) |
 //! | Host link TX            | PA2  | ST-LINK VCP  | USART2_TX (AF7)        | 921 600 baud 8N1                                 |
 //! | Host link RX            | PA3  | ST-LINK VCP  | USART2_RX (AF7)        |                                                  |
 //! | Release button B1       | PC13 | B1           | EXTI13                 | active high (held = release requested)           |
 //! | Heartbeat LED LD2       | PA5  | LD2 / D13    | GPIO out               | active high                                      |
 //! | SWD                     | PA13, PA14 | ST-LINK | SWDIO, SWCLK          | keep free: flashing and defmt-rtt                |
 //!
-//! Internal resources: TIM6 paces the ADC at 10 kHz (TRGO = update, ADC1 EXTSEL 13);
-//! TIM15 is embassy's time driver (`time-driver-any` picks it on the G474);
-//! DMA1_CH1 = ADC1, DMA1_CH2 = USART2 TX, DMA1_CH3 = USART2 RX (through DMAMUX);
-//! IWDG ≈ 250 ms. Flash 0x0807_C000..0x0808_0000 (bank 2) holds the calibration store (`memory.x`).
-//! UART4's interrupt vector (the UART itself is unused) runs the control task's
-//! high-priority executor.
+//! # Internal resources
+//!
+//! | Resource            | Use                                                                 |
+//! |---------------------|---------------------------------------------------------------------|
+//! | TIM1                | PWM, centre-aligned 20 kHz; master: TRGO = update, repetition counter 3, so ADC1 is triggered every second PWM period (10 kHz) at the same counter extreme (⁷); break input = COMP3, filter 0.75 µs, locked (LOCK level 2) |
+//! | COMP3, DAC3_CH1     | hardware overcurrent trip ([`crate::trip`]): PA0 against an internal DAC threshold, no pin |
+//! | ADC1 + DMA1_CH1     | scan of PA0, PA1, PB0, VREFINT per TIM1 trigger ([`crate::analog`]); VDDA from VREFINT and its factory calibration (`VREFINTCAL`, 0x1FFF_75AA) |
+//! | TIM4                | encoder, input filter fDTS/16 × 8 (0.75 µs)                          |
+//! | TIM2                | embassy's time driver (`time-driver-tim2`): TIM15, `time-driver-any`'s pick, shares its vector with TIM1_BRK |
+//! | TIM1_BRK_TIM15 IRQ  | break: drops the bridge enable ~1 µs after the hardware trip (P0)    |
+//! | WWDG + its IRQ      | control-loop deadline, 2 ms ([`crate::safety::StallWatchdog`], P0)  |
+//! | IWDG                | ≈ 250 ms, fed only when every task checked in: the last layer        |
+//! | DMA1_CH2 / CH3      | USART2 TX / RX (through DMAMUX)                                      |
+//! | UART4 IRQ           | the control task's high-priority executor (the UART itself is unused) |
+//! | NMI                 | flash double-ECC in the STORAGE region counts as a corrupt slot; anything else resets in the safe state |
+//! | DWT CYCCNT          | cycles per control step (mean, max per second)                      |
+//! | Flash 0x0807_C000..0x0808_0000 | bank 2: the calibration store (`memory.x`)               |
 //!
 //! (¹) From reset until [`Board::new`] runs every GPIO is a high-impedance analog input, so only
 //! the external pull-downs keep the bridge off while the MCU resets or is being flashed.
@@ -34,26 +47,61 @@
 //! (²) The AMT102-V runs from 5 V, so its A/B outputs need 5 V-tolerant (FT) inputs or a level
 //! shifter. TIM4 on PB6/PB7 was preferred to TIM3 on PA6/PA7 because PA6 doubles as DAC2_OUT1,
 //! which is not 5 V tolerant; confirm FT for PB6/PB7 in the DS12288 pin table before wiring.
+//! The filter: at the cam's top speed (20 Hz, one turn per vibration cycle) the 2048-PPR
+//! encoder puts out 41 kHz per channel, so each level lasts ≥ 12.2 µs and the x4 edges come
+//! 6.1 µs apart. [`ENCODER_FILTER`] passes a level only after 8 equal samples at
+//! 170 MHz / 16, 0.75 µs: glitches from the bridge's switching edges on the encoder cable
+//! (tens to hundreds of ns) are dropped, real levels have 16 times that, and both channels
+//! are delayed alike (±94 ns), far inside the 6.1 µs quadrature spacing.
 //! (³) The ACS714 output swings 0.5–4.5 V on a 5 V supply; analog inputs are never 5 V tolerant,
 //! e.g. 10 kΩ over 20 kΩ scales it to 0.33–3.0 V. The core owns the counts-to-amperes calibration.
+//! The sensor is in series with the motor: forward drive (direction low) must read above zero.
+//! (⁴) See [`crate::trip`]: threshold [`HW_TRIP_MARGIN`] × the core's current limit, re-centred
+//! on the core's measured zero, on the drive direction's side of zero.
+//! (⁵) `model::hardware::bus_divider`. 9.1 kΩ source with 100 nF: the sampling capacitor is
+//! charged from the 100 nF, the 0.9 ms time constant averages the bridge's ripple.
+//! (⁶) `model::hardware::ntc`; ratiometric to VDDA, so VDDA drops out. Readings within 2 % of
+//! either rail mean not fitted (open) or shorted, and no temperature is reported. PB0 (an
+//! ADC1 input) rather than PA4 (ADC2 only): one scan of one ADC carries every analog input,
+//! in step with the PWM. Header names of PA1 (A1) and PB0 (A3) per UM2505's Arduino table:
+//! confirm against the board's solder-bridge settings before wiring.
+//! (⁷) The sampling instant, argued: in centre-aligned PWM the on-time is centred on the
+//! counter's zero and the off-time on its top. The motor current (L/R = 0.45 ms, ten PWM
+//! periods) is a triangle of straight segments, and the value of a straight segment at its
+//! centre is its mean, so the current at the middle of the on-time and at the middle of the
+//! off-time both equal the period's mean, whatever the duty, ripple or supply (continuous
+//! conduction: always with [`Decay::Brake`]). A timer unrelated to the PWM (the old TIM6)
+//! samples the ripple at a phase fixed at boot: a bias of up to half the ripple. The
+//! repetition counter is written before the counter starts, which puts every update on the
+//! overflow (RM0440: odd RCR in centre-aligned mode), i.e. the centre of the off-time: for
+//! the rig's duties (3.6–8.8 V from 12–24 V, d < 0.75) that is the instant furthest from a
+//! switching edge at low duty, where the edges' spikes would land in the short on-time. The
+//! board checks the phase at boot and logs it; the other extreme is as unbiased. The
+//! ACS714's own lag (~2 µs) is roughly undone by the 2.2 µs sampling window that follows the
+//! trigger; what is left (< 0.1 µs of slope) is for a scope on the real board to confirm.
 
 use embassy_stm32::adc::{Adc, AdcChannel as _, AdcConfig, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::{Blocking, FLASH_BASE, Flash};
 use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::mode::Async;
-use embassy_stm32::pac::timer::vals::Ossi;
+use embassy_stm32::pac::timer::vals::{Bkinp, Bkp, Dir, FilterValue, Lock, Mms, Ossi};
 use embassy_stm32::peripherals::{
-    ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, EXTI13, IWDG, PA0, PA2, PA3, PA8, PA9, PB5, PB6, PB7, PC13,
-    TIM1, TIM4, TIM6, USART2,
+    ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, EXTI13, IWDG, PA0, PA1, PA2, PA3, PA8, PA9, PB0, PB5, PB6,
+    PB7, PC13, TIM1, TIM4, USART2,
 };
 use embassy_stm32::time::{Hertz, khz};
-use embassy_stm32::timer::low_level::{CountingMode, MasterMode, RoundTo, Timer as HwTimer};
+use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::qei::{self, Qei};
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Config, Peri, Peripherals, bind_interrupts, dma, interrupt, pac, triggers};
+use firmware_core::CoreConfig;
+
+use crate::analog;
+use crate::safety::{EccChecked, StallWatchdog};
+use crate::trip::OvercurrentTrip;
 
 bind_interrupts!(struct Irqs {
     USART2 => usart::InterruptHandler<USART2>;
@@ -65,23 +113,89 @@ bind_interrupts!(struct Irqs {
 
 /// PWM carrier frequency of the cam motor's H-bridge: above hearing, within the driver's limit.
 pub const MOTOR_PWM_FREQUENCY: Hertz = khz(20);
-/// Rate at which TIM6 triggers the motor-current conversions.
-pub const CURRENT_SAMPLE_RATE: Hertz = khz(10);
-/// Samples per [`CurrentSense::read_block`]: 1 ms of current at [`CURRENT_SAMPLE_RATE`].
-pub const CURRENT_BLOCK_LEN: usize = 10;
-/// ADC DMA ring: two blocks, so one is read while the DMA fills the other.
-const CURRENT_DMA_LEN: usize = 2 * CURRENT_BLOCK_LEN;
+/// Rate at which TIM1 triggers the motor-current conversions, Hz.
+pub const CURRENT_SAMPLE_RATE_HZ: u32 = 10_000;
+/// TIM1 repetition counter: centre-aligned, the counter over- or underflows twice per PWM
+/// period, and an update (ADC trigger) comes every `RCR + 1` of them: 4, every second period.
+const PWM_REPETITION: u16 = (2 * 20_000 / CURRENT_SAMPLE_RATE_HZ - 1) as u16;
+/// ADC DMA ring: two control steps, so one is read while the DMA fills the other.
+const ADC_DMA_LEN: usize = 2 * analog::BLOCK_LEN;
 /// Baud rate of the host link over the ST-LINK virtual COM port.
 pub const HOST_BAUD_RATE: u32 = 921_600;
 /// UART receive DMA ring: ~5.5 ms of back-to-back bytes at [`HOST_BAUD_RATE`].
 const HOST_RX_DMA_LEN: usize = 512;
 /// Independent-watchdog timeout. LSI is 32 kHz ± ~7 %, so the real timeout is ~235–270 ms.
 pub const WATCHDOG_TIMEOUT_US: u32 = 250_000;
+/// The hardware trip sits this far above the core's software current limit: the software
+/// check (1 ms means, a 10 ms hold) handles slow overloads, the comparator fast faults.
+/// 1.25 × 4.8 A = 6 A, inside the ACS714's 0.5–4.5 V output swing (±10.8 A).
+pub const HW_TRIP_MARGIN: f32 = 1.25;
+/// TIM4's input filter on the encoder channels: 8 samples at fDTS/16 (0.75 µs), see (²).
+pub const ENCODER_FILTER: FilterValue = FilterValue::FDTS_DIV16_N8;
+/// TIM1's break filter on COMP3's output: 8 samples at fDTS/16 (0.75 µs).
+const BREAK_FILTER: FilterValue = FilterValue::FDTS_DIV16_N8;
+
+/// What the bridge does with the motor during the PWM's off-time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum Decay {
+    /// Both low-side switches on (slow decay, synchronous rectification): the current keeps
+    /// flowing and may reverse, so the bridge takes the carrier's power back when the cam
+    /// overruns the drive (regenerating; it pumps a supply that cannot sink).
+    Brake,
+    /// All switches off (fast decay through the diodes into the supply): the current cannot
+    /// reverse, the bridge cannot take power back, like the paper's bench supply.
+    Coast,
+}
+
+impl Decay {
+    /// Whether the drive takes the carrier's power back (the estimator's
+    /// `carrier_power_returned`).
+    pub const fn returns_power(self) -> bool {
+        matches!(self, Decay::Brake)
+    }
+}
+
+/// The H-bridge board wired to PA8 / PB5 / PA9.
+#[derive(Clone, Copy, Debug)]
+pub struct BridgeBoard {
+    /// Product name, for the log.
+    pub name: &'static str,
+    /// Off-time behaviour with sign-magnitude PWM (PWM on PA8, direction on PB5, enable on PA9).
+    pub decay: Decay,
+}
+
+/// The recommended bridge: Pololu G2 High-Power Motor Driver 24v13 (#2992): 6.5–40 V, 13 A
+/// continuous, PWM to 100 kHz, 1.8–5 V logic. Sign-magnitude: PWM high drives in DIR's
+/// direction, PWM low brakes low (both outputs to ground), SLP low puts the outputs in high
+/// impedance. So [`Decay::Brake`] while enabled, coast when the enable (SLP) is low, which is
+/// the safe state. Check the board's SLP default before wiring: where it is pulled up on the
+/// board, the 10 kΩ pull-down must be sized to win (¹). A bridge that coasts in the off-time
+/// (e.g. PWM on its enable) is [`Decay::Coast`]: build with `--features bridge-coast-decay`.
+pub const BRIDGE: BridgeBoard = if cfg!(feature = "bridge-coast-decay") {
+    BridgeBoard {
+        name: "a bridge that coasts in the off-time",
+        decay: Decay::Coast,
+    }
+} else {
+    BridgeBoard {
+        name: "Pololu G2 24v13",
+        decay: Decay::Brake,
+    }
+};
+
+/// The core's configuration on this board: the defaults (read from `model::hardware`) with
+/// the bridge's decay mode.
+pub fn core_config() -> CoreConfig {
+    let mut config = CoreConfig::default();
+    config.estimator.carrier_power_returned = BRIDGE.decay.returns_power();
+    config
+}
 
 /// Clock tree: 170 MHz SYSCLK from HSI16 (16 MHz / 4 × 85 / 2), range-1 boost, ADC12 on SYSCLK.
 ///
 /// HSI16 (±1 %) is well inside the UART's clock tolerance and needs nothing on the board; the
 /// Nucleo's 24 MHz HSE crystal would be `source: HSE, prediv: DIV6` with the same PLL.
+/// APB1 and APB2 run undivided (170 MHz): the WWDG's timing assumes it.
 pub fn config() -> Config {
     use embassy_stm32::rcc::{Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk, mux};
 
@@ -108,7 +222,10 @@ pub fn config() -> Config {
 pub struct ResetCause {
     /// The independent watchdog expired: a task stopped checking in.
     pub watchdog: bool,
-    /// Software reset (e.g. a probe's `reset` or `SYSRESETREQ`).
+    /// The window watchdog expired: the control loop stalled with interrupts masked, or the
+    /// core locked up (the early-wakeup handler resets by software first otherwise).
+    pub window_watchdog: bool,
+    /// Software reset (e.g. a probe's `reset`, `SYSRESETREQ`, or a fault handler).
     pub software: bool,
     /// NRST pin went low (B2, the probe; internal resets also pull NRST, so this is set too).
     pub pin: bool,
@@ -123,6 +240,7 @@ impl ResetCause {
         pac::RCC.csr().modify(|w| w.set_rmvf(true));
         Self {
             watchdog: csr.iwdgrstf(),
+            window_watchdog: csr.wwdgrstf(),
             software: csr.sftrstf(),
             pin: csr.pinrstf(),
             brown_out: csr.borrstf(),
@@ -130,26 +248,35 @@ impl ResetCause {
     }
 }
 
-/// Sense of rotation of the cam motor, as driven on the direction pin.
+pub use crate::trip::Direction;
+
+/// Where in the PWM period TIM1's update (the ADC trigger) falls.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
-pub enum Direction {
-    /// Direction pin low.
-    Forward,
-    /// Direction pin high.
-    Reverse,
+pub enum SamplingPoint {
+    /// Counter at its top: the centre of the off-time (the intended point).
+    OffTimeCentre,
+    /// Counter at zero: the centre of the on-time (as unbiased; nearer the edges at low duty).
+    OnTimeCentre,
+    /// No update seen (TIM1 not counting): no samples will come either.
+    Unknown,
 }
 
-/// The cam motor's H-bridge: PWM magnitude, direction and enable.
+/// The cam motor's H-bridge: PWM magnitude, direction and enable, behind TIM1's break.
 ///
-/// Built in the safe state (enable low, 0 % duty) and returns to it on [`CamMotor::stop`].
+/// Built in the safe state (enable low, MOE off, 0 % duty) and returns to it on
+/// [`CamMotor::stop`]. After a hardware trip it refuses to drive until [`CamMotor::rearm`].
 pub struct CamMotor {
     pwm: SimplePwm<'static, TIM1>,
-    direction: Output<'static>,
+    direction_pin: Output<'static>,
     enable: Output<'static>,
+    direction: Direction,
+    tripped: bool,
+    sampling: SamplingPoint,
 }
 
 impl CamMotor {
-    /// Sets up TIM1 CH1 at [`MOTOR_PWM_FREQUENCY`] with the bridge disabled.
+    /// Sets up TIM1 CH1 at [`MOTOR_PWM_FREQUENCY`], centre-aligned, as the ADC's trigger
+    /// master, with COMP3 as its break input, everything off.
     pub fn new(
         tim: Peri<'static, TIM1>,
         pwm_pin: Peri<'static, PA8>,
@@ -158,7 +285,7 @@ impl CamMotor {
     ) -> Self {
         // Enable first, so the bridge is held off before the PWM pin becomes an output.
         let enable = Output::new(enable_pin, Level::Low, Speed::Low);
-        let direction = Output::new(direction_pin, Level::Low, Speed::Low);
+        let direction_pin = Output::new(direction_pin, Level::Low, Speed::Low);
         let pwm = SimplePwm::new(
             tim,
             Some(PwmPin::new(pwm_pin, OutputType::PushPull)),
@@ -166,25 +293,59 @@ impl CamMotor {
             None,
             None,
             MOTOR_PWM_FREQUENCY,
-            CountingMode::EdgeAlignedUp,
+            CountingMode::CenterAlignedUpInterrupts,
         );
-        // Whenever TIM1's outputs are switched off (MOE cleared, break), hold PWM at its idle
-        // level (low) instead of releasing the pin.
-        pac::TIM1.bdtr().modify(|w| w.set_ossi(Ossi::IDLE_LEVEL));
-        // A debugger halt stops TIM1, which then switches its outputs off as above. The IWDG is
+        let t = pac::TIM1;
+        // `SimplePwm::new` switched the main output on: off at once.
+        t.bdtr().modify(|w| w.set_moe(false));
+        // A debugger halt stops TIM1, which then switches its outputs off. The IWDG is
         // deliberately not frozen: a halt longer than ~250 ms resets the board.
         pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
+        // Break from COMP3 only (not the BKIN pins).
+        t.af1().modify(|w| {
+            w.set_bkine(false);
+            w.set_bkcmpe(2, true);
+            w.set_bkcmpp(2, Bkinp::NOT_INVERTED);
+        });
+        // Outputs off (MOE clear, by software or break) hold PWM at its idle level, low; no
+        // automatic re-enable; then lock all of it (and the channel polarity) until reset.
+        t.bdtr().modify(|w| {
+            w.set_ossi(Ossi::IDLE_LEVEL);
+            w.set_bkf(0, BREAK_FILTER);
+            w.set_bkp(0, Bkp::ACTIVE_HIGH);
+            w.set_bke(0, true);
+            w.set_aoe(false);
+            w.set_moe(false);
+            w.set_lock(Lock::LEVEL2);
+        });
+        let sampling = start_synchronous_trigger();
         let mut motor = Self {
             pwm,
-            direction,
+            direction_pin,
             enable,
+            direction: Direction::Forward,
+            tripped: false,
+            sampling,
         };
         motor.stop();
         motor.pwm.ch1().enable();
         motor
     }
 
-    /// Compare value for 100 % duty (8500 at 170 MHz / 20 kHz).
+    /// Where the ADC samples within the PWM period (checked at boot).
+    pub fn sampling_point(&self) -> SamplingPoint {
+        self.sampling
+    }
+
+    /// Clears a break flag left by the comparator's start-up and unmasks the break interrupt.
+    /// Call once the trip is configured.
+    pub fn arm_break(&mut self, trip: &OvercurrentTrip) {
+        self.tripped = false;
+        self.rearm(trip);
+        crate::safety::enable_break_interrupt();
+    }
+
+    /// Compare value for 100 % duty (4250 at 170 MHz / 2 / 20 kHz).
     pub fn max_duty(&self) -> u32 {
         self.pwm.max_duty_cycle()
     }
@@ -195,24 +356,94 @@ impl CamMotor {
         self.pwm.ch1().set_duty_cycle(duty);
     }
 
-    /// Sets the direction pin.
-    pub fn set_direction(&mut self, direction: Direction) {
+    /// Sets the direction pin and points the trip at that direction's current. A change
+    /// switches the bridge off first (the caller enables it again): moving the comparator's
+    /// threshold across the signal trips the break on the way, which is then cleared.
+    pub fn set_direction(&mut self, direction: Direction, trip: &mut OvercurrentTrip) {
+        if direction == self.direction {
+            return;
+        }
+        self.stop();
+        pac::TIM1.dier().modify(|w| w.set_bie(false));
         match direction {
-            Direction::Forward => self.direction.set_low(),
-            Direction::Reverse => self.direction.set_high(),
+            Direction::Forward => self.direction_pin.set_low(),
+            Direction::Reverse => self.direction_pin.set_high(),
+        }
+        trip.set_direction(direction);
+        self.direction = direction;
+        if !self.tripped {
+            self.rearm(trip);
         }
     }
 
-    /// Enables the bridge: the motor then follows the duty and direction.
-    pub fn enable(&mut self) {
+    /// Enables the bridge: the motor then follows the duty and direction. Refused (false)
+    /// after a hardware trip until [`CamMotor::rearm`]; the hardware itself refuses MOE while
+    /// the comparator is still above its threshold.
+    pub fn enable(&mut self) -> bool {
+        if self.tripped {
+            return false;
+        }
+        pac::TIM1.bdtr().modify(|w| w.set_moe(true));
         self.enable.set_high();
+        true
     }
 
-    /// The safe state: bridge disabled and 0 % duty (vibration off).
+    /// The safe state: bridge disabled, main output off, 0 % duty (vibration off).
     pub fn stop(&mut self) {
         self.enable.set_low();
+        pac::TIM1.bdtr().modify(|w| w.set_moe(false));
         self.pwm.ch1().set_duty_cycle_fully_off();
     }
+
+    /// Reads TIM1's break flag (call once per control step): true when the comparator has
+    /// tripped since the last re-arm. The bridge is then held off.
+    pub fn poll_break(&mut self) -> bool {
+        if pac::TIM1.sr().read().bif(0) && !self.tripped {
+            self.tripped = true;
+            self.stop();
+        }
+        self.tripped
+    }
+
+    /// Clears the break once the current is back under the threshold: call when the core no
+    /// longer drives and has latched a fault for the trip. Returns whether the bridge may be
+    /// enabled again.
+    pub fn rearm(&mut self, trip: &OvercurrentTrip) -> bool {
+        if trip.active() {
+            return false;
+        }
+        pac::TIM1.sr().modify(|w| w.set_bif(0, false));
+        pac::TIM1.dier().modify(|w| w.set_bie(true));
+        self.tripped = false;
+        true
+    }
+}
+
+/// Makes TIM1's update event the ADC trigger, every [`PWM_REPETITION`]` + 1` over/underflows,
+/// with the repetition counter loaded before the counter starts (so the updates fall on the
+/// overflow), then reports where they fall.
+fn start_synchronous_trigger() -> SamplingPoint {
+    let t = pac::TIM1;
+    t.cr1().modify(|w| w.set_cen(false));
+    t.cr2().modify(|w| w.set_mms(Mms::UPDATE));
+    t.rcr().write(|w| w.set_rep(PWM_REPETITION));
+    t.cnt().write(|w| w.set_cnt(0));
+    // Loads the repetition counter (ADC1 is not converting yet, so this trigger is lost).
+    t.egr().write(|w| w.set_ug(true));
+    t.sr().modify(|w| w.set_uif(false));
+    t.cr1().modify(|w| w.set_cen(true));
+    // Right after an update the counter turns: counting down means it was at the top.
+    for _ in 0..100_000 {
+        if t.sr().read().uif() {
+            let point = match t.cr1().read().dir() {
+                Dir::DOWN => SamplingPoint::OffTimeCentre,
+                Dir::UP => SamplingPoint::OnTimeCentre,
+            };
+            t.sr().modify(|w| w.set_uif(false));
+            return point;
+        }
+    }
+    SamplingPoint::Unknown
 }
 
 /// The cam shaft's AMT102-V incremental encoder on TIM4 in encoder mode 3 (x4).
@@ -221,7 +452,8 @@ pub struct CamEncoder {
 }
 
 impl CamEncoder {
-    /// Starts TIM4 counting both edges of A and B over the full 16-bit range.
+    /// Starts TIM4 counting both edges of A and B over the full 16-bit range, through the
+    /// input filter [`ENCODER_FILTER`].
     pub fn new(tim: Peri<'static, TIM4>, a: Peri<'static, PB6>, b: Peri<'static, PB7>) -> Self {
         let config = qei::Config {
             // The AMT102-V has push-pull outputs.
@@ -230,9 +462,12 @@ impl CamEncoder {
             mode: qei::QeiMode::Mode3,
             auto_reload: u16::MAX,
         };
-        Self {
-            qei: Qei::new(tim, a, b, config),
-        }
+        let qei = Qei::new(tim, a, b, config);
+        pac::TIM4.ccmr_input(0).modify(|w| {
+            w.set_icf(0, ENCODER_FILTER);
+            w.set_icf(1, ENCODER_FILTER);
+        });
+        Self { qei }
     }
 
     /// Raw count; it wraps at 2^16, so take differences with `wrapping_sub` as `i16`.
@@ -241,61 +476,61 @@ impl CamEncoder {
     }
 }
 
-/// The ADC DMA lapped the reader: at least one block of current samples was lost.
+/// The ADC DMA lapped the reader: at least one block of samples was lost.
 #[derive(Clone, Copy, Debug, defmt::Format)]
 pub struct SampleOverrun;
 
-/// Motor current from the ACS714: ADC1 triggered by TIM6 at [`CURRENT_SAMPLE_RATE`],
-/// streamed by DMA into a ring buffer.
-pub struct CurrentSense {
+/// ADC1 scanning the current, bus voltage, NTC and VREFINT on every TIM1 trigger
+/// ([`crate::analog`] has the order), streamed by DMA into a ring buffer.
+pub struct AnalogSense {
     adc: RingBufferedAdc<'static, ADC1>,
-    // Kept alive: dropping the low-level timer would gate its clock and stop the triggers.
-    _trigger: HwTimer<'static, TIM6>,
+    vrefint_cal: u16,
 }
 
-impl CurrentSense {
-    /// Calibrates ADC1, points it at PA0 with TIM6_TRGO as the regular trigger and starts TIM6.
-    /// Conversions begin with the first [`CurrentSense::read_block`].
+impl AnalogSense {
+    /// Calibrates ADC1 and sets up the scan with TIM1_TRGO as its trigger. Conversions begin
+    /// with the first [`AnalogSense::read_block`].
     pub fn new(
         adc: Peri<'static, ADC1>,
-        pin: Peri<'static, PA0>,
+        current: Peri<'static, PA0>,
+        bus: Peri<'static, PA1>,
+        ntc: Peri<'static, PB0>,
         dma: Peri<'static, DMA1_CH1>,
-        trigger: Peri<'static, TIM6>,
         dma_buf: &'static mut [u16],
     ) -> Self {
         let adc = Adc::new(adc, AdcConfig::default());
-        // 92.5 cycles = 2.2 µs at 42.5 MHz: settles the divider's few-kΩ source to 12 bits.
-        let sequence = [(pin.degrade_adc(), SampleTime::CYCLES92_5)];
+        let vrefint = adc.enable_vrefint();
+        let vrefint_cal = vrefint.calibrated_value();
+        // 92.5 cycles = 2.2 µs at 42.5 MHz: settles the current divider's few-kΩ source to
+        // 12 bits; the bus and NTC pins have 100 nF behind them. VREFINT needs ≥ 4 µs.
+        let sequence = [
+            (current.degrade_adc(), SampleTime::CYCLES92_5),
+            (bus.degrade_adc(), SampleTime::CYCLES92_5),
+            (ntc.degrade_adc(), SampleTime::CYCLES92_5),
+            (vrefint.degrade_adc(), SampleTime::CYCLES247_5),
+        ];
         let adc = adc.into_ring_buffered(
             dma,
             dma_buf,
             Irqs,
             sequence.into_iter(),
-            triggers::TIM6_TRGO,
+            triggers::TIM1_TRGO,
             Exten::RISING_EDGE,
         );
-
-        let trigger = HwTimer::new(trigger);
-        trigger.set_frequency(CURRENT_SAMPLE_RATE, RoundTo::Slower);
-        // Load the prescaler now rather than at the first overflow.
-        trigger.generate_update_event();
-        trigger
-            .regs_basic()
-            .cr2()
-            .modify(|w| w.set_mms(MasterMode::UPDATE));
-        trigger.start();
-
-        Self {
-            adc,
-            _trigger: trigger,
-        }
+        Self { adc, vrefint_cal }
     }
 
-    /// Waits for the next [`CURRENT_BLOCK_LEN`] samples (12-bit counts, oldest first).
-    /// After an overrun the ring restarts; the caller decides whether that is a fault.
+    /// The chip's VREFINT factory calibration (VREFINT at VDDA = 3.0 V).
+    pub fn vrefint_cal(&self) -> u16 {
+        self.vrefint_cal
+    }
+
+    /// Waits for the next control step's scans ([`analog::BLOCK_LEN`] values, interleaved,
+    /// oldest first). After an overrun the ring restarts; the caller decides whether that is
+    /// a fault.
     pub async fn read_block(
         &mut self,
-        block: &mut [u16; CURRENT_BLOCK_LEN],
+        block: &mut [u16; analog::BLOCK_LEN],
     ) -> Result<(), SampleOverrun> {
         self.adc
             .read(block)
@@ -355,34 +590,31 @@ impl ReleaseButton {
     }
 }
 
-/// The STORAGE region of `memory.x` (last 16 KiB of bank 2) as a flash of its own.
-pub type CalibrationFlash = firmware_core::storage::Partition<Flash<'static, Blocking>>;
-
-// Declaring linker symbols takes an `unsafe extern` block; only their addresses are taken
-// (safe), the symbols are never read.
-#[allow(unsafe_code)]
-unsafe extern "C" {
-    // Defined by memory.x.
-    static __storage_start: u8;
-    static __storage_end: u8;
-}
+/// The STORAGE region of `memory.x` (last 16 KiB of bank 2) as a flash of its own, with
+/// double-ECC reads reported as errors.
+pub type CalibrationFlash = EccChecked<firmware_core::storage::Partition<Flash<'static, Blocking>>>;
 
 /// Wraps the whole-chip flash driver into the STORAGE window. Erasing its 2 KiB pages in
 /// bank 2 does not stall code running from bank 1 (dual-bank read-while-write).
 fn calibration_flash(flash: Flash<'static, Blocking>) -> CalibrationFlash {
-    let start = (&raw const __storage_start) as u32;
-    let end = (&raw const __storage_end) as u32;
-    firmware_core::storage::Partition::new(flash, start - FLASH_BASE as u32, end - start)
+    let (start, end) = crate::safety::storage_region();
+    EccChecked::new(firmware_core::storage::Partition::new(
+        flash,
+        start - FLASH_BASE as u32,
+        end - start,
+    ))
 }
 
 /// Every driver of the rig, in its safe state.
 pub struct Board {
     /// Cam motor H-bridge (disabled).
     pub motor: CamMotor,
+    /// Hardware overcurrent trip (armed).
+    pub trip: OvercurrentTrip,
     /// Cam shaft encoder.
     pub encoder: CamEncoder,
-    /// Motor current samples.
-    pub current: CurrentSense,
+    /// Motor current, bus voltage, motor NTC and VDDA samples.
+    pub sense: AnalogSense,
     /// Host link over the ST-LINK virtual COM port.
     pub host_link: HostLink,
     /// Physical release input.
@@ -391,29 +623,43 @@ pub struct Board {
     pub led: Output<'static>,
     /// Independent watchdog, configured but not yet started.
     pub watchdog: IndependentWatchdog<'static, IWDG>,
+    /// Control-loop deadline (window watchdog), not yet started.
+    pub stall: StallWatchdog,
     /// The calibration store's window of the internal flash.
     pub storage: CalibrationFlash,
 }
 
 impl Board {
-    /// Builds every driver from the pin map above. Call once, right after `embassy_stm32::init`.
-    pub fn new(p: Peripherals) -> Self {
+    /// Builds every driver from the pin map above, the trip at `trip_limit_a`. Call once,
+    /// right after `embassy_stm32::init`.
+    pub fn new(p: Peripherals, trip_limit_a: f32) -> Self {
         // Motor first: it takes the bridge pins from floating to driven-off as early as possible.
-        let motor = CamMotor::new(p.TIM1, p.PA8, p.PB5, p.PA9);
+        let mut motor = CamMotor::new(p.TIM1, p.PA8, p.PB5, p.PA9);
 
-        let current_buf =
-            defmt::unwrap!(cortex_m::singleton!(: [u16; CURRENT_DMA_LEN] = [0; CURRENT_DMA_LEN]));
+        let adc_buf = defmt::unwrap!(cortex_m::singleton!(: [u16; ADC_DMA_LEN] = [0; ADC_DMA_LEN]));
         let host_rx_buf =
             defmt::unwrap!(cortex_m::singleton!(: [u8; HOST_RX_DMA_LEN] = [0; HOST_RX_DMA_LEN]));
 
+        // ADC1 makes PA0 analog, which COMP3 shares.
+        let sense = AnalogSense::new(p.ADC1, p.PA0, p.PA1, p.PB0, p.DMA1_CH1, adc_buf);
+        let trip = OvercurrentTrip::new(
+            p.COMP3,
+            p.DAC3,
+            trip_limit_a,
+            analog::nominal_zero_counts(model::hardware::adc::VREF_V as f32),
+        );
+        motor.arm_break(&trip);
+
         Self {
             motor,
+            trip,
             encoder: CamEncoder::new(p.TIM4, p.PB6, p.PB7),
-            current: CurrentSense::new(p.ADC1, p.PA0, p.DMA1_CH1, p.TIM6, current_buf),
+            sense,
             host_link: HostLink::new(p.USART2, p.PA2, p.PA3, p.DMA1_CH2, p.DMA1_CH3, host_rx_buf),
             release_button: ReleaseButton::new(p.PC13, p.EXTI13),
             led: Output::new(p.PA5, Level::Low, Speed::Low),
             watchdog: IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US),
+            stall: StallWatchdog::new(p.WWDG),
             storage: calibration_flash(Flash::new_blocking(p.FLASH)),
         }
     }

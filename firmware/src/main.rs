@@ -6,16 +6,22 @@
 //!
 //! | task            | executor                 | does                                                    |
 //! |-----------------|--------------------------|---------------------------------------------------------|
-//! | `control`       | interrupt (UART4, P6)    | 1 kHz, paced by the ADC DMA: samples, encoder, button -> `Core::step` -> H-bridge |
+//! | `control`       | interrupt (UART4, P6)    | 1 kHz, paced by the ADC DMA (itself triggered by the PWM timer): samples, encoder, button, break flag -> `Core::step` -> H-bridge; feeds the 2 ms stall watchdog; counts cycles |
 //! | `host_rx`       | thread                   | UART bytes -> `Core::receive`                            |
 //! | `host_tx`       | thread                   | `Core::transmit` -> UART                                 |
 //! | `persist`       | thread                   | writes a calibration to flash, reports the outcome       |
-//! | `status_led`    | thread                   | LD2: 1 Hz blink locked, on while vibrating, 5 Hz on a fault; logs state changes |
+//! | `monitor`       | thread                   | LD2: 1 Hz blink locked, on while vibrating, 5 Hz on a fault; logs state changes and, every 10 s, the board's health; hands the core's measured current zero to the overcurrent trip |
 //! | `watchdog_feeder` | thread                 | feeds the IWDG only when control, host_rx and host_tx all checked in |
 //!
 //! The control task runs on a higher-priority interrupt executor so that a flash erase
 //! (blocking, ~20 ms, in thread mode) or a long UART write never delays a control step.
 //! The core is shared through a critical-section mutex; each access is one short call.
+//!
+//! Failures end in the safe state (vibration off) by direct register writes, then a reset:
+//! see `safety` (panic, HardFault, NMI, unhandled interrupts, a stalled control loop) and
+//! `trip` (overcurrent, in hardware). defmt-rtt is built with `disable-blocking-mode`: a log
+//! line never waits for a probe, attached, dead or absent, and nothing here calls
+//! `defmt::flush`.
 //!
 //! On the host this builds as a stub that says how to build and flash, so that
 //! `cargo build --workspace` and `cargo test --workspace` work without the thumb target.
@@ -24,26 +30,71 @@
 /// Firmware version, reported at boot (and to the host in `Info`).
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 
+/// Firmware build: the git commit it was built from (short hash, `-dirty` when the work tree
+/// had uncommitted changes) or `unknown`; computed by `build.rs`.
+#[cfg_attr(not(target_os = "none"), allow(dead_code))]
+const BUILD: &str = env!("RIG_FIRMWARE_BUILD");
+
+/// Version and build as one record, `rig firmware <version> build <build>`.
+const IDENTITY: &str = concat!(
+    "rig firmware ",
+    env!("CARGO_PKG_VERSION"),
+    " build ",
+    env!("RIG_FIRMWARE_BUILD")
+);
+
+/// [`IDENTITY`] in the image under a fixed symbol: `rig flash` reads it from the ELF (and
+/// `rig log` from the running chip) to tell which firmware a file or a board holds.
+#[cfg(target_os = "none")]
+#[used]
+#[allow(unsafe_code)] // `no_mangle`: a fixed name for the host to look up; nothing else uses it.
+#[unsafe(no_mangle)]
+static RIG_FIRMWARE_ID: [u8; IDENTITY.len() + 1] = identity_bytes();
+
+/// [`IDENTITY`] as a NUL-terminated array (a `const fn`: fixed at compile time).
+#[cfg(target_os = "none")]
+const fn identity_bytes() -> [u8; IDENTITY.len() + 1] {
+    let mut out = [0u8; IDENTITY.len() + 1];
+    let src = IDENTITY.as_bytes();
+    let mut i = 0;
+    while i < src.len() {
+        out[i] = src[i];
+        i += 1;
+    }
+    out
+}
+
 #[cfg(not(target_os = "none"))]
 fn main() {
     println!(
         "rig firmware {VERSION} runs on the Nucleo-G474RE (STM32G474RE); this host build is a stub.\n\
          build:  cargo fw-build   (cargo build -p firmware --release --target thumbv7em-none-eabihf)\n\
-         flash:  cargo fw-flash   (probe-rs run --chip STM32G474RETx; `cargo install probe-rs-tools`)\n\
-         target: rustup target add thumbv7em-none-eabihf"
+         flash:  rig flash        (builds it, checks the image and flashes through the probe)\n\
+         logs:   rig log          (the defmt log over the probe)\n\
+         target: rustup target add thumbv7em-none-eabihf\n\
+         identity: {IDENTITY}"
     );
 }
 
+#[cfg(any(target_os = "none", test))]
+mod analog;
 #[cfg(target_os = "none")]
 mod board;
+#[cfg(target_os = "none")]
+#[allow(unsafe_code)] // fault handlers and the safe state write registers directly
+mod safety;
+#[cfg(target_os = "none")]
+mod trip;
 
 #[cfg(target_os = "none")]
 mod app {
-    use core::cell::RefCell;
+    use core::cell::{Cell, RefCell};
     use core::mem::MaybeUninit;
-    use core::sync::atomic::{AtomicU8, Ordering};
+    use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
 
+    use cortex_m::peripheral::DWT;
     use defmt::{error, info, unwrap, warn};
+    use defmt_rtt as _;
     use embassy_executor::{InterruptExecutor, Spawner};
     use embassy_futures::select::{Either, select};
     use embassy_stm32::gpio::Output;
@@ -58,11 +109,15 @@ mod app {
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use firmware_core::storage::{CalibrationStore, StorageError};
-    use firmware_core::{BootInfo, Core, CoreConfig, Inputs, Outputs};
-    use protocol::{Calibration, CalibrationStatus, SupervisorState};
-    use {defmt_rtt as _, panic_probe as _};
+    use firmware_core::{BoardInputs, BootInfo, Core, Inputs, Outputs};
+    use protocol::{ParametersStatus, ResetCause, RigParameters, SupervisorState};
 
-    use crate::board::{self, CalibrationFlash, CamEncoder, CamMotor, CurrentSense, Direction};
+    use crate::analog;
+    use crate::board::{
+        self, AnalogSense, CalibrationFlash, CamEncoder, CamMotor, Direction, SamplingPoint,
+    };
+    use crate::safety::{self, CrashCause, StallWatchdog};
+    use crate::trip::OvercurrentTrip;
 
     /// The control core, shared by the tasks.
     type SharedCore = Mutex<CriticalSectionRawMutex, RefCell<&'static mut Core>>;
@@ -78,7 +133,64 @@ mod app {
     const WATCHDOG_FEED_PERIOD: Duration = Duration::from_millis(100);
 
     /// A calibration the core wants written to flash.
-    static PERSIST: Signal<CriticalSectionRawMutex, Calibration> = Signal::new();
+    static PERSIST: Signal<CriticalSectionRawMutex, RigParameters> = Signal::new();
+
+    /// The build identifier `Info` reports: `RIG_FIRMWARE_BUILD` when the build script
+    /// provides it (the git short hash, `-dirty` for a changed tree), else `unknown`.
+    const BUILD_ID: &str = match option_env!("RIG_FIRMWARE_BUILD") {
+        Some(build) => build,
+        None => BootInfo::UNKNOWN_BUILD,
+    };
+
+    /// The reset flags as the protocol names the cause. The G4 sets BORRSTF at power-on
+    /// as well as after a brown-out, and every internal reset also pulls NRST, so the
+    /// flags are read from the most specific down.
+    fn reset_cause(reset: &board::ResetCause) -> ResetCause {
+        if reset.watchdog {
+            ResetCause::Watchdog
+        } else if reset.software {
+            ResetCause::Software
+        } else if reset.brown_out {
+            ResetCause::PowerOn
+        } else if reset.pin {
+            ResetCause::Pin
+        } else {
+            ResetCause::Other
+        }
+    }
+
+    /// The core's measured current-sensor zero (f32 bits; 0 = none yet), from `monitor` to
+    /// the control task, which re-centres the overcurrent trip on it.
+    static CURRENT_ZERO: AtomicU32 = AtomicU32::new(0);
+
+    /// Control steps per health snapshot: one second.
+    const HEALTH_STEPS: u32 = 1000;
+
+    /// What the board measures besides the core's inputs, once a second.
+    #[derive(Clone, Copy, Debug, Default, defmt::Format)]
+    struct Health {
+        /// VDDA from VREFINT, V (0 when implausible).
+        vdda_v: f32,
+        /// Bridge supply, V.
+        bus_v: f32,
+        /// Motor temperature, deg C, when an NTC is fitted.
+        motor_temp_c: Option<f32>,
+        /// Mean cycles of a control step (DWT CYCCNT, from the data to the bridge command).
+        step_cycles_mean: u32,
+        /// Largest cycles of a control step.
+        step_cycles_max: u32,
+        /// Hardware overcurrent trips since boot.
+        hw_trips: u32,
+    }
+
+    static HEALTH: Mutex<CriticalSectionRawMutex, Cell<Health>> = Mutex::new(Cell::new(Health {
+        vdda_v: 0.0,
+        bus_v: 0.0,
+        motor_temp_c: None,
+        step_cycles_mean: 0,
+        step_cycles_max: 0,
+        hw_trips: 0,
+    }));
 
     /// Runs the control task above the thread-mode tasks.
     static CONTROL_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
@@ -94,120 +206,262 @@ mod app {
     async fn main(spawner: Spawner) {
         // Before anything else can reset or clear them.
         let reset = board::ResetCause::take();
+        let crash = safety::take_crash();
         let p = embassy_stm32::init(board::config());
+        let config = board::core_config();
+        let trip_limit_a = config.faults.overcurrent_a * board::HW_TRIP_MARGIN;
         let board::Board {
             motor,
+            trip,
             encoder,
-            current,
+            sense,
             host_link,
             release_button,
             led,
             watchdog,
+            stall,
             storage,
-        } = board::Board::new(p);
+        } = board::Board::new(p, trip_limit_a);
 
+        let mut cp = unwrap!(cortex_m::Peripherals::take());
+        cp.DCB.enable_trace();
+        cp.DWT.enable_cycle_counter();
+
+        // Keeps the identity record in the image for the host (the linker would drop it).
+        core::hint::black_box(&crate::RIG_FIRMWARE_ID);
         info!(
-            "rig firmware v{} booted; last reset by the watchdog: {}",
+            "rig firmware {=str} build {=str} booted; last reset by the watchdog: {}",
             crate::VERSION,
+            crate::BUILD,
             reset.watchdog
         );
         if reset.watchdog {
             warn!("the previous run stalled long enough for the IWDG to reset it");
         }
         info!("reset flags: {}", reset);
+        if let Some(crash) = crash {
+            error!("the previous run ended in the safe state: {}", crash);
+        }
+        let stalled =
+            reset.window_watchdog || crash.is_some_and(|c| c.cause == CrashCause::ControlStall);
 
         let mut store = CalibrationStore::new(storage);
         let loaded = store.load();
         match loaded.status {
-            CalibrationStatus::Valid => info!("calibration loaded from flash"),
-            CalibrationStatus::Defaults => info!("no calibration stored: the paper's values"),
+            ParametersStatus::Valid => info!("calibration loaded from flash"),
+            ParametersStatus::Defaults => info!("no calibration stored: the paper's values"),
             _ => error!("stored calibration is invalid: the paper's values, motor locked"),
         }
         let boot = BootInfo {
-            watchdog_reset: reset.watchdog,
-            calibration: loaded.calibration,
-            calibration_status: loaded.status,
+            reset_cause: if stalled {
+                ResetCause::Watchdog
+            } else {
+                reset_cause(&reset)
+            },
+            firmware_build: BUILD_ID,
+            parameters: loaded.calibration,
+            parameters_status: loaded.status,
         };
         // The core (~43 KiB, mostly the capture buffer) is built straight into its static
         // slot (no stack temporary); the tasks share a reference to it through the mutex.
         let slot = unwrap!(cortex_m::singleton!(: MaybeUninit<Core> = MaybeUninit::uninit()));
-        let core_ref: &'static mut Core = slot.write(Core::new(CoreConfig::default(), boot));
+        let core_ref: &'static mut Core = slot.write(Core::new(config, boot));
         let core: &'static SharedCore =
             unwrap!(cortex_m::singleton!(: SharedCore = Mutex::new(RefCell::new(core_ref))));
 
         info!(
-            "board up: motor off (max duty {}), encoder at {}, current ADC @ {} Hz, host link @ {} Bd",
+            "board up: motor off (max duty {}), {} ({}), encoder at {}; current sampled in step with the PWM at {} ({} Hz); overcurrent trip at {} A (DAC {}); host link @ {} Bd",
             motor.max_duty(),
+            board::BRIDGE.name,
+            board::BRIDGE.decay,
             encoder.count(),
-            board::CURRENT_SAMPLE_RATE.0,
+            motor.sampling_point(),
+            board::CURRENT_SAMPLE_RATE_HZ,
+            trip.limit_a(),
+            trip.threshold_counts(),
             board::HOST_BAUD_RATE,
         );
+        if motor.sampling_point() == SamplingPoint::Unknown {
+            error!("TIM1 does not count: no current samples will come");
+        }
 
         interrupt::UART4.set_priority(Priority::P6);
         let control_spawner = CONTROL_EXECUTOR.start(interrupt::UART4);
         control_spawner.spawn(unwrap!(control(
             core,
-            motor,
-            encoder,
-            current,
-            release_button
+            ControlIo {
+                motor,
+                trip,
+                encoder,
+                sense,
+                button: release_button,
+                stall,
+            }
         )));
         spawner.spawn(unwrap!(host_rx(core, host_link.rx)));
         spawner.spawn(unwrap!(host_tx(core, host_link.tx)));
         spawner.spawn(unwrap!(persist(core, store)));
-        spawner.spawn(unwrap!(status_led(core, led)));
+        spawner.spawn(unwrap!(monitor(core, led)));
         spawner.spawn(unwrap!(watchdog_feeder(watchdog)));
     }
 
-    /// The 1 kHz control loop, paced by the ADC: every block of 10 current samples is one
-    /// step of the core, whose outputs go straight to the H-bridge.
-    #[embassy_executor::task]
-    async fn control(
-        core: &'static SharedCore,
-        mut motor: CamMotor,
+    /// The drivers the control task owns.
+    struct ControlIo {
+        motor: CamMotor,
+        trip: OvercurrentTrip,
         encoder: CamEncoder,
-        mut current: CurrentSense,
+        sense: AnalogSense,
         button: board::ReleaseButton,
-    ) {
-        let mut block = [0u16; board::CURRENT_BLOCK_LEN];
-        let full_scale = motor.max_duty() as f32;
+        stall: StallWatchdog,
+    }
+
+    /// Cycle counts of the control steps over one health period.
+    struct StepCycles {
+        sum: u32,
+        max: u32,
+        steps: u32,
+    }
+
+    impl StepCycles {
+        fn record(&mut self, cycles: u32) {
+            self.sum = self.sum.wrapping_add(cycles);
+            self.max = self.max.max(cycles);
+            self.steps += 1;
+        }
+
+        /// (mean, max) so far, and starts over.
+        fn take(&mut self) -> (u32, u32) {
+            let mean = self.sum / self.steps.max(1);
+            let max = self.max;
+            *self = Self {
+                sum: 0,
+                max: 0,
+                steps: 0,
+            };
+            (mean, max)
+        }
+    }
+
+    /// The 1 kHz control loop, paced by the ADC: every block of 10 scans (triggered by TIM1,
+    /// so in step with the PWM) is one step of the core, whose outputs go straight to the
+    /// H-bridge.
+    ///
+    /// Before each step the core gets the board's other measurements (`BoardInputs`): the
+    /// break flag (`motor.poll_break()`, TIM1 SR.BIF: the core latches HW_OVERCURRENT), VDDA
+    /// from VREFINT (scales the current counts), the bus voltage (feed-forward, open-loop
+    /// volts) and the motor NTC (Health); the step's DWT cycles go to `record_step_cycles`.
+    #[embassy_executor::task]
+    async fn control(core: &'static SharedCore, mut io: ControlIo) {
+        let mut raw = [0u16; analog::BLOCK_LEN];
+        let full_scale = io.motor.max_duty() as f32;
+        let vrefint_cal = io.sense.vrefint_cal();
+        let mut cycles = StepCycles {
+            sum: 0,
+            max: 0,
+            steps: 0,
+        };
+        let mut health = Health::default();
+        let mut zero_bits = 0u32;
+        // The first block is due 1 ms after the first read starts the ADC: inside the 2 ms
+        // deadline, which so also covers a PWM timer or ADC that never starts.
+        io.stall.start();
         loop {
-            let samples: &[u16] = match current.read_block(&mut block).await {
-                Ok(()) => &block,
+            let block = match io.sense.read_block(&mut raw).await {
+                Ok(()) => Some(analog::split(&raw)),
                 Err(board::SampleOverrun) => {
-                    // The step comes late; the core flags CONTROL_OVERRUN from the time.
+                    // The step comes late; the core flags CONTROL_OVERRUN from the time, and
+                    // the stall watchdog has already fired unless it was barely late.
                     warn!("current samples lost (ADC DMA overrun)");
-                    &[]
+                    None
                 }
             };
+            let start = DWT::cycle_count();
+            // The loop came round: reload the 2 ms deadline.
+            io.stall.feed();
+
+            let hw_trip = io.motor.poll_break();
+            if let Some(b) = &block {
+                if let Some(v) = analog::vdda_v(vrefint_cal, b.vrefint_counts) {
+                    health.vdda_v = v;
+                    health.bus_v = analog::bus_v(b.bus_counts, v);
+                }
+                health.motor_temp_c = analog::motor_temperature_c(b.ntc_counts);
+            }
             let inputs = Inputs {
                 now_us: Instant::now().as_micros(),
-                current_adc: samples,
-                encoder_count: encoder.count(),
-                release_button: button.is_held(),
+                current_adc: block.as_ref().map_or(&[], |b| &b.current[..]),
+                encoder_count: io.encoder.count(),
+                release_button: io.button.is_held(),
             };
-            let out = core.lock(|c| c.borrow_mut().step(&inputs));
-            drive(&mut motor, &out, full_scale);
+            let board_inputs = BoardInputs {
+                hw_break: hw_trip,
+                vdda_v: if health.vdda_v > 0.0 {
+                    health.vdda_v
+                } else {
+                    f32::NAN
+                },
+                bus_voltage_v: if health.vdda_v > 0.0 {
+                    health.bus_v
+                } else {
+                    f32::NAN
+                },
+                motor_temp_c: health.motor_temp_c.unwrap_or(f32::NAN),
+                // Storage reads go through `EccChecked`, which turns an ECC NMI into a read
+                // error the store already counts as a corrupt slot.
+                flash_ecc_error: false,
+            };
+            let out = core.lock(|c| {
+                let mut c = c.borrow_mut();
+                c.set_board_inputs(board_inputs);
+                let start = DWT::cycle_count();
+                let out = c.step(&inputs);
+                c.record_step_cycles(DWT::cycle_count().wrapping_sub(start));
+                out
+            });
+            if hw_trip && !out.enable {
+                // The core stopped driving and latched HW_OVERCURRENT from the break flag:
+                // the break may be cleared once the current is back under the threshold,
+                // after which ClearFaults can clear the fault (its condition is gone).
+                let faulted = core.lock(|c| !c.borrow().status().latched_faults.is_empty());
+                if faulted && io.motor.rearm(&io.trip) {
+                    warn!("overcurrent trip cleared: the core holds a latched fault");
+                }
+            }
+            drive(&mut io, &out, full_scale);
             if let Some(calibration) = out.persist {
                 PERSIST.signal(calibration);
             }
+            let zero = CURRENT_ZERO.load(Ordering::Relaxed);
+            if zero != zero_bits {
+                zero_bits = zero;
+                io.trip.set_zero(f32::from_bits(zero));
+            }
             CHECK_INS.fetch_or(CONTROL, Ordering::Relaxed);
+
+            cycles.record(DWT::cycle_count().wrapping_sub(start));
+            if cycles.steps >= HEALTH_STEPS {
+                (health.step_cycles_mean, health.step_cycles_max) = cycles.take();
+                health.hw_trips = safety::HW_TRIPS.load(Ordering::Relaxed);
+                HEALTH.lock(|h| h.set(health));
+            }
         }
     }
 
     /// Applies the core's command to the bridge; disabled is the safe state.
-    fn drive(motor: &mut CamMotor, out: &Outputs, full_scale: f32) {
+    fn drive(io: &mut ControlIo, out: &Outputs, full_scale: f32) {
         if !out.enable {
-            motor.stop();
+            io.motor.stop();
             return;
         }
-        motor.set_direction(if out.duty < 0.0 {
+        let direction = if out.duty < 0.0 {
             Direction::Reverse
         } else {
             Direction::Forward
-        });
-        motor.set_duty((out.duty.abs().min(1.0) * full_scale) as u32);
-        motor.enable();
+        };
+        io.motor.set_direction(direction, &mut io.trip);
+        io.motor
+            .set_duty((out.duty.abs().min(1.0) * full_scale) as u32);
+        io.motor.enable();
     }
 
     /// Host bytes into the core. Checks in at least every 10 ms, link idle or not.
@@ -245,7 +499,7 @@ mod app {
     }
 
     /// Writes calibrations to flash (blocking; only while the motor is off, as the core
-    /// refuses `SetCalibration` otherwise) and reports the outcome to the core.
+    /// refuses `SetParameters` otherwise) and reports the outcome to the core.
     #[embassy_executor::task]
     async fn persist(core: &'static SharedCore, mut store: CalibrationStore<CalibrationFlash>) {
         loop {
@@ -263,20 +517,31 @@ mod app {
         }
     }
 
-    /// LD2 shows the supervisor state; state and fault changes are logged.
+    /// Health log period, in 100 ms ticks.
+    const HEALTH_LOG_TICKS: u32 = 100;
+
+    /// LD2 shows the supervisor state; state and fault changes are logged, the board's
+    /// health every 10 s; the core's measured current zero goes to the overcurrent trip.
     #[embassy_executor::task]
-    async fn status_led(core: &'static SharedCore, mut led: Output<'static>) {
+    async fn monitor(core: &'static SharedCore, mut led: Output<'static>) {
         let mut ticker = Ticker::every(Duration::from_millis(100));
         let mut tick = 0u32;
-        let mut last = (SupervisorState::Locked, 0u16);
+        let mut last = (SupervisorState::Locked, 0u32);
         loop {
-            let (state, faults) = core.lock(|c| {
+            let (state, faults, zero) = core.lock(|c| {
                 let s = c.borrow().status();
-                (s.state, s.latched_faults.bits())
+                let zero = (!s.zeroing).then_some(s.current_zero_adc);
+                (s.state, s.latched_faults.bits(), zero)
             });
+            if let Some(zero) = zero.filter(|z| *z > 0.0) {
+                CURRENT_ZERO.store(zero.to_bits(), Ordering::Relaxed);
+            }
             if (state, faults) != last {
-                info!("supervisor: {} (faults {:#06x})", state.name(), faults);
+                info!("supervisor: {} (faults {:#010x})", state.name(), faults);
                 last = (state, faults);
+            }
+            if tick % HEALTH_LOG_TICKS == HEALTH_LOG_TICKS - 1 {
+                info!("health: {}", HEALTH.lock(|h| h.get()));
             }
             let on = match state {
                 SupervisorState::SpinUp | SupervisorState::Vibrating => true,

@@ -23,12 +23,9 @@ enum AnyLink {
 impl RigLink for AnyLink {
     type Error = host::RigError;
 
-    fn request(
-        &mut self,
-        req: &protocol::Request,
-    ) -> Result<protocol::DeviceMessage, host::RigError> {
+    fn request(&mut self, req: &protocol::Request) -> Result<protocol::Reply, host::RigError> {
         match self {
-            AnyLink::Simulated(l) => Ok(l.as_mut().request(req).map_err(host::RigError::from)?),
+            AnyLink::Simulated(l) => Ok(RigLink::request(l.as_mut(), req)?),
             AnyLink::Real(l) => RigLink::request(l.as_mut(), req),
         }
     }

@@ -31,10 +31,6 @@ use crate::client::Client;
 pub use analysis::{CalibrationResult, Consistency, VersusPaper, analyse, write_points_csv};
 pub use gauge::read_gauge_csv;
 
-/// The paper's Table 2 in its units: C1 N mm/A, C2 N mm, C3 N mm s/rad, C4 N mm, C5 A s/rad,
-/// C6 A.
-pub const TABLE2: [f64; 6] = model::paper::TABLE2;
-
 /// How the rig must be set up for the next part of the procedure.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Setup {

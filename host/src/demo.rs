@@ -10,8 +10,8 @@ use model::paper;
 use serde::Serialize;
 
 use crate::RigError;
-use crate::calibrate::{self, Plan, bench::SimBench};
-use crate::cli::connect::{DeviceOpts, Session};
+use crate::calibrate::{self, CalibrationResult, Measurements, Plan, bench::SimBench};
+use crate::connection::{DeviceOpts, Session};
 use crate::design::{self, DesignReport, RigParams};
 use sim::scenarios::{faults, fig5, sweep, table1};
 
@@ -103,24 +103,30 @@ pub struct DeviceState {
     pub calibration: [f64; 6],
 }
 
-fn write(path: &Path, bytes: &[u8], files: &mut Vec<String>) -> Result<(), RigError> {
-    std::fs::write(path, bytes).map_err(|source| RigError::File {
-        action: "write",
-        path: path.display().to_string(),
-        source,
-    })?;
-    files.push(path.display().to_string());
-    Ok(())
-}
+/// Writes the calibration step's files (calibration TOML, fit plots, measured points) into
+/// a folder and returns their paths: `rig calibrate`'s writer, handed in by the command
+/// line (arguments: folder, fit, measurements, the device's calibration it amends, port).
+pub type CalibrationWriter<'a> = &'a dyn Fn(
+    &Path,
+    &CalibrationResult,
+    &Measurements,
+    &protocol::RigParameters,
+    &str,
+) -> Result<Vec<String>, RigError>;
 
+/// Writes `value` as JSON (numbers as a person writes them) to `dir/name`, atomically.
 fn write_json<T: Serialize>(
     dir: &Path,
     name: &str,
     value: &T,
     files: &mut Vec<String>,
 ) -> Result<(), RigError> {
-    let text = serde_json::to_string_pretty(value)?;
-    write(&dir.join(name), text.as_bytes(), files)
+    let path = dir.join(name);
+    let mut text = reporting::json_pretty(value)?;
+    text.push('\n');
+    reporting::write_atomic(&path, text.as_bytes())?;
+    files.push(path.display().to_string());
+    Ok(())
 }
 
 fn create_dir(dir: &Path) -> Result<(), RigError> {
@@ -131,9 +137,11 @@ fn create_dir(dir: &Path) -> Result<(), RigError> {
     })
 }
 
-/// The whole simulated rig, with a report folder.
+/// The whole simulated rig, with a report folder; `write_calibration` writes the
+/// calibration step's files.
 pub fn run_simulated(
     opts: &DemoOptions,
+    write_calibration: CalibrationWriter<'_>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<DemoSummary, RigError> {
     create_dir(&opts.out)?;
@@ -143,7 +151,7 @@ pub fn run_simulated(
     write_json(&opts.out, "design.json", &design, &mut files)?;
 
     progress("calibration on the virtual device (the paper's procedure)");
-    let calibration = calibrate_virtual(&opts.out, &mut files)?;
+    let calibration = calibrate_virtual(&opts.out, write_calibration, &mut files)?;
 
     progress("fig5: 1 kg on 75 mm, held 14.5 s, then released");
     let fig5 = fig5::run(&fig5::Fig5Options {
@@ -167,6 +175,7 @@ pub fn run_simulated(
         }
     } else {
         sweep::SweepOptions {
+            loads: crate::sweep_report::sweep_loads(10),
             seed: opts.seed,
             ..Default::default()
         }
@@ -209,22 +218,20 @@ pub fn run_simulated(
         files,
         all_ok,
     };
-    let text = serde_json::to_string_pretty(&summary)?;
-    std::fs::write(&summary_path, text).map_err(|source| RigError::File {
-        action: "write",
-        path: summary_path.display().to_string(),
-        source,
-    })?;
+    write_json(&opts.out, "summary.json", &summary, &mut Vec::new())?;
     Ok(summary)
 }
 
 /// The paper's calibration on a virtual device over its pseudo-terminal, 20x real time.
-fn calibrate_virtual(out: &Path, files: &mut Vec<String>) -> Result<CalibrationCheck, RigError> {
+fn calibrate_virtual(
+    out: &Path,
+    write_calibration: CalibrationWriter<'_>,
+    files: &mut Vec<String>,
+) -> Result<CalibrationCheck, RigError> {
     let dev = DeviceOpts {
-        port: None,
-        baud: protocol::DEFAULT_BAUD_RATE,
         sim: true,
         speed: 20.0,
+        ..DeviceOpts::default()
     };
     let mut session = dev.connect()?;
     let base = session.client.calibration()?;
@@ -238,19 +245,13 @@ fn calibrate_virtual(out: &Path, files: &mut Vec<String>) -> Result<CalibrationC
     let result = calibrate::analyse(&measurements)?;
     let dir = out.join("calibration");
     create_dir(&dir)?;
-    let written = crate::cli::calibrate::write_files(
+    files.extend(write_calibration(
         &dir,
         &result,
         &measurements,
         &base,
         "the virtual device",
-    )?;
-    files.extend([
-        written.calibration,
-        written.torque_plot,
-        written.no_load_plot,
-        written.points,
-    ]);
+    )?);
     let measured = result.constants();
     let paper = model::Calibration::PAPER.to_paper_units();
     let within_tolerance = measured.iter().zip(paper).enumerate().all(|(k, (m, p))| {
@@ -408,7 +409,8 @@ pub fn render_text(s: &DemoSummary) -> String {
             "\ndevice: firmware {} on {}, latched faults: {}",
             d.firmware_version, d.board, d.latched_faults
         );
-        let _ = writeln!(out, "stored calibration C1..C6: {:?}", d.calibration);
+        let c: Vec<String> = d.calibration.iter().map(|&v| reporting::human(v)).collect();
+        let _ = writeln!(out, "stored calibration C1..C6: {}", c.join(", "));
         let _ = writeln!(
             out,
             "(motion tests need an operator: see `rig release`, `rig calibrate`, `rig monitor`)"

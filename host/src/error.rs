@@ -7,7 +7,7 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum RigError {
     /// Gear parameters that do not make a 2K-H gear.
-    #[error("invalid gear set {z:?}: {source}")]
+    #[error("invalid gear set {}: {source}", sim::names::teeth(z))]
     Gear {
         /// The tooth counts given.
         z: [u32; 4],
@@ -139,36 +139,21 @@ pub enum RigError {
         hint: String,
     },
     /// The device refused a request.
-    #[error("the device refused {request} ({code:?}): {advice}")]
+    #[error("the device refused {request}: {code}; {advice}")]
     Refused {
         /// The request.
         request: &'static str,
         /// The device's reason.
         code: protocol::NackCode,
-        /// What to do.
+        /// What the device said and what to do.
         advice: String,
     },
-    /// Host tool and firmware speak different protocol versions.
-    #[error("{}", version_mismatch_text(*device, *host, advice))]
+    /// Host tool and firmware speak different protocol versions or message layouts; the
+    /// message says which side to update ([`protocol::check_peer`]).
+    #[error("{source}")]
     VersionMismatch {
-        /// The device's protocol version, when it said.
-        device: Option<u16>,
-        /// This tool's protocol version.
-        host: u16,
-        /// Which side to update, and how.
-        advice: String,
-    },
-    /// Same protocol version, different message layouts (development builds).
-    #[error(
-        "device and rig tool both speak protocol v{version} but their schemas differ (device {device_hash:#010x}, tool {host_hash:#010x}): build both from the same checkout (cargo fw-flash; cargo install --path host --locked)"
-    )]
-    SchemaMismatch {
-        /// The shared protocol version.
-        version: u16,
-        /// The device's schema hash.
-        device_hash: u32,
-        /// This tool's schema hash.
-        host_hash: u32,
+        /// The protocol's verdict, with its advice.
+        source: protocol::Error,
     },
     /// Reading or writing the port failed after it was open.
     #[error("lost the link to {port}: {source}; check the cable and that the board is powered")]
@@ -218,12 +203,28 @@ pub enum RigError {
     #[error("cannot start the virtual device: {0}")]
     VirtualDevice(String),
 }
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-fn version_mismatch_text(device: Option<u16>, host: u16, advice: &str) -> String {
-    match device {
-        Some(d) => format!("device speaks protocol v{d}, this rig tool v{host}: {advice}"),
-        None => format!(
-            "the device refused this rig tool's protocol v{host} and did not say its own: {advice}"
-        ),
+    #[test]
+    fn messages_name_things_in_words() {
+        let e = RigError::Refused {
+            request: "Release(on)",
+            code: protocol::NackCode::BadArgument,
+            advice: "use a smaller value".into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "the device refused Release(on): an argument is outside the device's range; use a smaller value"
+        );
+        let e = RigError::Gear {
+            z: [49, 51, 50, 51],
+            source: model::GearSet::new([49, 51, 50, 51], 1e-3, 0.35).unwrap_err(),
+        };
+        assert!(
+            e.to_string().starts_with("invalid gear set 49,51,50,51: "),
+            "{e}"
+        );
     }
 }

@@ -4,7 +4,7 @@
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
-use protocol::{DeviceMessage, Request, SupervisorState};
+use protocol::{DeviceMessage, Reply, Request, SupervisorState};
 use sim::RigLink;
 
 use crate::RigError;
@@ -30,7 +30,7 @@ impl<T: Read + Write> DeviceLink<T> {
 impl<T: Read + Write> RigLink for DeviceLink<T> {
     type Error = RigError;
 
-    fn request(&mut self, req: &Request) -> Result<DeviceMessage, RigError> {
+    fn request(&mut self, req: &Request) -> Result<Reply, RigError> {
         self.client.request(req)
     }
 

@@ -10,8 +10,8 @@ use std::time::Duration;
 
 use assert_cmd::Command;
 use protocol::{
-    CalibrationStatus, DeviceInfo, DeviceMessage, FirmwareVersion, Frame, PROTOCOL_VERSION,
-    Request, RequestDeframer, SCHEMA_HASH,
+    Capabilities, DeviceInfo, DeviceMessage, FirmwareVersion, Frame, LegacyV1Nack,
+    PROTOCOL_VERSION, ParametersStatus, Reply, Request, RequestDeframer, ResetCause, SCHEMA_HASH,
 };
 use serialport::{SerialPort, TTYPort};
 
@@ -43,6 +43,8 @@ enum Peer {
     Garbage,
     /// Answers `Hello` with `Info` of this protocol version (and schema hash).
     Version(u16, u32),
+    /// Protocol v1 firmware: answers `Hello` with v1's own refusal layout.
+    V1,
 }
 
 /// A fake device on a pseudo-terminal; the `rig` binary opens `port`.
@@ -79,10 +81,30 @@ impl FakeDevice {
                     Peer::Garbage => {
                         let _ = master.write_all(&[0x55, 0xF3, 0x19, 0x00, 0xA7, 0x00]);
                     }
+                    Peer::V1 => {
+                        let mut requests = Vec::new();
+                        deframer.push(&buf[..n], |f| requests.push(f));
+                        for Frame {
+                            seq: hello_seq,
+                            msg,
+                        } in requests.into_iter().flatten()
+                        {
+                            if let Request::Hello { .. } = msg {
+                                seq = seq.wrapping_add(1);
+                                let nack = LegacyV1Nack { hello_seq };
+                                let frame = protocol::encode_frame_vec(seq, &nack).unwrap();
+                                let _ = master.write_all(&frame);
+                            }
+                        }
+                    }
                     Peer::Version(version, hash) => {
                         let mut requests = Vec::new();
                         deframer.push(&buf[..n], |f| requests.push(f));
-                        for Frame { msg, .. } in requests.into_iter().flatten() {
+                        for Frame {
+                            seq: request_seq,
+                            msg,
+                        } in requests.into_iter().flatten()
+                        {
                             if let Request::Hello { .. } | Request::GetInfo = msg {
                                 let info = DeviceInfo {
                                     firmware_version: FirmwareVersion {
@@ -92,13 +114,16 @@ impl FakeDevice {
                                     },
                                     protocol_version: version,
                                     schema_hash: hash,
+                                    firmware_build: "0123abcd".try_into().unwrap(),
                                     board: "fake".try_into().unwrap(),
-                                    calibration_status: CalibrationStatus::Defaults,
+                                    parameters_status: ParametersStatus::Defaults,
+                                    reset_cause: ResetCause::PowerOn,
+                                    uptime_s: 1,
+                                    capabilities: Capabilities::empty(),
                                 };
                                 seq = seq.wrapping_add(1);
-                                let frame =
-                                    protocol::encode_frame_vec(seq, &DeviceMessage::Info(info))
-                                        .unwrap();
+                                let reply = DeviceMessage::reply(request_seq, Reply::Info(info));
+                                let frame = protocol::encode_frame_vec(seq, &reply).unwrap();
                                 let _ = master.write_all(&frame);
                             }
                         }
@@ -172,7 +197,7 @@ fn newer_firmware_asks_to_update_the_host_tool() {
     let dev = FakeDevice::start(Peer::Version(PROTOCOL_VERSION + 1, 0x1234_5678));
     let e = fails(&["--port", &dev.port, "info", "--json"]);
     let want = format!(
-        "device speaks protocol v{}, this rig tool v{}: update the host tool",
+        "the firmware speaks protocol {}, this rig tool speaks {}: update the rig tool",
         PROTOCOL_VERSION + 1,
         PROTOCOL_VERSION
     );
@@ -183,14 +208,25 @@ fn newer_firmware_asks_to_update_the_host_tool() {
 fn older_firmware_asks_to_flash_the_firmware() {
     let dev = FakeDevice::start(Peer::Version(PROTOCOL_VERSION - 1, 0x1234_5678));
     let e = fails(&["--port", &dev.port, "faults"]);
-    assert_says(&e, &["flash the firmware", "cargo fw-flash"]);
+    assert_says(&e, &["run `rig flash` to update the firmware"]);
+}
+
+#[test]
+fn v1_firmware_asks_to_flash_the_firmware() {
+    // A v1 device can only refuse in v1's layout; the tool recognises it.
+    let dev = FakeDevice::start(Peer::V1);
+    let e = fails(&["--port", &dev.port, "info"]);
+    let want = format!(
+        "the firmware speaks protocol 1, this rig tool speaks {PROTOCOL_VERSION}: run `rig flash` to update the firmware"
+    );
+    assert_says(&e, &[&want]);
 }
 
 #[test]
 fn same_version_other_schema_asks_for_one_checkout() {
     let dev = FakeDevice::start(Peer::Version(PROTOCOL_VERSION, SCHEMA_HASH ^ 0xFF));
     let e = fails(&["--port", &dev.port, "info"]);
-    assert_says(&e, &["schemas differ", "same checkout"]);
+    assert_says(&e, &["message layouts differ", "same source"]);
 }
 
 #[test]
@@ -242,6 +278,38 @@ fn malformed_calibration_files_change_nothing() {
 }
 
 #[test]
+fn limits_and_constants_beyond_the_board_are_refused() {
+    // The firmware's rule (model::BoardLimits and model::Calibration::check), run before
+    // sending: a load cap of 1e30 would switch OVERLOAD off, C1 = 2258 is 36 times Table 2.
+    let dir = tempfile::tempdir().unwrap();
+    let cases: &[(&str, &str, &[&str])] = &[
+        (
+            "load.toml",
+            "[limits]\nmax_release_load_nm = 1e30\n",
+            &["max_release_load_nm", "3.68 N m"],
+        ),
+        (
+            "c1.toml",
+            "[calibration]\nc1 = 2258.0\n",
+            &["c1", "plausible range"],
+        ),
+    ];
+    for (name, text, wants) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let e = fails(&[
+            "--sim",
+            "calibration",
+            "set",
+            path.to_str().unwrap(),
+            "--yes",
+        ]);
+        assert_says(&e, wants);
+        assert_says(&e, &["nothing was written to the device"]);
+    }
+}
+
+#[test]
 fn bad_gauge_file_is_refused_before_the_rig_moves() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("gauge.csv");
@@ -272,11 +340,15 @@ fn option_values_and_combinations() {
 
 #[test]
 fn device_refusal_is_explained() {
-    // The firmware drives at most the calibration's max_freq_hz (15 Hz).
+    // The firmware drives at most the calibration's max_freq_hz (15 Hz): the tool refuses
+    // beyond it before asking, naming the option, the range and the calibration field (the
+    // device's own refusal reads "refused Release(on) (argument out of range)", see
+    // host's error tests; no Rust `Debug` name such as `BadArgument` reaches the user).
     let e = fails(&[
         "--sim", "--speed", "10", "release", "on", "--freq", "40", "--for", "1",
     ]);
-    assert_says(&e, &["refused Release(on) (BadArgument)", "smaller value"]);
+    assert_says(&e, &["--freq 40", "1 to 15 Hz", "max_freq_hz"]);
+    assert!(!e.contains("BadArgument"), "{e}");
 }
 
 #[test]

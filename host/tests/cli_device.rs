@@ -3,6 +3,7 @@
 //! real time.
 
 use std::borrow::BorrowMut;
+use std::path::Path;
 use std::time::Duration;
 
 use assert_cmd::Command;
@@ -99,9 +100,20 @@ fn info_json_has_the_contract_keys() {
     );
     assert_eq!(v["board"], "virtual");
     assert_eq!(v["sim"], true);
+    // Identity (issue 13): the build, why it last reset, and how long ago.
+    assert_eq!(v["firmware_build"], "virtual", "{v}");
+    assert_eq!(v["reset_cause"], "power-on", "{v}");
+    assert!(v["uptime_s"].as_u64().is_some(), "{v}");
+    // The virtual rig has the optional output-shaft encoder fitted.
+    assert_eq!(
+        v["capabilities"],
+        serde_json::json!(["OUTPUT_ENCODER", "SIMULATION"]),
+        "{v}"
+    );
     let text = stdout_of(sim(&["info"]));
     assert!(
-        text.contains("firmware") && text.contains("protocol   v1"),
+        text.contains("firmware")
+            && text.contains(&format!("protocol   v{}", protocol::PROTOCOL_VERSION)),
         "{text}"
     );
 }
@@ -267,7 +279,27 @@ fn calibrate_reproduces_table2() {
     assert_eq!(v["consistency"]["agree"], true);
     assert!(v["torque_fit"]["r_squared"].as_f64().unwrap() > 0.999);
     assert!(v["no_load_fit"]["r_squared"].as_f64().unwrap() > 0.99);
-    let out = dir.path().join("calibration");
+    // The default folder is under report/, named by the time.
+    let folders: Vec<_> = std::fs::read_dir(dir.path().join("report"))
+        .expect("rig calibrate wrote under report/")
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(folders.len(), 1, "{folders:?}");
+    let out = folders[0].clone();
+    let name = out.file_name().unwrap().to_string_lossy().into_owned();
+    assert!(
+        name.starts_with("calibrate-") && name.ends_with('Z'),
+        "{name}"
+    );
+    assert!(!dir.path().join("calibration").exists());
+    assert_eq!(
+        v["files"]["calibration"].as_str().unwrap(),
+        Path::new("report")
+            .join(&name)
+            .join("calibration.toml")
+            .to_str()
+            .unwrap()
+    );
     for f in [
         "calibration.toml",
         "torque_current.svg",
@@ -317,6 +349,7 @@ fn calibrate_dry_run_writes_nothing_and_takes_gauge_readings_from_csv() {
     assert_eq!(v["written_to_device"], false);
     assert!(v["files"].is_null());
     assert!(!dir.path().join("calibration").exists());
+    assert!(!dir.path().join("report").exists());
     let c1 = v["c1"].as_f64().unwrap();
     assert!((c1 / 62.1 - 1.0).abs() < 0.05, "{c1}");
     let text = stdout_of(sim(&["calibrate", "--dry-run"]).current_dir(dir.path()));
@@ -329,10 +362,11 @@ fn calibration_get_and_set_round_trip() {
     let file = dir.path().join("cal.toml");
     let text = stdout_of(sim(&["calibration", "get", file.to_str().unwrap()]));
     assert!(text.contains("wrote"), "{text}");
+    // A rig file: C1 in [calibration] in the paper's units.
     let toml = std::fs::read_to_string(&file).unwrap();
-    assert!(toml.contains("c1_nmm_per_a = 62.1"), "{toml}");
+    assert!(toml.contains("[calibration]\nc1 = 62.1\n"), "{toml}");
     let printed = stdout_of(sim(&["calibration", "get"]));
-    assert!(printed.contains("c6_a = 2.25"));
+    assert!(printed.contains("c6 = 2.25"), "{printed}");
     let v = json_of(sim(&["calibration", "get", "--json"]));
     assert!((v["c1_nmm_per_a"].as_f64().unwrap() - 62.1).abs() < 1e-4);
     // Unchanged: nothing to write.
@@ -344,7 +378,8 @@ fn calibration_get_and_set_round_trip() {
     ]));
     assert!(same.contains("already has this calibration"), "{same}");
     // A partial file changes only its keys.
-    std::fs::write(&file, "c1_nmm_per_a = 60.5\nmax_freq_hz = 12.0\n").unwrap();
+    // C1 alone moved within C4 = C1 C6 + C2's tolerance (the firmware's rule).
+    std::fs::write(&file, "c1_nmm_per_a = 62.0\nmax_freq_hz = 12.0\n").unwrap();
     let v = json_of(sim(&[
         "calibration",
         "set",
@@ -354,7 +389,7 @@ fn calibration_get_and_set_round_trip() {
     ]));
     assert_eq!(v["written"], true);
     assert_eq!(v["changed"].as_array().unwrap().len(), 2, "{v}");
-    assert!((v["calibration"]["c1_nmm_per_a"].as_f64().unwrap() - 60.5).abs() < 1e-4);
+    assert!((v["calibration"]["c1_nmm_per_a"].as_f64().unwrap() - 62.0).abs() < 1e-4);
     assert!((v["calibration"]["c2_nmm"].as_f64().unwrap() + 138.0).abs() < 1e-4);
     // Without --yes and without a terminal it refuses.
     let out = sim(&["calibration", "set", file.to_str().unwrap()])

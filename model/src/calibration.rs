@@ -551,6 +551,11 @@ impl fmt::Display for Sig {
         if !(-4.0..7.0).contains(&magnitude) {
             return write!(f, "{x:.3e}");
         }
+        #[allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "magnitude is in -4..7 here, so 0 <= decimals <= 7"
+        )]
         let decimals = (3.0 - magnitude).max(0.0) as usize;
         let mut buf = Buf::default();
         fmt::write(&mut buf, format_args!("{x:.decimals$}"))?;

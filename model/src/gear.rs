@@ -77,6 +77,7 @@ impl GearSet {
         let mut i = 0;
         while i < 4 {
             if z[i] == 0 {
+                #[allow(clippy::cast_possible_truncation, reason = "i < 4")]
                 return Err(GearError::ZeroTeeth { gear: i as u8 + 1 });
             }
             i += 1;

@@ -106,6 +106,35 @@ pub mod divider {
     }
 }
 
+/// The divider from the H-bridge supply to the bus-voltage pin (PA1): 100 k over 10 k with
+/// 100 nF at the pin. 12-24 V supplies read 1.09-2.18 V; the ADC's 3.3 V full scale is 36 V,
+/// headroom for a regenerating bridge pumping a supply that cannot sink.
+pub mod bus_divider {
+    /// Upper resistor, ohm.
+    pub const R_TOP_OHM: f64 = 100.0e3;
+    /// Lower resistor, ohm.
+    pub const R_BOTTOM_OHM: f64 = 10.0e3;
+    /// Ratio, pin volts per bus volt (1/11).
+    pub const RATIO: f64 = R_BOTTOM_OHM / (R_TOP_OHM + R_BOTTOM_OHM);
+    /// Filter capacitor at the pin, F: 0.9 ms with the divider's 9.1 k, averages the
+    /// 20 kHz supply ripple and feeds the ADC's sampling capacitor.
+    pub const FILTER_CAPACITANCE_F: f64 = 100.0e-9;
+}
+
+/// The optional motor thermistor (PB0): a 10 k NTC on the motor can (B25/85 = 3977 K, e.g.
+/// Vishay NTCLE100E3103) to ground, a 10 k pull-up to VDDA, so the reading is a ratio of
+/// VDDA whatever VDDA is. Beta equation: 1/T = 1/T25 + ln(R/R25)/B.
+pub mod ntc {
+    /// Resistance at 25 deg C, ohm.
+    pub const R25_OHM: f64 = 10.0e3;
+    /// 25 deg C in kelvin.
+    pub const T25_K: f64 = 298.15;
+    /// B constant (25/85 deg C), K.
+    pub const BETA_K: f64 = 3977.0;
+    /// Pull-up from the pin to VDDA, ohm.
+    pub const PULL_UP_OHM: f64 = 10.0e3;
+}
+
 /// The STM32G474's 12-bit ADC and its references.
 pub mod adc {
     /// Resolution, bits.
@@ -141,6 +170,35 @@ pub mod board {
     pub const CURRENT_SAMPLE_RATE_HZ: f64 = 10_000.0;
     /// Highest vibration frequency the board's controller accepts, Hz.
     pub const MAX_FREQ_HZ: f64 = 20.0;
+    /// The H-bridge's decay mode: `true` for synchronous (regenerating) decay, where the
+    /// bridge takes the carrier's inertial power back into the supply; `false` for the
+    /// recommended board driven sign-magnitude with diode (non-regenerating) decay on a
+    /// supply that cannot sink current, as the paper's bench supply. The plant
+    /// ([`crate::plant::PlantParams::regeneration`]) and the firmware's estimator read this
+    /// one setting, so they agree.
+    pub const REGENERATIVE_DECAY: bool = false;
+}
+
+/// The hardware overcurrent trip: COMP3 on the current-sense pin (PA0) against an internal
+/// DAC threshold, routed to TIM1's break input, so the bridge switches off within
+/// microseconds with no software involved (the firmware's 1 ms mean check stays as the
+/// second layer).
+pub mod comparator {
+    use super::{acs714, divider};
+
+    /// Instantaneous motor current at which the comparator trips, A: 25 % above the
+    /// board's 4.8 A software limit, so start-up peaks and the PWM ripple (about
+    /// +-0.4 A) never reach it while a jam (a stall current of 10-27 A) does within a
+    /// fraction of the winding's 0.45 ms time constant.
+    pub const TRIP_A: f64 = 6.0;
+
+    /// Pin voltage of `trip_a` through the nominal sensor transfer (ACS714 at 5.0 V,
+    /// the 2/3 divider): the DAC's threshold, V (2.41 V for 6 A).
+    pub const fn threshold_v(trip_a: f64) -> f64 {
+        let supply = acs714::SUPPLY_NOMINAL_V;
+        (acs714::zero_output_v(supply) + acs714::sensitivity_v_per_a(supply) * trip_a)
+            * divider::RATIO
+    }
 }
 
 /// A vibrator motor's own constants, against which a calibration is judged
@@ -200,6 +258,13 @@ mod tests {
         );
         // The paper: the vibrator does not turn below 1.0 V.
         const { assert!(rs735::BREAKAWAY_V > 0.9 && rs735::BREAKAWAY_V < 1.0) };
+    }
+
+    #[test]
+    fn comparator_threshold_is_the_trip_current_at_the_pin() {
+        // (2.5 V + 0.185 V/A x 6 A) x 2/3 = 2.407 V, inside the 3.3 V DAC range.
+        let v = comparator::threshold_v(comparator::TRIP_A);
+        assert!((v - 2.4067).abs() < 1e-3, "{v}");
     }
 
     #[test]

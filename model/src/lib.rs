@@ -18,6 +18,13 @@
 //! - [`calibration`]: C1-C6 in SI, their plausibility ([`Calibration::check`]) and the
 //!   board's caps ([`BoardLimits`]).
 #![cfg_attr(not(test), no_std)]
+// No silent numeric narrowing on the target: every cast that can truncate, lose a sign or
+// wrap is written so it cannot, or carries an `allow` with its reason.
+#![deny(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap
+)]
 
 pub mod calibration;
 pub mod dynamics;
@@ -26,13 +33,14 @@ pub mod excitation;
 pub mod friction;
 pub mod gear;
 pub mod hardware;
+pub mod load;
 mod math;
 pub mod paper;
 pub mod plant;
 
 pub use calibration::{
     BoardLimits, Calibration, CalibrationConsistency, CalibrationField, CalibrationIssue,
-    LimitIssue,
+    IssueKind, LimitField, LimitIssue, LimitIssueKind,
 };
 pub use dynamics::{Inertias, OutputShaft};
 pub use excitation::CamDrive;

@@ -13,7 +13,7 @@
 
 use core::f64::consts::PI;
 
-use crate::plant::Load;
+use crate::load::Load;
 use crate::{Calibration, GearSet};
 
 /// The paper's Table 1 gear sets `[Z1, Z2, Z3, Z4]`, in the table's order (n = 1, 1, 2, 2,

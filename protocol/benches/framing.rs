@@ -24,10 +24,6 @@ fn telemetry() -> DeviceMessage {
         status: StatusFlags::HOST_RELEASE,
         output_angle_rad: 0.31,
         output_speed_rad_s: 0.0,
-        bus_voltage_v: 12.1,
-        motor_temp_c: f32::NAN,
-        step_cycles_mean: 21_000,
-        step_cycles_max: 34_000,
     })
 }
 

@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::sizes::{TAG, U16, U32};
 use crate::{
-    CaptureChunk, DeviceInfo, FaultFlags, ParameterRejection, ReplyKind, RigParameters,
-    TelemetrySample,
+    CaptureChunk, DeviceInfo, FaultFlags, HealthSample, ParameterRejection, ReplyKind,
+    RigParameters, TelemetrySample,
 };
 
 /// Device-to-host messages.
@@ -48,6 +48,9 @@ pub enum DeviceMessage {
         /// Device clock when they rose, microseconds since boot.
         device_time_us: u64,
     },
+    /// Supply, temperature, control-step timing and link counters, once per second while
+    /// telemetry runs (unsolicited).
+    Health(HealthSample),
 }
 
 impl DeviceMessage {
@@ -70,7 +73,7 @@ impl DeviceMessage {
     }
 
     /// The sequence number of the request this message answers; `None` for unsolicited
-    /// messages (telemetry, capture data, fault events).
+    /// messages (telemetry, health, capture data, fault events).
     pub const fn reply_to(&self) -> Option<u16> {
         match self {
             Self::Reply { request_seq, .. } => Some(*request_seq),
@@ -102,6 +105,7 @@ impl DeviceMessage {
             Self::CaptureChunk(_) => "CaptureChunk",
             Self::CaptureDone { .. } => "CaptureDone",
             Self::FaultEvent { .. } => "FaultEvent",
+            Self::Health(_) => "Health",
         }
     }
 }

@@ -18,13 +18,16 @@
 //!   [`DeframerStats`]. A delimiter opens and closes every frame, so a stray byte on the
 //!   line costs at most the frame it touches; empty frames are ignored.
 //! * [`SeqTracker`] tells the host how many device frames were lost.
+//! * `session::Session` (feature `std`) is the host's sans-IO session: request matching
+//!   by `seq`, retries of retry-safe requests, heartbeats, peer-version recognition, with
+//!   time passed in; the serial client and the simulator's link both drive it.
 //!
 //! # Replies
 //! Each side numbers its own frames. Every request gets exactly one
 //! [`DeviceMessage::Reply`], which carries the request's frame `seq` as `request_seq`:
 //! the host matches replies by it ([`DeviceMessage::reply_to`]), never by kind. Everything
-//! else the device sends is unsolicited: `Telemetry`, `CaptureChunk`, `CaptureDone` and
-//! `FaultEvent`. Each request knows its facts: [`Request::name`], the [`ReplyKind`] it
+//! else the device sends is unsolicited: `Telemetry`, `Health` (once a second while
+//! telemetry runs), `CaptureChunk`, `CaptureDone` and `FaultEvent`. Each request knows its facts: [`Request::name`], the [`ReplyKind`] it
 //! expects ([`Request::reply_kind`]; a [`Reply::Nack`] can always come instead) and
 //! whether a retry after a timeout is safe ([`Request::retry_safe`]).
 //!
@@ -33,7 +36,8 @@
 //! # A session
 //! 1. Host: `Hello { PROTOCOL_VERSION, SCHEMA_HASH }`; device: `Info`, or
 //!    `Nack(VersionMismatch { device_protocol, device_schema_hash })` (see [`compat`]).
-//! 2. Host: `StartTelemetry { rate_hz }`; device streams `Telemetry` until `StopTelemetry`.
+//! 2. Host: `StartTelemetry { rate_hz }`; device streams `Telemetry`, and a `Health` sample
+//!    once a second, until `StopTelemetry`.
 //! 3. Host: `Release { on: true, target_hz }`, then a `Heartbeat` every
 //!    [`HEARTBEAT_INTERVAL_MS`]. Without an accepted request for [`COMMS_TIMEOUT_MS`] the
 //!    device stops vibrating (the safe state) and latches [`FaultFlags::COMMS_TIMEOUT`].
@@ -80,10 +84,17 @@
 //! (N mm, mm), as in its Table 2. Quantities a board does not sense are NaN.
 //!
 //! # Fuzzing
-//! `protocol/fuzz` is a cargo-fuzz crate (not a workspace member) with one target that
-//! feeds arbitrary bytes to the deframers and the peer identification:
-//! `cd protocol/fuzz && cargo +nightly fuzz run deframer -- -max_total_time=60`.
+//! The top-level `fuzz/` crate (cargo-fuzz, its own workspace) holds one target per decoder;
+//! `frame` feeds arbitrary bytes to the deframers: `cargo xtask fuzz`, or
+//! `cd fuzz && cargo +nightly fuzz run frame -- -max_total_time=60`.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
+// No silent numeric narrowing on the target: every cast that can truncate, lose a sign or
+// wrap is written so it cannot, or carries an `allow` with its reason.
+#![deny(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap
+)]
 
 mod capture;
 pub mod compat;
@@ -93,12 +104,15 @@ mod error;
 mod faults;
 mod flags;
 mod framing;
+mod health;
 mod info;
 mod link;
 mod parameters;
 mod request;
 pub mod schema;
 mod sequence;
+#[cfg(any(test, feature = "std"))]
+pub mod session;
 mod sizes;
 mod telemetry;
 
@@ -120,6 +134,7 @@ pub use framing::{
     CRC_LEN, FRAME_DELIMITER, FRAME_DELIMITERS, Frame, decode_body, decode_frame, encode_frame,
     frame_body,
 };
+pub use health::HealthSample;
 pub use info::{
     BOARD_NAME_LEN, Capabilities, DeviceInfo, FIRMWARE_BUILD_LEN, FirmwareVersion,
     ParametersStatus, ResetCause,

@@ -9,8 +9,8 @@
 use crate::framing::{CRC_LEN, FRAME_DELIMITERS};
 use crate::link::{DEFAULT_BAUD_RATE, MAX_TELEMETRY_RATE_HZ};
 use crate::{
-    BOARD_NAME_LEN, CAPTURE_CHUNK_SAMPLES, DeviceInfo, DeviceMessage, FIRMWARE_BUILD_LEN, NackCode,
-    Reply, Request, RigParameters, TelemetrySample,
+    BOARD_NAME_LEN, CAPTURE_CHUNK_SAMPLES, DeviceInfo, DeviceMessage, FIRMWARE_BUILD_LEN,
+    HealthSample, NackCode, Reply, Request, RigParameters, TelemetrySample,
 };
 
 pub(crate) const U8: usize = 1;
@@ -79,17 +79,18 @@ const _: () = assert!(TAG + U16 + Reply::MAX_WIRE_SIZE <= DeviceMessage::MAX_WIR
 const TELEMETRY_FRAME: usize = frame_size(TAG + TelemetrySample::MAX_WIRE_SIZE);
 
 /// A telemetry frame as it is sent in practice: within 50 days of boot (device clock below
-/// 2^42 us), fewer than 2^28 samples, named fault and status bits only, control steps
-/// below 2^21 cycles (12 ms at 170 MHz).
+/// 2^42 us), fewer than 2^28 samples, named fault and status bits only.
 const TELEMETRY_FRAME_TYPICAL: usize = frame_size(
     TAG + varint_len((1 << 28) - 1)
         + varint_len((1 << 42) - 1)
-        + 9 * F32
+        + 7 * F32
         + TAG
         + varint_len(u16::MAX as u64)
-        + varint_len(u8::MAX as u64)
-        + 2 * varint_len((1 << 21) - 1),
+        + varint_len(u8::MAX as u64),
 );
+
+/// A health frame at its worst case; one a second, next to a thousand telemetry frames.
+const HEALTH_FRAME: usize = frame_size(TAG + HealthSample::MAX_WIRE_SIZE);
 
 /// Bits on the line per byte at 8N1.
 const BITS_PER_BYTE: usize = 10;
@@ -98,11 +99,11 @@ const BITS_PER_BYTE: usize = 10;
 const _: () = assert!(
     TELEMETRY_FRAME * BITS_PER_BYTE * MAX_TELEMETRY_RATE_HZ as usize <= DEFAULT_BAUD_RATE as usize
 );
-// In practice, telemetry at the top rate leaves a quarter of the link for replies and
-// capture chunks.
+// In practice, telemetry at the top rate plus the health sample leave a third of the link
+// for replies and capture chunks (the slow quantities live in `HealthSample` for this).
 const _: () = assert!(
-    TELEMETRY_FRAME_TYPICAL * BITS_PER_BYTE * MAX_TELEMETRY_RATE_HZ as usize
-        <= DEFAULT_BAUD_RATE as usize * 3 / 4
+    (TELEMETRY_FRAME_TYPICAL * MAX_TELEMETRY_RATE_HZ as usize + HEALTH_FRAME) * BITS_PER_BYTE
+        <= DEFAULT_BAUD_RATE as usize * 2 / 3
 );
 
 #[cfg(test)]
@@ -142,24 +143,25 @@ mod tests {
     #[test]
     fn budget_values() {
         // Pinned so a change is a deliberate, reviewed decision. v2 added the opening
-        // delimiter (one byte per frame) and grew the request to the same record.
+        // delimiter (one byte per frame) and grew the request to the same record; the
+        // output shaft's angle and speed grew telemetry by 8 bytes, and the slow
+        // quantities moved to the once-a-second health sample.
         assert_eq!(MAX_MESSAGE_SIZE, 274);
         assert_eq!(MAX_FRAME_SIZE, 282);
         assert_eq!(MAX_REQUEST_FRAME_SIZE, 83);
-        assert_eq!(TELEMETRY_FRAME, 81);
-        assert_eq!(TELEMETRY_FRAME_TYPICAL, 69);
+        assert_eq!(TELEMETRY_FRAME, 63);
+        assert_eq!(TELEMETRY_FRAME_TYPICAL, 55);
+        assert_eq!(HEALTH_FRAME, 49);
     }
 
     #[test]
     fn typical_telemetry_frame_is_what_the_bound_says() {
-        // A sample 50 days after boot with every named bit set and 2^21 - 1 cycles.
+        // A sample 50 days after boot with every named bit set.
         let sample = TelemetrySample {
             seq: (1 << 28) - 1,
             device_time_us: (1 << 42) - 1,
             faults: crate::FaultFlags::all(),
             status: crate::StatusFlags::all(),
-            step_cycles_mean: (1 << 21) - 1,
-            step_cycles_max: (1 << 21) - 1,
             ..crate::golden::examples::telemetry()
         };
         let frame = crate::encode_frame_vec(u16::MAX, &DeviceMessage::Telemetry(sample)).unwrap();

@@ -61,8 +61,10 @@ flag_set! {
 
 /// One telemetry sample, sent at the rate set by `StartTelemetry`. SI units.
 ///
-/// A quantity the board does not sense (no output encoder, no bus-voltage divider, no
-/// motor thermistor: see [`crate::Capabilities`]) is NaN, never a made-up 0.
+/// It carries what changes within a control period; the slow quantities (supply,
+/// temperature, timing, link counters) come once a second in [`crate::HealthSample`], so a
+/// 1 kHz stream leaves room on the link for capture uploads. A quantity the board does not
+/// sense (no output encoder: see [`crate::Capabilities`]) is NaN, never a made-up 0.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TelemetrySample {
     /// Sample counter since boot; a gap means samples were lost.
@@ -89,18 +91,9 @@ pub struct TelemetrySample {
     pub output_angle_rad: f32,
     /// Output shaft speed, rad/s; NaN without an output encoder.
     pub output_speed_rad_s: f32,
-    /// Motor supply (bridge bus) voltage, V; NaN when not sensed.
-    pub bus_voltage_v: f32,
-    /// Motor temperature, degrees C; NaN without a thermistor.
-    pub motor_temp_c: f32,
-    /// Mean CPU cycles (DWT CYCCNT) of one control step over the last full second; 0 until
-    /// a second has passed, or where not measured (the virtual rig).
-    pub step_cycles_mean: u32,
-    /// Largest CPU cycle count of one control step over the last full second (0 as above).
-    pub step_cycles_max: u32,
 }
 
 impl TelemetrySample {
     /// Largest serialised size, bytes.
-    pub const MAX_WIRE_SIZE: usize = U32 + U64 + 9 * F32 + TAG + U32 + U16 + 2 * U32;
+    pub const MAX_WIRE_SIZE: usize = U32 + U64 + 7 * F32 + TAG + U32 + U16;
 }

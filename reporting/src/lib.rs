@@ -115,6 +115,22 @@ pub fn human_json(value: serde_json::Value) -> serde_json::Value {
     }
 }
 
+/// `value` as pretty JSON with every number as a person writes it (see [`human_json`]).
+pub fn json_pretty<T: serde::Serialize + ?Sized>(value: &T) -> Result<String, serde_json::Error> {
+    serde_json::to_string_pretty(&human_json(serde_json::to_value(value)?))
+}
+
+/// `value` as one line of JSON with every number as a person writes it.
+pub fn json_line<T: serde::Serialize + ?Sized>(value: &T) -> Result<String, serde_json::Error> {
+    serde_json::to_string(&human_json(serde_json::to_value(value)?))
+}
+
+/// A number for text output as a person writes it: `62.1` for a value that came from the
+/// `f32` 62.1 (see [`human_f64`]), whole numbers without a fraction.
+pub fn human(value: f64) -> String {
+    human_f64(value).to_string()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -150,5 +166,19 @@ mod tests {
         assert_eq!(human_f64(0.1 + 0.2), 0.1 + 0.2);
         let v = human_json(serde_json::json!({"c1": f64::from(62.1f32), "z": [49, 51]}));
         assert_eq!(v.to_string(), r#"{"c1":62.1,"z":[49,51]}"#);
+        #[derive(serde::Serialize)]
+        struct Device {
+            hz: f32,
+            ok: bool,
+        }
+        let d = Device { hz: 62.1, ok: true };
+        assert_eq!(json_line(&d).unwrap(), r#"{"hz":62.1,"ok":true}"#);
+        assert!(
+            json_pretty(&[f64::from(0.235f32)])
+                .unwrap()
+                .contains("0.235\n")
+        );
+        assert_eq!(human(f64::from(2.25f32)), "2.25");
+        assert_eq!(human(3.0), "3");
     }
 }

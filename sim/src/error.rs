@@ -7,7 +7,7 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum SimError {
     /// Gear parameters that do not make a 2K-H gear.
-    #[error("invalid gear set {z:?}: {source}")]
+    #[error("invalid gear set {}: {source}", crate::names::teeth(z))]
     Gear {
         /// The tooth counts given.
         z: [u32; 4],

@@ -8,11 +8,14 @@
 
 mod error;
 mod link;
+pub mod names;
+pub mod preset;
 mod rig;
 pub mod riglink;
 pub mod scenarios;
 
 pub use error::SimError;
-pub use link::SimLink;
-pub use rig::{Injections, PLANT_HZ, SimConfig, SimRig};
+pub use link::{LineNoise, SimLink};
+pub use preset::{EffectSpec, Preset};
+pub use rig::{Injections, PLANT_HZ, SimBench, SimConfig, SimRig};
 pub use riglink::RigLink;

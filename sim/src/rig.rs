@@ -2,10 +2,22 @@
 //! virtual time. The plant runs at 10 kHz (the ADC rate); the core is stepped at its
 //! control rate with the ADC samples of the interval, exactly as the firmware's control
 //! task feeds it; host bytes go through the core's real protocol server.
+//!
+//! The virtual rig also serves `Request::Simulation` commands, the operator's and the
+//! bench's actions, so procedures can hang a load through the same link a real rig uses
+//! (real firmware refuses them with `SimulationOnly`): `SetLoad` hangs a torque on the
+//! plant's output; `SetSupplyVoltage` and `SetSensorSupply` are recorded in [`SimBench`]
+//! and acknowledged, but the plant keeps its own supplies (`PlantParams::supply`,
+//! `SensorParams::acs_supply`): it has no way yet to change them while it runs, which
+//! another issue adds to `model`.
 
-use firmware_core::{BootInfo, Core, CoreConfig, Inputs};
-use model::plant::{Drive, Plant, PlantParams};
+use firmware_core::{BoardInputs, BootInfo, Core, CoreConfig, Inputs};
+use model::plant::{Drive, MotorParams, Plant, PlantParams};
 use model::{GearSet, plant::Load};
+use rigfile::RigFile;
+
+use crate::SimError;
+use protocol::{Capabilities, NackCode, ParametersStatus, ResetCause, RigParameters, SimCommand};
 
 /// Plant (and ADC) rate, Hz.
 pub const PLANT_HZ: u32 = 10_000;
@@ -17,6 +29,8 @@ pub struct Injections {
     pub encoder_frozen: bool,
     /// The ACS714 output is stuck at this ADC code.
     pub current_adc_stuck: Option<u16>,
+    /// The encoder counts backwards (A and B swapped, or the motor wired backwards).
+    pub encoder_reversed: bool,
 }
 
 /// Everything that defines a simulated session.
@@ -26,10 +40,10 @@ pub struct SimConfig {
     pub plant: PlantParams,
     /// The firmware configuration.
     pub core: CoreConfig,
-    /// Calibration the firmware boots with (as if read from flash).
-    pub calibration: protocol::Calibration,
-    /// Where that calibration came from.
-    pub calibration_status: protocol::CalibrationStatus,
+    /// Rig parameters (calibration) the firmware boots with (as if read from flash).
+    pub calibration: RigParameters,
+    /// Where they came from.
+    pub calibration_status: ParametersStatus,
     /// Whether the firmware boots after a watchdog reset.
     pub watchdog_reset: bool,
     /// Seed of the sensor noise.
@@ -46,17 +60,81 @@ impl SimConfig {
     /// The paper's rig built around gear set `z` with `load`; the stored calibration names `z`.
     pub fn for_gear(z: [u32; 4], load: Load) -> Result<Self, model::GearError> {
         let gear = GearSet::paper(z)?;
-        let mut calibration = protocol::Calibration::paper();
+        let mut calibration = RigParameters::paper();
         calibration.z = z.map(|v| v as u16);
         Ok(Self {
-            plant: PlantParams::paper(gear, load),
+            plant: board_plant(PlantParams::paper(gear, load)),
             core: CoreConfig::default(),
             calibration,
-            calibration_status: protocol::CalibrationStatus::Valid,
+            calibration_status: ParametersStatus::Valid,
             watchdog_reset: false,
             seed: 1,
         })
     }
+
+    /// The rig a rig file describes, with no load, booting with the file's calibration
+    /// record stored (what `rig calibration set FILE` would have sent).
+    ///
+    /// The plant takes the file's gear set, e and M_hat, mu_s and mu_d, a vibrator motor
+    /// built around its C1-C4 (C5 and C6 follow from them, Eqs. 16-17) at the calibration
+    /// temperature, and, when the file has a fitted `[model]`, its mu as the cam's axial
+    /// friction and the effects the plant can represent (`RigFile::plant_effects`; the rest
+    /// are left out). Without `[model]` the plant keeps its own drive (no regeneration),
+    /// as [`SimConfig::paper`].
+    pub fn from_rig_file(rig: &RigFile) -> Result<Self, SimError> {
+        let bad = |e: rigfile::RigFileError| SimError::BadValue {
+            what: "rig file".into(),
+            why: e.to_string(),
+        };
+        let calibration = rig.to_wire().map_err(bad)?;
+        let drive = rig.drive().map_err(bad)?;
+        let mut plant = board_plant(PlantParams::paper(drive.gear, Load::Torque(0.0)));
+        plant.drive = drive;
+        plant.mu_s = rig.friction.mu_s;
+        plant.mu_d = rig.friction.mu_d;
+        plant.mu_ax = rig.friction.mu_s;
+        plant.motor = MotorParams::rs735(&rig.calibration());
+        plant.motor.ambient_c = rig.calibration.temperature_c;
+        if let Some(m) = &rig.model {
+            let setup = rig.plant_effects().map_err(bad)?;
+            plant.mu_ax = m.mu;
+            plant.effects = setup.effects;
+            plant.regeneration = setup.regeneration;
+        }
+        Ok(Self {
+            plant,
+            core: CoreConfig::default(),
+            calibration,
+            calibration_status: ParametersStatus::Valid,
+            watchdog_reset: false,
+            seed: 1,
+        })
+    }
+}
+
+/// The build the virtual rig reports in `Info`: it runs the firmware core compiled into
+/// the host tool, so there is no separate firmware build to name.
+pub const VIRTUAL_BUILD: &str = "virtual";
+
+/// The paper's plant on this board: the hardware overcurrent trip (comparator into the
+/// timer's break) at [`model::hardware::comparator::TRIP_A`].
+fn board_plant(mut plant: PlantParams) -> PlantParams {
+    use model::hardware::comparator;
+    plant.break_threshold_v = Some(comparator::threshold_v(comparator::TRIP_A));
+    plant
+}
+
+/// The bench around the virtual rig, as `Request::Simulation` commands set it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimBench {
+    /// The supply the last `SetSupplyVoltage` asked for, V (recorded; the plant keeps
+    /// its own, see the module documentation).
+    pub supply_v: Option<f32>,
+    /// The current sensor's supply the last `SetSensorSupply` asked for, V (recorded, as
+    /// above).
+    pub sensor_supply_v: Option<f32>,
+    /// `Simulation` commands served.
+    pub commands: u32,
 }
 
 /// The closed-loop simulated rig.
@@ -71,7 +149,8 @@ pub struct SimRig {
     button: bool,
     injections: Injections,
     frozen_count: u16,
-    flash: Option<protocol::Calibration>,
+    flash: Option<RigParameters>,
+    bench: SimBench,
 }
 
 impl SimRig {
@@ -79,13 +158,20 @@ impl SimRig {
     pub fn new(config: SimConfig) -> Self {
         let control_hz = config.core.control_hz.clamp(1, PLANT_HZ);
         let boot = BootInfo {
-            watchdog_reset: config.watchdog_reset,
-            calibration: config.calibration,
-            calibration_status: config.calibration_status,
+            reset_cause: if config.watchdog_reset {
+                ResetCause::Watchdog
+            } else {
+                ResetCause::PowerOn
+            },
+            firmware_build: VIRTUAL_BUILD,
+            parameters: config.calibration,
+            parameters_status: config.calibration_status,
         };
+        let mut core_config = config.core;
+        core_config.capabilities.insert(Capabilities::SIMULATION);
         Self {
             plant: Plant::new(config.plant, config.seed),
-            core: Core::new(config.core, boot),
+            core: Core::new(core_config, boot),
             ticks_per_step: PLANT_HZ / control_hz,
             tick: 0,
             adc: Vec::with_capacity(64),
@@ -95,6 +181,11 @@ impl SimRig {
             injections: Injections::default(),
             frozen_count: 0,
             flash: Some(config.calibration),
+            bench: SimBench {
+                supply_v: None,
+                sensor_supply_v: None,
+                commands: 0,
+            },
         }
     }
 
@@ -133,6 +224,26 @@ impl SimRig {
             self.frozen_count = self.plant.encoder_count();
             self.frozen_count
         };
+        let encoder_count = if self.injections.encoder_reversed {
+            encoder_count.wrapping_neg()
+        } else {
+            encoder_count
+        };
+        // The timer's break flag (SR.BIF).
+        self.core.set_board_inputs(BoardInputs {
+            hw_break: self.plant.break_tripped(),
+            // VDDA as the binary measures it through VREFINT.
+            vdda_v: self.plant.params().sensors.adc_reference as f32,
+            ..BoardInputs::default()
+        });
+        // The optional output encoder reads the plant's output angle at its resolution.
+        let output_count = self.core.config().output_encoder.map(|e| {
+            let counts = self.plant.state().output_angle / core::f64::consts::TAU
+                * f64::from(e.counts_per_rev);
+            // The hardware counter is 16 bits and wraps.
+            (counts.round() as i64).rem_euclid(1 << 16) as u16
+        });
+        self.core.set_output_encoder_count(output_count);
         let inputs = Inputs {
             now_us: self.now_us(),
             current_adc: &self.adc,
@@ -140,6 +251,10 @@ impl SimRig {
             release_button: self.button,
         };
         let out = self.core.step(&inputs);
+        if self.plant.break_tripped() && !self.core.break_latched() {
+            // ClearFaults cleared HW_OVERCURRENT: the binary sets MOE again.
+            self.plant.rearm_break();
+        }
         self.adc.clear();
         self.drive = Drive {
             duty: out.duty as f64,
@@ -159,10 +274,19 @@ impl SimRig {
         }
     }
 
-    /// Bytes from the host to the device.
+    /// Bytes from the host to the device. `Simulation` commands act on the plant and the
+    /// bench; everything else goes to the firmware core's protocol server.
     pub fn to_device(&mut self, bytes: &[u8]) {
         let now = self.now_us();
-        self.core.receive(now, bytes);
+        let Self {
+            core, plant, bench, ..
+        } = self;
+        core.receive_with(now, bytes, |command| serve(command, plant, bench));
+    }
+
+    /// The bench as the `Simulation` commands left it.
+    pub fn bench(&self) -> SimBench {
+        self.bench
     }
 
     /// Moves the bytes the device sent since the last call into `out`.
@@ -195,13 +319,52 @@ impl SimRig {
         &self.core
     }
 
+    /// Whether the bridge drives the motor now: the firmware enables it and the hardware
+    /// overcurrent trip has not broken it off.
+    pub fn bridge_on(&self) -> bool {
+        self.drive.enabled && !self.plant.break_tripped()
+    }
+
     /// The H-bridge command the firmware applies now.
     pub fn drive(&self) -> Drive {
         self.drive
     }
 
-    /// The calibration in the simulated flash.
-    pub fn flash(&self) -> Option<protocol::Calibration> {
+    /// The rig parameters in the simulated flash.
+    pub fn flash(&self) -> Option<RigParameters> {
         self.flash
     }
+}
+
+/// Serves one `Simulation` command on the plant and the bench.
+fn serve(command: SimCommand, plant: &mut Plant, bench: &mut SimBench) -> Result<(), NackCode> {
+    let finite = |v: f32| {
+        if v.is_finite() {
+            Ok(f64::from(v))
+        } else {
+            Err(NackCode::BadArgument)
+        }
+    };
+    let positive = |v: f32| {
+        if v > 0.0 {
+            finite(v)
+        } else {
+            Err(NackCode::BadArgument)
+        }
+    };
+    match command {
+        SimCommand::SetLoad { tau_rot_nm } => plant.set_load(Load::Torque(finite(tau_rot_nm)?)),
+        SimCommand::SetSupplyVoltage { volts } => {
+            positive(volts)?;
+            bench.supply_v = Some(volts);
+        }
+        SimCommand::SetSensorSupply { volts } => {
+            positive(volts)?;
+            bench.sensor_supply_v = Some(volts);
+        }
+        // A command of a newer protocol this simulator does not model.
+        _ => return Err(NackCode::UnknownMessage),
+    }
+    bench.commands += 1;
+    Ok(())
 }

@@ -2,7 +2,7 @@
 //! simulated rig in virtual time ([`SimLink`]) or a real rig over its serial port (the
 //! host's device link). `hil-tests` runs them on either.
 
-use protocol::{DeviceMessage, FaultFlags, Request, SupervisorState};
+use protocol::{FaultFlags, Reply, Request, SupervisorState};
 use serde::Serialize;
 
 use crate::{SimError, SimLink};
@@ -17,8 +17,9 @@ const TELEMETRY_HZ: u16 = 50;
 pub trait RigLink {
     /// The session's error; scenario failures convert into it.
     type Error: From<SimError>;
-    /// Sends `req` and returns its reply (a `Nack` is an error).
-    fn request(&mut self, req: &Request) -> Result<DeviceMessage, Self::Error>;
+    /// Sends `req` and returns its reply, matched by its sequence number (a `Nack` is an
+    /// error).
+    fn request(&mut self, req: &Request) -> Result<Reply, Self::Error>;
     /// Keeps a release alive with heartbeats (true) or lets it lapse (false).
     fn keep_alive(&mut self, on: bool);
     /// Lets `seconds` pass (virtual or wall-clock), heartbeats going on when kept alive.
@@ -47,25 +48,36 @@ pub trait RigLink {
     /// Latched faults.
     fn latched_faults(&mut self) -> Result<FaultFlags, Self::Error> {
         match self.request(&Request::GetFaults)? {
-            DeviceMessage::Faults { latched, .. } => Ok(latched),
-            other => {
-                Err(SimError::Protocol(format!("GetFaults was answered with {other:?}")).into())
-            }
+            Reply::Faults { latched, .. } => Ok(latched),
+            other => Err(unexpected(&Request::GetFaults, &other).into()),
         }
     }
 }
 
-/// The error for a request answered with something else than its reply.
-pub fn refused(req: &Request, other: &DeviceMessage) -> SimError {
-    SimError::Protocol(format!("{req:?} was answered with {other:?}"))
+/// The error for a request answered with something else than its reply: a refusal
+/// (naming the device's reason) or a reply of another kind.
+pub fn unexpected(req: &Request, reply: &Reply) -> SimError {
+    match reply {
+        Reply::Nack(code) => SimError::Protocol(format!(
+            "the rig refused {}: {code} ({})",
+            req.name(),
+            code.name()
+        )),
+        other => SimError::Protocol(format!(
+            "{} was answered with {} instead of {}",
+            req.name(),
+            other.name(),
+            req.reply_kind().name()
+        )),
+    }
 }
 
 impl RigLink for SimLink {
     type Error = SimError;
 
-    fn request(&mut self, req: &Request) -> Result<DeviceMessage, SimError> {
+    fn request(&mut self, req: &Request) -> Result<Reply, SimError> {
         match SimLink::request(self, req)? {
-            nack @ DeviceMessage::Nack { .. } => Err(refused(req, &nack)),
+            nack @ Reply::Nack(_) => Err(unexpected(req, &nack)),
             reply => Ok(reply),
         }
     }
@@ -93,11 +105,11 @@ pub fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), L::Erro
         target_hz: hz,
     };
     match link.request(&req)? {
-        DeviceMessage::Ack { .. } => {
+        Reply::Ack => {
             link.keep_alive(true);
             Ok(())
         }
-        other => Err(refused(&req, &other).into()),
+        other => Err(unexpected(&req, &other).into()),
     }
 }
 
@@ -108,11 +120,11 @@ pub fn lock<L: RigLink + ?Sized>(link: &mut L) -> Result<(), L::Error> {
         target_hz: 0.0,
     };
     match link.request(&req)? {
-        DeviceMessage::Ack { .. } => {
+        Reply::Ack => {
             link.keep_alive(false);
             Ok(())
         }
-        other => Err(refused(&req, &other).into()),
+        other => Err(unexpected(&req, &other).into()),
     }
 }
 
@@ -184,7 +196,7 @@ pub fn comms_loss_drill<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<Co
     // Outside the 500 ms fault hold, and with the cam at rest, the clear succeeds.
     link.wait(2.5)?;
     let cleared = match link.request(&Request::ClearFaults)? {
-        DeviceMessage::Faults { latched, .. } => latched.is_empty(),
+        Reply::Faults { latched, .. } => latched.is_empty(),
         _ => false,
     };
     link.request(&Request::StopTelemetry)?;

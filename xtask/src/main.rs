@@ -1,12 +1,16 @@
 //! Project automation. `cargo xtask test` runs every check CI runs:
 //! installs the thumb target when missing, cross-builds the firmware and prints its flash
 //! and RAM use, checks `model` and `protocol` for the target, then fmt, clippy (warnings
-//! denied) and every host test.
+//! denied), docs (warnings denied), every host test, and a 10 s smoke run of each fuzz target
+//! in `fuzz/` when a nightly toolchain and cargo-fuzz are installed. `cargo xtask
+//! target-bench` counts the control core's cycles in an emulated Cortex-M4F (see
+//! `target_bench`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
 mod size;
+mod target_bench;
 
 /// The firmware's target.
 const THUMB: &str = "thumbv7em-none-eabihf";
@@ -21,9 +25,11 @@ fn main() -> ExitCode {
         Some("test") => test(),
         Some("firmware") => firmware().map(|_| ()),
         Some("setup") => setup(),
+        Some("fuzz") => fuzz_smoke(),
+        Some("target-bench") => target_bench(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <task>\n\n  test      every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, tests)\n  firmware  cross-build the release firmware and print its flash/RAM use\n  setup     install the thumb target and the rustfmt/clippy components when missing"
+                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]"
             );
             Err("no task given".into())
         }
@@ -105,24 +111,39 @@ fn setup() -> Result {
     Ok(())
 }
 
-/// Builds the release firmware and prints (and checks) its flash and RAM use.
-fn firmware() -> Result<size::Usage> {
-    run("firmware release build (thumbv7em-none-eabihf)", {
+/// Where the release firmware ELF is built.
+fn firmware_elf() -> PathBuf {
+    target_dir().join(THUMB).join("release").join("firmware")
+}
+
+/// The cargo target folder.
+fn target_dir() -> PathBuf {
+    std::env::var("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| root().join("target"))
+}
+
+/// Builds `package`'s binary of the same name for the thumb target (release) and returns
+/// the ELF's path.
+fn thumb_release_build(package: &str) -> Result<PathBuf> {
+    run(&format!("{package} release build ({THUMB})"), {
         let mut c = cargo();
         c.args([
             "build",
             "--package",
-            "firmware",
+            package,
             "--release",
             "--target",
             THUMB,
         ]);
         c
     })?;
-    let target_dir = std::env::var("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| root().join("target"));
-    let elf = target_dir.join(THUMB).join("release").join("firmware");
+    Ok(target_dir().join(THUMB).join("release").join(package))
+}
+
+/// Builds the release firmware and prints (and checks) its flash and RAM use.
+fn firmware() -> Result<size::Usage> {
+    let elf = thumb_release_build("firmware")?;
     let usage = size::measure(&elf)?;
     println!(
         "firmware size: flash {} B ({:.1} KiB of {} KiB budget), static RAM {} B ({:.1} KiB of {} KiB budget)",
@@ -137,6 +158,34 @@ fn firmware() -> Result<size::Usage> {
         return Err("firmware exceeds its flash or RAM budget".into());
     }
     Ok(usage)
+}
+
+/// `cargo xtask target-bench [--json] [--check]`: builds the firmware (for its size) and
+/// the bench image, runs the image in the emulator and prints the figures.
+fn target_bench(args: &[String]) -> Result {
+    let options = target_bench::Options::parse(args)?;
+    setup()?;
+    let firmware_elf = thumb_release_build("firmware")?;
+    let usage = size::measure(&firmware_elf)?;
+    let image = thumb_release_build("firmware-bench")?;
+    let python = target_bench::python_env(&target_dir())?;
+    let driver = root().join("xtask").join("target_bench").join("driver.py");
+    let output = target_bench::run_driver(&python, &driver, &image)?;
+    let result = target_bench::result(&output, usage, &image)?;
+    if options.json {
+        println!("{result}");
+    } else {
+        print!("{}", target_bench::table(&result));
+    }
+    let over = target_bench::over_budget(&result);
+    if options.check && !over.is_empty() {
+        let list: Vec<String> = over
+            .iter()
+            .map(|(k, v, limit)| format!("{k} {v} > {limit}"))
+            .collect();
+        return Err(format!("over budget: {}", list.join(", ")));
+    }
+    Ok(())
 }
 
 fn test() -> Result {
@@ -201,6 +250,73 @@ fn test() -> Result {
     run("tests", {
         let mut c = cargo();
         c.args(["test", "--workspace"]);
+        // The host's `rig flash` tests check the image built above.
+        c.env("RIG_FIRMWARE_ELF", firmware_elf());
         c
-    })
+    })?;
+    fuzz_smoke()
+}
+
+/// The fuzz targets in `fuzz/`, one per decoder.
+const FUZZ_TARGETS: [&str; 4] = ["frame", "flash_record", "rig_file", "measured_csv"];
+/// How long the smoke run fuzzes each target, s.
+const FUZZ_SECONDS: u32 = 10;
+
+/// `cargo` through the rustup proxy (so `+nightly` works), without the variables the outer
+/// stable cargo set for this process (`$CARGO` names the stable binary itself).
+fn rustup_cargo() -> Command {
+    let mut c = Command::new("cargo");
+    c.current_dir(root());
+    for var in [
+        "CARGO",
+        "RUSTUP_TOOLCHAIN",
+        "RUSTC",
+        "RUSTDOC",
+        "CARGO_TARGET_DIR",
+    ] {
+        c.env_remove(var);
+    }
+    c
+}
+
+/// A short run of every fuzz target (`cargo +nightly fuzz`), when a nightly toolchain and
+/// cargo-fuzz are installed; CI without them skips it.
+fn fuzz_smoke() -> Result {
+    // The fuzz crate is its own workspace: type-check its targets on the stable toolchain so an
+    // API change in the crates they drive fails here, nightly or not.
+    run("fuzz targets type-check (stable)", {
+        let mut c = cargo();
+        c.args(["check", "--manifest-path", "fuzz/Cargo.toml", "--bins"]);
+        c.env("CARGO_TARGET_DIR", target_dir().join("fuzz-check"));
+        c
+    })?;
+    let works = |args: &[&str]| {
+        rustup_cargo()
+            .args(args)
+            .output()
+            .map(|o| o.status.success())
+            .unwrap_or(false)
+    };
+    if !(works(&["+nightly", "--version"]) && works(&["+nightly", "fuzz", "--version"])) {
+        println!("fuzz smoke: skipped (no nightly toolchain / cargo-fuzz)");
+        return Ok(());
+    }
+    for target in FUZZ_TARGETS {
+        // New inputs go to the (ignored) corpus folder; the checked-in seeds are read only.
+        let corpus = root().join("fuzz").join("corpus").join(target);
+        std::fs::create_dir_all(&corpus)
+            .map_err(|e| format!("cannot create {}: {e}", corpus.display()))?;
+        run(&format!("fuzz smoke: {target}, {FUZZ_SECONDS} s"), {
+            let mut c = rustup_cargo();
+            c.args(["+nightly", "fuzz", "run", "-O", target]);
+            c.arg(&corpus);
+            let seeds = root().join("fuzz").join("seeds").join(target);
+            if seeds.is_dir() {
+                c.arg(seeds);
+            }
+            c.args(["--", &format!("-max_total_time={FUZZ_SECONDS}")]);
+            c
+        })?;
+    }
+    Ok(())
 }

@@ -20,8 +20,14 @@ pub struct CurrentSensorConfig {
     pub adc_reference_v: f32,
     /// ADC resolution, bits.
     pub adc_bits: u32,
-    /// Largest plausible distance of the measured zero from Vcc/2, in amperes.
+    /// Largest plausible offset of the sensor's own zero from Vcc/2, in amperes (on top
+    /// of the supply and divider tolerances below).
     pub zero_tolerance_a: f32,
+    /// Lowest and highest sensor supply the board may give the ACS714, V (4.5-5.5 V: the
+    /// zero window is sized from them, the sensor being ratiometric).
+    pub supply_range_v: (f32, f32),
+    /// Lowest and highest divider ratio with its resistors' tolerance.
+    pub divider_range: (f32, f32),
     /// Samples averaged for a zero measurement (motor off).
     pub zero_samples: u32,
     /// Time constant of the displayed (telemetry) current's low-pass, s.
@@ -33,6 +39,24 @@ impl CurrentSensorConfig {
     pub fn amps_per_count(&self) -> f32 {
         let full_scale = ((1u32 << self.adc_bits) - 1) as f32;
         self.adc_reference_v / full_scale / self.divider / self.sensitivity_v_per_a
+    }
+
+    /// The plausible window of the zero-current pin voltage, V: Vcc/2 over the supply
+    /// range through the divider's range, widened by the sensor's own offset.
+    pub fn zero_window_v(&self) -> (f32, f32) {
+        let offset = self.zero_tolerance_a * self.sensitivity_v_per_a * self.divider;
+        (
+            self.supply_range_v.0 / 2.0 * self.divider_range.0 - offset,
+            self.supply_range_v.1 / 2.0 * self.divider_range.1 + offset,
+        )
+    }
+
+    /// Amperes per ADC count of a ratiometric sensor whose zero reads `zero_counts`: the
+    /// zero is Vcc/2 and the sensitivity scales with Vcc, so the sensor supply follows
+    /// from the zero and the divider and the ADC reference cancel out.
+    pub fn ratiometric_amps_per_count(&self, zero_counts: f32) -> f32 {
+        // sensitivity(Vcc) * divider / (vref / full) = S_nom / V_nom * 2 * zero_counts.
+        self.supply_v / (2.0 * self.sensitivity_v_per_a * zero_counts)
     }
 
     /// ADC reading of zero current for an ideal sensor (Vcc/2 through the divider), counts.
@@ -51,6 +75,11 @@ impl Default for CurrentSensorConfig {
             adc_reference_v: adc::VREF_V as f32,
             adc_bits: adc::BITS,
             zero_tolerance_a: 0.3,
+            supply_range_v: (acs714::SUPPLY_MIN_V as f32, acs714::SUPPLY_MAX_V as f32),
+            divider_range: (
+                divider::ratio_bounds().0 as f32,
+                divider::ratio_bounds().1 as f32,
+            ),
             zero_samples: 1000,
             display_time_constant_s: 0.02,
         }
@@ -71,6 +100,9 @@ pub struct MotorConfig {
     pub duty_slew_per_s: f32,
     /// Drive the cam with a negative duty (direction pin high) instead.
     pub reverse: bool,
+    /// The motor's own constants, against which a new calibration's C1-C6 are judged
+    /// ([`model::Calibration::check`]).
+    pub constants: model::MotorConstants,
 }
 
 impl Default for MotorConfig {
@@ -83,6 +115,7 @@ impl Default for MotorConfig {
             // current, which itself is 2.3-2.7 A (C6 = 2.25 A) under a 4.5 A limit.
             duty_slew_per_s: 0.5,
             reverse: false,
+            constants: model::MotorConstants::RS735,
         }
     }
 }
@@ -125,6 +158,15 @@ pub struct SupervisorConfig {
     pub min_freq_hz: f32,
     /// Highest frequency a release may ask for, Hz (the calibration may lower it).
     pub max_freq_hz: f32,
+    /// Largest load on the output while released, N m: the gear's tooth-strength limit
+    /// (3.68 N m for the paper's gear, [`model::BoardLimits::PAPER`]). The calibration's
+    /// `max_release_load_nm` may lower it, never raise it; a load estimate above it while
+    /// released latches `LOAD_LIMIT`.
+    pub max_release_load_nm: f32,
+    /// Relative allowance for the load estimate's error above `max_release_load_nm`
+    /// before `LOAD_LIMIT` latches (the estimate is good to about 2 % at the cap, see the
+    /// closed-loop tests; 0.05 keeps a load at the cap itself from tripping on noise).
+    pub load_cap_tolerance: f32,
     /// Relative speed error within which the cam counts as at speed.
     pub at_speed_tolerance: f32,
     /// How long the cam must stay at speed before `Vibrating`, us.
@@ -145,6 +187,9 @@ pub struct SupervisorConfig {
     pub settle_revolutions: u8,
     /// Consecutive revolutions above `max_release_load_nm` before `OVERLOAD`.
     pub overload_revolutions: u8,
+    /// Consecutive revolutions above the board's load cap (`max_release_load_nm` and its
+    /// tolerance) before `LOAD_LIMIT`.
+    pub load_limit_revolutions: u8,
     /// `JAM` when tau_cam exceeds this multiple of Eq. (10) at the largest release load.
     pub jam_ratio: f32,
     /// Requests other than status and clear are refused this long after a fault, us.
@@ -157,6 +202,8 @@ impl Default for SupervisorConfig {
             default_freq_hz: 10.0,
             min_freq_hz: 1.0,
             max_freq_hz: board::MAX_FREQ_HZ as f32,
+            max_release_load_nm: model::BoardLimits::PAPER.max_release_load_nm as f32,
+            load_cap_tolerance: 0.05,
             at_speed_tolerance: 0.1,
             at_speed_time_us: 100_000,
             spin_up_timeout_us: 3_000_000,
@@ -167,6 +214,7 @@ impl Default for SupervisorConfig {
             weak_revolutions: 3,
             settle_revolutions: 1,
             overload_revolutions: 1,
+            load_limit_revolutions: 3,
             jam_ratio: 2.0,
             fault_hold_us: 500_000,
         }
@@ -189,6 +237,9 @@ pub struct FaultConfig {
     pub stall_min_counts: u32,
     /// A step later than this many control periods is `CONTROL_OVERRUN`.
     pub overrun_periods: u32,
+    /// How long the encoder's speed may run against the drive's sign (above the stop
+    /// speed) before `REVERSED_ENCODER`, us.
+    pub reversed_time_us: u64,
 }
 
 impl Default for FaultConfig {
@@ -200,6 +251,7 @@ impl Default for FaultConfig {
             stall_window_us: 200_000,
             stall_min_counts: 64,
             overrun_periods: 2,
+            reversed_time_us: 100_000,
         }
     }
 }
@@ -221,7 +273,8 @@ pub struct EstimatorConfig {
 impl Default for EstimatorConfig {
     fn default() -> Self {
         Self {
-            carrier_power_returned: false,
+            // The board's decay mode, the one setting the plant reads too.
+            carrier_power_returned: board::REGENERATIVE_DECAY,
             max_revolution_us: 2_000_000,
         }
     }
@@ -242,6 +295,10 @@ pub struct CoreConfig {
     pub comms_timeout_us: u64,
     /// Board name reported in `Info` (at most 16 bytes are sent).
     pub board_name: &'static str,
+    /// Optional hardware fitted, reported in `Info`; telemetry and health report NaN for
+    /// what is missing. The real board has none of them yet; the virtual rig adds
+    /// `SIMULATION`.
+    pub capabilities: protocol::Capabilities,
     /// Current sensor.
     pub current: CurrentSensorConfig,
     /// Motor model and drive limits.
@@ -254,6 +311,10 @@ pub struct CoreConfig {
     pub faults: FaultConfig,
     /// Torque estimator.
     pub estimator: EstimatorConfig,
+    /// The optional output-shaft encoder (`None`: not fitted; `Some` also sets
+    /// `Capabilities::OUTPUT_ENCODER` in `Info`). Read only with the `output-encoder`
+    /// feature.
+    pub output_encoder: Option<crate::OutputEncoderConfig>,
 }
 
 impl CoreConfig {
@@ -271,6 +332,18 @@ impl CoreConfig {
     pub fn counts_per_rev(&self) -> u32 {
         4 * self.encoder_ppr
     }
+
+    /// The caps this board puts on a calibration's limits: the release load at
+    /// `supervisor.max_release_load_nm`, the current at the overcurrent trip
+    /// `faults.overcurrent_a`, the frequency at `supervisor.max_freq_hz`. A record asking
+    /// for more is refused ([`model::BoardLimits::check`]); the host checks the same caps.
+    pub fn board_limits(&self) -> model::BoardLimits {
+        model::BoardLimits {
+            max_release_load_nm: f64::from(self.supervisor.max_release_load_nm),
+            max_current_a: f64::from(self.faults.overcurrent_a),
+            max_freq_hz: f64::from(self.supervisor.max_freq_hz),
+        }
+    }
 }
 
 /// Control step rate of the real rig, Hz.
@@ -285,12 +358,14 @@ impl Default for CoreConfig {
             supply_v: board::BRIDGE_SUPPLY_V as f32,
             comms_timeout_us: protocol::COMMS_TIMEOUT_MS as u64 * 1000,
             board_name: "nucleo-g474re",
+            capabilities: protocol::Capabilities::empty(),
             current: CurrentSensorConfig::default(),
             motor: MotorConfig::default(),
             speed_loop: SpeedLoopConfig::default(),
             supervisor: SupervisorConfig::default(),
             faults: FaultConfig::default(),
             estimator: EstimatorConfig::default(),
+            output_encoder: None,
         }
     }
 }
@@ -317,6 +392,17 @@ mod tests {
             (c.motor.resistance_ohm, c.motor.ke_cam_v_s_per_rad),
             (0.44, 0.078)
         );
+    }
+
+    #[test]
+    fn estimator_and_plant_agree_on_the_decay_mode() {
+        let gear = model::GearSet::paper(model::paper::RIG_Z).unwrap();
+        let plant = model::plant::PlantParams::paper(gear, model::plant::Load::Torque(0.0));
+        assert_eq!(
+            CoreConfig::default().estimator.carrier_power_returned,
+            plant.regeneration
+        );
+        assert_eq!(plant.regeneration, board::REGENERATIVE_DECAY);
     }
 
     #[test]

@@ -18,9 +18,8 @@ pub enum ZeroResult {
 /// Current measurement state.
 #[derive(Debug, Clone)]
 pub struct CurrentSense {
+    config: CurrentSensorConfig,
     amps_per_count: f32,
-    nominal_zero: f32,
-    zero_tolerance_counts: f32,
     zero_samples: u32,
     alpha_per_step: f32,
     zero_counts: f32,
@@ -37,9 +36,8 @@ impl CurrentSense {
         let amps_per_count = config.amps_per_count();
         let tau = config.display_time_constant_s.max(step_s);
         Self {
+            config: *config,
             amps_per_count,
-            nominal_zero: config.nominal_zero_counts(),
-            zero_tolerance_counts: config.zero_tolerance_a / amps_per_count,
             zero_samples: config.zero_samples.max(1),
             alpha_per_step: step_s / tau,
             zero_counts: config.nominal_zero_counts(),
@@ -89,7 +87,14 @@ impl CurrentSense {
 
     /// Takes one step's samples: updates the mean and the display filter, and advances a
     /// running zero measurement. Returns the zero's verdict when the measurement completes.
+    #[cfg(test)]
     pub fn update(&mut self, samples: &[u16]) -> Option<ZeroResult> {
+        self.update_with_vdda(samples, f32::NAN)
+    }
+
+    /// As [`CurrentSense::update`], with the measured ADC reference `vdda_v` (NaN: the
+    /// nominal one) for the zero's plausibility window.
+    pub fn update_with_vdda(&mut self, samples: &[u16], vdda_v: f32) -> Option<ZeroResult> {
         let mut sum = 0u32;
         for &s in samples {
             sum += u32::from(s);
@@ -108,8 +113,21 @@ impl CurrentSense {
         let zero = *acc as f32 / *n as f32;
         self.zeroing = None;
         self.zero_counts = zero;
-        self.zero_in_range = (zero - self.nominal_zero).abs() <= self.zero_tolerance_counts;
+        // The window from the real tolerances: a ratiometric sensor on a 4.5-5.5 V supply
+        // through a 1 % divider, read against the measured VDDA.
+        let vref = if vdda_v.is_finite() && vdda_v > 1.0 {
+            vdda_v
+        } else {
+            self.config.adc_reference_v
+        };
+        let full_scale = ((1u32 << self.config.adc_bits) - 1) as f32;
+        let zero_v = zero * vref / full_scale;
+        let (low, high) = self.config.zero_window_v();
+        self.zero_in_range = zero_v >= low && zero_v <= high;
         self.zero_valid = self.zero_in_range;
+        if self.zero_in_range {
+            self.amps_per_count = self.config.ratiometric_amps_per_count(zero);
+        }
         self.filtered_a = 0.0;
         self.step_mean_a = 0.0;
         Some(if self.zero_in_range {
@@ -156,11 +174,28 @@ mod tests {
     }
 
     #[test]
+    fn zero_window_covers_the_supply_range() {
+        // 4.75 V and 5.25 V sensor supplies read zeros of 1965 and 2172 counts: in range,
+        // and the sensitivity follows the supply (ratiometric).
+        for (supply, zero) in [(4.75f32, 1965u16), (5.25, 2172)] {
+            let mut s = sense();
+            s.begin_zero();
+            let mut verdict = None;
+            for _ in 0..100 {
+                verdict = verdict.or(s.update(&[zero; 10]));
+            }
+            assert_eq!(verdict, Some(ZeroResult::InRange), "{supply}");
+            let counts_per_amp = 0.185 * supply / 5.0 * (2.0 / 3.0) / 3.3 * 4095.0;
+            assert!((1.0 / s.amps_per_count() / counts_per_amp - 1.0).abs() < 0.002);
+        }
+    }
+
+    #[test]
     fn implausible_zero_is_reported() {
         let mut s = sense();
         s.begin_zero();
-        // 0.5 A-equivalent above Vcc/2: an offset the ACS714 cannot have.
-        let block = [(2068.0 + 0.5 * 153.0) as u16; 10];
+        // 2 A-equivalent above Vcc/2: an offset no sensor on a 4.5-5.5 V supply has.
+        let block = [(2068.0 + 2.0 * 153.0) as u16; 10];
         let mut verdict = None;
         for _ in 0..100 {
             verdict = verdict.or(s.update(&block));

@@ -3,7 +3,10 @@
 //! tau_cam = C1 i + C2 - (C3 w + C4) (Eqs. 15-17) is linear in i and w, so its revolution
 //! mean is that of the revolution's mean current and mean speed. Per sample the estimator
 //! only adds raw ADC counts; at each revolution boundary (interpolated inside the step) it
-//! converts once and inverts Eq. (10) with the model in f64 for the load tau_rot.
+//! converts once and inverts Eq. (10) for the load tau_rot, in single precision with
+//! [`Coefficients`] derived once from the rig parameters (the Cortex-M4F's FPU is f32 only;
+//! [`EstimatorModel`] is the same model in f64 on the model's own functions, and the tests
+//! hold the two together).
 //!
 //! Eq. (9)'s inertia term exchanges power with the carrier and averages to zero over a
 //! turn when the drive takes power back; the paper's Eq. (10) is the mean over the
@@ -15,7 +18,7 @@
 //! measured mean before Eq. (10) is inverted, and left out of the requirement the
 //! supervisor compares against.
 
-use core::f64::consts::TAU;
+use core::f32::consts::TAU;
 
 use model::CamDrive;
 use model::effects::{drive_kappa, rectified_inertia_torque};
@@ -61,6 +64,71 @@ impl EstimatorModel {
     }
 }
 
+impl EstimatorModel {
+    /// The single-precision coefficients of this model (host side: the model's f64
+    /// functions; the firmware derives them in f32, see `controller::derived`).
+    pub fn coefficients(&self) -> Coefficients {
+        let slope = self.drive.required_cam_torque(self.mu, 1.0, 0.0);
+        Coefficients::new(
+            [
+                self.vibrator.c1,
+                self.vibrator.c2,
+                self.vibrator.c3,
+                self.vibrator.c4,
+            ]
+            .map(|c| c as f32),
+            slope as f32,
+            (self.drive.required_inertia_torque(1.0)) as f32,
+            self.carrier_power_returned,
+        )
+    }
+}
+
+/// Eq. (10) and the vibrator's torque, reduced to single-precision coefficients: what the
+/// estimator evaluates at each revolution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Coefficients {
+    /// C1 (N m/A), C2 (N m), C3 (N m s/rad), C4 (N m).
+    c: [f32; 4],
+    /// Eq. (10)'s friction part per newton metre of load: 2/pi mu e (axial force per torque).
+    per_load: f32,
+    /// The inertia share present in a revolution mean per (rad/s)^2: 0 when the drive
+    /// takes the carrier's power back, else half of M e^2 / pi.
+    inertia_in_mean: f32,
+}
+
+impl Coefficients {
+    /// From the vibrator constants (SI), Eq. (10)'s slope per unit load and its inertia
+    /// term per (rad/s)^2, M e^2 / pi.
+    pub fn new(c: [f32; 4], per_load: f32, inertia: f32, carrier_power_returned: bool) -> Self {
+        Self {
+            c,
+            per_load,
+            inertia_in_mean: if carrier_power_returned {
+                0.0
+            } else {
+                0.5 * inertia
+            },
+        }
+    }
+
+    /// Cam torque from mean current `i` (A) and mean speed `w` (rad/s), N m.
+    pub fn cam_torque(&self, i: f32, w: f32) -> f32 {
+        let [c1, c2, c3, c4] = self.c;
+        c1 * i + c2 - (c3 * w.abs() + c4)
+    }
+
+    /// Load torque explaining a revolution-mean cam torque at speed `w` (Eq. 10 inverted).
+    pub fn load(&self, tau_cam: f32, w: f32) -> f32 {
+        (tau_cam - self.inertia_in_mean * w * w) / self.per_load
+    }
+
+    /// Revolution-mean cam torque Eq. (10) predicts for load `tau_rot` at speed `w`, N m.
+    pub fn required(&self, tau_rot: f32, w: f32) -> f32 {
+        self.per_load * tau_rot.abs() + self.inertia_in_mean * w * w
+    }
+}
+
 /// One revolution's estimate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RevolutionEstimate {
@@ -83,7 +151,8 @@ pub struct TorqueEstimator {
     max_revolution_us: u64,
     running: bool,
     next_boundary: i64,
-    last_cross_us: f64,
+    /// Time of the last boundary: whole microseconds and the fraction.
+    last_cross_us: (u64, f32),
     sum_counts: u64,
     samples: u32,
     last: Option<RevolutionEstimate>,
@@ -113,7 +182,7 @@ impl TorqueEstimator {
             max_revolution_us,
             running: false,
             next_boundary: 0,
-            last_cross_us: 0.0,
+            last_cross_us: (0, 0.0),
             sum_counts: 0,
             samples: 0,
             last: None,
@@ -125,7 +194,7 @@ impl TorqueEstimator {
     pub fn start(&mut self, now_us: u64, position: i64) {
         self.running = true;
         self.next_boundary = position + self.counts_per_rev;
-        self.last_cross_us = now_us as f64;
+        self.last_cross_us = (now_us, 0.0);
         self.sum_counts = 0;
         self.samples = 0;
         self.revolutions = 0;
@@ -151,7 +220,7 @@ impl TorqueEstimator {
     pub fn update(
         &mut self,
         step: &StepSamples,
-        model: &EstimatorModel,
+        model: &Coefficients,
         to_amps: impl Fn(f32) -> f32,
     ) -> Option<RevolutionEstimate> {
         if !self.running {
@@ -161,26 +230,28 @@ impl TorqueEstimator {
         let mut result = None;
         if step.position >= self.next_boundary && step.position > step.prev_position {
             // Where in the step the boundary fell, by linear interpolation of the position.
-            let frac = (self.next_boundary - step.prev_position) as f64
-                / (step.position - step.prev_position) as f64;
+            let frac = (self.next_boundary - step.prev_position) as f32
+                / (step.position - step.prev_position) as f32;
             let frac = frac.clamp(0.0, 1.0);
-            let split = libm::round(frac * n as f64) as usize;
+            let split = (frac * n as f32 + 0.5) as usize;
             let (before, after) = step.current_adc.split_at(split.min(n));
             self.add(before);
-            let cross_us =
-                step.prev_us as f64 + frac * step.now_us.saturating_sub(step.prev_us) as f64;
-            let period_us = cross_us - self.last_cross_us;
-            if self.samples > 0 && period_us > 0.0 && period_us <= self.max_revolution_us as f64 {
-                let mean_counts = self.sum_counts as f64 / f64::from(self.samples);
-                let i = f64::from(to_amps(mean_counts as f32));
+            let offset = frac * step.now_us.saturating_sub(step.prev_us) as f32;
+            let whole = offset as u64;
+            let cross_us = (step.prev_us + whole, offset - whole as f32);
+            let period_us = cross_us.0.saturating_sub(self.last_cross_us.0) as f32
+                + (cross_us.1 - self.last_cross_us.1);
+            if self.samples > 0 && period_us > 0.0 && period_us <= self.max_revolution_us as f32 {
+                let mean_counts = self.sum_counts as f32 / self.samples as f32;
+                let i = to_amps(mean_counts);
                 let w = TAU / (period_us * 1e-6);
                 let tau_cam = model.cam_torque(i, w);
                 let estimate = RevolutionEstimate {
-                    current_a: i as f32,
-                    cam_speed_rad_s: w as f32,
-                    tau_cam_nm: tau_cam as f32,
-                    tau_rot_nm: model.load(tau_cam, w) as f32,
-                    required_no_load_nm: model.required(0.0, w) as f32,
+                    current_a: i,
+                    cam_speed_rad_s: w,
+                    tau_cam_nm: tau_cam,
+                    tau_rot_nm: model.load(tau_cam, w),
+                    required_no_load_nm: model.required(0.0, w),
                 };
                 self.last = Some(estimate);
                 self.revolutions = self.revolutions.saturating_add(1);
@@ -214,6 +285,7 @@ impl TorqueEstimator {
 mod tests {
     use super::*;
     use crate::config::CurrentSensorConfig;
+    use core::f64::consts::TAU;
     use model::effects::carrier_inertia_torque;
     use model::{hardware, paper};
 
@@ -260,7 +332,7 @@ mod tests {
             };
             prev = pos;
             let to_amps = |c: f32| ((f64::from(c) - zero) * apc) as f32;
-            out.extend(est.update(&step, &model(), to_amps));
+            out.extend(est.update(&step, &model().coefficients(), to_amps));
         }
         out
     }
@@ -332,7 +404,10 @@ mod tests {
             prev_position: 0,
             position: 100_000,
         };
-        assert!(est.update(&step, &model(), |_| 0.0).is_none());
+        assert!(
+            est.update(&step, &model().coefficients(), |_| 0.0)
+                .is_none()
+        );
         // At 2 rad/s one turn takes 3.1 s, longer than the 2 s limit.
         let got = feed(&mut est, 2.0, 1.2, |_| 2.5);
         assert!(got.is_empty());

@@ -15,6 +15,7 @@ pub struct FaultMonitor {
     hold_us: u64,
     overcurrent_since: Option<u64>,
     stall_start: Option<(u64, i64)>,
+    reversed_since: Option<u64>,
 }
 
 impl FaultMonitor {
@@ -27,6 +28,7 @@ impl FaultMonitor {
             hold_us,
             overcurrent_since: None,
             stall_start: None,
+            reversed_since: None,
         }
     }
 
@@ -74,6 +76,27 @@ impl FaultMonitor {
             return false;
         }
         let since = *self.overcurrent_since.get_or_insert(now_us);
+        now_us.saturating_sub(since) >= duration_us
+    }
+
+    /// Reversed-encoder detector: true once the encoder's speed `speed_rad_s` has run
+    /// against the driven duty's sign (faster than `min_speed_rad_s`) for `duration_us`
+    /// while the bridge is `driven`: swapped A/B channels, or a motor wired backwards.
+    pub fn reversed(
+        &mut self,
+        now_us: u64,
+        driven: bool,
+        duty: f32,
+        speed_rad_s: f32,
+        min_speed_rad_s: f32,
+        duration_us: u64,
+    ) -> bool {
+        let against = driven && duty * speed_rad_s < 0.0 && speed_rad_s.abs() > min_speed_rad_s;
+        if !against {
+            self.reversed_since = None;
+            return false;
+        }
+        let since = *self.reversed_since.get_or_insert(now_us);
         now_us.saturating_sub(since) >= duration_us
     }
 
@@ -132,6 +155,20 @@ mod tests {
         assert!(!f.overcurrent(12_000, 6.0, 4.5, 10_000));
         assert!(!f.overcurrent(21_000, 6.0, 4.5, 10_000));
         assert!(f.overcurrent(22_000, 6.0, 4.5, 10_000));
+    }
+
+    #[test]
+    fn reversed_needs_opposite_sign_speed_and_time() {
+        let mut f = FaultMonitor::new(0);
+        assert!(!f.reversed(0, true, 0.3, -10.0, 2.0, 100_000));
+        assert!(!f.reversed(50_000, true, 0.3, -10.0, 2.0, 100_000));
+        // Too slow to tell (the cam just starting or stopping) restarts the timer.
+        assert!(!f.reversed(60_000, true, 0.3, -1.0, 2.0, 100_000));
+        assert!(!f.reversed(100_000, true, 0.3, -10.0, 2.0, 100_000));
+        assert!(f.reversed(200_000, true, -0.3, 10.0, 2.0, 100_000));
+        // The same sign, or the bridge off (a coasting cam), is fine.
+        assert!(!f.reversed(300_000, true, 0.3, 10.0, 2.0, 100_000));
+        assert!(!f.reversed(400_000, false, 0.3, -10.0, 2.0, 0));
     }
 
     #[test]

@@ -22,20 +22,37 @@
 //! assert!(!out.enable && out.duty == 0.0); // vibration off: the safe state
 //! ```
 //!
-//! Per-sample work is integer sums and f32 arithmetic (the Cortex-M4F has a single-precision
-//! FPU); the model's f64 functions run once per revolution or when the calibration changes.
+//! Everything on the target's path is integer or f32 arithmetic (the Cortex-M4F has a
+//! single-precision FPU; no soft double, no f64 trigonometry): the revolution estimate
+//! evaluates [`Coefficients`] derived once per parameter record, whose f64 counterpart
+//! ([`EstimatorModel`], the model's own functions) the tests hold them to. Telemetry and
+//! health samples are taken by the step and framed by [`Core::transmit`].
+//! `cargo xtask target-bench` measures the cycles on an emulated Cortex-M4.
+//!
+//! # Board inputs (issue 10)
+//! Besides [`Inputs`], the binary hands over what else the board measures with
+//! [`Core::set_board_inputs`] before a step ([`BoardInputs`]; kept out of [`Inputs`] so a
+//! binary that does not read them yet keeps building): TIM1's break flag after the COMP3
+//! overcurrent trip (`hw_break`, latches `HW_OVERCURRENT`; re-arm MOE only while
+//! [`Core::break_latched`] is false), VDDA from VREFINT (`vdda_v`, the current-sensor zero
+//! window), the bridge bus voltage (`bus_voltage_v`, feed-forward and open-loop duty =
+//! volts / Vbus, Health), the motor NTC (`motor_temp_c`, Health) and a flash ECC error
+//! flag. The step's DWT cycle count goes to [`Core::record_step_cycles`]; the storage
+//! layer's ECC hook is [`storage::CalibrationStore::with_ecc_check`]. NaN means "not
+//! measured" throughout. The host's calibration check and `SetParameters` share
+//! [`check_rules`] (the model's `BoardLimits::check` and `Calibration::check`).
 //!
 //! # Safety policy
 //! The motor runs only in `SpinUp` and `Vibrating`, only while a release is live (a host
-//! `Release` kept alive by any request within `comms_timeout_us`, or the held button),
-//! and never while a fault is latched. Faults latch until `ClearFaults`, which clears
+//! `Release` kept alive by any accepted request within `comms_timeout_us`, or the held
+//! button), and never while a fault is latched. Faults latch until `ClearFaults`, which clears
 //! only those whose condition is gone; for `fault_hold_us` after a fault every request
 //! other than `Hello`, `GetInfo`, `GetFaults` and `ClearFaults` is refused.
 //!
 //! # Memory
 //! [`Core`] holds the capture buffer ([`CAPTURE_CAPACITY`] samples of 4 bytes, 40 000
 //! bytes, 1.0 s at 10 kHz) and is 43 000 bytes in all on the target; the release image
-//! uses ~45 KiB of static RAM and ~60.5 KiB of flash (`cargo xtask firmware`). Build it
+//! uses ~45 KiB of static RAM and ~63.2 KiB of flash (`cargo xtask firmware`). Build it
 //! in place (`MaybeUninit::write(Core::new(..))` into a static slot, as the binary does)
 //! rather than on the stack.
 #![cfg_attr(not(test), no_std)]
@@ -47,6 +64,7 @@ mod current;
 mod encoder;
 mod estimator;
 mod faults;
+mod output_encoder;
 mod server;
 mod speed_loop;
 pub mod storage;
@@ -61,8 +79,9 @@ pub use config::{
     CoreConfig, CurrentSensorConfig, EstimatorConfig, FaultConfig, MotorConfig, SpeedLoopConfig,
     SupervisorConfig,
 };
-pub use controller::{BootInfo, Core, Inputs, Outputs, Status};
-pub use estimator::{EstimatorModel, RevolutionEstimate};
+pub use controller::{BoardInputs, BootInfo, Core, Inputs, Outputs, Status, check_rules};
+pub use estimator::{Coefficients, EstimatorModel, RevolutionEstimate};
+pub use output_encoder::{OutputEncoder, OutputEncoderConfig};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;
 pub use tx_queue::TX_QUEUE_LEN;

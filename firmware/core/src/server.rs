@@ -1,15 +1,20 @@
-//! The protocol server: every [`Request`] gets exactly one reply (`SetCalibration`'s comes
-//! after the flash write), echoing the request's `seq` in `Ack`/`Nack`.
+//! The protocol server: every [`Request`] gets exactly one [`Reply`] carrying the request's
+//! frame `seq` (`SetParameters`' comes after the flash write).
 //!
 //! Garbled frames are counted by the deframer and otherwise ignored; an intact frame of an
-//! unknown message is refused with `UnknownMessage`. Any intact frame counts as a heartbeat.
+//! unknown message is refused with `UnknownMessage`. Only accepted requests (anything
+//! answered but a `Nack`) refresh the release heartbeat: a stream of refused requests or
+//! undecodable frames must not keep the motor vibrating. `Simulation` commands are for the
+//! virtual rig: [`Core::receive`] refuses them with `SimulationOnly`, and the simulator
+//! serves them through [`Core::receive_with`].
 
 use protocol::{
-    CalibrationStatus, DeviceInfo, DeviceMessage, Error, FirmwareVersion, Frame,
-    MAX_TELEMETRY_RATE_HZ, NackCode, PROTOCOL_VERSION, Request, SCHEMA_HASH, SupervisorState,
+    DeviceInfo, DeviceMessage, Error, FirmwareVersion, Frame, HelloAnswer, LegacyV1Nack,
+    MAX_TELEMETRY_RATE_HZ, NackCode, PROTOCOL_VERSION, ParametersStatus, Reply, Request,
+    SCHEMA_HASH, SimCommand, SupervisorState, hello_answer,
 };
 
-use crate::controller::{Core, Derived, Persist};
+use crate::controller::{Core, Derived, Persist, check_board_caps};
 
 /// This firmware's version, from the crate version.
 pub const FIRMWARE_VERSION: FirmwareVersion = parse_version(env!("CARGO_PKG_VERSION"));
@@ -34,18 +39,58 @@ const fn parse_version(text: &str) -> FirmwareVersion {
     }
 }
 
+/// How a request is answered.
+enum Answer {
+    /// This reply, now.
+    Now(Reply),
+    /// After the flash write (`SetParameters`); see [`crate::Core::persist_result`].
+    Later,
+    /// A protocol v1 host's `Hello`: v1's own refusal, which it can decode.
+    LegacyV1Nack,
+}
+
+impl Answer {
+    const fn nack(code: NackCode) -> Self {
+        Self::Now(Reply::Nack(code))
+    }
+
+    /// Whether the request was accepted (so it refreshes the release heartbeat).
+    const fn accepted(&self) -> bool {
+        !matches!(self, Self::Now(Reply::Nack(_)) | Self::LegacyV1Nack)
+    }
+}
+
 impl Core {
-    /// Takes bytes from the host link, in chunks of any size, and answers complete requests.
+    /// Takes bytes from the host link, in chunks of any size, and answers complete
+    /// requests. `Simulation` commands are refused with `SimulationOnly`.
     pub fn receive(&mut self, now_us: u64, bytes: &[u8]) {
+        self.receive_with(now_us, bytes, |_| Err(NackCode::SimulationOnly));
+    }
+
+    /// As [`Core::receive`], with `simulation` serving `Request::Simulation` commands (the
+    /// virtual rig acts on its plant): `Ok` is acknowledged, `Err(code)` refused. Its
+    /// answer goes out in order with the other replies, under the device's frame numbers.
+    pub fn receive_with(
+        &mut self,
+        now_us: u64,
+        bytes: &[u8],
+        mut simulation: impl FnMut(SimCommand) -> Result<(), NackCode>,
+    ) {
         for &byte in bytes {
             match self.deframer.push_byte(byte) {
                 Some(Ok(Frame { seq, msg })) => {
-                    self.last_request_us = now_us;
-                    self.handle(now_us, seq, msg);
+                    let answer = match msg {
+                        // An operator's action on the virtual rig, allowed in a fault hold.
+                        Request::Simulation(command) => match simulation(command) {
+                            Ok(()) => Answer::Now(Reply::Ack),
+                            Err(code) => Answer::nack(code),
+                        },
+                        other => self.handle(now_us, seq, other),
+                    };
+                    self.answer(now_us, seq, answer);
                 }
                 Some(Err(Error::Decode { seq: Some(seq) })) => {
-                    self.last_request_us = now_us;
-                    self.reply_nack(seq, NackCode::UnknownMessage);
+                    self.answer(now_us, seq, Answer::nack(NackCode::UnknownMessage));
                 }
                 // Counted in the deframer's stats; nothing to answer.
                 Some(Err(_)) | None => {}
@@ -53,32 +98,41 @@ impl Core {
         }
     }
 
-    fn reply(&mut self, msg: DeviceMessage) {
-        self.tx.push(&msg, 0);
-    }
-
-    fn ack(&mut self, seq: u16) {
-        self.reply(DeviceMessage::Ack { seq });
-    }
-
-    fn info(&self) -> DeviceInfo {
-        let mut board = heapless::String::new();
-        for c in self.config.board_name.chars() {
-            if board.push(c).is_err() {
-                break;
+    /// Sends the answer to request `seq`; an accepted request refreshes the heartbeat.
+    fn answer(&mut self, now_us: u64, seq: u16, answer: Answer) {
+        if answer.accepted() {
+            self.last_request_us = now_us;
+        }
+        match answer {
+            Answer::Now(reply) => self.send_reply(seq, reply),
+            Answer::Later => {}
+            Answer::LegacyV1Nack => {
+                self.tx.push(&LegacyV1Nack { hello_seq: seq }, 0);
             }
         }
+    }
+
+    /// Queues `reply` to the request with frame sequence number `seq`.
+    pub(crate) fn send_reply(&mut self, seq: u16, reply: Reply) {
+        self.tx.push(&DeviceMessage::reply(seq, reply), 0);
+    }
+
+    fn info(&self, now_us: u64) -> DeviceInfo {
         DeviceInfo {
-            firmware_version: FIRMWARE_VERSION,
             protocol_version: PROTOCOL_VERSION,
             schema_hash: SCHEMA_HASH,
-            board,
-            calibration_status: self.calibration_status,
+            firmware_version: FIRMWARE_VERSION,
+            firmware_build: truncated(self.firmware_build),
+            board: truncated(self.config.board_name),
+            parameters_status: self.parameters_status,
+            reset_cause: self.reset_cause,
+            uptime_s: u32::try_from(now_us / 1_000_000).unwrap_or(u32::MAX),
+            capabilities: self.config.capabilities,
         }
     }
 
-    fn faults_reply(&self) -> DeviceMessage {
-        DeviceMessage::Faults {
+    fn faults_reply(&self) -> Reply {
+        Reply::Faults {
             active: self.active_faults(),
             latched: self.faults.latched(),
         }
@@ -91,53 +145,58 @@ impl Core {
         )
     }
 
-    fn handle(&mut self, now: u64, seq: u16, msg: Request) {
+    fn handle(&mut self, now: u64, seq: u16, msg: Request) -> Answer {
         let status_or_clear = matches!(
             msg,
             Request::Hello { .. } | Request::GetInfo | Request::GetFaults | Request::ClearFaults
         );
         if !status_or_clear && self.faults.in_hold(now) {
-            self.reply_nack(seq, NackCode::InFaultHold);
-            return;
+            return Answer::nack(NackCode::InFaultHold);
         }
+        let ack = Answer::Now(Reply::Ack);
         match msg {
             Request::Hello {
                 protocol_version,
                 schema_hash,
-            } => {
-                if protocol_version == PROTOCOL_VERSION && schema_hash == SCHEMA_HASH {
-                    self.reply(DeviceMessage::Info(self.info()));
-                } else {
-                    self.reply_nack(seq, NackCode::VersionMismatch);
-                }
-            }
-            Request::GetInfo => self.reply(DeviceMessage::Info(self.info())),
-            Request::Release { on, target_hz } => self.release(seq, on, target_hz),
-            Request::Heartbeat => self.ack(seq),
-            Request::GetCalibration => self.reply(DeviceMessage::Calibration(self.calibration)),
-            Request::SetCalibration(calibration) => {
+            } => match hello_answer(protocol_version, schema_hash) {
+                HelloAnswer::Info => Answer::Now(Reply::Info(self.info(now))),
+                HelloAnswer::LegacyV1Nack => Answer::LegacyV1Nack,
+                HelloAnswer::VersionMismatch => Answer::nack(NackCode::VersionMismatch {
+                    device_protocol: PROTOCOL_VERSION,
+                    device_schema_hash: SCHEMA_HASH,
+                }),
+            },
+            Request::GetInfo => Answer::Now(Reply::Info(self.info(now))),
+            Request::Release { on, target_hz } => self.release(on, target_hz),
+            Request::Heartbeat => ack,
+            Request::GetParameters => Answer::Now(Reply::Parameters(self.parameters)),
+            Request::SetParameters(parameters) => {
                 if !self.motor_idle() || self.persist != Persist::Idle {
-                    self.reply_nack(seq, NackCode::Busy);
-                } else if Derived::new(&calibration, &self.config).is_none() {
-                    self.reply_nack(seq, NackCode::CalibrationRejected);
-                } else {
-                    // Activated and acknowledged once the binary reports the flash write.
-                    self.persist = Persist::Requested { calibration, seq };
+                    return Answer::nack(NackCode::Busy);
+                }
+                let checked = Derived::new(&parameters, &self.config)
+                    .and_then(|_| check_board_caps(&parameters, &self.config));
+                match checked {
+                    Err(rejection) => Answer::nack(NackCode::ParametersRejected(rejection)),
+                    Ok(()) => {
+                        // Activated and acknowledged once the binary reports the flash write.
+                        self.persist = Persist::Requested { parameters, seq };
+                        Answer::Later
+                    }
                 }
             }
             Request::StartTelemetry { rate_hz } => {
                 if rate_hz == 0 {
-                    self.reply_nack(seq, NackCode::BadArgument);
-                } else {
-                    let max = MAX_TELEMETRY_RATE_HZ.min(self.config.control_hz as u16);
-                    let rate = u32::from(rate_hz.min(max));
-                    self.telemetry_period = (self.config.control_hz / rate).max(1);
-                    self.ack(seq);
+                    return Answer::nack(NackCode::BadArgument);
                 }
+                let control_hz = u16::try_from(self.config.control_hz).unwrap_or(u16::MAX);
+                let rate = u32::from(rate_hz.min(MAX_TELEMETRY_RATE_HZ.min(control_hz)));
+                self.streams.start(self.config.control_hz / rate);
+                ack
             }
             Request::StopTelemetry => {
-                self.telemetry_period = 0;
-                self.ack(seq);
+                self.streams.stop();
+                ack
             }
             Request::StartCapture {
                 sample_rate_hz,
@@ -145,72 +204,87 @@ impl Core {
             } => {
                 let adc_hz = self.config.sample_rate_hz();
                 match self.capture.start(sample_rate_hz, samples, adc_hz) {
-                    Ok(_) => self.ack(seq),
-                    Err(code) => self.reply_nack(seq, code),
+                    Ok(_) => ack,
+                    Err(code) => Answer::nack(code),
                 }
             }
-            Request::GetFaults => self.reply(self.faults_reply()),
+            Request::GetFaults => Answer::Now(self.faults_reply()),
             Request::ClearFaults => {
                 let active = self.active_faults();
                 self.faults.clear(active);
-                self.reply(self.faults_reply());
+                Answer::Now(self.faults_reply())
             }
             Request::RezeroCurrent => {
                 if self.motor_idle() && !self.current.zeroing() {
                     self.current.begin_zero();
-                    self.ack(seq);
+                    ack
                 } else {
-                    self.reply_nack(seq, NackCode::Busy);
+                    Answer::nack(NackCode::Busy)
                 }
             }
-            Request::OpenLoop { volts } => self.open_loop(seq, volts),
+            Request::OpenLoop { volts } => self.open_loop(volts),
+            // Served in `receive_with`; listed so a new request fails to compile here.
+            Request::Simulation(_) => Answer::nack(NackCode::SimulationOnly),
             // `Request` is non-exhaustive: a newer host's request this firmware lacks.
-            _ => self.reply_nack(seq, NackCode::UnknownMessage),
+            _ => Answer::nack(NackCode::UnknownMessage),
         }
     }
 
-    fn open_loop(&mut self, seq: u16, volts: f32) {
+    fn open_loop(&mut self, volts: f32) -> Answer {
         if volts == 0.0 {
             self.open_loop_volts = None;
-            self.ack(seq);
+            Answer::Now(Reply::Ack)
         } else if !(volts.is_finite()
             && volts.abs() <= self.config.supply_v * self.config.motor.max_duty)
         {
-            self.reply_nack(seq, NackCode::BadArgument);
+            Answer::nack(NackCode::BadArgument)
         } else if !self.faults.latched().is_empty()
-            || self.calibration_status == CalibrationStatus::Invalid
+            || self.parameters_status == ParametersStatus::Invalid
         {
-            self.reply_nack(seq, NackCode::InFaultHold);
+            Answer::nack(NackCode::InFaultHold)
         } else if self.host_release || self.button_held {
-            self.reply_nack(seq, NackCode::Busy);
+            Answer::nack(NackCode::Busy)
         } else {
             self.open_loop_volts = Some(volts);
-            self.ack(seq);
+            Answer::Now(Reply::Ack)
         }
     }
 
-    fn release(&mut self, seq: u16, on: bool, target_hz: f32) {
+    fn release(&mut self, on: bool, target_hz: f32) -> Answer {
         if !on {
+            // Off stops every drive, an open-loop one included.
             self.host_release = false;
-            self.ack(seq);
-            return;
+            self.open_loop_volts = None;
+            return Answer::Now(Reply::Ack);
         }
         let s = self.config.supervisor;
         if !(target_hz.is_finite() && (s.min_freq_hz..=s.max_freq_hz).contains(&target_hz)) {
-            self.reply_nack(seq, NackCode::BadArgument);
+            Answer::nack(NackCode::BadArgument)
         } else if !self.faults.latched().is_empty()
-            || self.calibration_status == CalibrationStatus::Invalid
+            || self.parameters_status == ParametersStatus::Invalid
         {
-            self.reply_nack(seq, NackCode::InFaultHold);
+            Answer::nack(NackCode::InFaultHold)
         } else if self.open_loop_volts.is_some() {
-            self.reply_nack(seq, NackCode::Busy);
+            Answer::nack(NackCode::Busy)
         } else {
             self.host_release = true;
-            // Within the allowed range but above the calibration's limit: clamped.
+            // Within the allowed range but above the parameters' limit: clamped.
             self.host_target_hz = target_hz.min(self.derived.max_hz);
-            self.ack(seq);
+            Answer::Now(Reply::Ack)
         }
     }
+}
+
+/// `text` cut to the string's capacity at a character boundary.
+fn truncated<const N: usize>(text: &str) -> heapless::String<N> {
+    let mut cut = text.len().min(N);
+    while !text.is_char_boundary(cut) {
+        cut -= 1;
+    }
+    let mut out = heapless::String::new();
+    // Cannot fail: `cut` bytes fit the capacity.
+    let _ = out.push_str(&text[..cut]);
+    out
 }
 
 #[cfg(test)]
@@ -226,5 +300,13 @@ mod tests {
             format!("{v}"),
             env!("CARGO_PKG_VERSION").split('-').next().unwrap()
         );
+    }
+
+    #[test]
+    fn long_names_are_cut_at_a_character() {
+        let s: heapless::String<4> = truncated("abcdef");
+        assert_eq!(s, "abcd");
+        let s: heapless::String<4> = truncated("abcé");
+        assert_eq!(s, "abc");
     }
 }

@@ -76,6 +76,11 @@ impl SpeedLoop {
         self.feed_forward = feed_forward;
     }
 
+    /// The bridge supply the feed-forward divides by, V (the measured bus voltage).
+    pub fn set_supply_v(&mut self, supply_v: f32) {
+        self.feed_forward.supply_v = supply_v;
+    }
+
     /// Restarts from the measured speed (a new spin-up). The duty starts at the
     /// feed-forward of that speed: enabling the bridge at zero duty on a coasting motor
     /// would short it (ke w / R = 10 A at 55 rad/s).

@@ -7,7 +7,7 @@
 //! 4   schema version u16      2   (STORAGE_SCHEMA)
 //! 6   payload length u16      2
 //! 8   sequence u32            4   (the newer record wins; wrapping compare)
-//! 12  calibration             68  (15 f32 and 4 u16 in protocol::Calibration's field order)
+//! 12  calibration             68  (15 f32 and 4 u16 in protocol::RigParameters's field order)
 //! 80  CRC-32/ISO-HDLC of 0..80 4
 //! 84  0xFF padding to 96
 //! 96  commit marker           16  (written last, in a separate write)
@@ -16,13 +16,13 @@
 //! Saving erases the slot that does not hold the newest record, writes the body, reads it
 //! back, then writes the commit marker. Power lost at any point leaves the previous record
 //! intact in the other slot; a slot without its commit marker is ignored. A committed
-//! record that fails its checks makes the load report [`CalibrationStatus::Invalid`] (with
+//! record that fails its checks makes the load report [`ParametersStatus::Invalid`] (with
 //! the paper's defaults) unless the other slot holds a good one.
 
 use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
-use protocol::{Calibration, CalibrationStatus};
+use protocol::{ParametersStatus, RigParameters};
 
 /// Layout version of the stored record; bump on any change to the layout above.
 pub const STORAGE_SCHEMA: u16 = 1;
@@ -54,16 +54,19 @@ pub enum StorageError {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Loaded {
     /// The calibration to use (the paper's when nothing valid is stored).
-    pub calibration: Calibration,
+    pub calibration: RigParameters,
     /// Where it came from.
-    pub status: CalibrationStatus,
+    pub status: ParametersStatus,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Slot {
     Empty,
     Corrupt,
-    Valid { seq: u32, calibration: Calibration },
+    Valid {
+        seq: u32,
+        calibration: RigParameters,
+    },
 }
 
 /// The calibration store on a flash region of at least two erase units.
@@ -71,14 +74,31 @@ enum Slot {
 pub struct CalibrationStore<F> {
     flash: F,
     newest: Option<(usize, u32)>,
+    ecc_error: fn() -> bool,
+}
+
+/// No ECC reporting: reads never raise ECC errors.
+fn no_ecc_error() -> bool {
+    false
 }
 
 impl<F: NorFlash> CalibrationStore<F> {
     /// A store on `flash` (offset 0 is the region's start).
     pub fn new(flash: F) -> Self {
+        Self::with_ecc_check(flash, no_ecc_error)
+    }
+
+    /// A store whose reads are checked for flash ECC errors: `ecc_error` returns (and
+    /// clears) whether a double-ECC error was raised since it was last called. On the
+    /// STM32G4 a double error in a torn program unit raises the NMI; the binary's NMI
+    /// handler recognises FLASH_ECCR.ECCD in the storage region, records it in a flag this
+    /// function takes, and returns, so boot does not hang: the slot being read counts as
+    /// corrupt and the other slot (or the defaults) is used.
+    pub fn with_ecc_check(flash: F, ecc_error: fn() -> bool) -> Self {
         Self {
             flash,
             newest: None,
+            ecc_error,
         }
     }
 
@@ -101,11 +121,10 @@ impl<F: NorFlash> CalibrationStore<F> {
 
     fn read_slot(&mut self, slot: usize) -> Slot {
         let mut record = [0u8; RECORD_LEN];
-        if self
-            .flash
-            .read(Self::slot_offset(slot), &mut record)
-            .is_err()
-        {
+        // A stale flag from before this read is not this slot's.
+        let _ = (self.ecc_error)();
+        let read = self.flash.read(Self::slot_offset(slot), &mut record);
+        if read.is_err() || (self.ecc_error)() {
             return Slot::Corrupt;
         }
         if record[COMMIT_AT..] != COMMIT {
@@ -136,14 +155,14 @@ impl<F: NorFlash> CalibrationStore<F> {
     pub fn load(&mut self) -> Loaded {
         self.newest = None;
         let defaults = |status| Loaded {
-            calibration: Calibration::paper(),
+            calibration: RigParameters::paper(),
             status,
         };
         if !self.fits() {
-            return defaults(CalibrationStatus::Invalid);
+            return defaults(ParametersStatus::Invalid);
         }
         let slots = [self.read_slot(0), self.read_slot(1)];
-        let mut best: Option<(usize, u32, Calibration)> = None;
+        let mut best: Option<(usize, u32, RigParameters)> = None;
         for (i, slot) in slots.iter().enumerate() {
             if let Slot::Valid { seq, calibration } = *slot {
                 let newer = best.is_none_or(|(_, b, _)| seq.wrapping_sub(b) as i32 > 0);
@@ -157,16 +176,16 @@ impl<F: NorFlash> CalibrationStore<F> {
                 self.newest = Some((slot, seq));
                 Loaded {
                     calibration,
-                    status: CalibrationStatus::Valid,
+                    status: ParametersStatus::Valid,
                 }
             }
-            None if slots.contains(&Slot::Corrupt) => defaults(CalibrationStatus::Invalid),
-            None => defaults(CalibrationStatus::Defaults),
+            None if slots.contains(&Slot::Corrupt) => defaults(ParametersStatus::Invalid),
+            None => defaults(ParametersStatus::Defaults),
         }
     }
 
     /// Stores `calibration` as the newest record (call [`CalibrationStore::load`] first).
-    pub fn save(&mut self, calibration: &Calibration) -> Result<(), StorageError> {
+    pub fn save(&mut self, calibration: &RigParameters) -> Result<(), StorageError> {
         if !self.fits() {
             return Err(StorageError::RegionTooSmall);
         }
@@ -202,7 +221,7 @@ impl<F: NorFlash> CalibrationStore<F> {
     }
 }
 
-fn encode(c: &Calibration, out: &mut [u8]) {
+fn encode(c: &RigParameters, out: &mut [u8]) {
     let floats = [
         c.c1_nmm_per_a,
         c.c2_nmm,
@@ -237,10 +256,10 @@ fn encode(c: &Calibration, out: &mut [u8]) {
     }
 }
 
-fn decode(b: &[u8]) -> Calibration {
+fn decode(b: &[u8]) -> RigParameters {
     let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
     let z = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
-    Calibration {
+    RigParameters {
         c1_nmm_per_a: f(0),
         c2_nmm: f(4),
         c3_nmm_s_per_rad: f(8),

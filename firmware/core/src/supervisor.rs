@@ -53,8 +53,12 @@ pub struct RevolutionCheck {
     pub required_no_load: f32,
     /// Eq. (10) at the largest release load.
     pub required_max_load: f32,
-    /// Largest release load.
+    /// Largest release load (the calibration's, at most the board's cap).
     pub max_load: f32,
+    /// The board's cap on the load while released (the gear's tooth strength) plus the
+    /// estimate's tolerance: above it `LOAD_LIMIT` rather than `OVERLOAD`, whatever the
+    /// calibration's `max_load`.
+    pub load_cap: f32,
 }
 
 /// The supervisor's state machine.
@@ -69,6 +73,7 @@ pub struct Supervisor {
     max_hz: f32,
     weak_count: u8,
     overload_count: u8,
+    load_limit_count: u8,
     settle_left: u8,
     open_loop: bool,
 }
@@ -86,6 +91,7 @@ impl Supervisor {
             max_hz,
             weak_count: 0,
             overload_count: 0,
+            load_limit_count: 0,
             settle_left: config.settle_revolutions,
             open_loop: false,
         }
@@ -121,6 +127,7 @@ impl Supervisor {
         if state == SupervisorState::Vibrating {
             self.weak_count = 0;
             self.overload_count = 0;
+            self.load_limit_count = 0;
             self.settle_left = self.config.settle_revolutions;
         }
     }
@@ -234,12 +241,21 @@ impl Supervisor {
         if r.tau_cam > self.config.jam_ratio * r.required_max_load {
             return FaultFlags::JAM;
         }
-        if r.tau_rot > r.max_load {
+        // Above the gear's strength, whatever this release allows: a few revolutions in a
+        // row, so one revolution of a transient (a frequency step) does not trip it.
+        if r.tau_rot > r.load_cap {
+            self.load_limit_count = self.load_limit_count.saturating_add(1);
+            if self.load_limit_count >= self.config.load_limit_revolutions {
+                return FaultFlags::LOAD_LIMIT;
+            }
+        } else if r.tau_rot > r.max_load {
+            self.load_limit_count = 0;
             self.overload_count = self.overload_count.saturating_add(1);
             if self.overload_count >= self.config.overload_revolutions {
                 return FaultFlags::OVERLOAD;
             }
         } else {
+            self.load_limit_count = 0;
             self.overload_count = 0;
         }
         // At a fixed voltage there is no frequency to raise.
@@ -284,6 +300,7 @@ mod tests {
             required_no_load: 0.0,
             required_max_load: 0.0535,
             max_load: 3.68,
+            load_cap: 5.0,
         }
     }
 
@@ -324,6 +341,17 @@ mod tests {
         s.settle_left = 0;
         assert!(s.on_revolution(&check(0.03, 2.0), 0).is_empty());
         assert_eq!(s.on_revolution(&check(0.06, 3.9), 0), FaultFlags::OVERLOAD);
+        // Above the board's cap (the gear's tooth strength) it is LOAD_LIMIT.
+        let mut s = vibrating();
+        s.settle_left = 0;
+        let above_cap = RevolutionCheck {
+            load_cap: 3.68,
+            ..check(0.06, 3.9)
+        };
+        for _ in 1..SupervisorConfig::default().load_limit_revolutions {
+            assert!(s.on_revolution(&above_cap, 0).is_empty());
+        }
+        assert_eq!(s.on_revolution(&above_cap, 0), FaultFlags::LOAD_LIMIT);
         assert_eq!(s.on_revolution(&check(0.2, 3.9), 0), FaultFlags::JAM);
         assert_eq!(
             s.on_revolution(&check(f32::NAN, 1.0), 0),

@@ -5,7 +5,8 @@
 //! leaves [`REPLY_RESERVE`] free, capture chunks also stop at [`CAPTURE_IN_FLIGHT`] bytes
 //! queued so telemetry and replies wait behind at most that much.
 
-use protocol::{DeviceMessage, MAX_DEVICE_FRAME_SIZE, encode_frame};
+use protocol::{MAX_DEVICE_FRAME_SIZE, encode_frame};
+use serde::Serialize;
 
 /// Queue size, bytes.
 pub const TX_QUEUE_LEN: usize = 1024;
@@ -58,17 +59,26 @@ impl TxQueue {
         self.dropped
     }
 
-    /// Encodes `msg` and queues it if it fits with `reserve` bytes to spare.
-    pub fn push(&mut self, msg: &DeviceMessage, reserve: usize) -> bool {
+    /// Counts a frame that was never offered (a stream sample superseded before framing).
+    pub fn note_dropped(&mut self) {
+        self.dropped = self.dropped.saturating_add(1);
+    }
+
+    /// Encodes `msg` (a [`protocol::DeviceMessage`], or a legacy message such as
+    /// [`protocol::LegacyV1Nack`]) and queues it if it fits with `reserve` bytes to spare.
+    pub fn push<M: Serialize + ?Sized>(&mut self, msg: &M, reserve: usize) -> bool {
         let seq = self.next_seq;
         self.next_seq = self.next_seq.wrapping_add(1);
         let mut scratch = [0u8; MAX_DEVICE_FRAME_SIZE];
         let fits = match encode_frame(seq, msg, &mut scratch) {
             Ok(frame) if frame.len() + reserve <= self.free() => {
-                for &b in frame {
-                    self.buf[(self.head + self.len) % TX_QUEUE_LEN] = b;
-                    self.len += 1;
-                }
+                // At most two contiguous copies: up to the ring's end, then from its start.
+                let tail = (self.head + self.len) % TX_QUEUE_LEN;
+                let first = frame.len().min(TX_QUEUE_LEN - tail);
+                let (a, b) = frame.split_at(first);
+                self.buf[tail..tail + first].copy_from_slice(a);
+                self.buf[..b.len()].copy_from_slice(b);
+                self.len += frame.len();
                 true
             }
             _ => false,
@@ -82,10 +92,10 @@ impl TxQueue {
     /// Moves queued bytes into `out`; returns how many.
     pub fn drain(&mut self, out: &mut [u8]) -> usize {
         let n = out.len().min(self.len);
-        for slot in &mut out[..n] {
-            *slot = self.buf[self.head];
-            self.head = (self.head + 1) % TX_QUEUE_LEN;
-        }
+        let first = n.min(TX_QUEUE_LEN - self.head);
+        out[..first].copy_from_slice(&self.buf[self.head..self.head + first]);
+        out[first..n].copy_from_slice(&self.buf[..n - first]);
+        self.head = (self.head + n) % TX_QUEUE_LEN;
         self.len -= n;
         n
     }
@@ -100,7 +110,7 @@ impl Default for TxQueue {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::{DeviceDeframer, Frame};
+    use protocol::{DeviceDeframer, DeviceMessage, Frame};
 
     #[test]
     fn frames_wrap_around_and_decode_in_order() {
@@ -109,7 +119,7 @@ mod tests {
         let mut got = Vec::new();
         let mut out = [0u8; 7];
         for round in 0..200u16 {
-            assert!(q.push(&DeviceMessage::Ack { seq: round }, 0));
+            assert!(q.push(&DeviceMessage::ack(round), 0));
             while q.len() > 20 {
                 let n = q.drain(&mut out);
                 d.push(&out[..n], |f| got.push(f.unwrap()));
@@ -122,7 +132,7 @@ mod tests {
         assert_eq!(got.len(), 200);
         for (k, Frame { seq, msg }) in got.into_iter().enumerate() {
             assert_eq!(seq, k as u16);
-            assert_eq!(msg, DeviceMessage::Ack { seq: k as u16 });
+            assert_eq!(msg, DeviceMessage::ack(k as u16));
         }
     }
 
@@ -130,7 +140,7 @@ mod tests {
     fn full_queue_drops_whole_frames_and_skips_their_seq() {
         let mut q = TxQueue::new();
         let mut pushed = 0;
-        while q.push(&DeviceMessage::Ack { seq: 1 }, 0) {
+        while q.push(&DeviceMessage::ack(1), 0) {
             pushed += 1;
         }
         assert_eq!(q.dropped(), 1);
@@ -141,7 +151,7 @@ mod tests {
         let mut seqs = Vec::new();
         d.push(&out[..n], |f| seqs.push(f.unwrap().seq));
         assert_eq!(seqs.len(), pushed);
-        assert!(q.push(&DeviceMessage::Ack { seq: 1 }, 0));
+        assert!(q.push(&DeviceMessage::ack(1), 0));
         let n = q.drain(&mut out);
         let mut last = None;
         d.push(&out[..n], |f| last = f.ok().map(|f| f.seq));

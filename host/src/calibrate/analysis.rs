@@ -6,8 +6,10 @@ use std::io::Write;
 
 use serde::Serialize;
 
+use rigfile::{FitSection, paper_units};
+
 use super::fit::{Estimate, LineFit};
-use super::{Measurements, StepMeasurement, TABLE2};
+use super::{Measurements, StepMeasurement};
 use crate::RigError;
 
 /// A constant against the paper's.
@@ -36,21 +38,12 @@ pub struct Consistency {
     pub agree: bool,
 }
 
-/// The fitted calibration and its statistics.
+/// The fitted calibration (the model's [`model::Calibration`]) and the fits' statistics.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CalibrationResult {
-    /// C1, N mm/A.
-    pub c1: f64,
-    /// C2, N mm.
-    pub c2: f64,
-    /// C3 = C1 C5, N mm s/rad.
-    pub c3: f64,
-    /// C4 = C1 C6 + C2, N mm.
-    pub c4: f64,
-    /// C5, A s/rad.
-    pub c5: f64,
-    /// C6, A.
-    pub c6: f64,
+    /// C1-C6 (SI inside; `c1`..`c6` in the paper's units at the top level of the JSON).
+    #[serde(flatten, serialize_with = "paper_units::serialize")]
+    pub calibration: model::Calibration,
     /// Torque against current: slope C1, intercept C2.
     pub torque_fit: LineFit,
     /// No-load current against cam speed: slope C5, intercept C6.
@@ -69,26 +62,54 @@ pub struct CalibrationResult {
 impl CalibrationResult {
     /// C1..C6 in the paper's units.
     pub fn constants(&self) -> [f64; 6] {
-        [self.c1, self.c2, self.c3, self.c4, self.c5, self.c6]
+        paper_units::to_paper(&self.calibration)
     }
 
     /// The constants in SI.
     pub fn to_model(&self) -> model::Calibration {
-        model::Calibration::from_paper_units(self.constants())
+        self.calibration
     }
 
     /// `base` with C1..C6 replaced by these.
-    pub fn apply_to(&self, base: &protocol::Calibration) -> protocol::Calibration {
-        protocol::Calibration {
-            c1_nmm_per_a: self.c1 as f32,
-            c2_nmm: self.c2 as f32,
-            c3_nmm_s_per_rad: self.c3 as f32,
-            c4_nmm: self.c4 as f32,
-            c5_a_s_per_rad: self.c5 as f32,
-            c6_a: self.c6 as f32,
-            ..*base
+    pub fn apply_to(&self, base: &protocol::RigParameters) -> protocol::RigParameters {
+        rigfile::wire::with_constants(base, &self.calibration)
+    }
+
+    /// The fit statistics as the rig file's `[calibration.fit]` (paper units, rounded to
+    /// the digits that carry information).
+    pub fn fit_section(&self) -> FitSection {
+        let r = |v: f64| significant(v, 8);
+        let ci = |v: [f64; 2]| v.map(|x| significant(x, 8));
+        FitSection {
+            torque_points: self.torque_fit.n as u32,
+            torque_r_squared: r(self.torque_fit.r_squared),
+            torque_residual_sd_nmm: r(self.torque_fit.residual_sd),
+            no_load_points: self.no_load_fit.n as u32,
+            no_load_r_squared: r(self.no_load_fit.r_squared),
+            no_load_residual_sd_a: r(self.no_load_fit.residual_sd),
+            ci95: [
+                self.torque_fit.slope_ci95,
+                self.torque_fit.intercept_ci95,
+                self.consistency.c3_derived.ci95,
+                self.consistency.c4_derived.ci95,
+                self.no_load_fit.slope_ci95,
+                self.no_load_fit.intercept_ci95,
+            ]
+            .map(ci),
+            loss_direct: [self.consistency.c3_direct, self.consistency.c4_direct].map(r),
+            consistent: self.consistency.agree,
         }
     }
+}
+
+/// `v` rounded to `digits` significant digits.
+fn significant(v: f64, digits: usize) -> f64 {
+    if !v.is_finite() || v == 0.0 {
+        return v;
+    }
+    format!("{v:.*e}", digits.saturating_sub(1))
+        .parse()
+        .unwrap_or(v)
 }
 
 /// Below this mean speed a no-load point counts as stalled (the motor did not break away).
@@ -157,18 +178,14 @@ pub fn analyse(m: &Measurements) -> Result<CalibrationResult, RigError> {
         agree: within(&c3, loss_fit.slope) && within(&c4, loss_fit.intercept),
     };
     let constants = [c1, c2, c3.value, c4.value, c5, c6];
+    let table2 = paper_units::table2();
     let versus_paper = std::array::from_fn(|k| VersusPaper {
         measured: constants[k],
-        paper: TABLE2[k],
-        rel_error: (constants[k] - TABLE2[k]) / TABLE2[k].abs(),
+        paper: table2[k],
+        rel_error: (constants[k] - table2[k]) / table2[k].abs(),
     });
     Ok(CalibrationResult {
-        c1,
-        c2,
-        c3: c3.value,
-        c4: c4.value,
-        c5,
-        c6,
+        calibration: paper_units::from_paper(constants),
         torque_fit,
         no_load_fit,
         loss_fit,
@@ -227,7 +244,7 @@ mod tests {
     /// Points exactly on Table 2's lines give Table 2 back (C3, C4 derived).
     #[test]
     fn table2_lines_give_table2() {
-        let c = TABLE2;
+        let c = paper_units::table2();
         let no_load = (0..10)
             .map(|k| {
                 let w = 1.0 + f64::from(k);
@@ -244,13 +261,14 @@ mod tests {
             })
             .collect();
         let r = analyse(&Measurements { no_load, torque }).unwrap();
-        assert!((r.c1 - 62.1).abs() < 1e-9 && (r.c2 + 138.0).abs() < 1e-9);
-        assert!((r.c3 - 62.1 * 0.00378).abs() < 1e-9);
-        assert!((r.c4 - (62.1 * 2.25 - 138.0)).abs() < 1e-9);
+        let [c1, c2, c3, c4, ..] = r.constants();
+        assert!((c1 - 62.1).abs() < 1e-9 && (c2 + 138.0).abs() < 1e-9);
+        assert!((c3 - 62.1 * 0.00378).abs() < 1e-9);
+        assert!((c4 - (62.1 * 2.25 - 138.0)).abs() < 1e-9);
         assert!(r.consistency.agree);
         assert!((r.torque_fit.r_squared - 1.0).abs() < 1e-12);
         assert_eq!(r.stalled_points, 0);
-        let cal = r.apply_to(&protocol::Calibration::paper());
+        let cal = r.apply_to(&protocol::RigParameters::paper());
         assert_eq!(cal.validate(), Ok(()));
     }
 

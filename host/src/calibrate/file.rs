@@ -1,241 +1,121 @@
-//! The calibration file: TOML with the device's calibration record in the paper's units
-//! (the field names of [`protocol::Calibration`]), written by `rig calibrate` and
-//! `rig calibration get`, read by `rig calibration set`.
-//!
-//! Every field is optional when reading: a missing one keeps the device's value. Unknown
-//! keys are errors (a typo must not pass silently). A `[fit]` table (the statistics
-//! `rig calibrate` writes) is kept for the reader and ignored when setting.
+//! The calibration as a file: the rig file (`docs/rig-file.md`), written by `rig calibrate`
+//! and `rig calibration get`, read by `rig calibration set`. The older flat calibration file
+//! (`c1_nmm_per_a = ...`) still loads. Conversions to and from the device's record are
+//! [`rigfile::wire`]'s.
 
 use std::path::Path;
 
-use protocol::Calibration;
-use serde::Deserialize;
+use rigfile::{Loaded, RigFile, RigFileError};
 
 use crate::RigError;
 
-/// The file's fields, each optional.
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CalibrationFile {
-    c1_nmm_per_a: Option<f32>,
-    c2_nmm: Option<f32>,
-    c3_nmm_s_per_rad: Option<f32>,
-    c4_nmm: Option<f32>,
-    c5_a_s_per_rad: Option<f32>,
-    c6_a: Option<f32>,
-    z: Option<[u16; 4]>,
-    module_mm: Option<f32>,
-    pressure_angle_deg: Option<f32>,
-    eccentricity_mm: Option<f32>,
-    carrier_mass_kg: Option<f32>,
-    mu_s: Option<f32>,
-    mu_d: Option<f32>,
-    max_release_load_nm: Option<f32>,
-    max_current_a: Option<f32>,
-    max_freq_hz: Option<f32>,
-    #[allow(dead_code)]
-    fit: Option<toml::Value>,
-}
-
-/// A calibration read from a file, on top of a base record.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ParsedCalibration {
-    /// The resulting record (validated).
-    pub calibration: Calibration,
-    /// The fields the file set.
-    pub set_fields: Vec<&'static str>,
-}
-
-/// What a field must be, for messages.
-fn rule(field: &str) -> &'static str {
-    match field {
-        "c1_nmm_per_a" => "a positive number (N mm/A; the paper's is 62.1)",
-        "c2_nmm" | "c4_nmm" => "a finite number (N mm)",
-        "c3_nmm_s_per_rad" | "c5_a_s_per_rad" | "c6_a" => "zero or positive",
-        "z" => "four tooth counts of at least 4 with Z1 Z3 != Z2 Z4, e.g. [49, 51, 50, 50]",
-        "pressure_angle_deg" => "between 0 and 45 degrees (standard gears: 20)",
-        "mu_s" => "between 0 and 1",
-        "mu_d" => "positive and not above mu_s",
-        _ => "a positive number",
+/// A rig file's problem as a calibration-file error (whose message adds that nothing was
+/// written to the device).
+fn for_device(file: &str, e: RigFileError) -> RigError {
+    match e {
+        RigFileError::RigFile { why, .. } => RigError::CalibrationFile {
+            file: file.to_owned(),
+            why,
+        },
+        other => RigError::CalibrationFile {
+            file: file.to_owned(),
+            why: other.to_string(),
+        },
     }
 }
 
-/// Reads calibration file `path`, filling fields it does not set from `base`.
-pub fn read(path: &Path, base: &Calibration) -> Result<ParsedCalibration, RigError> {
+/// Parses rig-file text (named `file` in messages) for `rig calibration set`: every key the
+/// device carries comes from the file or, left out, from the defaults (the paper's values).
+/// A file that sets none of them is refused.
+pub fn parse(text: &str, file: &str) -> Result<Loaded, RigError> {
+    let loaded = RigFile::parse_detailed(text, file).map_err(|e| for_device(file, e))?;
+    if loaded.set_on_device().is_empty() {
+        return Err(RigError::CalibrationFile {
+            file: file.to_owned(),
+            why: "it sets no calibration field (expected a rig file with sections such as [calibration] c1 = 62.1, see docs/rig-file.md; `rig calibration get FILE` writes a complete example)".into(),
+        });
+    }
+    loaded.rig.to_wire().map_err(|e| for_device(file, e))?;
+    Ok(loaded)
+}
+
+/// Reads calibration file `path` (see [`parse`]).
+pub fn read(path: &Path) -> Result<Loaded, RigError> {
     let name = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| RigError::CalibrationFile {
         file: name.clone(),
         why: format!("cannot read it ({e})"),
     })?;
-    parse(&text, &name, base)
+    parse(&text, &name)
 }
 
-/// Parses calibration TOML `text` (named `file` in messages) on top of `base`.
-pub fn parse(text: &str, file: &str, base: &Calibration) -> Result<ParsedCalibration, RigError> {
-    let bad = |why: String| RigError::CalibrationFile {
-        file: file.to_owned(),
-        why,
-    };
-    let f: CalibrationFile = toml::from_str(text).map_err(|e| {
-        let msg = e.message().to_owned();
-        let at = e
-            .span()
-            .map(|s| {
-                let line = text[..s.start.min(text.len())].matches('\n').count() + 1;
-                format!("line {line}: ")
-            })
-            .unwrap_or_default();
-        bad(format!("{at}{msg}"))
-    })?;
-    let mut cal = *base;
-    let mut set = Vec::new();
-    macro_rules! take {
-        ($($field:ident),*) => {$(
-            if let Some(v) = f.$field {
-                cal.$field = v;
-                set.push(stringify!($field));
-            }
-        )*};
-    }
-    take!(
-        c1_nmm_per_a,
-        c2_nmm,
-        c3_nmm_s_per_rad,
-        c4_nmm,
-        c5_a_s_per_rad,
-        c6_a,
-        z,
-        module_mm,
-        pressure_angle_deg,
-        eccentricity_mm,
-        carrier_mass_kg,
-        mu_s,
-        mu_d,
-        max_release_load_nm,
-        max_current_a,
-        max_freq_hz
-    );
-    if set.is_empty() {
-        return Err(bad(
-            "it sets no calibration field (expected keys such as c1_nmm_per_a = 62.1; `rig calibration get FILE` writes a complete example)".into(),
-        ));
-    }
-    if let Err(protocol::Error::InvalidCalibration { field }) = cal.validate() {
-        let value = if set.contains(&field) {
-            "is out of range"
-        } else {
-            "(kept from the device) is out of range with the file's other values"
-        };
-        return Err(bad(format!(
-            "`{field}` {value}: it must be {}",
-            rule(field)
-        )));
-    }
-    Ok(ParsedCalibration {
-        calibration: cal,
-        set_fields: set,
-    })
+/// What writing a device's record to a path does to the file there.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Target {
+    /// No file there: a new one.
+    New,
+    /// A rig file there: updated, what the device does not carry kept.
+    Updated,
+    /// A file there that is not a readable rig file: replaced.
+    Replaced {
+        /// Why it could not be read.
+        why: String,
+    },
 }
 
-fn num(v: f32) -> String {
-    if v.is_nan() {
-        "nan".into()
-    } else if v.is_infinite() {
-        if v > 0.0 { "inf".into() } else { "-inf".into() }
-    } else {
-        format!("{v:?}")
+/// The rig file to write for the device's record `record` at `path`: the rig file already
+/// there (its calibration temperature, `[model]` and other sections kept) with everything
+/// the record carries replaced, or a new one.
+pub fn for_record(record: &protocol::RigParameters, path: Option<&Path>) -> (RigFile, Target) {
+    match path.filter(|p| p.exists()).map(RigFile::load) {
+        Some(Ok(existing)) => (existing.with_wire(record), Target::Updated),
+        Some(Err(e)) => (
+            RigFile::from_wire(record),
+            Target::Replaced { why: e.to_string() },
+        ),
+        None => (RigFile::from_wire(record), Target::New),
     }
-}
-
-/// The calibration as a commented TOML document; `fit` (already TOML) is appended as the
-/// `[fit]` table when given.
-pub fn to_toml(cal: &Calibration, header: &str, fit: Option<&str>) -> String {
-    let z = cal.z.map(|v| v.to_string()).join(", ");
-    let mut s = String::new();
-    for line in header.lines() {
-        s.push_str(&format!("# {line}\n"));
-    }
-    s.push_str(&format!(
-        "# Units as in the paper's Table 2. `rig calibration set FILE` writes it to the device;\n\
-         # keys left out keep the device's values.\n\
-         \n\
-         # Vibrator, Eqs. (15)-(17)\n\
-         c1_nmm_per_a = {}        # C1: |tau_cam| = C1 i_in + C2\n\
-         c2_nmm = {}\n\
-         c3_nmm_s_per_rad = {}    # C3: |tau_loss| = C3 w_n + C4\n\
-         c4_nmm = {}\n\
-         c5_a_s_per_rad = {}      # C5: |i_loss| = C5 w_n + C6\n\
-         c6_a = {}\n\
-         \n\
-         # Gear and carrier\n\
-         z = [{z}]                 # Z1 (fixed), Z2, Z3 (planet), Z4 (output)\n\
-         module_mm = {}\n\
-         pressure_angle_deg = {}\n\
-         eccentricity_mm = {}\n\
-         carrier_mass_kg = {}\n\
-         mu_s = {}\n\
-         mu_d = {}\n\
-         \n\
-         # Limits the firmware enforces\n\
-         max_release_load_nm = {}\n\
-         max_current_a = {}\n\
-         max_freq_hz = {}\n",
-        num(cal.c1_nmm_per_a),
-        num(cal.c2_nmm),
-        num(cal.c3_nmm_s_per_rad),
-        num(cal.c4_nmm),
-        num(cal.c5_a_s_per_rad),
-        num(cal.c6_a),
-        num(cal.module_mm),
-        num(cal.pressure_angle_deg),
-        num(cal.eccentricity_mm),
-        num(cal.carrier_mass_kg),
-        num(cal.mu_s),
-        num(cal.mu_d),
-        num(cal.max_release_load_nm),
-        num(cal.max_current_a),
-        num(cal.max_freq_hz),
-    ));
-    if let Some(fit) = fit {
-        s.push_str("\n# How rig calibrate got these values (ignored when setting)\n[fit]\n");
-        s.push_str(fit);
-        if !fit.ends_with('\n') {
-            s.push('\n');
-        }
-    }
-    s
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use protocol::RigParameters as Calibration;
 
     #[test]
     fn round_trip_keeps_every_field() {
         let mut cal = Calibration::paper();
         cal.c4_nmm = -0.5;
-        let text = to_toml(&cal, "test", Some("r2 = 0.99\n"));
-        let base = Calibration {
-            c1_nmm_per_a: 1.0,
-            ..Calibration::paper()
-        };
-        let parsed = parse(&text, "t.toml", &base).unwrap();
-        assert_eq!(parsed.calibration, cal);
-        assert_eq!(parsed.set_fields.len(), 16);
+        let text = RigFile::from_wire(&cal)
+            .to_toml_with_comment("test")
+            .unwrap();
+        let parsed = parse(&text, "t.toml").unwrap();
+        assert_eq!(parsed.rig.to_wire().unwrap(), cal);
+        assert_eq!(parsed.set_on_device().len(), 16);
+        assert!(parsed.defaulted().is_empty());
     }
 
     #[test]
-    fn partial_file_keeps_the_base() {
-        let p = parse("c1_nmm_per_a = 60\n", "t.toml", &Calibration::paper()).unwrap();
-        assert_eq!(p.calibration.c1_nmm_per_a, 60.0);
-        assert_eq!(p.calibration.c2_nmm, -138.0);
-        assert_eq!(p.set_fields, vec!["c1_nmm_per_a"]);
+    fn partial_file_takes_the_defaults() {
+        let p = parse("c1_nmm_per_a = 60\n", "t.toml").unwrap();
+        let cal = p.rig.to_wire().unwrap();
+        assert_eq!(cal.c1_nmm_per_a, 60.0);
+        assert_eq!(cal.c2_nmm, -138.0);
+        let set: Vec<_> = p.set_on_device().iter().map(|k| k.wire).collect();
+        assert_eq!(set, [Some("c1_nmm_per_a")]);
+        assert_eq!(p.defaulted().len(), 15);
+        let p = parse(
+            "[calibration]\nc1 = 60\n[limits]\nmax_freq_hz = 12\n",
+            "t.toml",
+        )
+        .unwrap();
+        let set: Vec<String> = p.set_on_device().iter().map(|k| k.path()).collect();
+        assert_eq!(set, ["[calibration] c1", "[limits] max_freq_hz"]);
     }
 
     #[test]
     fn malformed_files_say_what_is_wrong() {
-        let base = Calibration::paper();
-        let err = |text: &str| parse(text, "bad.toml", &base).unwrap_err().to_string();
+        let err = |text: &str| parse(text, "bad.toml").unwrap_err().to_string();
         let e = err("c1_nmm_per_a = \"lots\"\n");
         assert!(e.contains("bad.toml") && e.contains("line 1"), "{e}");
         let e = err("c7 = 1.0\n");
@@ -249,5 +129,42 @@ mod tests {
         assert!(e.contains("sets no calibration field"), "{e}");
         let e = err("z = [50, 50, 50, 50]\n");
         assert!(e.contains("`z`"), "{e}");
+        // The same mistakes in the rig file's own format.
+        let e = err("[calibration]\nc7 = 1.0\n");
+        assert!(e.contains("`c7`") && e.contains("[calibration]"), "{e}");
+        let e = err("[friction]\nmu_d = 0.5\n");
+        assert!(e.contains("[friction] `mu_d` is out of range"), "{e}");
+        // Sections the device does not carry alone set nothing.
+        let e = err("[model]\nmu = 0.2\n");
+        assert!(e.contains("sets no calibration field"), "{e}");
+    }
+
+    #[test]
+    fn an_existing_file_keeps_what_the_device_does_not_carry() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rig.toml");
+        let mut rig = RigFile::paper().with_model(0.25, Vec::new());
+        rig.calibration.temperature_c = 31.0;
+        let mut notes = toml::Table::new();
+        notes.insert("who".into(), toml::Value::String("kept".into()));
+        rig.extra.insert("notes".into(), toml::Value::Table(notes));
+        rig.save(&path).unwrap();
+        let record = Calibration {
+            max_freq_hz: 12.0,
+            ..Calibration::paper()
+        };
+        let (updated, target) = for_record(&record, Some(&path));
+        assert_eq!(target, Target::Updated);
+        assert_eq!(updated.to_wire().unwrap(), record);
+        assert_eq!(updated.calibration.temperature_c, 31.0);
+        assert_eq!(updated.model, rig.model);
+        assert_eq!(updated.extra, rig.extra);
+        let (fresh, target) = for_record(&record, Some(&dir.path().join("new.toml")));
+        assert_eq!(target, Target::New);
+        assert_eq!(fresh, RigFile::from_wire(&record));
+        std::fs::write(&path, "not = [toml\n").unwrap();
+        let (fresh, target) = for_record(&record, Some(&path));
+        assert!(matches!(target, Target::Replaced { .. }), "{target:?}");
+        assert_eq!(fresh, RigFile::from_wire(&record));
     }
 }

@@ -51,12 +51,18 @@ fn span(v: impl Iterator<Item = f64>, include_zero: bool) -> (f64, f64) {
 }
 
 /// Draws `plot` into the SVG file `path`: the data with the fit above, residuals below.
+/// Written atomically: a failed drawing leaves an existing `path` untouched.
 pub fn draw(path: &Path, plot: &FitPlot<'_>) -> Result<(), RigError> {
+    reporting::write_atomic_with(path, |tmp| draw_into(tmp, path, plot))
+}
+
+/// Draws into file `target`; errors name `path`.
+fn draw_into(target: &Path, path: &Path, plot: &FitPlot<'_>) -> Result<(), RigError> {
     let err = |e: &dyn std::fmt::Display| RigError::Plot {
         path: path.display().to_string(),
         why: e.to_string(),
     };
-    let root = SVGBackend::new(path, (640, 560)).into_drawing_area();
+    let root = SVGBackend::new(target, (640, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let root = root
         .titled(plot.title, ("sans-serif", 18))

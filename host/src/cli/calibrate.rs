@@ -1,10 +1,13 @@
 //! `rig calibrate`: the paper's vibrator calibration on the device (see
-//! [`crate::calibrate`]): measure, fit, report, plot, write the TOML file, and write the
-//! constants to the device after confirmation.
+//! [`crate::calibrate`]): measure, fit, report, plot, write the rig file
+//! (`docs/rig-file.md`: the device's record with the measured C1-C6 and the fit
+//! statistics), and write the constants to the device after confirmation. Every file is
+//! written atomically.
 
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::SystemTime;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -14,16 +17,15 @@ use super::connect::{DeviceOpts, Session, confirm};
 use crate::RigError;
 use crate::calibrate::bench::{OperatorBench, SimBench};
 use crate::calibrate::plot::{self, FitPlot};
-use crate::calibrate::{
-    self, Bench, CalibrationResult, Measurements, Plan, Progress, Setup, TABLE2, file,
-};
+use crate::calibrate::{self, Bench, CalibrationResult, Measurements, Plan, Progress, Setup};
+use rigfile::{RigFile, paper_units};
 
 /// Arguments of `rig calibrate`.
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
-    /// Folder for calibration.toml, the two fit plots (SVG) and the measured points (CSV).
-    #[arg(long, value_name = "DIR", default_value = "calibration")]
-    out: PathBuf,
+    /// Folder for calibration.toml (the rig file, docs/rig-file.md), the two fit plots (SVG) and the measured points (CSV) [default: report/calibrate-YYYYMMDDTHHMMSSZ, the start time in UTC].
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
     /// Gauge torques (N mm) from this CSV (a `gauge_nmm` column, one row per torque step)
     /// instead of typing them.
     #[arg(long, value_name = "FILE")]
@@ -73,7 +75,36 @@ pub struct CalibrateReport {
 }
 
 /// Units of C1..C6 as in Table 2.
-pub const UNITS: [&str; 6] = ["N mm/A", "N mm", "N mm s/rad", "N mm", "A s/rad", "A"];
+pub const UNITS: [&str; 6] = paper_units::UNITS;
+
+/// `time` in UTC as `YYYYMMDDTHHMMSSZ` (for folder names).
+fn utc_stamp(time: SystemTime) -> String {
+    let secs = time
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rest) = (secs / 86_400, secs % 86_400);
+    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm, proleptic Gregorian).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}{month:02}{day:02}T{:02}{:02}{:02}Z",
+        rest / 3600,
+        rest / 60 % 60,
+        rest % 60
+    )
+}
+
+/// The default output folder: `report/calibrate-<UTC time>`.
+pub fn default_out_dir(now: SystemTime) -> PathBuf {
+    Path::new("report").join(format!("calibrate-{}", utc_stamp(now)))
+}
 
 /// Runs `rig calibrate`.
 pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
@@ -84,10 +115,14 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         .as_deref()
         .map(|p| calibrate::read_gauge_csv(p, &plan))
         .transpose()?;
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| default_out_dir(SystemTime::now()));
     if !a.dry_run {
-        std::fs::create_dir_all(&a.out).map_err(|source| RigError::File {
+        std::fs::create_dir_all(&out).map_err(|source| RigError::File {
             action: "create folder",
-            path: a.out.display().to_string(),
+            path: out.display().to_string(),
             source,
         })?;
     }
@@ -131,7 +166,7 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         None
     } else {
         Some(write_files(
-            &a.out,
+            &out,
             &result,
             &measurements,
             &base,
@@ -206,57 +241,34 @@ fn progress_bar(plan: &Plan, json: bool) -> ProgressBar {
     bar
 }
 
-/// Writes calibration.toml, the two fit plots (SVG) and the measured points (CSV) into `dir`.
+/// Writes calibration.toml (the rig file: `base` with the measured C1-C6, and the fit
+/// statistics), the two fit plots (SVG) and the measured points (CSV) into `dir`, each
+/// atomically.
 pub fn write_files(
     dir: &Path,
     r: &CalibrationResult,
     m: &Measurements,
-    base: &protocol::Calibration,
+    base: &protocol::RigParameters,
     port: &str,
 ) -> Result<CalibrationFiles, RigError> {
-    let write = |path: &Path, bytes: &[u8]| {
-        std::fs::write(path, bytes).map_err(|source| RigError::File {
-            action: "write",
-            path: path.display().to_string(),
-            source,
-        })
-    };
     let toml_path = dir.join("calibration.toml");
-    let ci = |v: [f64; 2]| format!("[{:.6}, {:.6}]", v[0], v[1]);
-    let fit = format!(
-        "torque_points = {}\ntorque_r_squared = {:.8}\ntorque_residual_sd_nmm = {:.5}\nc1_ci95 = {}\nc2_ci95 = {}\n\
-         no_load_points = {}\nno_load_r_squared = {:.8}\nno_load_residual_sd_a = {:.6}\nc5_ci95 = {}\nc6_ci95 = {}\n\
-         c3_ci95 = {}\nc4_ci95 = {}\nc3_direct = {:.6}\nc4_direct = {:.6}\nconsistent = {}\n",
-        r.torque_fit.n,
-        r.torque_fit.r_squared,
-        r.torque_fit.residual_sd,
-        ci(r.torque_fit.slope_ci95),
-        ci(r.torque_fit.intercept_ci95),
-        r.no_load_fit.n,
-        r.no_load_fit.r_squared,
-        r.no_load_fit.residual_sd,
-        ci(r.no_load_fit.slope_ci95),
-        ci(r.no_load_fit.intercept_ci95),
-        ci(r.consistency.c3_derived.ci95),
-        ci(r.consistency.c4_derived.ci95),
-        r.consistency.c3_direct,
-        r.consistency.c4_direct,
-        r.consistency.agree,
-    );
-    let cal = r.apply_to(base);
-    let text = file::to_toml(
-        &cal,
-        &format!("Vibrator calibration measured by `rig calibrate` on {port}."),
-        Some(&fit),
-    );
-    write(&toml_path, text.as_bytes())?;
+    let mut rig = RigFile::from_wire(&r.apply_to(base));
+    rig.calibration.fit = Some(r.fit_section());
+    rig.save_with_comment(
+        &toml_path,
+        &format!(
+            "Vibrator calibration measured by `rig calibrate` on {port}.\n\
+             `rig calibration set FILE` writes it to the device, `rig explain --model FILE` uses it."
+        ),
+    )?;
     let points_path = dir.join("points.csv");
     let mut csv = Vec::new();
     calibrate::write_points_csv(m, &mut csv).map_err(|e| RigError::MeasuredFile {
         file: points_path.display().to_string(),
         why: e.to_string(),
     })?;
-    write(&points_path, &csv)?;
+    reporting::write_atomic(&points_path, &csv)?;
+    let table2 = paper_units::table2();
     let torque_plot = dir.join("torque_current.svg");
     let torque_points: Vec<(f64, f64)> = m
         .torque
@@ -271,7 +283,7 @@ pub fn write_files(
             y_label: "gauge torque, N mm",
             points: &torque_points,
             fit: &r.torque_fit,
-            reference: Some((TABLE2[0], TABLE2[1])),
+            reference: Some((table2[0], table2[1])),
         },
     )?;
     let no_load_plot = dir.join("no_load.svg");
@@ -289,7 +301,7 @@ pub fn write_files(
             y_label: "current, A",
             points: &no_load_points,
             fit: &r.no_load_fit,
-            reference: Some((TABLE2[4], TABLE2[5])),
+            reference: Some((table2[4], table2[5])),
         },
     )?;
     let s = |p: &Path| p.display().to_string();
@@ -379,4 +391,24 @@ fn print_text(
         None => {}
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::*;
+
+    #[test]
+    fn default_folder_is_under_report_and_named_by_utc_time() {
+        let at = |secs: u64| SystemTime::UNIX_EPOCH + Duration::from_secs(secs);
+        assert_eq!(utc_stamp(at(0)), "19700101T000000Z");
+        // 2000-02-29 12:34:56 UTC: a leap day in a century leap year.
+        assert_eq!(utc_stamp(at(951_827_696)), "20000229T123456Z");
+        assert_eq!(utc_stamp(at(1_735_689_599)), "20241231T235959Z");
+        assert_eq!(
+            default_out_dir(at(0)),
+            Path::new("report/calibrate-19700101T000000Z")
+        );
+    }
 }

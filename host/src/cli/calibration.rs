@@ -1,5 +1,6 @@
-//! `rig calibration get|set`: read the device's calibration into a TOML file, or write a
-//! TOML file to the device (checked first: a bad file changes nothing).
+//! `rig calibration get|set`: read the device's calibration record into a rig file
+//! (`docs/rig-file.md`), or send a rig file's record to the device (checked first: a bad
+//! file changes nothing). The older flat calibration file is read too.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -9,7 +10,8 @@ use clap::{Args, Subcommand};
 
 use super::connect::{DeviceOpts, confirm};
 use crate::RigError;
-use crate::calibrate::file;
+use crate::calibrate::file::{self, Target};
+use rigfile::{FileFormat, Loaded};
 
 /// Arguments of `rig calibration`.
 #[derive(Debug, Args)]
@@ -22,18 +24,18 @@ pub struct CalibrationArgs {
 /// `get` or `set`.
 #[derive(Debug, Subcommand)]
 pub enum CalibrationAction {
-    /// Print the device's calibration as TOML, or write it to FILE.
+    /// Print the device's calibration as a rig file (TOML), or write it to FILE.
     Get {
-        /// Write it here instead of printing it.
+        /// Write it here instead of printing it (a rig file already there keeps what the device does not carry: [model], the calibration temperature, other sections).
         file: Option<PathBuf>,
         /// Print JSON instead of TOML.
         #[arg(long)]
         json: bool,
     },
-    /// Write the calibration in FILE (TOML; keys left out keep the device's values) to the
-    /// device.
+    /// Write the calibration record in rig file FILE to the device: C1-C6, gear, cam,
+    /// friction and limits; keys left out take the paper's values (listed before writing).
     Set {
-        /// The calibration file (`rig calibration get FILE` writes an example).
+        /// The rig file (docs/rig-file.md; `rig calibration get FILE` writes an example), or an older calibration file.
         file: PathBuf,
         /// Write without asking.
         #[arg(long, short = 'y')]
@@ -56,21 +58,32 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                 writeln!(out)?;
                 return Ok(ExitCode::SUCCESS);
             }
-            let text = file::to_toml(
-                &cal,
-                &format!("Calibration read from the device on {}.", s.port()),
-                None,
-            );
+            let comment = format!("Calibration read from the device on {}.", s.port());
             match path {
                 Some(p) => {
-                    std::fs::write(&p, text).map_err(|source| RigError::File {
-                        action: "write",
-                        path: p.display().to_string(),
-                        source,
-                    })?;
-                    writeln!(out, "wrote {}", p.display())?;
+                    let (rig, target) = file::for_record(&cal, Some(&p));
+                    rig.save_with_comment(&p, &comment)?;
+                    match target {
+                        Target::New => writeln!(out, "wrote {}", p.display())?,
+                        Target::Updated => writeln!(
+                            out,
+                            "wrote {} (updated: what the device does not carry is kept)",
+                            p.display()
+                        )?,
+                        Target::Replaced { why } => writeln!(
+                            out,
+                            "wrote {} (replaced a file that was not a rig file: {why})",
+                            p.display()
+                        )?,
+                    }
                 }
-                None => write!(out, "{text}")?,
+                None => write!(
+                    out,
+                    "{}",
+                    file::for_record(&cal, None)
+                        .0
+                        .to_toml_with_comment(&comment)?
+                )?,
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -79,25 +92,32 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             yes,
             json,
         } => {
-            // A file that cannot even be parsed is refused before the device is opened.
-            let text = std::fs::read_to_string(&path).map_err(|e| RigError::CalibrationFile {
-                file: path.display().to_string(),
-                why: format!("cannot read it ({e})"),
-            })?;
-            let name = path.display().to_string();
-            file::parse(&text, &name, &protocol::Calibration::paper())?;
+            // A file that cannot be used is refused before the device is opened.
+            let loaded = file::read(&path)?;
+            let new = loaded.rig.to_wire()?;
+            board_precheck(&new, &path)?;
+            let defaulted = loaded.defaulted();
+            let defaulted_fields: Vec<&str> = defaulted.iter().filter_map(|k| k.wire).collect();
             let mut s = dev.connect()?;
             let current = s.client.calibration()?;
-            let parsed = file::parse(&text, &name, &current)?;
-            let new = parsed.calibration;
             let changes: Vec<String> = diff(&current, &new);
             let mut out = std::io::stdout().lock();
+            if !json && !defaulted.is_empty() {
+                writeln!(
+                    out,
+                    "not in {}, so the paper's values (docs/rig-file.md):",
+                    path.display()
+                )?;
+                for line in defaulted_lines(&loaded) {
+                    writeln!(out, "  {line}")?;
+                }
+            }
             if changes.is_empty() {
                 if json {
                     writeln!(
                         out,
                         "{}",
-                        serde_json::json!({ "changed": [], "written": false })
+                        serde_json::json!({ "changed": [], "written": false, "defaulted": defaulted_fields })
                     )?;
                 } else {
                     writeln!(
@@ -129,7 +149,12 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             if json {
                 serde_json::to_writer_pretty(
                     &mut out,
-                    &serde_json::json!({ "changed": changes, "written": true, "calibration": new }),
+                    &serde_json::json!({
+                        "changed": changes,
+                        "written": true,
+                        "calibration": new,
+                        "defaulted": defaulted_fields,
+                    }),
                 )?;
                 writeln!(out)?;
             } else {
@@ -140,10 +165,71 @@ pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     }
 }
 
-/// `field: old -> new` for every field that differs.
-fn diff(old: &protocol::Calibration, new: &protocol::Calibration) -> Vec<String> {
-    let a = serde_json::to_value(old).unwrap_or_default();
-    let b = serde_json::to_value(new).unwrap_or_default();
+/// The firmware's own rule for a new record (`firmware_core::check_rules`: the model's
+/// [`model::BoardLimits::check`] against the board's caps and [`model::Calibration::check`]
+/// against its motor), run before the device is opened, so a limit the board cannot honour
+/// or constants 36 times off Table 2 are refused here with the field named (the device
+/// refuses them too).
+fn board_precheck(
+    record: &protocol::RigParameters,
+    path: &std::path::Path,
+) -> Result<(), RigError> {
+    let config = firmware_core::CoreConfig::default();
+    let (caps, motor) = (config.board_limits(), config.motor.constants);
+    let Err(rejection) = firmware_core::check_rules(record, &caps, &motor) else {
+        return Ok(());
+    };
+    // The model's own wording: the value, the cap or plausible range, in the file's units.
+    let requested = model::BoardLimits {
+        max_release_load_nm: f64::from(record.max_release_load_nm),
+        max_current_a: f64::from(record.max_current_a),
+        max_freq_hz: f64::from(record.max_freq_hz),
+    };
+    let detail = match caps.check(&requested) {
+        Err(issue) => issue.to_string(),
+        Ok(()) => match model::Calibration::from_paper_units(record.constants()).check(&motor) {
+            Err(issue) => format!("{} ({issue})", rejection.field.name()),
+            Ok(()) => format!("{} {}", rejection.field.name(), rejection.reason.describe()),
+        },
+    };
+    Err(RigError::CalibrationFile {
+        file: path.display().to_string(),
+        why: format!("{detail}; the board's firmware refuses it"),
+    })
+}
+
+/// The keys `loaded` left at their defaults, one line per section, named as the file names
+/// them (`[gear] z = [49, 51, 50, 50], module_mm = 1.0`; flat keys for the older file).
+fn defaulted_lines(loaded: &Loaded) -> Vec<String> {
+    let flat = loaded.format == FileFormat::CalibrationFile;
+    let mut lines: Vec<(&str, Vec<String>)> = Vec::new();
+    for k in loaded.defaulted() {
+        let name = match k.wire {
+            Some(wire) if flat => wire,
+            _ => k.key,
+        };
+        let item = format!("{name} = {}", k.default);
+        match lines.last_mut() {
+            Some((section, items)) if *section == k.section => items.push(item),
+            _ => lines.push((k.section, vec![item])),
+        }
+    }
+    lines
+        .into_iter()
+        .map(|(section, items)| {
+            if flat {
+                items.join(", ")
+            } else {
+                format!("[{section}] {}", items.join(", "))
+            }
+        })
+        .collect()
+}
+
+/// `field: old -> new` for every field that differs (numbers as a person writes them).
+fn diff(old: &protocol::RigParameters, new: &protocol::RigParameters) -> Vec<String> {
+    let a = reporting::human_json(serde_json::to_value(old).unwrap_or_default());
+    let b = reporting::human_json(serde_json::to_value(new).unwrap_or_default());
     let (Some(a), Some(b)) = (a.as_object(), b.as_object()) else {
         return Vec::new();
     };

@@ -13,18 +13,20 @@ use serde::Serialize;
 
 use super::connect::{DeviceOpts, Session};
 use crate::client::{CAPTURE_RATE_HZ, Capture};
-use crate::{RigError, args};
+use crate::{RigError, args, limits};
 
 /// Arguments of `rig capture`.
 #[derive(Debug, Args)]
 pub struct CaptureArgs {
-    /// Length of the burst, seconds (the device's buffer holds 1 s at 10 kHz).
+    /// Length of the burst, seconds (the device's buffer holds 1 s at 10 kHz: a longer
+    /// burst records what fits, with a warning).
     #[arg(long, value_name = "S", default_value_t = 0.5, value_parser = args::positive, allow_hyphen_values = true)]
     seconds: f64,
     /// Write the samples to this CSV file.
     #[arg(long, value_name = "FILE")]
     csv: Option<PathBuf>,
-    /// Sample rate, Hz (the paper logged at 10 kHz; at least 100).
+    /// Sample rate, Hz (the paper logged at 10 kHz): 10 kHz divided by a whole number, at
+    /// least 100 (10000, 5000, 2500, 2000, 1250, 1000, ...).
     #[arg(long, value_name = "HZ", default_value_t = CAPTURE_RATE_HZ, value_parser = clap::value_parser!(u16).range(100..))]
     rate: u16,
     /// Vibrate at this frequency (Hz) during the burst: released first, locked after.
@@ -51,12 +53,15 @@ pub struct CaptureReport {
     pub mean_cam_speed_rad_s: Option<f64>,
     /// The CSV written.
     pub csv: Option<String>,
+    /// What the device did differently from what was asked (fewer samples than
+    /// `--seconds` asked for: its buffer is full at that).
+    pub warnings: Vec<String>,
 }
 
 /// Releases at `hz` and waits until the cam runs at speed (the supervisor says vibrating).
-fn spin_up(s: &mut Session, hz: f64) -> Result<(), RigError> {
+fn spin_up(s: &mut Session, hz: f32) -> Result<(), RigError> {
     s.client.start_telemetry(20)?;
-    s.client.release(true, hz as f32)?;
+    s.client.release(true, hz)?;
     let deadline = Instant::now() + Duration::from_secs_f64(5.0 / s.time_scale() + 2.0);
     let result = loop {
         if Instant::now() > deadline {
@@ -83,30 +88,16 @@ fn spin_up(s: &mut Session, hz: f64) -> Result<(), RigError> {
     result
 }
 
-/// Runs `rig capture`.
-pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
-    let samples = (a.seconds * f64::from(a.rate)).round().max(1.0);
-    if samples > f64::from(u32::MAX) {
-        return Err(RigError::BadValue {
-            what: format!("--seconds {}", a.seconds),
-            why: "too long for one capture: the device's buffer holds about 1 s".into(),
-        });
-    }
-    // Create the file first, so a bad path fails before the device records anything.
-    let file = match &a.csv {
-        Some(path) => Some(File::create(path).map_err(|source| RigError::File {
-            action: "create",
-            path: path.display().to_string(),
-            source,
-        })?),
-        None => None,
-    };
+/// Records the burst on the device (released at `--release` first, locked after).
+fn record(a: &CaptureArgs, dev: &DeviceOpts, samples: u32) -> Result<Capture, RigError> {
     let mut s = dev.connect()?;
     let show = !a.json && std::io::stderr().is_terminal();
     if let Some(hz) = a.release {
+        // The firmware would drive a frequency above the calibration's maximum at that maximum.
+        let hz = limits::check_release_freq("--release", hz, &s.client.calibration()?)?;
         spin_up(&mut s, hz)?;
     }
-    let captured = s.client.capture(a.rate, samples as u32, |p| {
+    let captured = s.client.capture(a.rate, samples, |p| {
         if show {
             eprint!("\ruploading {} / {} samples", p.received, p.total);
         }
@@ -118,39 +109,114 @@ pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     if show {
         eprintln!();
     }
-    if let (Some(file), Some(path)) = (file, &a.csv) {
-        capture
-            .write_csv(std::io::BufWriter::new(file))
-            .map_err(|e| RigError::MeasuredFile {
-                file: path.display().to_string(),
-                why: format!("cannot write the capture: {e}"),
-            })?;
+    Ok(capture)
+}
+
+/// The number of samples `--seconds` at `--rate` asks for, or the error naming the range.
+fn samples_asked(a: &CaptureArgs) -> Result<u32, RigError> {
+    limits::check_capture_rate("--rate", a.rate)?;
+    let rate = f64::from(a.rate);
+    let samples = (a.seconds * rate).round();
+    if samples < 1.0 {
+        return Err(RigError::BadValue {
+            what: format!("--seconds {}", a.seconds),
+            why: format!(
+                "shorter than one sample at {} Hz: give at least {} s",
+                a.rate,
+                1.0 / rate
+            ),
+        });
     }
+    if samples > f64::from(u32::MAX) {
+        return Err(RigError::BadValue {
+            what: format!("--seconds {}", a.seconds),
+            why: format!(
+                "too long for one capture: the device's buffer holds {} samples ({} s at {} Hz)",
+                limits::capture_capacity(),
+                f64::from(limits::capture_capacity()) / rate,
+                a.rate
+            ),
+        });
+    }
+    Ok(samples as u32)
+}
+
+/// What the device did differently from what was asked, one sentence each.
+fn warnings(a: &CaptureArgs, c: &Capture) -> Vec<String> {
+    let mut w = Vec::new();
+    if c.total_samples < c.requested {
+        w.push(format!(
+            "the device recorded {} of the {} samples asked for (--seconds {}): its buffer holds {} samples, {} s at {} Hz",
+            c.total_samples,
+            c.requested,
+            a.seconds,
+            limits::capture_capacity(),
+            f64::from(limits::capture_capacity()) / f64::from(c.sample_rate_hz.max(1)),
+            c.sample_rate_hz
+        ));
+    }
+    if c.sample_rate_hz != a.rate {
+        w.push(format!(
+            "the device recorded at {} Hz, not the {} Hz asked for (--rate): the CSV's t_s column uses {} Hz",
+            c.sample_rate_hz, a.rate, c.sample_rate_hz
+        ));
+    }
+    w
+}
+
+/// Runs `rig capture`.
+pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    let samples = samples_asked(&a)?;
+    let capture = match &a.csv {
+        // Atomically: the file is created (beside the target) before the device records,
+        // so a bad path fails first, and an existing file is replaced only by a full capture.
+        Some(path) => {
+            let mut recorded = None;
+            reporting::write_atomic_with(path, |tmp| -> Result<(), RigError> {
+                let file = File::create(tmp).map_err(|source| RigError::File {
+                    action: "create",
+                    path: path.display().to_string(),
+                    source,
+                })?;
+                let capture = record(&a, dev, samples)?;
+                capture
+                    .write_csv(std::io::BufWriter::new(file))
+                    .map_err(|e| RigError::MeasuredFile {
+                        file: path.display().to_string(),
+                        why: format!("cannot write the capture: {e}"),
+                    })?;
+                recorded = Some(capture);
+                Ok(())
+            })?;
+            recorded.ok_or_else(|| RigError::Protocol("the capture was not recorded".into()))?
+        }
+        None => record(&a, dev, samples)?,
+    };
     let report = CaptureReport {
         received: capture.samples.len(),
         duration_s: capture.duration_s(),
         mean_current_a: capture.mean_current_a(),
         mean_cam_speed_rad_s: capture.mean_cam_speed_rad_s(),
         csv: a.csv.as_ref().map(|p| p.display().to_string()),
+        warnings: warnings(&a, &capture),
         capture,
     };
     let c = &report.capture;
     let mut out = std::io::stdout().lock();
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
+        super::print_json(&mut out, &report)?;
     } else {
         writeln!(
             out,
-            "capture {}: {} samples at {} Hz ({:.3} s), {} received",
-            c.capture_id, c.total_samples, c.sample_rate_hz, report.duration_s, report.received
+            "capture {}: {} samples at {} Hz ({} s), {} received",
+            c.capture_id,
+            c.total_samples,
+            c.sample_rate_hz,
+            reporting::human(report.duration_s),
+            report.received
         )?;
-        if c.total_samples < c.requested {
-            writeln!(
-                out,
-                "  the device recorded {} of the {} samples asked for (its buffer is full at that)",
-                c.total_samples, c.requested
-            )?;
+        for w in &report.warnings {
+            writeln!(out, "  warning: {w}")?;
         }
         if let (Some(i), Some(w)) = (report.mean_current_a, report.mean_cam_speed_rad_s) {
             writeln!(out, "  mean current {i:.3} A, mean cam speed {w:.2} rad/s")?;

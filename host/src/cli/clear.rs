@@ -23,8 +23,7 @@ pub fn run(a: ClearArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let f = s.client.clear_faults()?;
     let mut out = std::io::stdout().lock();
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &FaultsReport::from(f))?;
-        writeln!(out)?;
+        super::print_json(&mut out, &FaultsReport::from(f))?;
     } else if f.latched.is_empty() {
         writeln!(out, "faults cleared")?;
     } else {

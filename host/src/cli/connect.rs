@@ -1,34 +1,108 @@
-//! The global device options (`--port`, `--baud`, `--sim`, `--speed`) and the session the
-//! device verbs open with them.
+//! The device options (`--port`, `--baud`, `--sim`, `--speed`) as the command line takes
+//! them: before the verb ([`DeviceArgs`]) or after a device verb ([`VerbDeviceArgs`]).
+//! Only the verbs that use a device accept them; [`DeviceArgs::refuse_for`] is the error
+//! for the others. The resolved options and the session live in [`crate::connection`].
 
 use std::io::IsTerminal;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use clap::Args;
-use protocol::DeviceInfo;
 
 use crate::RigError;
-use crate::client::{Client, ClientOptions, SerialTransport, open_serial};
-use crate::device::VirtualDevice;
-use crate::ports;
+pub use crate::connection::{DeviceOpts, Session};
 
-/// Which device to talk to; global, so they go before or after the verb.
-#[derive(Debug, Clone, Args)]
-pub struct DeviceOpts {
-    /// Serial port of the rig, e.g. /dev/ttyACM0 (`rig ports` lists them). Without it:
-    /// $RIG_PORT, else the only ST-LINK port plugged in.
-    #[arg(long, global = true, value_name = "PORT", conflicts_with = "sim")]
-    pub port: Option<String>,
-    /// Baud rate of the serial port (the firmware's UART runs at 921600).
-    #[arg(long, global = true, value_name = "BAUD", default_value_t = protocol::DEFAULT_BAUD_RATE, value_parser = parse_baud)]
-    pub baud: u32,
-    /// Use the virtual device: the firmware core and a simulated rig on a pseudo-terminal.
-    #[arg(long, global = true)]
-    pub sim: bool,
-    /// With --sim: run the virtual device this many times faster than real time.
-    #[arg(long, global = true, value_name = "FACTOR", default_value_t = 1.0, value_parser = parse_speed)]
-    pub speed: f64,
+/// The verbs that use a device, for messages.
+pub const DEVICE_VERBS: &str =
+    "info, faults, clear, release, monitor, capture, calibrate, calibration, flash and demo";
+
+/// The device options as given on the command line (nothing defaulted), declared twice:
+/// before the verb (not global, so a verb without a device does not take them after its
+/// name) and on each device verb (global below it, so `rig calibration get --sim` works).
+macro_rules! device_args {
+    ($(#[$meta:meta])* $name:ident, global = $global:literal, heading = $heading:literal) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Default, Args)]
+        #[command(next_help_heading = $heading)]
+        pub struct $name {
+            /// Serial port of the rig, e.g. /dev/ttyACM0 (`rig ports` lists them). Without it:
+            /// $RIG_PORT, else the only ST-LINK port plugged in.
+            #[arg(long, global = $global, value_name = "PORT", conflicts_with = "sim")]
+            pub port: Option<String>,
+            /// Baud rate of the serial port [default: 921600, the firmware's UART].
+            #[arg(long, global = $global, value_name = "BAUD", value_parser = parse_baud)]
+            pub baud: Option<u32>,
+            /// Use the virtual device: the firmware core and a simulated rig on a pseudo-terminal.
+            #[arg(long, global = $global)]
+            pub sim: bool,
+            /// With --sim: run the virtual device this many times faster than real time [default: 1].
+            #[arg(long, global = $global, value_name = "FACTOR", value_parser = parse_speed)]
+            pub speed: Option<f64>,
+        }
+
+        impl $name {
+            /// The options given, by their command-line names.
+            pub fn given(&self) -> Vec<&'static str> {
+                [
+                    ("--port", self.port.is_some()),
+                    ("--baud", self.baud.is_some()),
+                    ("--sim", self.sim),
+                    ("--speed", self.speed.is_some()),
+                ]
+                .into_iter()
+                .filter_map(|(name, given)| given.then_some(name))
+                .collect()
+            }
+        }
+    };
+}
+
+device_args!(
+    /// Device options before the verb: `rig --sim info`. Device verbs only.
+    DeviceArgs,
+    global = false,
+    heading = "Device options (for info, faults, clear, release, monitor, capture, calibrate, calibration, demo; also after the verb)"
+);
+device_args!(
+    /// Device options after a device verb: `rig info --sim`.
+    VerbDeviceArgs,
+    global = true,
+    heading = "Device options"
+);
+
+impl DeviceArgs {
+    /// The error for device options given to `verb`, which uses no device (`Ok` when none
+    /// were given). `$RIG_PORT` is not an option: it is read only when a device is opened.
+    pub fn refuse_for(&self, verb: &str) -> Result<(), RigError> {
+        match self.given().first() {
+            None => Ok(()),
+            Some(option) => Err(RigError::BadValue {
+                what: (*option).into(),
+                why: format!(
+                    "`rig {verb}` uses no device, so it takes no device options (--port, --baud, --sim, --speed); they go with {DEVICE_VERBS}"
+                ),
+            }),
+        }
+    }
+
+    /// The options of a device verb: those before it and those after it, defaults applied.
+    pub fn resolve(&self, after: &VerbDeviceArgs) -> Result<DeviceOpts, RigError> {
+        let port = after.port.clone().or_else(|| self.port.clone());
+        let sim = self.sim || after.sim;
+        if sim && port.is_some() {
+            return Err(RigError::BadValue {
+                what: "--port".into(),
+                why: "cannot be used with --sim (the virtual device opens its own port): give one of them".into(),
+            });
+        }
+        let defaults = DeviceOpts::default();
+        Ok(DeviceOpts {
+            port,
+            baud: after.baud.or(self.baud).unwrap_or(defaults.baud),
+            sim,
+            speed: after.speed.or(self.speed).unwrap_or(defaults.speed),
+        })
+    }
 }
 
 /// Parses a baud rate.
@@ -53,89 +127,6 @@ pub fn parse_speed(s: &str) -> Result<f64, String> {
         _ => Err(format!(
             "'{s}' is not a speed factor: give a number above 0 and at most 1000 (1 = real time)"
         )),
-    }
-}
-
-/// An open session with the device, and the virtual device when `--sim` made one.
-pub struct Session {
-    /// The client, connected and version-checked.
-    pub client: Client<SerialTransport>,
-    /// What the device said at `Hello`.
-    pub info: DeviceInfo,
-    /// The virtual device (dropped after the client: fields drop in order).
-    pub device: Option<VirtualDevice>,
-}
-
-impl Session {
-    /// The port's name.
-    pub fn port(&self) -> &str {
-        &self.client.options().port_name
-    }
-
-    /// Device seconds per wall-clock second.
-    pub fn time_scale(&self) -> f64 {
-        self.client.options().time_scale
-    }
-}
-
-impl DeviceOpts {
-    /// The port to open (none for `--sim`).
-    pub fn resolve_port(&self) -> Result<String, RigError> {
-        if let Some(p) = &self.port {
-            return Ok(p.clone());
-        }
-        if let Ok(p) = std::env::var("RIG_PORT")
-            && !p.trim().is_empty()
-        {
-            return Ok(p.trim().to_owned());
-        }
-        let stlinks: Vec<_> = ports::list().into_iter().filter(|p| p.stlink).collect();
-        match stlinks.as_slice() {
-            [one] => Ok(one.port.clone()),
-            [] => Err(RigError::NoDevice),
-            many => Err(RigError::BadValue {
-                what: "--port".into(),
-                why: format!(
-                    "several ST-LINK ports are plugged in ({}): choose one with --port",
-                    many.iter()
-                        .map(|p| p.port.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            }),
-        }
-    }
-
-    /// Opens the device (starting the virtual one for `--sim`) and says `Hello`.
-    pub fn connect(&self) -> Result<Session, RigError> {
-        if !self.sim && self.speed != 1.0 {
-            return Err(RigError::BadValue {
-                what: format!("--speed {}", self.speed),
-                why: "only the virtual device can run faster: add --sim".into(),
-            });
-        }
-        let (device, port, name) = if self.sim {
-            let dev = VirtualDevice::paper(self.speed)?;
-            let port = dev.port_name().to_owned();
-            let name = format!("the virtual device ({port})");
-            (Some(dev), port, name)
-        } else {
-            let port = self.resolve_port()?;
-            (None, port.clone(), port)
-        };
-        let io = open_serial(&port, self.baud)?;
-        let mut opts = ClientOptions::new(name);
-        if self.sim {
-            opts.time_scale = self.speed;
-            // Pseudo-terminal bytes wait for a kernel worker: on a busy machine, long.
-            opts.reply_timeout = std::time::Duration::from_secs(1);
-        }
-        let (client, info) = Client::connect(io, opts)?;
-        Ok(Session {
-            client,
-            info,
-            device,
-        })
     }
 }
 
@@ -174,5 +165,34 @@ mod tests {
         assert_eq!(parse_speed("20"), Ok(20.0));
         assert!(parse_speed("0").is_err());
         assert!(parse_speed("nan").is_err());
+    }
+
+    #[test]
+    fn options_before_and_after_the_verb_merge() {
+        let before = DeviceArgs {
+            sim: true,
+            ..Default::default()
+        };
+        let after = VerbDeviceArgs {
+            speed: Some(5.0),
+            ..Default::default()
+        };
+        let d = before.resolve(&after).unwrap();
+        assert!(d.sim && d.speed == 5.0 && d.baud == protocol::DEFAULT_BAUD_RATE);
+        let after = VerbDeviceArgs {
+            port: Some("/dev/ttyACM0".into()),
+            ..Default::default()
+        };
+        let e = before.resolve(&after).unwrap_err().to_string();
+        assert!(e.contains("--port") && e.contains("--sim"), "{e}");
+        assert!(DeviceArgs::default().refuse_for("design").is_ok());
+        let e = DeviceArgs {
+            baud: Some(9600),
+            ..Default::default()
+        }
+        .refuse_for("design")
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("--baud") && e.contains("rig design"), "{e}");
     }
 }

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Args;
 
-use crate::cli::connect::DeviceOpts;
+use crate::connection::DeviceOpts;
 use crate::{RigError, demo};
 
 /// Arguments of `rig demo`.
@@ -26,10 +26,25 @@ pub struct DemoArgs {
     pub json: bool,
 }
 
-/// Runs `rig demo`: the simulated rig by default; with `--port` (or $RIG_PORT) the parts
-/// that cannot move a load on a real rig.
-pub fn run(a: DemoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+/// Runs `rig demo`: the simulated rig by default; with `--port` the parts that cannot move
+/// a load on a real rig. `given`: the device options on the command line (the simulated
+/// demo runs in virtual time and has no serial line, so `--speed` and `--baud` without
+/// `--port` do not apply).
+pub fn run(a: DemoArgs, dev: &DeviceOpts, given: &[&str]) -> Result<ExitCode, RigError> {
     let real = dev.port.is_some() && !dev.sim;
+    if given.contains(&"--speed") {
+        return Err(RigError::BadValue {
+            what: "--speed".into(),
+            why: "`rig demo` runs the simulated rig in virtual time (and a real rig in real time): leave --speed out".into(),
+        });
+    }
+    if !real && given.contains(&"--baud") {
+        return Err(RigError::BadValue {
+            what: "--baud".into(),
+            why: "applies to `rig demo` only with --port (the simulated demo has no serial line)"
+                .into(),
+        });
+    }
     let chatty = !a.json && std::io::stderr().is_terminal();
     let summary = if real {
         demo::run_on_device(dev, &a.out)?
@@ -39,7 +54,7 @@ pub fn run(a: DemoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             quick: a.quick,
             seed: a.seed,
         };
-        demo::run_simulated(&opts, &mut |step| {
+        demo::run_simulated(&opts, &write_calibration, &mut |step| {
             if chatty {
                 eprintln!("... {step}");
             }
@@ -47,8 +62,7 @@ pub fn run(a: DemoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     };
     let mut out = std::io::stdout().lock();
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &summary)?;
-        writeln!(out)?;
+        super::print_json(&mut out, &summary)?;
     } else {
         write!(out, "{}", demo::render_text(&summary))?;
     }
@@ -57,4 +71,16 @@ pub fn run(a: DemoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     } else {
         ExitCode::FAILURE
     })
+}
+
+/// `rig calibrate`'s file writer, for the demo's calibration step.
+fn write_calibration(
+    dir: &std::path::Path,
+    result: &crate::calibrate::CalibrationResult,
+    measurements: &crate::calibrate::Measurements,
+    base: &protocol::RigParameters,
+    port: &str,
+) -> Result<Vec<String>, RigError> {
+    let w = super::calibrate::write_files(dir, result, measurements, base, port)?;
+    Ok(vec![w.calibration, w.torque_plot, w.no_load_plot, w.points])
 }

@@ -96,11 +96,10 @@ pub fn run(a: DesignArgs) -> Result<ExitCode, RigError> {
     let mut out = std::io::stdout().lock();
     if a.json {
         if a.table1 {
-            serde_json::to_writer_pretty(&mut out, &reports)?;
+            super::print_json(&mut out, &reports)?;
         } else {
-            serde_json::to_writer_pretty(&mut out, &reports[0])?;
+            super::print_json(&mut out, &reports[0])?;
         }
-        writeln!(out)?;
     } else {
         for r in &reports {
             write!(out, "{}", design::render_text(r))?;

@@ -19,14 +19,18 @@ Measured data: CSV with a header in SI units, one row per test point. Required c
 omega_n_rad_s, tau_rot_nm, i_in_a; optional t_s, v_in_v, temp_c, backdriven (0/1); other
 columns are ignored. A row with backdriven = 0 may leave i_in_a empty.
 
-Rig file (--model, alias --rig): TOML, every key optional (the paper's rig otherwise):
+Rig file (--model, alias --rig): TOML, every key optional (the paper's rig otherwise); the
+same file `rig calibrate` and `rig calibration get` write (docs/rig-file.md lists every key):
   [gear]         z = [49, 51, 50, 50], module_mm = 1.0, pressure_angle_deg = 20.0
   [cam]          eccentricity_mm = 1.0, carrier_mass_kg = 3.82
   [friction]     mu_s = 0.271, mu_d = 0.174
   [calibration]  c1 = 62.1, c2 = -138.0, c3 = 0.235, c4 = 1.69, c5 = 0.00378, c6 = 2.25
                  (Table 2, N mm, A and s), temperature_c = 25.0
+  [limits]       max_release_load_nm = 3.68, max_current_a = 4.5, max_freq_hz = 15.0
   [model]        mu = ..., [[model.effects]] name = \"...\", params = { ... }
                  (written by --write-model; loaded effects are refitted, not searched for)
+Other sections are kept as they are by --write-model. The older flat calibration file
+(c1_nmm_per_a = ...) loads too.
 
 Effects searched for: speed-dependent-axial-friction, load-dependent-friction,
 current-sensor-offset, thermal-drift, vibrator-viscous-loss, inertia-rectification,
@@ -65,7 +69,7 @@ pub struct ExplainArgs {
     /// Write no report folder.
     #[arg(long, conflicts_with = "report")]
     pub no_report: bool,
-    /// Write the augmented model (the rig file with its fitted [model]) to FILE.
+    /// Write the augmented model (the rig file with its fitted [model]) to FILE, atomically and only when the whole run succeeded.
     #[arg(long, value_name = "FILE")]
     pub write_model: Option<PathBuf>,
     /// Explain a synthetic sweep of the paper's test plan with this hidden effect ("none": effect-free) instead of --measured.
@@ -221,12 +225,15 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
                 args.repeats as usize,
             )?;
             if let Some(p) = &args.write_synthetic {
-                let file = std::fs::File::create(p).map_err(|source| RigError::File {
-                    action: "write",
-                    path: p.display().to_string(),
-                    source,
+                reporting::write_atomic_with(p, |tmp| -> Result<(), RigError> {
+                    let file = std::fs::File::create(tmp).map_err(|source| RigError::File {
+                        action: "write",
+                        path: p.display().to_string(),
+                        source,
+                    })?;
+                    data.write_csv(file)?;
+                    Ok(())
                 })?;
-                data.write_csv(file)?;
             }
             let name = format!(
                 "synthetic sweep ({}, seed {})",
@@ -256,8 +263,13 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
         }
     }
     outcome.explanation.synthetic = truth;
-    if let Some(p) = &args.write_model {
-        outcome.augmented_rig().save(p)?;
+    // The model file is written last, when everything else worked: a failed run leaves an
+    // existing FILE as it was. Named in the report before it exists.
+    let model_file = args
+        .write_model
+        .as_ref()
+        .map(|p| (p, outcome.augmented_rig()));
+    if let Some((p, _)) = &model_file {
         outcome.explanation.model_written = Some(p.display().to_string());
     }
     let dir = if args.no_report {
@@ -275,6 +287,12 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
             eprintln!("warning: no report written ({e}); choose a folder with --report DIR");
             outcome.explanation.report_dir = None;
         }
+    }
+    if let Some((p, rig)) = &model_file {
+        rig.save_with_comment(
+            p,
+            &format!("Written by `rig explain --write-model` from {source}."),
+        )?;
     }
     let mut out = std::io::stdout().lock();
     if args.json {

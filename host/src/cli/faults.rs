@@ -88,8 +88,7 @@ pub fn run(a: FaultsArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let f = s.client.faults()?;
     let mut out = std::io::stdout().lock();
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &FaultsReport::from(f))?;
-        writeln!(out)?;
+        super::print_json(&mut out, &FaultsReport::from(f))?;
     } else {
         print_text(&mut out, f)?;
     }

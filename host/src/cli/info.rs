@@ -4,7 +4,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 use clap::Args;
-use protocol::{CalibrationStatus, DeviceInfo};
+use protocol::{DeviceInfo, ParametersStatus as CalibrationStatus};
 use serde::Serialize;
 
 use super::connect::DeviceOpts;
@@ -37,6 +37,17 @@ pub struct InfoReport {
     pub board: String,
     /// Where the active calibration came from: `valid`, `defaults` or `invalid`.
     pub calibration_status: &'static str,
+    /// The firmware's build: the git commit it was built from (`-dirty` when the tree had
+    /// uncommitted changes, `unknown` without git).
+    pub firmware_build: String,
+    /// Why the device last reset: `power-on`, `pin`, `software`, `watchdog`, `brown-out`,
+    /// `lockup` or `other`.
+    pub reset_cause: &'static str,
+    /// Time since that reset, s.
+    pub uptime_s: u32,
+    /// Optional hardware the device reports (`OUTPUT_ENCODER`, `BUS_VOLTAGE`, `MOTOR_TEMP`,
+    /// `SIMULATION`: the virtual rig).
+    pub capabilities: Vec<&'static str>,
 }
 
 /// Lower-case name of a calibration status.
@@ -60,7 +71,15 @@ impl InfoReport {
             schema_hash: format!("{:#010x}", info.schema_hash),
             host_protocol_version: protocol::PROTOCOL_VERSION,
             board: info.board.to_string(),
-            calibration_status: calibration_status_name(info.calibration_status),
+            calibration_status: calibration_status_name(info.parameters_status),
+            firmware_build: info.firmware_build.to_string(),
+            reset_cause: info.reset_cause.name(),
+            uptime_s: info.uptime_s,
+            capabilities: protocol::Capabilities::NAMED
+                .iter()
+                .filter(|(_, flag)| info.capabilities.contains(*flag))
+                .map(|(name, _)| *name)
+                .collect(),
         }
     }
 }
@@ -72,17 +91,28 @@ pub fn run(a: InfoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let report = InfoReport::new(&info, s.port(), s.device.is_some());
     let mut out = std::io::stdout().lock();
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
+        super::print_json(&mut out, &report)?;
     } else {
         writeln!(out, "device     {} on {}", report.board, report.port)?;
-        writeln!(out, "firmware   {}", report.firmware_version)?;
+        writeln!(
+            out,
+            "firmware   {} (build {})",
+            report.firmware_version, report.firmware_build
+        )?;
+        writeln!(
+            out,
+            "up         {} s since the last reset ({})",
+            report.uptime_s, report.reset_cause
+        )?;
+        if !report.capabilities.is_empty() {
+            writeln!(out, "fitted     {}", report.capabilities.join(", "))?;
+        }
         writeln!(
             out,
             "protocol   v{} (schema {}), same as this tool",
             report.protocol_version, report.schema_hash
         )?;
-        let note = match info.calibration_status {
+        let note = match info.parameters_status {
             CalibrationStatus::Valid => "stored calibration in use",
             CalibrationStatus::Defaults => {
                 "nothing stored: the paper's Table 2 values are in use (rig calibrate)"

@@ -1,7 +1,13 @@
 //! The `rig` command line: one module per verb, each with its clap arguments and a `run`
 //! function that returns the process exit code or a [`crate::RigError`].
+//!
+//! Device options (`--port`, `--baud`, `--sim`, `--speed`) go before the verb or after a
+//! verb that uses a device; any other verb refuses them, naming the option.
+
+use std::io::Write;
 
 use clap::{Parser, Subcommand};
+use serde::Serialize;
 
 pub mod calibrate;
 pub mod calibration;
@@ -10,13 +16,19 @@ pub mod clear;
 pub mod connect;
 pub mod demo;
 pub mod design;
+pub mod experiment;
 pub mod explain;
 pub mod faults;
+pub mod flash;
 pub mod info;
+pub mod log;
 pub mod monitor;
 pub mod ports;
 pub mod release;
+pub mod serve;
 pub mod sim;
+
+use connect::{DeviceArgs, VerbDeviceArgs};
 
 /// Tools for the vibration-switched 2K-H planetary gear rig.
 #[derive(Debug, Parser)]
@@ -25,59 +37,186 @@ pub struct Cli {
     /// The verb.
     #[command(subcommand)]
     pub command: Command,
-    /// Which device the device verbs talk to.
+    /// Which device the device verbs talk to (also accepted after a device verb).
     #[command(flatten)]
-    pub device: connect::DeviceOpts,
+    pub device: DeviceArgs,
 }
 
-/// The verbs.
+/// The verbs. Those that use a device carry the device options given after their name.
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Design calculator: ratio, contact ratios, Lambda, hold verdict and required cam torque.
     Design(design::DesignArgs),
-    /// Simulated rig (firmware core + plant): fig5, table1, torque-sweep, faults.
+    /// Simulated rig (firmware core + plant): fig5, table1, torque-sweep, faults, serve.
     Sim(sim::SimArgs),
     /// The main job: the whole simulated rig (design, calibration, fig5, table1, sweep, faults) with a report folder.
-    Demo(demo::DemoArgs),
+    Demo {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: demo::DemoArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
+    /// The paper's experiments on a rig: torque-sweep (Figs. 8-9), hold-release (Fig. 5), backdrive (Table 1).
+    Experiment {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: experiment::ExperimentArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// Find where the current model and measured data disagree, name the missing effect, add it.
-    Explain(crate::cli::explain::ExplainArgs),
+    Explain(explain::ExplainArgs),
     /// List serial ports, marking ST-LINK virtual COM ports (Nucleo boards).
     Ports(ports::PortsArgs),
     /// Device identity: firmware and protocol versions, board, calibration source.
-    Info(info::InfoArgs),
+    Info {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: info::InfoArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// Active and latched faults of the device, with what each means.
-    Faults(faults::FaultsArgs),
+    Faults {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: faults::FaultsArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// Clear the latched faults whose cause is gone.
-    Clear(clear::ClearArgs),
+    Clear {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: clear::ClearArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// Vibrate (on: the gear becomes backdrivable) while the command runs; Ctrl-C locks.
-    Release(release::ReleaseArgs),
+    Release {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: release::ReleaseArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// Live telemetry: charts of current, cam speed, tau_cam, load estimate and state.
-    Monitor(monitor::MonitorArgs),
+    Monitor {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: monitor::MonitorArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// A 10 kHz burst of raw current and encoder samples from the device's buffer, to CSV.
-    Capture(capture::CaptureArgs),
+    Capture {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: capture::CaptureArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// The paper's vibrator calibration (C1-C6): measure, fit, plot, write the device.
-    Calibrate(calibrate::CalibrateArgs),
+    Calibrate {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: calibrate::CalibrateArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// Read (get) or write (set) the device's calibration as a TOML file.
-    Calibration(calibration::CalibrationArgs),
+    Calibration {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: calibration::CalibrationArgs,
+        /// Device options after the verb (or after `get` / `set`).
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
+    /// Check and flash the firmware through the debug probe (keeps the stored calibration).
+    Flash {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: flash::FlashArgs,
+        /// Device options after the verb (the serial port of the rig to lock first).
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
+    /// The firmware's defmt log through the debug probe, or decoded from a saved stream.
+    Log(log::LogArgs),
 }
 
 impl Cli {
     /// Runs the chosen verb.
     pub fn run(self) -> Result<std::process::ExitCode, crate::RigError> {
+        let before = self.device;
         match self.command {
-            Command::Design(a) => design::run(a),
-            Command::Demo(a) => demo::run(a, &self.device),
-            Command::Explain(a) => crate::cli::explain::run(a),
-            Command::Sim(a) => sim::run(a),
-            Command::Ports(a) => ports::run(a),
-            Command::Info(a) => info::run(a, &self.device),
-            Command::Faults(a) => faults::run(a, &self.device),
-            Command::Clear(a) => clear::run(a, &self.device),
-            Command::Release(a) => release::run(a, &self.device),
-            Command::Monitor(a) => monitor::run(a, &self.device),
-            Command::Capture(a) => capture::run(a, &self.device),
-            Command::Calibrate(a) => calibrate::run(a, &self.device),
-            Command::Calibration(a) => calibration::run(a, &self.device),
+            Command::Design(a) => {
+                before.refuse_for("design")?;
+                design::run(a)
+            }
+            Command::Sim(a) => {
+                before.refuse_for("sim")?;
+                sim::run(a)
+            }
+            Command::Explain(a) => {
+                before.refuse_for("explain")?;
+                explain::run(a)
+            }
+            Command::Ports(a) => {
+                before.refuse_for("ports")?;
+                ports::run(a)
+            }
+            Command::Demo { args, device } => {
+                let mut given = before.given();
+                given.extend(device.given());
+                demo::run(args, &before.resolve(&device)?, &given)
+            }
+            Command::Experiment { args, device } => {
+                experiment::run(args, &before.resolve(&device)?)
+            }
+            Command::Info { args, device } => info::run(args, &before.resolve(&device)?),
+            Command::Faults { args, device } => faults::run(args, &before.resolve(&device)?),
+            Command::Clear { args, device } => clear::run(args, &before.resolve(&device)?),
+            Command::Release { args, device } => release::run(args, &before.resolve(&device)?),
+            Command::Monitor { args, device } => monitor::run(args, &before.resolve(&device)?),
+            Command::Capture { args, device } => capture::run(args, &before.resolve(&device)?),
+            Command::Calibrate { args, device } => calibrate::run(args, &before.resolve(&device)?),
+            Command::Calibration { args, device } => {
+                calibration::run(args, &before.resolve(&device)?)
+            }
+            Command::Flash { args, device } => flash::run(args, &before.resolve(&device)?),
+            Command::Log(a) => log::run(a, &before.resolve(&VerbDeviceArgs::default())?),
         }
     }
+}
+
+/// Prints `value` as pretty JSON, numbers as a person writes them (62.1, not
+/// 62.099998474121094: see [`reporting::human_json`]), and a newline. Every verb's `--json`
+/// goes through here.
+pub fn print_json<T: Serialize + ?Sized>(
+    out: &mut impl Write,
+    value: &T,
+) -> Result<(), crate::RigError> {
+    writeln!(out, "{}", reporting::json_pretty(value)?)?;
+    Ok(())
+}
+
+/// Prints `value` as one line of JSON (JSON lines), numbers as a person writes them.
+pub fn print_json_line<T: Serialize + ?Sized>(
+    out: &mut impl Write,
+    value: &T,
+) -> Result<(), crate::RigError> {
+    writeln!(out, "{}", reporting::json_line(value)?)?;
+    Ok(())
 }

@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 use std::fs::File;
 use std::io::{IsTerminal, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -21,7 +21,7 @@ use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType, Paragraph};
 
 use super::connect::{DeviceOpts, interrupt_flag};
 use crate::client::LinkStats;
-use crate::{RigError, args};
+use crate::{RigError, args, limits};
 
 /// Arguments of `rig monitor`.
 #[derive(Debug, Args)]
@@ -35,11 +35,13 @@ pub struct MonitorArgs {
     /// Stop after this many (device) seconds; default: until q or Ctrl-C.
     #[arg(long, value_name = "S", value_parser = args::positive, allow_hyphen_values = true)]
     seconds: Option<f64>,
-    /// Telemetry rate, samples per second (at most 1000).
+    /// Telemetry rate, samples per second: 1000 divided by a whole number (1000, 500, 250,
+    /// 200, 125, 100, 50, 40, 25, 20, 10, ...).
     #[arg(long, value_name = "HZ", default_value_t = 50, value_parser = clap::value_parser!(u16).range(1..=1000))]
     rate: u16,
-    /// Vibrate at this frequency (Hz) while monitoring; locked again on exit. In the
-    /// full-screen view `r` toggles the release at this frequency (default 10 Hz).
+    /// Vibrate at this frequency (Hz, at most the calibration's max_freq_hz) while
+    /// monitoring; locked again on exit. In the full-screen view `r` toggles the release at
+    /// this frequency (default 10 Hz).
     #[arg(long, value_name = "HZ", value_parser = args::positive, allow_hyphen_values = true)]
     release: Option<f64>,
     /// One JSON object per sample (JSON lines) instead of text.
@@ -262,21 +264,59 @@ fn render_chart(
 
 /// Runs `rig monitor`.
 pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
-    let stop = interrupt_flag();
-    let mut csv = match &a.csv {
-        Some(path) => {
-            let file = File::create(path).map_err(|source| RigError::File {
+    // The firmware would send at its control rate divided by a whole number.
+    limits::check_telemetry_rate("--rate", a.rate)?;
+    match &a.csv {
+        // Logged to a temporary file beside the target, renamed over it when the monitor
+        // ends normally (q, Ctrl-C, --seconds): a failed run leaves an existing file as it
+        // was, and keeps what it logged in FILE.partial.
+        Some(path) => reporting::write_atomic_with(path, |tmp| -> Result<(), RigError> {
+            let file = File::create(tmp).map_err(|source| RigError::File {
                 action: "create",
                 path: path.display().to_string(),
                 source,
             })?;
             let mut w = csv::Writer::from_writer(file);
             w.write_record(CSV_HEADER).map_err(csv_error(path))?;
-            Some(w)
-        }
-        None => None,
-    };
+            let mut logged = 0;
+            let watched = watch(&a, dev, Some((&mut w, path)), &mut logged);
+            let flushed = w.flush().map_err(RigError::Output);
+            drop(w);
+            if let Err(e) = watched.and(flushed) {
+                let mut partial = path.as_os_str().to_owned();
+                partial.push(".partial");
+                if logged > 0 && std::fs::rename(tmp, &partial).is_ok() {
+                    eprintln!(
+                        "note: what was logged before the error is in {}; {} was left as it was",
+                        std::path::Path::new(&partial).display(),
+                        path.display()
+                    );
+                }
+                return Err(e);
+            }
+            Ok(())
+        })?,
+        None => watch(&a, dev, None, &mut 0)?,
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The monitor itself: connects, streams telemetry until done, logs every sample to `csv`
+/// (counting them in `logged`).
+fn watch(
+    a: &MonitorArgs,
+    dev: &DeviceOpts,
+    mut csv: Option<(&mut csv::Writer<File>, &Path)>,
+    logged: &mut u64,
+) -> Result<(), RigError> {
+    let stop = interrupt_flag();
     let mut s = dev.connect()?;
+    let calibration = s.client.calibration()?;
+    // The firmware would drive a frequency above the calibration's maximum at that maximum.
+    let release_hz = match a.release {
+        Some(hz) => limits::check_release_freq("--release", hz, &calibration)?,
+        None => 10.0f32.min(limits::release_freq_range(&calibration).1),
+    };
     s.client.start_telemetry(a.rate)?;
     let full_screen =
         !a.plain && !a.json && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
@@ -285,10 +325,9 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     } else {
         None
     };
-    let release_hz = a.release.unwrap_or(10.0);
     let mut released = false;
     if a.release.is_some() {
-        s.client.release(true, release_hz as f32)?;
+        s.client.release(true, release_hz)?;
         released = true;
     }
     let mut view = MonitorView::new(s.port());
@@ -306,7 +345,7 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                     KeyAction::Quit => return Ok(()),
                     KeyAction::ToggleRelease => {
                         let on = !released;
-                        view.note = Some(match s.client.release(on, release_hz as f32) {
+                        view.note = Some(match s.client.release(on, release_hz) {
                             Ok(()) => {
                                 released = on;
                                 if on {
@@ -324,14 +363,12 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             if let Some(t) = s.client.next_telemetry(Duration::from_millis(30))? {
                 count += 1;
                 let start = *first.get_or_insert(t.device_time_us);
-                if let Some(w) = csv.as_mut() {
-                    w.write_record(csv_row(&t)).map_err(csv_error(
-                        a.csv.as_deref().unwrap_or(std::path::Path::new("")),
-                    ))?;
+                if let Some((w, path)) = csv.as_mut() {
+                    w.write_record(csv_row(&t)).map_err(csv_error(path))?;
+                    *logged += 1;
                 }
                 if a.json {
-                    serde_json::to_writer(&mut out, &sample_json(&t))?;
-                    writeln!(out)?;
+                    super::print_json_line(&mut out, &sample_json(&t))?;
                 } else if terminal.is_none() {
                     writeln!(out, "{}", plain_line(&t))?;
                 }
@@ -364,9 +401,6 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         let _ = s.client.release(false, 0.0);
     }
     let _ = s.client.stop_telemetry();
-    if let Some(mut w) = csv {
-        w.flush()?;
-    }
     result?;
     if !a.json {
         let st = s.client.stats();
@@ -375,10 +409,10 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             st.telemetry_lost, st.frame_errors
         );
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
-fn csv_error(path: &std::path::Path) -> impl Fn(csv::Error) -> RigError + '_ {
+fn csv_error(path: &Path) -> impl Fn(csv::Error) -> RigError + '_ {
     move |e| RigError::MeasuredFile {
         file: path.display().to_string(),
         why: format!("cannot write the log: {e}"),
@@ -388,7 +422,7 @@ fn csv_error(path: &std::path::Path) -> impl Fn(csv::Error) -> RigError + '_ {
 /// A telemetry sample as a JSON object (SI units, names as in the CSV).
 pub fn sample_json(t: &TelemetrySample) -> serde_json::Value {
     serde_json::json!({
-        "device_time_s": t.device_time_us as f64 * 1e-6,
+        "device_time_s": t.device_time_us as f64 / 1e6,
         "seq": t.seq,
         "state": t.state.name(),
         "cam_speed_rad_s": t.cam_speed_rad_s,
@@ -441,6 +475,8 @@ mod tests {
             state,
             faults: FaultFlags::empty(),
             status: StatusFlags::HOST_RELEASE,
+            output_angle_rad: f32::NAN,
+            output_speed_rad_s: f32::NAN,
         }
     }
 

@@ -20,8 +20,7 @@ pub fn run(a: PortsArgs) -> Result<ExitCode, RigError> {
     let list = ports::list();
     let mut out = std::io::stdout().lock();
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &list)?;
-        writeln!(out)?;
+        super::print_json(&mut out, &list)?;
         return Ok(ExitCode::SUCCESS);
     }
     if list.is_empty() {

@@ -11,7 +11,7 @@ use protocol::SupervisorState;
 use serde::Serialize;
 
 use super::connect::{DeviceOpts, interrupt_flag};
-use crate::{RigError, args};
+use crate::{RigError, args, limits};
 
 /// On or off.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -28,7 +28,8 @@ pub struct ReleaseArgs {
     /// `on` to vibrate (the load can move!), `off` to stop.
     #[arg(value_enum)]
     state: OnOff,
-    /// Vibration (cam) frequency, Hz; the paper used 5, 10 and 15.
+    /// Vibration (cam) frequency, Hz; the paper used 5, 10 and 15. At most the
+    /// calibration's max_freq_hz (15 Hz for the paper's): a higher one is refused.
     #[arg(long, value_name = "HZ", default_value_t = 10.0, value_parser = args::positive, allow_hyphen_values = true)]
     freq: f64,
     /// Hold the release for this many (device) seconds, then lock; default: until Ctrl-C.
@@ -69,15 +70,17 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     if a.state == OnOff::Off {
         s.client.release(false, 0.0)?;
         if a.json {
-            writeln!(out, "{}", serde_json::json!({ "released": false }))?;
+            super::print_json_line(&mut out, &serde_json::json!({ "released": false }))?;
         } else {
             writeln!(out, "vibration off: the gear holds its load")?;
         }
         return Ok(ExitCode::SUCCESS);
     }
+    // The firmware would drive a frequency above the calibration's maximum at that maximum.
+    let target_hz = limits::check_release_freq("--freq", a.freq, &s.client.calibration()?)?;
     let scale = s.time_scale();
     s.client.start_telemetry(TELEMETRY_HZ)?;
-    s.client.release(true, a.freq as f32)?;
+    s.client.release(true, target_hz)?;
     if !a.json {
         let until = match a.hold_for {
             Some(t) => format!("for {t} s"),
@@ -116,7 +119,7 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             continue;
         };
         let start = *t0.get_or_insert(t.device_time_us);
-        let since = (t.device_time_us - start) as f64 * 1e-6;
+        let since = (t.device_time_us - start) as f64 / 1e6;
         report.held_s = since;
         if report.states.last() != Some(&t.state.name()) {
             report.states.push(t.state.name());
@@ -161,8 +164,7 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     report.final_state = final_state.name();
     report.mean_vibrating_hz = (hz_n > 0).then(|| hz_sum / f64::from(hz_n));
     if a.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
+        super::print_json(&mut out, &report)?;
     } else {
         let mean = report
             .mean_vibrating_hz

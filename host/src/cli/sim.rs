@@ -29,6 +29,8 @@ pub enum Scenario {
     TorqueSweep(SweepArgs),
     /// Fault drills: overcurrent (jammed cam), encoder-loss, comms-loss, bad-calibration.
     Faults(FaultArgs),
+    /// Serve the virtual rig on a pseudo-terminal any serial client can open, until Ctrl-C.
+    Serve(super::serve::ServeArgs),
 }
 
 /// Arguments of `rig sim fig5`.
@@ -37,12 +39,15 @@ pub struct Fig5Args {
     /// Hold phase without vibration, s (the paper held 14.5 s).
     #[arg(long, default_value_t = 14.5, value_parser = crate::args::positive)]
     pub hold: f64,
-    /// Vibration frequency of the release, Hz (3.6 V gave about 5 Hz).
+    /// Vibration frequency of the release, Hz (3.6 V gave about 5 Hz; 1 to 15).
     #[arg(long, default_value_t = 5.0, value_parser = crate::args::positive)]
     pub freq: f64,
     /// Sensor-noise seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The current sensor's (ACS714) supply, V: 4.5 to 5.5 (the sensor is ratiometric).
+    #[arg(long, default_value_t = 5.0, value_parser = sensor_supply)]
+    pub sensor_supply_v: f64,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -51,7 +56,7 @@ pub struct Fig5Args {
 /// Arguments of `rig sim table1`.
 #[derive(Debug, Args)]
 pub struct Table1Args {
-    /// Vibration frequency of the release, Hz.
+    /// Vibration frequency of the release, Hz (1 to 15).
     #[arg(long, default_value_t = 10.0, value_parser = crate::args::positive)]
     pub freq: f64,
     /// Sensor-noise seed.
@@ -77,6 +82,13 @@ pub struct SweepArgs {
     /// Seed of the noise and the test order.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The current sensor's (ACS714) supply, V: 4.5 to 5.5 (the sensor is ratiometric).
+    #[arg(long, default_value_t = 5.0, value_parser = sensor_supply)]
+    pub sensor_supply_v: f64,
+    /// The plant: `paper` behaves as the paper's rig measured (docs/presets.md), `ideal` is
+    /// the paper's equations alone.
+    #[arg(long, default_value = "paper", value_parser = clap::builder::PossibleValuesParser::new(sim::preset::PRESETS))]
+    pub preset: String,
     /// Write one row per test point to this CSV file.
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -99,6 +111,143 @@ pub struct FaultArgs {
     pub json: bool,
 }
 
+/// A release frequency the simulated rig drives as asked: its calibration is the paper's
+/// (at most 15 Hz); above that the firmware would silently drive at 15 Hz.
+fn check_freq(hz: f64) -> Result<f32, RigError> {
+    let paper = protocol::RigParameters::paper();
+    crate::limits::check_release_freq("--freq", hz, &paper).map_err(|_| {
+        let (lo, hi) = crate::limits::release_freq_range(&paper);
+        RigError::BadValue {
+            what: format!("--freq {hz}"),
+            why: format!(
+                "the simulated rig drives {lo} to {hi} Hz (the paper's calibration, max_freq_hz = {hi}): give a frequency in that range"
+            ),
+        }
+    })
+}
+
+/// The torque sweep as `rig experiment torque-sweep` runs it (one implementation), on the
+/// in-process virtual rig in virtual time, its rows with the simulator's extra columns
+/// (the torque measured by Eqs. (15)-(17) and Eq. (10) at the mean cam speed).
+fn sweep_procedure(opts: &sweep::SweepOptions) -> Result<Vec<sweep::SweepPoint>, RigError> {
+    use crate::experiment::{Operator, Plan, SimBench, sweep as procedure};
+    let z = opts.z;
+    let mut config = sim::SimConfig::for_gear(z, model::plant::Load::Torque(0.0))
+        .map_err(|source| sim::SimError::Gear { z, source })?;
+    config.seed = opts.seed;
+    config.plant.effects = opts.effects;
+    let drive = config.plant.drive;
+    let mu = config.plant.mu_s;
+    let mut plan = Plan::grid(
+        "rig sim torque-sweep",
+        &opts.loads,
+        &opts.voltages,
+        opts.repeats,
+        opts.rest_s,
+    );
+    plan.seed = opts.seed;
+    plan.window_s = opts.window_s;
+    let mut bench = SimBench::new(config)?;
+    let mut operator = Operator::scripted(b"", false);
+    let setup = procedure::SweepSetup {
+        plan,
+        window: procedure::Window::Start,
+        resume: false,
+        command: "rig sim torque-sweep".into(),
+    };
+    let outcome = procedure::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
+    let calibration = model::paper::CALIBRATION;
+    Ok(outcome
+        .rows
+        .into_iter()
+        .map(|r| sweep::SweepPoint {
+            t_s: r.t_s,
+            v_in_v: r.v_in_v.unwrap_or(0.0),
+            omega_n_rad_s: r.omega_n_rad_s,
+            tau_rot_nm: r.tau_rot_nm,
+            i_in_a: r.i_in_a,
+            temp_c: r.temp_c.unwrap_or(f64::NAN),
+            repeat: r.repeat,
+            tau_cam_est_nm: r.tau_cam_est_nm,
+            tau_cam_meas_nm: calibration.cam_torque(r.i_in_a, r.omega_n_rad_s),
+            tau_cam_eq10_nm: drive.required_cam_torque(mu, r.tau_rot_nm, r.omega_n_rad_s),
+            backdriven: r.backdriven.unwrap_or(1),
+        })
+        .collect())
+}
+
+/// Table 1 as `rig experiment backdrive` runs it (one implementation), once per gear set
+/// on a fresh in-process virtual rig with that set.
+fn table1_procedure(
+    sets: &[[u32; 4]],
+    hz: f64,
+    seed: u64,
+) -> Result<Vec<table1::Table1Row>, RigError> {
+    use crate::experiment::{Operator, SimBench, backdrive};
+    let opts = backdrive::Backdrive {
+        load_nm: table1::TAU_ROT,
+        hz,
+        ..Default::default()
+    };
+    let mut rows = Vec::new();
+    for &z in sets {
+        let mut config = sim::SimConfig::for_gear(z, model::plant::Load::Torque(0.0))
+            .map_err(|source| sim::SimError::Gear { z, source })?;
+        config.seed = seed;
+        let gear = config.plant.drive.gear;
+        let mut bench = SimBench::new(config)?;
+        let mut operator = Operator::scripted(b"", false);
+        let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, Some(z))? else {
+            continue;
+        };
+        let paper_non_backdriven_point = gear.n() == 1;
+        rows.push(table1::Table1Row {
+            z,
+            n: gear.n(),
+            mu_s_lambda: model::paper::MU_S * gear.big_lambda(),
+            backdriven_without_vibration: v.backdriven_without_vibration,
+            backdriven_with_vibration: v.backdriven_with_vibration,
+            paper_non_backdriven_point,
+            agrees_with_paper: v.backdriven_without_vibration != paper_non_backdriven_point
+                && v.backdriven_with_vibration,
+        });
+    }
+    Ok(rows)
+}
+
+/// Fig. 5 as `rig experiment hold-release` runs it (one implementation), on the
+/// in-process virtual rig with Fig. 5's gear set and its 1.0 kg mass on 75 mm.
+fn fig5_procedure(opts: &fig5::Fig5Options) -> Result<fig5::Fig5Result, RigError> {
+    use crate::experiment::{Operator, SimBench, hold_release};
+    let z = model::paper::FIG5_Z;
+    let mut config = sim::SimConfig::for_gear(z, model::paper::FIG5_LOAD)
+        .map_err(|source| sim::SimError::Gear { z, source })?;
+    config.seed = opts.seed;
+    let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
+    let mut bench = SimBench::new(config)?;
+    let mut operator = Operator::scripted(b"", false);
+    let procedure = hold_release::HoldRelease {
+        load_nm: None,
+        hold_s: opts.hold_s,
+        hz: f64::from(opts.vibration_hz),
+        release_s: opts.release_s,
+        // The cam brakes to rest (well under a second), then `after_stop_s`.
+        after_s: 1.0 + opts.after_stop_s,
+    };
+    let samples = hold_release::run(&mut bench, &mut operator, &procedure, &mut |_| {})?;
+    let n = hold_release::fig5_numbers(&samples, model::paper::R_OUT);
+    Ok(fig5::Fig5Result {
+        z,
+        held_without_vibration: n.held_without_vibration,
+        hold_s: opts.hold_s,
+        release_to_motion_s: n.release_to_motion_s,
+        output_speed_after_stop_rad_s: n.output_speed_after_stop_rad_s,
+        output_speed_at_stop_rad_s: n.output_speed_at_stop_rad_s,
+        load_drop_m: n.load_drop_m,
+        mu_d_lambda,
+    })
+}
+
 /// Runs `rig sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
     let mut out = std::io::stdout().lock();
@@ -106,14 +255,14 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
         Scenario::Fig5(a) => {
             let opts = fig5::Fig5Options {
                 hold_s: a.hold,
-                vibration_hz: a.freq as f32,
+                vibration_hz: check_freq(a.freq)?,
                 seed: a.seed,
+                sensor_supply_v: a.sensor_supply_v,
                 ..Default::default()
             };
-            let r = fig5::run(&opts)?;
+            let r = fig5_procedure(&opts)?;
             if a.json {
-                serde_json::to_writer_pretty(&mut out, &r)?;
-                writeln!(out)?;
+                super::print_json(&mut out, &r)?;
             } else {
                 writeln!(out, "fig5, (Z1, Z4) = (50, 49), 1.0 kg on 75 mm:")?;
                 writeln!(
@@ -134,17 +283,20 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
         Scenario::Table1(a) => {
-            let rows = table1::run(&model::TABLE1, a.freq as f32, a.seed)?;
+            let rows = table1_procedure(&model::TABLE1, f64::from(check_freq(a.freq)?), a.seed)?;
             if a.json {
-                serde_json::to_writer_pretty(&mut out, &rows)?;
-                writeln!(out)?;
+                super::print_json(&mut out, &rows)?;
             } else {
-                writeln!(out, "table1 at tau_rot = {} N m:", table1::TAU_ROT)?;
+                writeln!(
+                    out,
+                    "table1 at tau_rot = {} N m, Z1,Z2,Z3,Z4:",
+                    reporting::human(table1::TAU_ROT)
+                )?;
                 for r in &rows {
                     writeln!(
                         out,
-                        "  {:?} n={} without vibration: {:<11} with vibration: {:<11} {}",
-                        r.z,
+                        "  {:<12} n={} without vibration: {:<11} with vibration: {:<11} {}",
+                        r.z.map(|v| v.to_string()).join(","),
                         r.n,
                         if r.backdriven_without_vibration {
                             "backdriven"
@@ -167,24 +319,22 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             Ok(ExitCode::SUCCESS)
         }
         Scenario::TorqueSweep(a) => {
-            let n = a.levels as f64;
             let opts = sweep::SweepOptions {
-                loads: (0..a.levels)
-                    .map(|k| 0.368 + (3.68 - 0.368) * k as f64 / (n - 1.0))
-                    .collect(),
+                loads: crate::sweep_report::sweep_loads(a.levels),
                 repeats: a.repeats,
                 rest_s: a.rest,
                 seed: a.seed,
+                sensor_supply_v: a.sensor_supply_v,
+                effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
-            let points = sweep::run(&opts)?;
+            let points = sweep_procedure(&opts)?;
             if let Some(path) = &a.csv {
                 crate::sweep_report::write_csv(&points, path)?;
             }
             let summary = sweep::summarise(&points, &opts);
             if a.json {
-                serde_json::to_writer_pretty(&mut out, &summary)?;
-                writeln!(out)?;
+                super::print_json(&mut out, &summary)?;
             } else {
                 writeln!(out, "torque sweep: {} points", summary.points)?;
                 for (v, hz) in &summary.mean_hz_per_voltage {
@@ -208,11 +358,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        Scenario::Serve(a) => super::serve::run(a),
         Scenario::Faults(a) => {
             let outcomes = faults::run(&a.drills, a.seed)?;
             if a.json {
-                serde_json::to_writer_pretty(&mut out, &outcomes)?;
-                writeln!(out)?;
+                super::print_json(&mut out, &outcomes)?;
             } else {
                 for o in &outcomes {
                     writeln!(
@@ -235,5 +385,23 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                 ExitCode::FAILURE
             })
         }
+    }
+}
+
+/// `--sensor-supply-v`: the ACS714's specified supply range, 4.5 to 5.5 V.
+fn sensor_supply(text: &str) -> Result<f64, String> {
+    let v: f64 = text
+        .parse()
+        .map_err(|_| format!("'{text}' is not a number of volts"))?;
+    let (low, high) = (
+        model::hardware::acs714::SUPPLY_MIN_V,
+        model::hardware::acs714::SUPPLY_MAX_V,
+    );
+    if (low..=high).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{v} V is outside the ACS714's supply range {low} to {high} V"
+        ))
     }
 }

@@ -7,8 +7,9 @@ use std::thread;
 use std::time::Duration;
 
 use protocol::{
-    CalibrationStatus, CaptureChunk, CaptureSample, DeviceInfo, DeviceMessage, FaultFlags,
-    FirmwareVersion, Frame, NackCode, PROTOCOL_VERSION, Request, RequestDeframer, SCHEMA_HASH,
+    Capabilities, CaptureChunk, CaptureSample, DeviceInfo, DeviceMessage, FaultFlags,
+    FirmwareVersion, Frame, LegacyV1Nack, NackCode, PROTOCOL_VERSION, ParametersStatus, Reply,
+    Request, RequestDeframer, ResetCause, SCHEMA_HASH,
 };
 
 use super::*;
@@ -22,15 +23,26 @@ fn device_info(protocol_version: u16, schema_hash: u32) -> DeviceInfo {
         },
         protocol_version,
         schema_hash,
+        firmware_build: "1a2b3c4d5e6f".try_into().unwrap(),
         board: "fake".try_into().unwrap(),
-        calibration_status: CalibrationStatus::Defaults,
+        parameters_status: ParametersStatus::Defaults,
+        reset_cause: ResetCause::PowerOn,
+        uptime_s: 12,
+        capabilities: Capabilities::empty(),
     }
 }
 
 /// Runs a fake device on the far end of a pipe: `answer` maps each request (with its
 /// sequence number) to the frames to send back, as `(frame seq, message)`.
 fn fake_device(
-    mut answer: impl FnMut(u16, Request) -> Vec<(u16, DeviceMessage)> + Send + 'static,
+    answer: impl FnMut(u16, Request) -> Vec<(u16, DeviceMessage)> + Send + 'static,
+) -> Client<PipeEnd> {
+    fake_device_of(answer)
+}
+
+/// As [`fake_device`], with messages of any layout (an older protocol's, for example).
+fn fake_device_of<M: serde::Serialize + Send + 'static>(
+    mut answer: impl FnMut(u16, Request) -> Vec<(u16, M)> + Send + 'static,
 ) -> Client<PipeEnd> {
     let (host, mut dev) = memory_pipe(Duration::from_millis(2));
     thread::spawn(move || {
@@ -61,18 +73,26 @@ fn fake_device(
 
 /// A well-behaved device: Info for hello, Ack for the rest.
 fn good_answer(seq: u16, req: Request) -> Vec<(u16, DeviceMessage)> {
-    let msg = match req {
+    let reply = match req {
         Request::Hello { .. } | Request::GetInfo => {
-            DeviceMessage::Info(device_info(PROTOCOL_VERSION, SCHEMA_HASH))
+            Reply::Info(device_info(PROTOCOL_VERSION, SCHEMA_HASH))
         }
-        Request::GetFaults => DeviceMessage::Faults {
+        Request::GetFaults => Reply::Faults {
             active: FaultFlags::empty(),
             latched: FaultFlags::COMMS_TIMEOUT,
         },
-        Request::GetCalibration => DeviceMessage::Calibration(protocol::Calibration::paper()),
-        _ => DeviceMessage::Ack { seq },
+        Request::GetParameters => Reply::Parameters(protocol::RigParameters::paper()),
+        _ => Reply::Ack,
     };
-    vec![(seq, msg)]
+    vec![(seq, DeviceMessage::reply(seq, reply))]
+}
+
+/// An `Info` reply to request `seq` from a device of `version` and `hash`.
+fn info_reply(seq: u16, version: u16, hash: u32) -> Vec<(u16, DeviceMessage)> {
+    vec![(
+        seq,
+        DeviceMessage::reply(seq, Reply::Info(device_info(version, hash))),
+    )]
 }
 
 #[test]
@@ -82,7 +102,7 @@ fn hello_and_requests_are_matched_by_seq() {
     assert_eq!(info.protocol_version, PROTOCOL_VERSION);
     let f = c.faults().unwrap();
     assert_eq!(f.latched, FaultFlags::COMMS_TIMEOUT);
-    assert_eq!(c.calibration().unwrap(), protocol::Calibration::paper());
+    assert_eq!(c.calibration().unwrap(), protocol::RigParameters::paper());
     c.release(true, 10.0).unwrap();
     assert!(c.keeping_alive());
     c.release(false, 0.0).unwrap();
@@ -92,61 +112,61 @@ fn hello_and_requests_are_matched_by_seq() {
 
 #[test]
 fn newer_device_says_update_the_host() {
-    let mut c = fake_device(|seq, _| {
-        vec![(
-            seq,
-            DeviceMessage::Info(device_info(PROTOCOL_VERSION + 1, 7)),
-        )]
-    });
+    let mut c = fake_device(|seq, _| info_reply(seq, PROTOCOL_VERSION + 1, 7));
     let e = c.hello().unwrap_err().to_string();
     assert!(
-        e.contains(&format!("protocol v{}", PROTOCOL_VERSION + 1)),
+        e.contains(&format!("protocol {}", PROTOCOL_VERSION + 1)),
         "{e}"
     );
-    assert!(e.contains("update the host tool"), "{e}");
+    assert!(e.contains("update the rig tool"), "{e}");
 }
 
 #[test]
 fn older_device_says_flash_the_firmware() {
-    let mut c = fake_device(|seq, _| {
-        vec![(
-            seq,
-            DeviceMessage::Info(device_info(PROTOCOL_VERSION - 1, 7)),
-        )]
-    });
+    let mut c = fake_device(|seq, _| info_reply(seq, PROTOCOL_VERSION - 1, 7));
     let e = c.hello().unwrap_err().to_string();
-    assert!(e.contains("cargo fw-flash"), "{e}");
+    assert!(e.contains("run `rig flash` to update the firmware"), "{e}");
 }
 
 #[test]
 fn same_version_other_schema_is_refused() {
-    let mut c = fake_device(|seq, _| {
-        vec![(
-            seq,
-            DeviceMessage::Info(device_info(PROTOCOL_VERSION, SCHEMA_HASH ^ 1)),
-        )]
-    });
+    let mut c = fake_device(|seq, _| info_reply(seq, PROTOCOL_VERSION, SCHEMA_HASH ^ 1));
     let e = c.hello().unwrap_err().to_string();
     assert!(e.contains("schema"), "{e}");
 }
 
 #[test]
 fn version_nack_is_explained() {
-    let mut c = fake_device(|seq, req| match req {
-        Request::Hello { .. } => vec![(
-            seq,
-            DeviceMessage::Nack {
-                seq,
-                code: NackCode::VersionMismatch,
-            },
-        )],
-        _ => vec![(
-            seq,
-            DeviceMessage::Info(device_info(PROTOCOL_VERSION + 3, 1)),
-        )],
+    // A newer device refuses this tool's hello, naming its own version.
+    let mut c = fake_device(|seq, _| {
+        let code = NackCode::VersionMismatch {
+            device_protocol: PROTOCOL_VERSION + 3,
+            device_schema_hash: 1,
+        };
+        vec![(seq, DeviceMessage::nack(seq, code))]
     });
     let e = c.hello().unwrap_err().to_string();
-    assert!(e.contains("update the host tool"), "{e}");
+    assert!(e.contains("update the rig tool"), "{e}");
+    assert_eq!(c.stats().retries, 0);
+}
+
+#[test]
+fn a_v1_device_says_flash_the_firmware() {
+    // Protocol v1 firmware answers a v2 hello with v1's own refusal layout (the only one
+    // it has), which this tool cannot decode but recognises.
+    let mut c = fake_device_of(|seq, req| match req {
+        Request::Hello { .. } => vec![(900, LegacyV1Nack { hello_seq: seq })],
+        _ => vec![],
+    });
+    let e = c.hello().unwrap_err().to_string();
+    assert_eq!(
+        e,
+        format!(
+            "the firmware speaks protocol 1, this rig tool speaks {PROTOCOL_VERSION}: run `rig flash` to update the firmware"
+        )
+    );
+    // Recognised at once: not retried, not timed out.
+    assert_eq!(c.stats().retries, 0);
 }
 
 #[test]
@@ -211,15 +231,7 @@ fn garbage_suggests_the_baud_rate() {
 
 #[test]
 fn nack_names_the_request_and_the_fix() {
-    let mut c = fake_device(|seq, _| {
-        vec![(
-            seq,
-            DeviceMessage::Nack {
-                seq,
-                code: NackCode::InFaultHold,
-            },
-        )]
-    });
+    let mut c = fake_device(|seq, _| vec![(seq, DeviceMessage::nack(seq, NackCode::InFaultHold))]);
     let e = c.release(true, 10.0).unwrap_err().to_string();
     assert!(e.contains("Release(on)"), "{e}");
     assert!(e.contains("rig clear"), "{e}");
@@ -231,12 +243,7 @@ fn stale_and_unsolicited_frames_do_not_answer_requests() {
     let mut c = fake_device(|seq, req| {
         let mut out = vec![
             // A late answer to an older request, and a telemetry sample in between.
-            (
-                seq.wrapping_sub(1),
-                DeviceMessage::Ack {
-                    seq: seq.wrapping_sub(1),
-                },
-            ),
+            (seq.wrapping_sub(1), DeviceMessage::ack(seq.wrapping_sub(1))),
             (
                 900,
                 DeviceMessage::FaultEvent {
@@ -294,6 +301,8 @@ fn telemetry_gaps_are_counted() {
                     state: protocol::SupervisorState::Locked,
                     faults: FaultFlags::empty(),
                     status: protocol::StatusFlags::empty(),
+                    output_angle_rad: f32::NAN,
+                    output_speed_rad_s: f32::NAN,
                 };
                 out.push((1000 + s as u16, DeviceMessage::Telemetry(t)));
             }

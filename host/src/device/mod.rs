@@ -46,8 +46,19 @@ const HOST_GRACE: Duration = Duration::from_millis(1500);
 /// How long one turn waits for host bytes.
 const POLL: Duration = Duration::from_millis(1);
 
+/// Random bytes mixed into the line, both ways, in wall-clock time (`rig sim serve
+/// --line-noise-bytes-per-s`), as a noisy cable would.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WallNoise {
+    /// Noise bytes per wall-clock second, in each direction.
+    pub bytes_per_s: f64,
+    /// Seed of the bytes and their timing.
+    pub seed: u64,
+}
+
 struct Shared {
     rig: Mutex<SimRig>,
+    noise_bytes: Mutex<u64>,
     stop: AtomicBool,
     dropped_bytes: Mutex<u64>,
 }
@@ -73,6 +84,15 @@ impl VirtualDevice {
     /// Boots a simulated rig from `config` on a new pseudo-terminal, running `speed` times
     /// faster than real time (1 = real time).
     pub fn start(config: SimConfig, speed: f64) -> Result<Self, RigError> {
+        Self::start_with_noise(config, speed, None)
+    }
+
+    /// As [`VirtualDevice::start`], with `noise` random bytes mixed into the line both ways.
+    pub fn start_with_noise(
+        config: SimConfig,
+        speed: f64,
+        noise: Option<WallNoise>,
+    ) -> Result<Self, RigError> {
         if !(speed.is_finite() && speed > 0.0) {
             return Err(RigError::BadValue {
                 what: format!("--speed {speed}"),
@@ -88,13 +108,14 @@ impl VirtualDevice {
             PtyMaster::open().map_err(|e| fail("cannot open a pseudo-terminal pair", &e))?;
         let shared = Arc::new(Shared {
             rig: Mutex::new(SimRig::new(config)),
+            noise_bytes: Mutex::new(0),
             stop: AtomicBool::new(false),
             dropped_bytes: Mutex::new(0),
         });
         let worker = Arc::clone(&shared);
         let thread = std::thread::Builder::new()
             .name("virtual-device".into())
-            .spawn(move || run(master, &worker, speed))
+            .spawn(move || run(master, &worker, speed, noise))
             .map_err(|e| fail("cannot start the simulation thread", &e))?;
         Ok(Self {
             port,
@@ -104,11 +125,19 @@ impl VirtualDevice {
         })
     }
 
-    /// Starts the paper's (49, 50) rig; it reports itself as board `virtual`.
+    /// Starts the paper's (49, 50) rig with the `paper` preset ([`sim::Preset::paper`]: it
+    /// behaves as the paper's rig measured); it reports itself as board `virtual`.
     pub fn paper(speed: f64) -> Result<Self, RigError> {
+        Self::start(Self::paper_config(&sim::Preset::paper()), speed)
+    }
+
+    /// The paper's (49, 50) rig with `preset`, reporting itself as board `virtual`.
+    pub fn paper_config(preset: &sim::Preset) -> SimConfig {
         let mut config = SimConfig::paper();
         config.core.board_name = "virtual";
-        Self::start(config, speed)
+        config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
+        preset.apply(&mut config.plant);
+        config
     }
 
     /// The pseudo-terminal's port name, to open like a serial port.
@@ -136,6 +165,11 @@ impl VirtualDevice {
         self.with_rig(|rig| rig.time())
     }
 
+    /// Noise bytes mixed into the line so far, both ways.
+    pub fn noise_bytes(&self) -> u64 {
+        *lock(&self.shared.noise_bytes)
+    }
+
     /// Device output dropped because the host did not read it, bytes.
     pub fn dropped_bytes(&self) -> u64 {
         *lock(&self.shared.dropped_bytes)
@@ -157,7 +191,19 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 /// The device loop: host bytes in, time advanced, device bytes out.
-fn run(mut master: PtyMaster, shared: &Shared, speed: f64) {
+fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoise>) {
+    let mut rng = model::plant::NoiseSource::new(noise.map_or(0, |n| n.seed));
+    let mut noise_owed = [0.0f64; 2];
+    let mut noise_bytes = |dt: f64, owed: &mut f64, out: &mut Vec<u8>| {
+        if let Some(n) = noise {
+            // Poisson-like: a random share of the mean keeps the gaps irregular.
+            *owed += dt * n.bytes_per_s * 2.0 * rng.uniform();
+            while *owed >= 1.0 {
+                *owed -= 1.0;
+                out.push((rng.next_u64() >> 56) as u8);
+            }
+        }
+    };
     let mut buf = [0u8; 4096];
     let mut pending: Vec<u8> = Vec::new();
     let mut owed = 0.0f64;
@@ -173,12 +219,24 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64) {
             0
         };
         let now = Instant::now();
-        owed = (owed + (now - last).as_secs_f64() * pace).min(MAX_TURN_S);
+        let wall_dt = (now - last).as_secs_f64();
+        let mut to_device_noise = Vec::new();
+        noise_bytes(wall_dt, &mut noise_owed[0], &mut to_device_noise);
+        let noise_start = pending.len();
+        noise_bytes(wall_dt, &mut noise_owed[1], &mut pending);
+        let noise_sent = to_device_noise.len() + pending.len() - noise_start;
+        if noise_sent > 0 {
+            *lock(&shared.noise_bytes) += noise_sent as u64;
+        }
+        owed = (owed + wall_dt * pace).min(MAX_TURN_S);
         last = now;
         let ticks = (owed / tick).floor();
         owed -= ticks * tick;
         {
             let mut rig = lock(&shared.rig);
+            if !to_device_noise.is_empty() {
+                rig.to_device(&to_device_noise);
+            }
             if received > 0 {
                 rig.to_device(&buf[..received]);
                 last_rx = rig.time();

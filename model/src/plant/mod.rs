@@ -27,38 +27,7 @@ use crate::{CamDrive, GearSet, OutputShaft, paper};
 /// Below this speed (rad/s) a shaft counts as standing still.
 const STANDSTILL: f64 = 1e-6;
 
-/// What loads the output shaft.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-pub enum Load {
-    /// A mass hanging from a pulley on the output: tau_rot = m g r, inertia m r^2.
-    Mass {
-        /// Mass, kg.
-        mass: f64,
-        /// Pulley radius, m.
-        radius: f64,
-    },
-    /// A set torque, N m (a brake or a torque motor).
-    Torque(f64),
-}
-
-impl Load {
-    /// Torque on the output, N m.
-    pub fn torque(&self) -> f64 {
-        match *self {
-            Load::Mass { mass, radius } => mass * crate::G * radius,
-            Load::Torque(t) => t,
-        }
-    }
-
-    /// Inertia the load adds to the output, kg m^2.
-    pub fn inertia(&self) -> f64 {
-        match *self {
-            Load::Mass { mass, radius } => mass * radius * radius,
-            Load::Torque(_) => 0.0,
-        }
-    }
-}
+pub use crate::load::Load;
 
 /// How the cam shaft is set up.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,6 +47,11 @@ pub enum CamSetup {
 pub struct PlantParams {
     /// The vibrator.
     pub motor: MotorParams,
+    /// The hardware overcurrent trip's threshold at the current-sense pin, V
+    /// ([`crate::hardware::comparator`]); `None`: no comparator. Once the pin voltage
+    /// exceeds it the bridge stays off (the timer's break) until [`Plant::rearm_break`].
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub break_threshold_v: Option<f64>,
     /// Gear set, eccentricity and carrier mass.
     pub drive: CamDrive,
     /// Static friction coefficient of the teeth.
@@ -113,6 +87,7 @@ impl PlantParams {
     pub fn paper(gear: GearSet, load: Load) -> Self {
         Self {
             motor: MotorParams::default(),
+            break_threshold_v: None,
             drive: CamDrive::paper(gear),
             mu_s: paper::MU_S,
             mu_d: paper::MU_D,
@@ -122,7 +97,7 @@ impl PlantParams {
             supply: board::BRIDGE_SUPPLY_V,
             // The paper's bench supply cannot sink current, and actuators in general do not
             // return negative power (the paper's ref. [18]).
-            regeneration: false,
+            regeneration: board::REGENERATIVE_DECAY,
             friction_split: false,
             cam: CamSetup::Coupled,
             sensors: SensorParams::default(),
@@ -213,6 +188,8 @@ pub struct Plant {
     axial_per_torque: f64,
     /// 1 / thermal resistance and 1 / heat capacity of the winding.
     thermal: [f64; 2],
+    /// The comparator tripped the timer's break: the bridge is off.
+    break_tripped: bool,
 }
 
 impl Plant {
@@ -233,6 +210,7 @@ impl Plant {
                 1.0 / params.motor.thermal_resistance,
                 1.0 / params.motor.thermal_capacity,
             ],
+            break_tripped: false,
             params,
         }
     }
@@ -339,13 +317,26 @@ impl Plant {
         offset_current(self.state.current, self.params.effects.current_offset) + noise
     }
 
+    /// Whether the hardware overcurrent trip has switched the bridge off (the break flag
+    /// the firmware reads).
+    pub fn break_tripped(&self) -> bool {
+        self.break_tripped
+    }
+
+    /// Re-arms the break (the firmware sets the timer's main output enable again).
+    pub fn rearm_break(&mut self) {
+        self.break_tripped = false;
+    }
+
     /// Encoder counter (16-bit, wrapping) now.
     pub fn encoder_count(&self) -> u16 {
         self.params.sensors.encoder_count(self.state.cam_angle)
     }
 
     /// Advances the plant by `dt` seconds under the bridge command `drive`.
-    pub fn step(&mut self, dt: f64, drive: Drive) {
+    pub fn step(&mut self, dt: f64, mut drive: Drive) {
+        // The timer's break holds the bridge off whatever the firmware commands.
+        drive.enabled &= !self.break_tripped;
         let temp = self.state.temperature;
         let resistance = self.params.motor.resistance
             * (1.0 + rs735::COPPER_TEMPCO_PER_K * (temp - self.params.motor.ambient_c));
@@ -468,6 +459,13 @@ impl Plant {
         led.output_friction += -out_friction * wt_mean * dt;
 
         self.state.current = i1;
+        // The comparator watches the pin continuously: past its threshold the break cuts
+        // the bridge within microseconds, modelled as from the end of this step.
+        if let Some(threshold) = self.params.break_threshold_v
+            && self.params.sensors.pin_voltage(i1) > threshold
+        {
+            self.break_tripped = true;
+        }
         self.state.cam_speed = new_omega;
         self.state.cam_angle += dtheta;
         self.state.output_speed = new_wt;

@@ -8,7 +8,8 @@ use crate::hardware::{acs714, adc, amt102, divider};
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SensorParams {
-    /// ACS714 sensitivity, V/A (185 mV/A for the +-5 A part).
+    /// ACS714 sensitivity at the nominal 5.0 V supply, V/A (185 mV/A for the +-5 A part);
+    /// the sensor is ratiometric: at `acs_supply` it is this times `acs_supply / 5.0`.
     pub acs_sensitivity: f64,
     /// ACS714 supply, V: the zero-current output is half of it.
     pub acs_supply: f64,
@@ -42,26 +43,43 @@ impl Default for SensorParams {
 }
 
 impl SensorParams {
+    /// Sensitivity at the sensor's actual supply (ratiometric), V/A.
+    pub fn sensitivity_at_supply(&self) -> f64 {
+        self.acs_sensitivity * self.acs_supply / acs714::SUPPLY_NOMINAL_V
+    }
+
     /// Largest ADC code.
     pub fn adc_full_scale(&self) -> u16 {
-        ((1u32 << self.adc_bits) - 1) as u16
+        u16::try_from((1u32 << self.adc_bits.min(16)) - 1).unwrap_or(u16::MAX)
     }
 
     /// ADC code for motor current `current` (A), with noise from `rng` and quantisation.
     pub fn current_to_adc(&self, current: f64, rng: &mut NoiseSource) -> u16 {
         let v_sensor = self.acs_supply / 2.0
             + self.acs_zero_error
-            + self.acs_sensitivity * current
+            + self.sensitivity_at_supply() * current
             + self.acs_noise * rng.normal_fast();
         let v_pin = (v_sensor * self.divider).clamp(0.0, self.adc_reference);
         let full = self.adc_full_scale() as f64;
-        libm::round(v_pin / self.adc_reference * full).clamp(0.0, full) as u16
+        #[allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "clamped to 0..=full, a u16"
+        )]
+        let code = libm::round(v_pin / self.adc_reference * full).clamp(0.0, full) as u16;
+        code
+    }
+
+    /// Noise-free voltage at the ADC pin (and the comparator's input) for `current`, V.
+    pub fn pin_voltage(&self, current: f64) -> f64 {
+        (self.acs_supply / 2.0 + self.acs_zero_error + self.sensitivity_at_supply() * current)
+            * self.divider
     }
 
     /// Current (A) an ideal zeroed reading of `code` stands for (the firmware's inverse).
     pub fn adc_to_current(&self, code: u16) -> f64 {
         let v_pin = code as f64 / self.adc_full_scale() as f64 * self.adc_reference;
-        (v_pin / self.divider - self.acs_supply / 2.0) / self.acs_sensitivity
+        (v_pin / self.divider - self.acs_supply / 2.0) / self.sensitivity_at_supply()
     }
 
     /// Quadrature counts per cam revolution (4 edges per pulse).
@@ -74,7 +92,14 @@ impl SensorParams {
     pub fn encoder_count(&self, angle: f64) -> u16 {
         let counts =
             libm::floor(angle / (2.0 * core::f64::consts::PI) * self.counts_per_rev() as f64);
-        (counts as i64) as u16
+        // The timer is a 16-bit up/down counter: it wraps, and so does this.
+        #[allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "a 16-bit hardware counter wraps modulo 2^16"
+        )]
+        let count = (counts as i64) as u16;
+        count
     }
 }
 

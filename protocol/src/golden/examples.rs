@@ -25,10 +25,18 @@ pub(crate) fn telemetry() -> TelemetrySample {
         status: StatusFlags::HOST_RELEASE | StatusFlags::CAPTURE_RUNNING,
         output_angle_rad: -0.75,
         output_speed_rad_s: f32::NAN,
+    }
+}
+
+pub(crate) fn health() -> HealthSample {
+    HealthSample {
+        device_time_us: 6_000_000,
         bus_voltage_v: 12.25,
-        motor_temp_c: 31.5,
+        motor_temp_c: f32::NAN,
         step_cycles_mean: 21_000,
         step_cycles_max: 34_567,
+        rx_frame_errors: 3,
+        tx_frames_dropped: 130,
     }
 }
 
@@ -255,6 +263,7 @@ pub(crate) fn device_messages() -> std::vec::Vec<(std::string::String, DeviceMes
                 device_time_us: 1_000,
             },
         ),
+        ("DeviceMessage::Health", Health(health())),
     ];
     out.extend(unsolicited.map(|(n, m)| (n.to_owned(), m)));
     out
@@ -269,6 +278,7 @@ pub(crate) fn device_index(m: &DeviceMessage) -> usize {
         CaptureChunk(_) => 2,
         CaptureDone { .. } => 3,
         FaultEvent { .. } => 4,
+        Health(_) => 5,
     }
 }
 

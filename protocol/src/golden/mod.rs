@@ -365,6 +365,7 @@ fn recorded_sizes_match_the_constants() {
     assert_eq!(max("RigParameters"), RigParameters::MAX_WIRE_SIZE);
     assert_eq!(max("DeviceInfo"), DeviceInfo::MAX_WIRE_SIZE);
     assert_eq!(max("TelemetrySample"), TelemetrySample::MAX_WIRE_SIZE);
+    assert_eq!(max("HealthSample"), HealthSample::MAX_WIRE_SIZE);
     assert_eq!(max("CaptureSample"), CaptureSample::MAX_WIRE_SIZE);
     assert_eq!(max("CaptureChunk"), CaptureChunk::MAX_WIRE_SIZE);
     assert_eq!(max("NackCode"), NackCode::MAX_WIRE_SIZE);
@@ -389,11 +390,18 @@ fn worst_case_sizes_are_exact() {
         device_time_us: u64::MAX,
         faults: FaultFlags::from_bits_retain(u32::MAX),
         status: StatusFlags::from_bits_retain(u16::MAX),
-        step_cycles_mean: u32::MAX,
-        step_cycles_max: u32::MAX,
         ..telemetry()
     };
     assert_eq!(wire_len(&telemetry), TelemetrySample::MAX_WIRE_SIZE);
+    let health = HealthSample {
+        device_time_us: u64::MAX,
+        step_cycles_mean: u32::MAX,
+        step_cycles_max: u32::MAX,
+        rx_frame_errors: u32::MAX,
+        tx_frames_dropped: u32::MAX,
+        ..health()
+    };
+    assert_eq!(wire_len(&health), HealthSample::MAX_WIRE_SIZE);
     let info = DeviceInfo {
         firmware_version: FirmwareVersion {
             major: 255,
@@ -480,6 +488,15 @@ fn other_variants_fit_the_budget() {
             flags: faults,
             device_time_us: u64::MAX,
         },
+        DeviceMessage::Health(HealthSample {
+            device_time_us: u64::MAX,
+            bus_voltage_v: f32::MAX,
+            motor_temp_c: f32::MAX,
+            step_cycles_mean: u32::MAX,
+            step_cycles_max: u32::MAX,
+            rx_frame_errors: u32::MAX,
+            tx_frames_dropped: u32::MAX,
+        }),
         DeviceMessage::reply(
             u16::MAX,
             Reply::Faults {

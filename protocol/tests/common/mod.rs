@@ -50,14 +50,13 @@ fn telemetry() -> impl Strategy<Value = TelemetrySample> {
     (
         any::<u32>(),
         any::<u64>(),
-        proptest::array::uniform9(any::<f32>()),
+        proptest::array::uniform7(any::<f32>()),
         supervisor_state(),
         faults(),
         any::<u16>(),
-        any::<[u32; 2]>(),
     )
         .prop_map(
-            |(seq, device_time_us, f, state, faults, status, cycles)| TelemetrySample {
+            |(seq, device_time_us, f, state, faults, status)| TelemetrySample {
                 seq,
                 device_time_us,
                 cam_speed_rad_s: f[0],
@@ -70,12 +69,22 @@ fn telemetry() -> impl Strategy<Value = TelemetrySample> {
                 status: StatusFlags::from_bits_retain(status),
                 output_angle_rad: f[5],
                 output_speed_rad_s: f[6],
-                bus_voltage_v: f[7],
-                motor_temp_c: f[8],
-                step_cycles_mean: cycles[0],
-                step_cycles_max: cycles[1],
             },
         )
+}
+
+fn health() -> impl Strategy<Value = HealthSample> {
+    (any::<u64>(), any::<[f32; 2]>(), any::<[u32; 4]>()).prop_map(|(device_time_us, f, n)| {
+        HealthSample {
+            device_time_us,
+            bus_voltage_v: f[0],
+            motor_temp_c: f[1],
+            step_cycles_mean: n[0],
+            step_cycles_max: n[1],
+            rx_frame_errors: n[2],
+            tx_frames_dropped: n[3],
+        }
+    })
 }
 
 fn capture_chunk() -> impl Strategy<Value = CaptureChunk> {
@@ -238,6 +247,7 @@ pub fn device_message() -> impl Strategy<Value = DeviceMessage> {
             flags,
             device_time_us
         }),
+        health().prop_map(DeviceMessage::Health),
     ]
 }
 

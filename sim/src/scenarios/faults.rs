@@ -3,7 +3,7 @@
 //! per drill.
 
 use model::plant::{CamSetup, Load};
-use protocol::{DeviceMessage, FaultFlags, Request};
+use protocol::{FaultFlags, Reply, Request};
 use serde::Serialize;
 
 use super::{hello, release};
@@ -11,11 +11,13 @@ use crate::SimError;
 use crate::{Injections, SimConfig, SimLink, SimRig};
 
 /// The drills, in the order they run.
-pub const DRILLS: [&str; 4] = [
+pub const DRILLS: [&str; 6] = [
     "overcurrent",
     "encoder-loss",
     "comms-loss",
     "bad-calibration",
+    "reversed-encoder",
+    "load-limit",
 ];
 
 /// Longest a drill waits for the safe state, s.
@@ -73,8 +75,33 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
             let mut link = rig(seed, |_| {})?;
             release(&mut link, 10.0)?;
             link.wait(1.5);
-            // The cam jams: its shaft stops dead while the loop still drives it.
+            // The cam jams: its shaft stops dead while the loop still drives it. The
+            // comparator's break cuts the bridge before any control step runs.
             link.rig.plant_mut().set_cam(CamSetup::Blocked);
+            (link, true)
+        }
+        "reversed-encoder" => {
+            // A and B swapped from the start: the speed reads against the drive.
+            let mut link = rig(seed, |_| {})?;
+            link.rig.inject(Injections {
+                encoder_reversed: true,
+                ..Default::default()
+            });
+            release(&mut link, 10.0)?;
+            // Timed from the moment the bridge first drives.
+            link.wait_until(SAFE_WITHIN_S, 0.0001, |l| l.rig.bridge_on());
+            (link, true)
+        }
+        "load-limit" => {
+            // A record stored before the caps, asking for 1e30 N m (OVERLOAD off): a load
+            // above the gear's 3.68 N m while released still stops the rig.
+            let mut link = rig(seed, |c| {
+                c.calibration.max_release_load_nm = 1e30;
+                c.calibration.max_current_a = 4.8;
+            })?;
+            release(&mut link, 10.0)?;
+            link.wait(1.5);
+            link.rig.plant_mut().set_load(Load::Torque(3.95));
             (link, true)
         }
         "encoder-loss" => {
@@ -98,7 +125,7 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
         "bad-calibration" => {
             let link = rig(seed, |c| {
                 c.calibration.c1_nmm_per_a = f32::NAN;
-                c.calibration_status = protocol::CalibrationStatus::Invalid;
+                c.calibration_status = protocol::ParametersStatus::Invalid;
             })?;
             (link, false)
         }
@@ -110,7 +137,7 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
         }
     };
     let time_to_safe_s = if cause {
-        link.wait_until(SAFE_WITHIN_S, 0.001, |l| !l.rig.drive().enabled)
+        link.wait_until(SAFE_WITHIN_S, 0.0001, |l| !l.rig.bridge_on())
     } else {
         Some(0.0)
     };
@@ -121,7 +148,7 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
             on: true,
             target_hz: 10.0
         })?,
-        DeviceMessage::Ack { .. }
+        Reply::Ack
     );
     link.wait(0.2);
     let latched = crate::RigLink::latched_faults(&mut link)?;

@@ -22,6 +22,9 @@ pub struct Fig5Options {
     pub after_stop_s: f64,
     /// Sensor-noise seed.
     pub seed: u64,
+    /// The ACS714's supply, V (ratiometric zero and sensitivity; the board allows
+    /// 4.5-5.5 V).
+    pub sensor_supply_v: f64,
 }
 
 impl Default for Fig5Options {
@@ -32,6 +35,7 @@ impl Default for Fig5Options {
             release_s: 2.0,
             after_stop_s: 0.5,
             seed: 1,
+            sensor_supply_v: model::hardware::acs714::SUPPLY_NOMINAL_V,
         }
     }
 }
@@ -64,6 +68,7 @@ pub fn run(opts: &Fig5Options) -> Result<Fig5Result, SimError> {
     let mut config =
         SimConfig::for_gear(z, paper::FIG5_LOAD).map_err(|source| SimError::Gear { z, source })?;
     config.seed = opts.seed;
+    config.plant.sensors.acs_supply = opts.sensor_supply_v;
     let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
     let mut link = SimLink::new(SimRig::new(config));
     hello(&mut link)?;

@@ -6,7 +6,7 @@ pub mod fig5;
 pub mod sweep;
 pub mod table1;
 
-use protocol::{DeviceMessage, Request};
+use protocol::{Reply, Request};
 
 use crate::SimError;
 use crate::SimLink;
@@ -20,24 +20,19 @@ pub const MOTION_RAD: f64 = 0.1e-3 / model::paper::R_OUT;
 /// Sends `req` and requires an `Ack`.
 pub fn expect_ack(link: &mut SimLink, req: &Request) -> Result<(), SimError> {
     match link.request(req)? {
-        DeviceMessage::Ack { .. } => Ok(()),
-        other => Err(SimError::Protocol(format!(
-            "{req:?} was answered with {other:?}"
-        ))),
+        Reply::Ack => Ok(()),
+        other => Err(crate::riglink::unexpected(req, &other)),
     }
 }
 
-/// Opens the session (hello) as the host tool does.
+/// Opens the session (hello) as the host tool does, checking the device's version.
 pub fn hello(link: &mut SimLink) -> Result<(), SimError> {
-    let reply = link.request(&Request::Hello {
-        protocol_version: protocol::PROTOCOL_VERSION,
-        schema_hash: protocol::SCHEMA_HASH,
-    })?;
-    match reply {
-        DeviceMessage::Info(_) => Ok(()),
-        other => Err(SimError::Protocol(format!(
-            "hello was answered with {other:?}"
-        ))),
+    let hello = protocol::session::Session::hello();
+    let reply = link.request(&hello)?;
+    match protocol::session::hello_outcome(&reply) {
+        Some(Ok(_)) => Ok(()),
+        Some(Err(e)) => Err(SimError::Protocol(e.to_string())),
+        None => Err(crate::riglink::unexpected(&hello, &reply)),
     }
 }
 

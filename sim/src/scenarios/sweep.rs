@@ -29,8 +29,12 @@ pub struct SweepOptions {
     pub rest_s: f64,
     /// Seed of the sensor noise and of the test order.
     pub seed: u64,
-    /// Effects switched on in the plant (for the discrepancy workflow).
+    /// Effects switched on in the plant (for the discrepancy workflow); by default the
+    /// `paper` preset's ([`crate::Preset::paper`]), as the paper's rig measured.
     pub effects: PlantEffects,
+    /// The ACS714's supply, V (ratiometric zero and sensitivity; the board allows
+    /// 4.5-5.5 V).
+    pub sensor_supply_v: f64,
 }
 
 impl Default for SweepOptions {
@@ -45,7 +49,8 @@ impl Default for SweepOptions {
             window_s: paper::CURRENT_AVERAGING_S,
             rest_s: 10.0,
             seed: 1,
-            effects: PlantEffects::default(),
+            effects: crate::Preset::paper().effects,
+            sensor_supply_v: model::hardware::acs714::SUPPLY_NOMINAL_V,
         }
     }
 }
@@ -107,6 +112,7 @@ pub fn run(opts: &SweepOptions) -> Result<Vec<SweepPoint>, SimError> {
         SimConfig::for_gear(z, Load::Torque(0.0)).map_err(|source| SimError::Gear { z, source })?;
     config.seed = opts.seed;
     config.plant.effects = opts.effects;
+    config.plant.sensors.acs_supply = opts.sensor_supply_v;
     // The bench tests up to the largest load: the release limit sits above it so estimate
     // noise at the top load does not trip OVERLOAD.
     let top = opts.loads.iter().copied().fold(0.0, f64::max);

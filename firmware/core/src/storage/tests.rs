@@ -34,6 +34,20 @@ struct MemFlash {
     data: Vec<u8>,
     steps: usize,
     cut_at: Option<usize>,
+    /// Offsets of program units left half programmed (their ECC does not match).
+    torn: Vec<usize>,
+    /// Reading a torn unit raises a double-ECC error (the STM32G4's NMI), reported through
+    /// [`take_ecc_error`].
+    ecc_on_torn: bool,
+}
+
+std::thread_local! {
+    static ECC_ERROR: core::cell::Cell<bool> = const { core::cell::Cell::new(false) };
+}
+
+/// The test's stand-in for the binary's NMI flag.
+fn take_ecc_error() -> bool {
+    ECC_ERROR.with(|f| f.replace(false))
 }
 
 impl MemFlash {
@@ -42,6 +56,8 @@ impl MemFlash {
             data: vec![0xFF; REGION],
             steps: 0,
             cut_at: None,
+            torn: Vec::new(),
+            ecc_on_torn: false,
         }
     }
 
@@ -51,6 +67,8 @@ impl MemFlash {
             data: self.data.clone(),
             steps: 0,
             cut_at: None,
+            torn: self.torn.clone(),
+            ecc_on_torn: self.ecc_on_torn,
         }
     }
 
@@ -80,6 +98,10 @@ impl ReadNorFlash for MemFlash {
             .get(at..at + bytes.len())
             .ok_or(MemError::OutOfBounds)?;
         bytes.copy_from_slice(src);
+        let end = at + bytes.len();
+        if self.ecc_on_torn && self.torn.iter().any(|&u| u < end && u + WRITE > at) {
+            ECC_ERROR.with(|f| f.set(true));
+        }
         Ok(())
     }
 
@@ -102,7 +124,10 @@ impl NorFlash for MemFlash {
         }
         for page in (from..to).step_by(PAGE) {
             match self.step() {
-                Ok(()) => self.data[page..page + PAGE].fill(0xFF),
+                Ok(()) => {
+                    self.data[page..page + PAGE].fill(0xFF);
+                    self.torn.retain(|&u| u < page || u >= page + PAGE);
+                }
                 Err(cut_here) => {
                     if cut_here {
                         // Half erased: the rest keeps scrambled bits of the old contents.
@@ -138,6 +163,7 @@ impl NorFlash for MemFlash {
                         for (d, &s) in self.data[dst..dst + WRITE].iter_mut().zip(chunk) {
                             *d = s | 0x0F;
                         }
+                        self.torn.push(dst);
                     }
                     return Err(MemError::PowerLost);
                 }
@@ -147,11 +173,11 @@ impl NorFlash for MemFlash {
     }
 }
 
-fn calibration(k: u16) -> Calibration {
-    Calibration {
+fn calibration(k: u16) -> RigParameters {
+    RigParameters {
         c1_nmm_per_a: 60.0 + f32::from(k),
         max_release_load_nm: 1.0 + f32::from(k) * 0.1,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     }
 }
 
@@ -162,8 +188,8 @@ fn load(flash: &MemFlash) -> Loaded {
 #[test]
 fn blank_flash_gives_defaults() {
     let loaded = load(&MemFlash::new());
-    assert_eq!(loaded.status, CalibrationStatus::Defaults);
-    assert_eq!(loaded.calibration, Calibration::paper());
+    assert_eq!(loaded.status, ParametersStatus::Defaults);
+    assert_eq!(loaded.calibration, RigParameters::paper());
 }
 
 #[test]
@@ -174,7 +200,7 @@ fn saves_alternate_slots_and_the_newest_wins() {
         store.save(&calibration(k)).unwrap();
         let flash = store.into_inner();
         let loaded = load(&flash);
-        assert_eq!(loaded.status, CalibrationStatus::Valid);
+        assert_eq!(loaded.status, ParametersStatus::Valid);
         assert_eq!(loaded.calibration, calibration(k));
         // Record k went to slot k % 2 with sequence k + 1.
         let slot = (k as usize % 2) * PAGE;
@@ -200,7 +226,7 @@ fn sequence_compare_survives_wrapping() {
 fn power_cut_at_every_step_keeps_the_previous_calibration() {
     // Three generations, so both slots get overwritten once with a cut at every step.
     let mut flash = MemFlash::new();
-    let mut previous: Option<Calibration> = None;
+    let mut previous: Option<RigParameters> = None;
     for generation in 0..3u16 {
         let next = calibration(generation);
         let mut cuts = 0;
@@ -220,11 +246,11 @@ fn power_cut_at_every_step_keeps_the_previous_calibration() {
             }
             match previous {
                 Some(prev) => {
-                    assert_eq!(loaded.status, CalibrationStatus::Valid, "cut at {cuts}");
+                    assert_eq!(loaded.status, ParametersStatus::Valid, "cut at {cuts}");
                     assert_eq!(loaded.calibration, prev, "cut at {cuts}");
                 }
                 // Nothing stored before: a torn first save is not a calibration.
-                None => assert_eq!(loaded.status, CalibrationStatus::Defaults, "cut at {cuts}"),
+                None => assert_eq!(loaded.status, ParametersStatus::Defaults, "cut at {cuts}"),
             }
             // After the cut, a full save from the torn state still works.
             let mut retry = CalibrationStore::new(after.rebooted());
@@ -247,15 +273,15 @@ fn corrupt_record_is_invalid_unless_the_other_slot_is_good() {
     let mut flash = store.into_inner();
     flash.data[20] ^= 0x01; // a bit of C1 rots
     let loaded = load(&flash);
-    assert_eq!(loaded.status, CalibrationStatus::Invalid);
-    assert_eq!(loaded.calibration, Calibration::paper());
+    assert_eq!(loaded.status, ParametersStatus::Invalid);
+    assert_eq!(loaded.calibration, RigParameters::paper());
 
     // A second, good record in the other slot is used.
     let mut store = CalibrationStore::new(flash);
     store.load();
     store.save(&calibration(2)).unwrap();
     let loaded = load(&store.into_inner());
-    assert_eq!(loaded.status, CalibrationStatus::Valid);
+    assert_eq!(loaded.status, ParametersStatus::Valid);
     assert_eq!(loaded.calibration, calibration(2));
 }
 
@@ -269,17 +295,17 @@ fn other_schema_or_invalid_values_are_invalid() {
     flash.data[4] = 2;
     let crc = CRC32.checksum(&flash.data[..BODY_LEN]);
     flash.data[BODY_LEN..CRC_END].copy_from_slice(&crc.to_le_bytes());
-    assert_eq!(load(&flash).status, CalibrationStatus::Invalid);
+    assert_eq!(load(&flash).status, ParametersStatus::Invalid);
 
     // A well-formed record whose values fail validation (mu_d > mu_s).
     let mut store = CalibrationStore::new(MemFlash::new());
     store.load();
-    let bad = Calibration {
+    let bad = RigParameters {
         mu_d: 0.5,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     store.save(&bad).unwrap();
-    assert_eq!(load(&store.into_inner()).status, CalibrationStatus::Invalid);
+    assert_eq!(load(&store.into_inner()).status, ParametersStatus::Invalid);
 }
 
 #[test]
@@ -307,9 +333,60 @@ fn partition_offsets_and_bounds() {
 fn too_small_a_region_refuses() {
     let p = Partition::new(MemFlash::new(), 0, PAGE as u32);
     let mut store = CalibrationStore::new(p);
-    assert_eq!(store.load().status, CalibrationStatus::Invalid);
+    assert_eq!(store.load().status, ParametersStatus::Invalid);
     assert_eq!(
         store.save(&calibration(1)),
         Err(StorageError::RegionTooSmall)
     );
+}
+
+#[test]
+fn torn_units_raising_ecc_errors_count_as_corrupt() {
+    // A cut at every program step of the second generation's save, on a chip whose torn
+    // units raise a double-ECC error when read: the torn slot counts as corrupt, and the
+    // other slot's record is used.
+    let mut flash = MemFlash::new();
+    flash.ecc_on_torn = true;
+    let mut store = CalibrationStore::with_ecc_check(flash, take_ecc_error);
+    store.load();
+    store.save(&calibration(1)).unwrap();
+    let flash = store.into_inner();
+    let mut ecc_seen = 0;
+    for cut in 0..15 {
+        let mut trial = flash.rebooted();
+        trial.cut_at = Some(cut);
+        let mut store = CalibrationStore::with_ecc_check(trial, take_ecc_error);
+        store.load();
+        assert!(store.save(&calibration(2)).is_err());
+        let after = store.into_inner();
+        if !after.torn.is_empty() {
+            ecc_seen += 1;
+        }
+        let mut reader = CalibrationStore::with_ecc_check(after.rebooted(), take_ecc_error);
+        let loaded = reader.load();
+        assert_eq!(loaded.status, ParametersStatus::Valid, "cut at {cut}");
+        assert_eq!(loaded.calibration, calibration(1), "cut at {cut}");
+        // A retry rewrites the torn slot (erase first) and wins.
+        reader.save(&calibration(2)).unwrap();
+        let mut again = CalibrationStore::with_ecc_check(reader.into_inner(), take_ecc_error);
+        assert_eq!(again.load().calibration, calibration(2), "cut at {cut}");
+    }
+    // Every program cut (14 of the 15 steps; the first is the erase) left a torn unit.
+    assert_eq!(ecc_seen, 14);
+
+    // Nothing valid anywhere but an unreadable slot: the defaults, flagged invalid.
+    let mut flash = MemFlash::new();
+    flash.ecc_on_torn = true;
+    flash.cut_at = Some(1);
+    let mut store = CalibrationStore::with_ecc_check(flash, take_ecc_error);
+    store.load();
+    assert!(store.save(&calibration(1)).is_err());
+    let mut flash = store.into_inner().rebooted();
+    // Tear the commit marker's unit too, as a cut during it would.
+    let commit_unit = COMMIT_AT;
+    flash.data[commit_unit..commit_unit + 16].copy_from_slice(&COMMIT);
+    flash.torn.push(commit_unit);
+    let loaded = CalibrationStore::with_ecc_check(flash, take_ecc_error).load();
+    assert_eq!(loaded.status, ParametersStatus::Invalid);
+    assert_eq!(loaded.calibration, RigParameters::paper());
 }

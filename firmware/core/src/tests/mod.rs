@@ -8,8 +8,8 @@ mod supervisor;
 use model::GearSet;
 use model::plant::{Drive, Load, Plant, PlantParams};
 use protocol::{
-    Calibration, DeviceDeframer, DeviceMessage, FaultFlags, MAX_FRAME_SIZE, NackCode, Request,
-    SupervisorState, encode_frame,
+    DeviceDeframer, DeviceMessage, FaultFlags, MAX_FRAME_SIZE, NackCode, Reply, Request,
+    RigParameters, SupervisorState, encode_frame,
 };
 
 use crate::{BootInfo, Core, CoreConfig, Inputs, Outputs, Status};
@@ -40,10 +40,12 @@ pub(crate) struct Rig {
     pub adc_offset: i32,
     /// Report the encoder count frozen at this value (encoder lost).
     pub encoder_frozen: Option<u16>,
+    /// Report the encoder counting backwards (A and B swapped).
+    pub encoder_reversed: bool,
     /// How the "binary" answers a flash write (None: never answers).
     pub persist_answer: Option<bool>,
-    /// Calibrations handed out for writing.
-    pub persisted: Vec<Calibration>,
+    /// Parameter records handed out for writing.
+    pub persisted: Vec<RigParameters>,
     /// Most bytes the link moves per step, a UART's pace (None: everything at once).
     pub link_budget: Option<usize>,
 }
@@ -79,6 +81,7 @@ impl Rig {
             button: false,
             adc_offset: 0,
             encoder_frozen: None,
+            encoder_reversed: false,
             persist_answer: Some(true),
             persisted: Vec::new(),
             link_budget: None,
@@ -104,9 +107,12 @@ impl Rig {
 
     /// Steps the core only, with these samples, at the rig's current time.
     pub fn step_with(&mut self, adc: &[u16]) -> Outputs {
-        let encoder_count = self
+        let mut encoder_count = self
             .encoder_frozen
             .unwrap_or_else(|| self.plant.encoder_count());
+        if self.encoder_reversed {
+            encoder_count = encoder_count.wrapping_neg();
+        }
         let out = self.core.step(&Inputs {
             now_us: self.now_us,
             current_adc: adc,
@@ -207,20 +213,37 @@ impl Rig {
         self.received[before..].to_vec()
     }
 
-    /// The single `Ack`/`Nack` answer to `request`: `Ok(())` or the Nack code.
-    pub fn ack(&mut self, request: &Request) -> Result<(), NackCode> {
+    /// The single reply to `request`, matched by its seq.
+    pub fn reply(&mut self, request: &Request) -> Reply {
         let seq = self.host_seq;
         let replies = self.request(request);
         let answers: Vec<_> = replies
             .iter()
-            .filter_map(|m| match m {
-                DeviceMessage::Ack { seq: s } if *s == seq => Some(Ok(())),
-                DeviceMessage::Nack { seq: s, code } if *s == seq => Some(Err(*code)),
-                _ => None,
-            })
+            .filter(|m| m.reply_to() == Some(seq))
+            .filter_map(DeviceMessage::as_reply)
             .collect();
         assert_eq!(answers.len(), 1, "{request:?}: {replies:?}");
-        answers[0]
+        answers[0].clone()
+    }
+
+    /// The single `Ack`/`Nack` answer to `request`: `Ok(())` or the Nack code.
+    pub fn ack(&mut self, request: &Request) -> Result<(), NackCode> {
+        match self.reply(request) {
+            Reply::Ack => Ok(()),
+            Reply::Nack(code) => Err(code),
+            other => panic!(
+                "{} answered {}, not Ack or Nack",
+                request.name(),
+                other.name()
+            ),
+        }
+    }
+
+    /// Whether a reply to request `seq` with `pred` has arrived.
+    pub fn answered(&self, seq: u16, pred: impl Fn(&Reply) -> bool) -> bool {
+        self.received
+            .iter()
+            .any(|m| m.reply_to() == Some(seq) && m.as_reply().is_some_and(&pred))
     }
 
     pub fn state(&self) -> SupervisorState {

@@ -2,8 +2,9 @@
 //! garbage counted.
 
 use protocol::{
-    Calibration, CalibrationStatus, CaptureSample, DeviceMessage, FaultFlags, MAX_FRAME_SIZE,
-    NackCode, PROTOCOL_VERSION, Request, SCHEMA_HASH, SupervisorState, encode_frame,
+    CaptureSample, DeviceMessage, FaultFlags, MAX_FRAME_SIZE, NackCode, PROTOCOL_VERSION,
+    ParameterField, ParameterRejection, ParametersStatus, RejectReason, Reply, Request, ResetCause,
+    RigParameters, SCHEMA_HASH, SimCommand, SupervisorState, encode_frame,
 };
 
 use super::Rig;
@@ -22,63 +23,123 @@ fn hello() -> Request {
 fn every_request_is_answered() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(150);
-    let info = |m: &DeviceMessage| matches!(m, DeviceMessage::Info(i) if i.board == "nucleo-g474re" && i.protocol_version == PROTOCOL_VERSION && i.calibration_status == CalibrationStatus::Defaults);
+    let info = |m: &DeviceMessage| matches!(m, DeviceMessage::Reply { reply: Reply::Info(i), .. } if i.board == "nucleo-g474re" && i.protocol_version == PROTOCOL_VERSION && i.parameters_status == ParametersStatus::Defaults);
     let cases: Vec<(Request, Expect)> = vec![
         (hello(), Box::new(info)),
         (Request::GetInfo, Box::new(info)),
         (
             Request::Heartbeat,
-            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+            Box::new(|m| {
+                matches!(
+                    m,
+                    DeviceMessage::Reply {
+                        reply: Reply::Ack,
+                        ..
+                    }
+                )
+            }),
         ),
         (
-            Request::GetCalibration,
-            Box::new(|m| matches!(m, DeviceMessage::Calibration(c) if *c == Calibration::paper())),
+            Request::GetParameters,
+            Box::new(
+                |m| matches!(m, DeviceMessage::Reply { reply: Reply::Parameters(c), .. } if *c == RigParameters::paper()),
+            ),
         ),
         (
             Request::StartTelemetry { rate_hz: 50 },
-            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+            Box::new(|m| {
+                matches!(
+                    m,
+                    DeviceMessage::Reply {
+                        reply: Reply::Ack,
+                        ..
+                    }
+                )
+            }),
         ),
         (
             Request::StopTelemetry,
-            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+            Box::new(|m| {
+                matches!(
+                    m,
+                    DeviceMessage::Reply {
+                        reply: Reply::Ack,
+                        ..
+                    }
+                )
+            }),
         ),
         (
             Request::GetFaults,
             Box::new(
-                |m| matches!(m, DeviceMessage::Faults { active, latched } if active.is_empty() && latched.is_empty()),
+                |m| matches!(m, DeviceMessage::Reply { reply: Reply::Faults { active, latched }, .. } if active.is_empty() && latched.is_empty()),
             ),
         ),
         (
             Request::ClearFaults,
-            Box::new(|m| matches!(m, DeviceMessage::Faults { .. })),
+            Box::new(|m| {
+                matches!(
+                    m,
+                    DeviceMessage::Reply {
+                        reply: Reply::Faults { .. },
+                        ..
+                    }
+                )
+            }),
         ),
         (
             Request::RezeroCurrent,
-            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+            Box::new(|m| {
+                matches!(
+                    m,
+                    DeviceMessage::Reply {
+                        reply: Reply::Ack,
+                        ..
+                    }
+                )
+            }),
         ),
         (
             Request::StartCapture {
                 sample_rate_hz: 1000,
                 samples: 10,
             },
-            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+            Box::new(|m| {
+                matches!(
+                    m,
+                    DeviceMessage::Reply {
+                        reply: Reply::Ack,
+                        ..
+                    }
+                )
+            }),
         ),
         (
             Request::Release {
                 on: false,
                 target_hz: 0.0,
             },
-            Box::new(|m| matches!(m, DeviceMessage::Ack { .. })),
+            Box::new(|m| {
+                matches!(
+                    m,
+                    DeviceMessage::Reply {
+                        reply: Reply::Ack,
+                        ..
+                    }
+                )
+            }),
         ),
     ];
     for (request, expect) in cases {
         let replies = rig.request(&request);
         assert_eq!(replies.len(), 1, "{request:?}: {replies:?}");
         assert!(expect(&replies[0]), "{request:?}: {replies:?}");
-        if let DeviceMessage::Ack { seq } | DeviceMessage::Nack { seq, .. } = replies[0] {
-            // The reply echoes the request's sequence number (sent just before).
-            assert_eq!(seq, rig_last_seq(&rig));
-        }
+        // Every reply names the request's sequence number (sent just before).
+        assert_eq!(
+            replies[0].reply_to(),
+            Some(rig_last_seq(&rig)),
+            "{request:?}"
+        );
         rig.run_ms(120);
     }
 }
@@ -95,12 +156,16 @@ fn hello_with_another_version_is_refused() {
         (PROTOCOL_VERSION + 1, SCHEMA_HASH),
         (PROTOCOL_VERSION, SCHEMA_HASH ^ 1),
     ] {
+        // The refusal carries the device's own version, so the host can say what to do.
         assert_eq!(
             rig.ack(&Request::Hello {
                 protocol_version: v,
                 schema_hash: h
             }),
-            Err(NackCode::VersionMismatch)
+            Err(NackCode::VersionMismatch {
+                device_protocol: PROTOCOL_VERSION,
+                device_schema_hash: SCHEMA_HASH
+            })
         );
     }
 }
@@ -135,50 +200,148 @@ fn release_arguments_are_checked_and_clamped() {
 fn set_calibration_persists_then_activates() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(150);
-    let new = Calibration {
-        c1_nmm_per_a: 60.0,
+    let new = RigParameters {
+        // C1 changed alone stays within C4 = C1 C6 + C2's tolerance (model's check).
+        c1_nmm_per_a: 62.0,
         max_freq_hz: 18.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
-    let seq = rig.send(&Request::SetCalibration(new));
+    let seq = rig.send(&Request::SetParameters(new));
     // Not acknowledged before the flash write.
-    assert!(
-        !rig.received
-            .iter()
-            .any(|m| matches!(m, DeviceMessage::Ack { seq: s } if *s == seq))
-    );
+    assert!(!rig.answered(seq, |r| *r == Reply::Ack));
     rig.step();
     assert_eq!(rig.persisted, [new]);
-    assert!(
-        rig.received
-            .iter()
-            .any(|m| matches!(m, DeviceMessage::Ack { seq: s } if *s == seq))
-    );
-    assert!(
-        matches!(rig.request(&Request::GetCalibration)[..], [DeviceMessage::Calibration(c)] if c == new)
-    );
+    assert!(rig.answered(seq, |r| *r == Reply::Ack));
+    assert_eq!(rig.reply(&Request::GetParameters), Reply::Parameters(new));
     let s = rig.core.status();
-    assert_eq!(s.calibration_status, CalibrationStatus::Valid);
+    assert_eq!(s.parameters_status, ParametersStatus::Valid);
 
-    // Invalid values are rejected without touching flash.
-    let bad = Calibration {
+    // Invalid values are rejected without touching flash, naming the field.
+    let rejected = |field, reason| {
+        Err(NackCode::ParametersRejected(ParameterRejection::new(
+            field, reason,
+        )))
+    };
+    let bad = RigParameters {
         z: [49, 51, 50, 49], // unequal centre distances
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     assert_eq!(
-        rig.ack(&Request::SetCalibration(bad)),
-        Err(NackCode::CalibrationRejected)
+        rig.ack(&Request::SetParameters(bad)),
+        rejected(ParameterField::Z, RejectReason::Inconsistent)
     );
-    let bad = Calibration {
+    let bad = RigParameters {
         mu_s: f32::NAN,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     assert_eq!(
-        rig.ack(&Request::SetCalibration(bad)),
-        Err(NackCode::CalibrationRejected)
+        rig.ack(&Request::SetParameters(bad)),
+        rejected(ParameterField::MuS, RejectReason::NotFinite)
+    );
+    // Limits the board cannot honour are refused, not silently lowered.
+    let bad = RigParameters {
+        max_current_a: 6.0, // the board trips at 4.8 A
+        ..RigParameters::paper()
+    };
+    assert_eq!(
+        rig.ack(&Request::SetParameters(bad)),
+        rejected(ParameterField::MaxCurrent, RejectReason::AboveBoardCap)
+    );
+    let bad = RigParameters {
+        max_freq_hz: 25.0, // the supervisor drives at most 20 Hz
+        ..RigParameters::paper()
+    };
+    assert_eq!(
+        rig.ack(&Request::SetParameters(bad)),
+        rejected(ParameterField::MaxFreq, RejectReason::AboveBoardCap)
     );
     rig.step();
     assert_eq!(rig.persisted.len(), 1);
+}
+
+#[test]
+fn limits_and_constants_the_host_cannot_lift() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    let rejected = |field, reason| {
+        Err(NackCode::ParametersRejected(ParameterRejection::new(
+            field, reason,
+        )))
+    };
+    // 3.4e38 would switch OVERLOAD off; the gear's teeth hold 3.68 N m.
+    for load in [1e30, 3.4e38, 3.7] {
+        let bad = RigParameters {
+            max_release_load_nm: load,
+            ..RigParameters::paper()
+        };
+        assert_eq!(
+            rig.ack(&Request::SetParameters(bad)),
+            rejected(ParameterField::MaxReleaseLoad, RejectReason::AboveBoardCap),
+            "{load}"
+        );
+    }
+    // A fit 36 times off Table 2 is implausible for the RS-735.
+    let bad = RigParameters {
+        c1_nmm_per_a: 2258.0,
+        ..RigParameters::paper()
+    };
+    assert_eq!(
+        rig.ack(&Request::SetParameters(bad)),
+        rejected(ParameterField::C1, RejectReason::Implausible)
+    );
+    // C3 = C1 C5 (0.235 N mm s/rad) within 10 %.
+    let bad = RigParameters {
+        c3_nmm_s_per_rad: 0.5,
+        ..RigParameters::paper()
+    };
+    assert_eq!(
+        rig.ack(&Request::SetParameters(bad)),
+        rejected(ParameterField::C3, RejectReason::Inconsistent)
+    );
+    rig.step();
+    assert!(rig.persisted.is_empty());
+    // The same rule, the model's, is what the host runs before sending.
+    let bad = RigParameters {
+        max_release_load_nm: 1e30,
+        ..RigParameters::paper()
+    };
+    let config = crate::CoreConfig::default();
+    assert_eq!(
+        crate::check_rules(&bad, &config.board_limits(), &config.motor.constants)
+            .map_err(|r| r.field),
+        Err(ParameterField::MaxReleaseLoad)
+    );
+    // At the caps is fine.
+    let ok = RigParameters {
+        max_release_load_nm: 3.68,
+        max_current_a: 4.8,
+        max_freq_hz: 20.0,
+        ..RigParameters::paper()
+    };
+    let seq = rig.send(&Request::SetParameters(ok));
+    rig.step();
+    assert!(rig.answered(seq, |r| *r == Reply::Ack));
+    assert_eq!(rig.persisted, [ok]);
+}
+
+#[test]
+fn release_off_stops_an_open_loop_drive() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(1200);
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    rig.run_ms_alive(800);
+    assert!(rig.core.status().enabled);
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: false,
+            target_hz: 10.0
+        }),
+        Ok(())
+    );
+    let s = rig.core.status();
+    assert_eq!(s.open_loop_volts, None);
+    assert!(!rig.step().enable, "the bridge is off at the next step");
+    assert!(rig.core.status().latched_faults.is_empty());
 }
 
 #[test]
@@ -186,26 +349,23 @@ fn failed_flash_write_keeps_the_old_calibration() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(150);
     rig.persist_answer = Some(false);
-    let new = Calibration {
-        c1_nmm_per_a: 60.0,
-        ..Calibration::paper()
+    let new = RigParameters {
+        c1_nmm_per_a: 62.0,
+        ..RigParameters::paper()
     };
-    let seq = rig.send(&Request::SetCalibration(new));
+    let seq = rig.send(&Request::SetParameters(new));
     rig.step();
-    assert!(rig.received.iter().any(
-        |m| matches!(m, DeviceMessage::Nack { seq: s, code: NackCode::StorageFailed } if *s == seq)
-    ));
-    assert_eq!(rig.core.status().calibration, Calibration::paper());
+    let storage_failed = |r: &Reply| *r == Reply::Nack(NackCode::StorageFailed);
+    assert!(rig.answered(seq, storage_failed));
+    assert_eq!(rig.core.status().parameters, RigParameters::paper());
 
     // A binary that never answers: refused after 5 s; meanwhile another write is Busy.
     rig.persist_answer = None;
-    let seq = rig.send(&Request::SetCalibration(new));
+    let seq = rig.send(&Request::SetParameters(new));
     rig.step();
-    assert_eq!(rig.ack(&Request::SetCalibration(new)), Err(NackCode::Busy));
+    assert_eq!(rig.ack(&Request::SetParameters(new)), Err(NackCode::Busy));
     rig.run_ms(5001);
-    assert!(rig.received.iter().any(
-        |m| matches!(m, DeviceMessage::Nack { seq: s, code: NackCode::StorageFailed } if *s == seq)
-    ));
+    assert!(rig.answered(seq, storage_failed));
 }
 
 #[test]
@@ -213,7 +373,7 @@ fn calibration_and_rezero_are_busy_while_the_motor_runs() {
     let mut rig = Rig::new(0.5);
     rig.vibrate(10.0);
     assert_eq!(
-        rig.ack(&Request::SetCalibration(Calibration::paper())),
+        rig.ack(&Request::SetParameters(RigParameters::paper())),
         Err(NackCode::Busy)
     );
     assert_eq!(rig.ack(&Request::RezeroCurrent), Err(NackCode::Busy));
@@ -360,12 +520,15 @@ fn garbage_is_counted_and_never_stops_the_server() {
             || rig
                 .received
                 .iter()
-                .all(|m| matches!(m, DeviceMessage::Nack { .. }))
+                .all(|m| matches!(m.as_reply(), Some(Reply::Nack(_))))
     );
     // Still serving.
     assert!(matches!(
         rig.request(&Request::GetInfo)[..],
-        [DeviceMessage::Info(_)]
+        [DeviceMessage::Reply {
+            reply: Reply::Info(_),
+            ..
+        }]
     ));
     assert!(rig.latched().is_empty());
 }
@@ -380,10 +543,7 @@ fn unknown_message_is_refused_with_its_seq() {
     rig.pump();
     assert_eq!(
         rig.received,
-        [DeviceMessage::Nack {
-            seq: 4321,
-            code: NackCode::UnknownMessage
-        }]
+        [DeviceMessage::nack(4321, NackCode::UnknownMessage)]
     );
     assert_eq!(rig.core.status().deframer.decode_errors, 1);
 }
@@ -397,10 +557,13 @@ fn faults_report_active_and_latched() {
     let replies = rig.request(&Request::GetFaults);
     assert_eq!(
         replies,
-        [DeviceMessage::Faults {
-            active: FaultFlags::OVERCURRENT,
-            latched: FaultFlags::OVERCURRENT
-        }]
+        [DeviceMessage::reply(
+            rig_last_seq(&rig),
+            Reply::Faults {
+                active: FaultFlags::OVERCURRENT,
+                latched: FaultFlags::OVERCURRENT
+            }
+        )]
     );
 }
 
@@ -457,4 +620,216 @@ fn open_loop_without_heartbeat_times_out_to_safe() {
         s.latched_faults
     );
     assert_eq!(s.open_loop_volts, None);
+}
+
+#[test]
+fn refused_requests_do_not_keep_a_release_alive() {
+    // A release, then only refused requests (a host retrying a bad record, another
+    // version's hello) and undecodable frames: the release lapses within the comms
+    // timeout as if the host had gone.
+    let mut rig = Rig::new(0.3);
+    rig.vibrate(10.0);
+    assert_eq!(rig.ack(&Request::Heartbeat), Ok(()));
+    let last_accepted = rig.now_us;
+    let bad = RigParameters {
+        mu_d: 0.5,
+        ..RigParameters::paper()
+    };
+    let mut buf = [0u8; MAX_FRAME_SIZE];
+    let unknown = encode_frame(999, &200u8, &mut buf).unwrap().to_vec();
+    let mut refused = 0;
+    let lapsed_at = loop {
+        match (rig.now_us / 1000) % 3 {
+            0 => {
+                // Busy while the motor runs, and a bad record in any case.
+                if rig.ack(&Request::SetParameters(bad)).is_err() {
+                    refused += 1;
+                }
+            }
+            1 => {
+                let hello = Request::Hello {
+                    protocol_version: PROTOCOL_VERSION + 1,
+                    schema_hash: 0,
+                };
+                if rig.ack(&hello).is_err() {
+                    refused += 1;
+                }
+            }
+            _ => rig.core.receive(rig.now_us, &unknown),
+        }
+        rig.step();
+        if rig.latched().contains(FaultFlags::COMMS_TIMEOUT) {
+            break rig.now_us;
+        }
+        assert!(
+            rig.now_us - last_accepted < 2_000_000,
+            "the release never lapsed"
+        );
+    };
+    assert!(refused > 250, "{refused} refused requests");
+    let after_us = lapsed_at - last_accepted;
+    assert!((500_000..=502_000).contains(&after_us), "{after_us} us");
+    assert!(!rig.step().enable);
+}
+
+#[test]
+fn accepted_requests_of_any_kind_keep_a_release_alive() {
+    let mut rig = Rig::new(0.3);
+    rig.vibrate(10.0);
+    for k in 0..1500 {
+        if k % 100 == 0 {
+            // Not a heartbeat, but accepted: it refreshes the release.
+            assert!(matches!(
+                rig.reply(&Request::GetFaults),
+                Reply::Faults { .. }
+            ));
+        }
+        rig.step();
+    }
+    assert_eq!(rig.state(), SupervisorState::Vibrating);
+    assert!(rig.latched().is_empty());
+}
+
+#[test]
+fn simulation_commands_are_refused_by_real_firmware() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    let load = Request::Simulation(SimCommand::SetLoad { tau_rot_nm: 1.0 });
+    assert_eq!(rig.ack(&load), Err(NackCode::SimulationOnly));
+    // A simulator serves them through `receive_with`, in order with the other replies.
+    let mut buf = [0u8; MAX_FRAME_SIZE];
+    let frame = encode_frame(70, &load, &mut buf).unwrap().to_vec();
+    let mut seen = Vec::new();
+    rig.core.receive_with(rig.now_us, &frame, |c| {
+        seen.push(c);
+        Ok(())
+    });
+    rig.pump();
+    assert_eq!(seen, [SimCommand::SetLoad { tau_rot_nm: 1.0 }]);
+    assert_eq!(rig.received.last(), Some(&DeviceMessage::ack(70)));
+}
+
+#[test]
+fn a_v1_host_gets_v1s_refusal() {
+    let mut rig = Rig::new(0.0);
+    let hello = Request::Hello {
+        protocol_version: 1,
+        schema_hash: 0xDEAD_BEEF,
+    };
+    let mut buf = [0u8; MAX_FRAME_SIZE];
+    let frame = encode_frame(301, &hello, &mut buf).unwrap().to_vec();
+    rig.core.receive(0, &frame);
+    let mut out = [0u8; 64];
+    let n = rig.core.transmit(&mut out);
+    // Not a v2 message: the v1 layout of `Nack { seq: 301, VersionMismatch }`, which
+    // identifies the device to a v1 tool (and to this one) as protocol 1.
+    let mut bytes = out[..n].to_vec();
+    assert!(protocol::decode_frame::<DeviceMessage>(&mut bytes.clone()).is_err());
+    let body = protocol::frame_body(&mut bytes).unwrap();
+    let peer = protocol::identify_peer(body).unwrap();
+    assert_eq!(peer.protocol_version, 1);
+    // Refused: it does not refresh the heartbeat.
+    assert_eq!(rig.core.status().deframer.frames_ok, 1);
+}
+
+#[test]
+fn info_reports_build_reset_uptime_and_capabilities() {
+    let boot = crate::BootInfo {
+        reset_cause: ResetCause::Pin,
+        firmware_build: "0123456789abcdef0123-dirty",
+        ..crate::BootInfo::default()
+    };
+    let config = crate::CoreConfig {
+        capabilities: protocol::Capabilities::SIMULATION,
+        ..crate::CoreConfig::default()
+    };
+    let mut rig = super::Rig::with_config(config, boot, 0.0, |_| {});
+    rig.run_ms(2500);
+    let Reply::Info(info) = rig.reply(&Request::GetInfo) else {
+        panic!("GetInfo answered otherwise");
+    };
+    // Cut to the wire's 20 bytes.
+    assert_eq!(info.firmware_build, "0123456789abcdef0123");
+    assert_eq!(info.reset_cause, ResetCause::Pin);
+    assert_eq!(info.uptime_s, 2);
+    assert_eq!(info.capabilities, protocol::Capabilities::SIMULATION);
+    assert_eq!(info.firmware_version, crate::FIRMWARE_VERSION);
+}
+
+#[test]
+fn health_comes_once_a_second_while_telemetry_runs() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    rig.ack(&Request::StartTelemetry { rate_hz: 1000 }).unwrap();
+    // Some noise for the link counters.
+    rig.core.receive(rig.now_us, &[0x12, 0x34, 0x00]);
+    for k in 0..3000u32 {
+        rig.step();
+        rig.core.record_step_cycles(20_000 + k % 2 * 1000);
+    }
+    let health: Vec<_> = rig
+        .received
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMessage::Health(h) => Some(*h),
+            _ => None,
+        })
+        .collect();
+    // At the start, then every second.
+    assert_eq!(health.len(), 3, "{health:?}");
+    assert_eq!(
+        health[1].device_time_us - health[0].device_time_us,
+        1_000_000
+    );
+    let h = health[2];
+    assert!(h.bus_voltage_v.is_nan() && h.motor_temp_c.is_nan());
+    assert_eq!((h.step_cycles_mean, h.step_cycles_max), (20_500, 21_000));
+    assert_eq!(h.rx_frame_errors, 1);
+    assert_eq!(h.tx_frames_dropped, 0);
+    // The telemetry has no output encoder to read.
+    let t = rig
+        .received
+        .iter()
+        .rev()
+        .find_map(|m| match m {
+            DeviceMessage::Telemetry(t) => Some(*t),
+            _ => None,
+        })
+        .unwrap();
+    assert!(t.output_angle_rad.is_nan() && t.output_speed_rad_s.is_nan());
+    rig.ack(&Request::StopTelemetry).unwrap();
+    let before = rig.received.len();
+    rig.run_ms(1500);
+    assert!(
+        !rig.received[before..]
+            .iter()
+            .any(|m| matches!(m, DeviceMessage::Health(_)))
+    );
+}
+
+#[test]
+fn measured_bus_voltage_sets_the_open_loop_duty_and_is_reported() {
+    let mut rig = Rig::new(0.0);
+    rig.core.set_board_inputs(crate::BoardInputs {
+        bus_voltage_v: 10.0,
+        motor_temp_c: 31.5,
+        ..Default::default()
+    });
+    rig.run_ms(1200);
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    rig.run_ms_alive(2500);
+    // duty = volts / Vbus: 0.62 on a 10 V bus, not 6.2 / 12.
+    let s = rig.core.status();
+    assert!((s.duty - 0.62).abs() < 1e-3, "{}", s.duty);
+    assert_eq!(rig.ack(&Request::StartTelemetry { rate_hz: 10 }), Ok(()));
+    rig.run_ms_alive(20);
+    let health = rig
+        .received
+        .iter()
+        .find_map(|m| match m {
+            DeviceMessage::Health(h) => Some(*h),
+            _ => None,
+        })
+        .expect("a health sample");
+    assert_eq!((health.bus_voltage_v, health.motor_temp_c), (10.0, 31.5));
 }

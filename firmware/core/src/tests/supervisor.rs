@@ -2,7 +2,9 @@
 
 use core::f32::consts::TAU;
 
-use protocol::{Calibration, CalibrationStatus, FaultFlags, Request, StatusFlags, SupervisorState};
+use protocol::{
+    FaultFlags, ParametersStatus, Request, RigParameters, StatusFlags, SupervisorState,
+};
 
 use super::{PAPER_Z, Rig};
 use crate::BootInfo;
@@ -19,10 +21,10 @@ const STOP: Request = Request::Release {
     target_hz: 0.0,
 };
 
-fn boot_with(calibration: Calibration) -> BootInfo {
+fn boot_with(calibration: RigParameters) -> BootInfo {
     BootInfo {
-        calibration,
-        calibration_status: CalibrationStatus::Valid,
+        parameters: calibration,
+        parameters_status: ParametersStatus::Valid,
         ..BootInfo::default()
     }
 }
@@ -181,9 +183,9 @@ fn fault_clears_to_locked_or_stopping() {
 #[test]
 fn weak_cam_torque_raises_the_frequency_then_cannot_release() {
     // C2 too low by 20 N mm: the measured tau_cam stays ~20 N mm below Eq. (10)'s need.
-    let cal = Calibration {
+    let cal = RigParameters {
         c2_nmm: -158.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     let mut rig = Rig::with(boot_with(cal), 0.3, |_| {});
     rig.vibrate(10.0);
@@ -220,10 +222,32 @@ fn spin_up_that_never_reaches_speed_cannot_release() {
 }
 
 #[test]
+fn load_above_the_gears_strength_is_load_limit() {
+    // A stored record from before the caps, asking for 1e30 N m: the cap still holds.
+    let cal = RigParameters {
+        max_release_load_nm: 1e30,
+        max_current_a: 4.8,
+        ..RigParameters::paper()
+    };
+    let mut rig = Rig::with(boot_with(cal), 3.95, |_| {});
+    rig.run_ms(150);
+    rig.ack(&release(10.0)).unwrap();
+    rig.run_until(4000, true, |s| s.state == SupervisorState::Fault)
+        .unwrap();
+    assert_eq!(
+        rig.latched(),
+        FaultFlags::LOAD_LIMIT,
+        "{:?}",
+        rig.core.status()
+    );
+    assert!(!rig.step().enable);
+}
+
+#[test]
 fn overload_stops_the_release() {
-    let cal = Calibration {
+    let cal = RigParameters {
         max_release_load_nm: 2.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     let mut rig = Rig::with(boot_with(cal), 3.0, |_| {});
     rig.run_ms(150);
@@ -243,9 +267,9 @@ fn overload_stops_the_release() {
 #[test]
 fn jam_when_the_cam_torque_is_far_above_expectation() {
     // Eq. (10) at the 1 N m limit is ~14.5 N mm; a 3.5 N m load needs ~51 N mm > 2x.
-    let cal = Calibration {
+    let cal = RigParameters {
         max_release_load_nm: 1.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     let mut rig = Rig::with(boot_with(cal), 3.5, |_| {});
     rig.run_ms(150);
@@ -258,10 +282,10 @@ fn jam_when_the_cam_torque_is_far_above_expectation() {
 #[test]
 fn coasting_and_self_locking_flags_follow_the_gear_set() {
     let flags = |z: [u16; 4], mu_d: f32| {
-        let cal = Calibration {
+        let cal = RigParameters {
             z,
             mu_d,
-            ..Calibration::paper()
+            ..RigParameters::paper()
         };
         let rig = Rig::with(boot_with(cal), 0.0, |_| {});
         let s = rig.core.status();
@@ -284,10 +308,10 @@ fn coasting_and_self_locking_flags_follow_the_gear_set() {
 
 #[test]
 fn load_estimate_tracks_the_plant_across_the_papers_range() {
-    let cal = Calibration {
+    let cal = RigParameters {
         max_release_load_nm: 5.0,
         max_freq_hz: 20.0,
-        ..Calibration::paper()
+        ..RigParameters::paper()
     };
     for (load, hz) in [
         (0.368, 5.0),
@@ -314,5 +338,25 @@ fn load_estimate_tracks_the_plant_across_the_papers_range() {
             "{hz} Hz: {}",
             s.cam_speed_rad_s
         );
+    }
+}
+
+#[test]
+fn the_rig_works_across_the_sensor_supply_tolerance() {
+    // A ratiometric ACS714 on 4.75 V or 5.25 V: the zero moves by 0.7 A-equivalent (the
+    // old +-0.3 A window latched CURRENT_ZERO_RANGE) and the sensitivity by 5 %; the core
+    // reads the supply from the zero, so the load estimate stays within 2 %.
+    for supply in [4.75, 5.25] {
+        let mut rig = Rig::with(BootInfo::default(), 1.84, |p| p.sensors.acs_supply = supply);
+        rig.vibrate(10.0);
+        rig.run_ms_alive(1500);
+        let s = rig.core.status();
+        assert!(
+            s.latched_faults.is_empty(),
+            "{supply} V: {}",
+            s.latched_faults
+        );
+        let err = (f64::from(s.tau_rot_nm) - 1.84) / 1.84;
+        assert!(err.abs() < 0.02, "{supply} V: {} N m", s.tau_rot_nm);
     }
 }

@@ -1,0 +1,263 @@
+//! The control core: one [`Core::step`] per control period turns sensor readings into a
+//! bridge command, and the host link goes through [`Core::receive`] and
+//! [`Core::transmit`]. Time is passed in; there is no I/O, no heap and no hardware here.
+//!
+//! The pieces: [`io`] (boot facts, inputs, outputs, status), `derived` (the parameter
+//! checks and what the loop derives from the record), `step` (one control period),
+//! `streams` (telemetry, health and step timing), `persist` (a record on its way to
+//! flash); the requests are served in `crate::server`.
+
+mod derived;
+mod io;
+mod persist;
+mod step;
+mod streams;
+
+use protocol::{FaultFlags, ParametersStatus, ResetCause, RigParameters};
+
+use crate::capture::{Capture, CapturePhase};
+use crate::config::CoreConfig;
+use crate::current::CurrentSense;
+use crate::encoder::CamEncoder;
+use crate::estimator::TorqueEstimator;
+use crate::faults::FaultMonitor;
+use crate::speed_loop::SpeedLoop;
+use crate::supervisor::Supervisor;
+use crate::tx_queue::{CAPTURE_IN_FLIGHT, REPLY_RESERVE, TxQueue};
+
+pub use derived::check_rules;
+pub(crate) use derived::{Derived, check_board_caps};
+pub use io::{BoardInputs, BootInfo, Inputs, Outputs, Status};
+pub(crate) use persist::Persist;
+use streams::StepTiming;
+pub(crate) use streams::Streams;
+
+/// The control core. See the crate documentation.
+pub struct Core {
+    pub(crate) config: CoreConfig,
+    pub(crate) parameters: RigParameters,
+    pub(crate) parameters_status: ParametersStatus,
+    pub(crate) derived: Derived,
+    pub(crate) current: CurrentSense,
+    encoder: CamEncoder,
+    speed_loop: SpeedLoop,
+    estimator: TorqueEstimator,
+    pub(crate) supervisor: Supervisor,
+    pub(crate) faults: FaultMonitor,
+    pub(crate) deframer: protocol::RequestDeframer,
+    pub(crate) tx: TxQueue,
+    pub(crate) now_us: u64,
+    last_step_us: Option<u64>,
+    pub(crate) host_release: bool,
+    pub(crate) host_target_hz: f32,
+    /// A live open-loop drive (`Request::OpenLoop`): the bridge voltage asked for, V.
+    pub(crate) open_loop_volts: Option<f32>,
+    /// Open-loop settle check: position and time of the last revolution start, and the
+    /// period of the revolution before it (0: none yet).
+    open_loop_rev: (i64, u64, u64),
+    open_loop_steady: bool,
+    /// When the last accepted request arrived: the release heartbeat.
+    pub(crate) last_request_us: u64,
+    pub(crate) button_held: bool,
+    button_armed: bool,
+    duty: f32,
+    enable: bool,
+    pub(crate) persist: Persist,
+    /// The output encoder, when fitted, and its latest count (`Core::set_output_encoder_count`).
+    pub(crate) output_encoder: Option<crate::OutputEncoder>,
+    pub(crate) output_count: Option<u16>,
+    pub(crate) streams: Streams,
+    step_timing: StepTiming,
+    overruns: u32,
+    pub(crate) capture: Capture,
+    pub(crate) board: BoardInputs,
+    pub(crate) reset_cause: ResetCause,
+    pub(crate) firmware_build: &'static str,
+}
+
+impl Core {
+    /// A core in `Locked`, measuring the current zero. A watchdog reset or an invalid
+    /// parameter record latches its fault from the start.
+    pub fn new(config: CoreConfig, boot: BootInfo) -> Self {
+        let (parameters, status, derived) = match Derived::new(&boot.parameters, &config) {
+            Ok(d) if boot.parameters_status != ParametersStatus::Invalid => {
+                (boot.parameters, boot.parameters_status, d)
+            }
+            _ => {
+                let paper = RigParameters::paper();
+                // Not `expect`: formatting the rejection would pull `Debug` into the image.
+                let Ok(d) = Derived::new(&paper, &config) else {
+                    panic!("the paper's parameters are valid (tested)");
+                };
+                (paper, ParametersStatus::Invalid, d)
+            }
+        };
+        let step_s = config.period_us() as f32 * 1e-6;
+        let mut config = config;
+        if cfg!(feature = "output-encoder") && config.output_encoder.is_some() {
+            config
+                .capabilities
+                .insert(protocol::Capabilities::OUTPUT_ENCODER);
+        }
+        let mut core = Self {
+            current: CurrentSense::new(&config.current, step_s),
+            encoder: CamEncoder::new(config.counts_per_rev()),
+            speed_loop: SpeedLoop::new(config.speed_loop, &config.motor, derived.feed_forward),
+            estimator: TorqueEstimator::new(
+                config.counts_per_rev(),
+                config.estimator.max_revolution_us,
+            ),
+            supervisor: Supervisor::new(config.supervisor, derived.max_hz),
+            faults: FaultMonitor::new(config.supervisor.fault_hold_us),
+            deframer: protocol::RequestDeframer::new(),
+            tx: TxQueue::new(),
+            now_us: 0,
+            last_step_us: None,
+            host_release: false,
+            host_target_hz: config.supervisor.default_freq_hz,
+            open_loop_volts: None,
+            open_loop_rev: (0, 0, 0),
+            open_loop_steady: false,
+            last_request_us: 0,
+            button_held: false,
+            button_armed: false,
+            duty: 0.0,
+            enable: false,
+            persist: Persist::Idle,
+            output_encoder: config.output_encoder.map(crate::OutputEncoder::new),
+            output_count: None,
+            streams: Streams::default(),
+            step_timing: StepTiming::default(),
+            overruns: 0,
+            capture: Capture::new(),
+            board: BoardInputs::default(),
+            reset_cause: boot.reset_cause,
+            firmware_build: boot.firmware_build,
+            config,
+            parameters,
+            parameters_status: status,
+            derived,
+        };
+        core.current.begin_zero();
+        let mut boot_faults = FaultFlags::empty();
+        boot_faults.set(FaultFlags::WATCHDOG_RESET, boot.watchdog_reset());
+        boot_faults.set(
+            FaultFlags::CALIBRATION_INVALID,
+            status == ParametersStatus::Invalid,
+        );
+        core.raise(boot_faults);
+        core
+    }
+
+    /// The board's measurements for the next [`Core::step`] (see [`BoardInputs`]); they
+    /// stay until set again.
+    pub fn set_board_inputs(&mut self, board: BoardInputs) {
+        self.board = board;
+    }
+
+    /// Whether `HW_OVERCURRENT` is latched: while it is, the binary keeps the timer's break
+    /// (the bridge stays off even if the break flag clears); once `ClearFaults` clears it,
+    /// the binary may re-arm the break.
+    pub fn break_latched(&self) -> bool {
+        self.faults.latched().contains(FaultFlags::HW_OVERCURRENT)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CoreConfig {
+        &self.config
+    }
+
+    /// The active rig parameters.
+    pub fn parameters(&self) -> &RigParameters {
+        &self.parameters
+    }
+
+    fn direction(&self) -> f32 {
+        if self.config.motor.reverse { -1.0 } else { 1.0 }
+    }
+
+    /// Latches `flags`; any fault also drops the release requests (a held button must be
+    /// let go once, a host must ask again).
+    pub(crate) fn raise(&mut self, flags: FaultFlags) {
+        if flags.is_empty() {
+            return;
+        }
+        self.faults.raise(flags, self.now_us);
+        self.host_release = false;
+        self.open_loop_volts = None;
+        self.button_armed = false;
+        self.button_held = false;
+        self.estimator.stop();
+    }
+
+    /// Faults whose condition is present now.
+    pub(crate) fn active_faults(&self) -> FaultFlags {
+        let mut a = FaultFlags::empty();
+        a.set(
+            FaultFlags::OVERCURRENT,
+            self.current.step_mean_a().abs() > self.derived.current_limit_a,
+        );
+        a.set(
+            FaultFlags::CURRENT_ZERO_RANGE,
+            !self.current.zero_in_range(),
+        );
+        a.set(
+            FaultFlags::CALIBRATION_INVALID,
+            self.parameters_status == ParametersStatus::Invalid,
+        );
+        a
+    }
+
+    /// Drains pending outgoing frame bytes into `out`; returns the count (0: nothing pending).
+    /// The stream samples the steps took are framed here, and capture chunks are
+    /// generated here, one per call, so replies and telemetry still go out while a
+    /// capture uploads.
+    pub fn transmit(&mut self, out: &mut [u8]) -> usize {
+        self.frame_streams();
+        // One capture message per call: each is framed here, under the binary's core lock.
+        if self.capture.phase() == CapturePhase::Uploading
+            && self.tx.len() < CAPTURE_IN_FLIGHT
+            && self.tx.free() >= protocol::MAX_DEVICE_FRAME_SIZE + REPLY_RESERVE
+            && let Some(msg) = self.capture.next_message()
+        {
+            self.tx.push(&msg, REPLY_RESERVE);
+        }
+        self.tx.drain(out)
+    }
+
+    /// A snapshot of the core.
+    pub fn status(&self) -> Status {
+        let estimate = self.estimator.last();
+        Status {
+            state: self.supervisor.state(),
+            latched_faults: self.faults.latched(),
+            active_faults: self.active_faults(),
+            flags: self.status_flags(),
+            cam_speed_rad_s: self.encoder.speed_rad_s() * self.direction(),
+            cam_angle_rad: self.encoder.angle_rad(),
+            current_a: self.current.filtered_a(),
+            duty: self.duty,
+            enabled: self.enable,
+            target_hz: self.supervisor.target_hz(),
+            speed_reference_rad_s: self.speed_loop.reference(),
+            tau_cam_nm: estimate.map_or(0.0, |e| e.tau_cam_nm),
+            tau_rot_nm: estimate.map_or(0.0, |e| e.tau_rot_nm),
+            estimate_valid: estimate.is_some(),
+            revolutions: self.estimator.revolutions(),
+            keeps_moving_after_stop: self.derived.keeps_moving,
+            holds_at_rest: self.derived.holds_at_rest,
+            host_release: self.host_release,
+            open_loop_volts: self.open_loop_volts,
+            button_release: self.button_held,
+            current_zero_adc: self.current.zero_counts(),
+            zeroing: self.current.zeroing(),
+            parameters: self.parameters,
+            parameters_status: self.parameters_status,
+            deframer: self.deframer.stats(),
+            tx_dropped: self.tx.dropped(),
+            control_overruns: self.overruns,
+            capture_recording: self.capture.phase() == CapturePhase::Recording,
+            capture_uploading: self.capture.phase() == CapturePhase::Uploading,
+        }
+    }
+}

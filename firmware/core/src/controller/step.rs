@@ -1,0 +1,282 @@
+//! One control period: sensor readings in, a bridge command out. In order: timing
+//! (overrun), current and encoder, capture recording, release inputs (heartbeat, button),
+//! hardware faults, the revolution estimate, the supervisor, the drive (speed loop or open
+//! loop), then fault events, the streams and a pending flash write.
+
+use core::f32::consts::TAU;
+
+use protocol::{DeviceMessage, FaultFlags, SupervisorState};
+
+use super::{Core, Inputs, Outputs};
+use crate::capture::CapturePhase;
+use crate::current::ZeroResult;
+use crate::estimator::StepSamples;
+use crate::supervisor::{RevolutionCheck, SupervisorInputs};
+
+impl Core {
+    /// Runs one control period. Call at `control_hz`.
+    pub fn step(&mut self, inputs: &Inputs) -> Outputs {
+        let now = inputs.now_us;
+        let period = self.config.period_us();
+        let prev_us = self.last_step_us.unwrap_or(now.saturating_sub(period));
+        let elapsed = now.saturating_sub(prev_us);
+        self.last_step_us = Some(now);
+        self.now_us = now;
+        if elapsed > u64::from(self.config.faults.overrun_periods) * period {
+            self.overruns = self.overruns.saturating_add(1);
+            self.raise(FaultFlags::CONTROL_OVERRUN);
+        }
+        // A late step must not kick the integrator.
+        let dt = elapsed.max(1).min(4 * period) as f32 * 1e-6;
+
+        let vdda = self.board.vdda_v;
+        if self.current.update_with_vdda(inputs.current_adc, vdda) == Some(ZeroResult::OutOfRange) {
+            self.raise(FaultFlags::CURRENT_ZERO_RANGE);
+        }
+        let prev_position = self.encoder.position();
+        self.encoder.update(now, inputs.encoder_count);
+        let position = self.encoder.position();
+        let dir = self.direction();
+        let speed = self.encoder.speed_rad_s() * dir;
+        self.capture
+            .record_step(inputs.current_adc, prev_position as u16, position as u16);
+
+        let supply = self.bus_supply_v();
+        self.speed_loop.set_supply_v(supply);
+        self.update_output_encoder(now);
+        self.update_release(now, inputs.release_button);
+        self.check_hardware(now, position);
+
+        if self.supervisor.state() == SupervisorState::Vibrating {
+            let dir_i = dir as i64;
+            let step = StepSamples {
+                current_adc: inputs.current_adc,
+                prev_us,
+                now_us: now,
+                prev_position: prev_position * dir_i,
+                position: position * dir_i,
+            };
+            self.estimate_revolution(&step, now);
+        }
+
+        self.run_supervisor(now, speed, position * dir as i64);
+
+        if self.supervisor.drives_motor() && self.faults.latched().is_empty() {
+            self.duty = self.drive_duty(speed, dt);
+            self.enable = true;
+        } else {
+            self.duty = 0.0;
+            self.enable = false;
+        }
+
+        let risen = self.faults.take_unreported();
+        if !risen.is_empty() {
+            self.tx.push(
+                &DeviceMessage::FaultEvent {
+                    flags: risen,
+                    device_time_us: now,
+                },
+                0,
+            );
+        }
+        self.send_streams(now, speed);
+        Outputs {
+            duty: self.duty,
+            enable: self.enable,
+            persist: self.take_persist(now),
+            capture: self.capture.phase() == CapturePhase::Recording,
+        }
+    }
+
+    /// Feeds the estimator; a completed revolution goes to the supervisor's load checks.
+    fn estimate_revolution(&mut self, step: &StepSamples, now: u64) {
+        let dir = self.direction();
+        let current = &self.current;
+        let estimate = self.estimator.update(step, &self.derived.model, |counts| {
+            current.amps(counts) * dir
+        });
+        if let Some(e) = estimate {
+            let check = RevolutionCheck {
+                tau_cam: e.tau_cam_nm,
+                tau_rot: e.tau_rot_nm,
+                required_no_load: e.required_no_load_nm,
+                required_max_load: self
+                    .derived
+                    .model
+                    .required(self.derived.max_load_nm, e.cam_speed_rad_s),
+                max_load: self.derived.max_load_nm,
+                load_cap: self.config.supervisor.max_release_load_nm
+                    * (1.0 + self.config.supervisor.load_cap_tolerance),
+            };
+            let raised = self.supervisor.on_revolution(&check, now);
+            self.raise(raised);
+        }
+    }
+
+    /// The duty of a running motor: the speed loop's, or an open-loop drive's fixed
+    /// voltage.
+    fn drive_duty(&mut self, speed: f32, dt: f32) -> f32 {
+        let dir = self.direction();
+        let Some(volts) = self.open_loop_volts else {
+            let target = TAU * self.supervisor.target_hz();
+            return self.speed_loop.update(target, speed, dt) * dir;
+        };
+        // A bench supply's fixed voltage, reached through the duty slew limit and a soft
+        // start: the ramp pauses while the current is above 85 % of the overcurrent limit
+        // and the cam is accelerating.
+        let m = self.config.motor;
+        // max/min, not clamp: clamp's NaN assertion would pull float formatting into the
+        // image.
+        let goal = (volts / self.bus_supply_v())
+            .max(-m.max_duty)
+            .min(m.max_duty)
+            * dir;
+        // Only while the cam turns: a shaft held on the force gauge draws its stall
+        // current, which is what the calibration asks for.
+        let accelerating = speed.abs() > self.config.supervisor.stop_speed_rad_s;
+        let near_limit = self.current.step_mean_a().abs() > 0.85 * self.derived.current_limit_a;
+        let step = if accelerating && near_limit && goal.abs() > self.duty.abs() {
+            0.0
+        } else {
+            m.duty_slew_per_s * dt
+        };
+        goal.max(self.duty - step).min(self.duty + step)
+    }
+
+    /// A host release or open-loop drive lapses without an accepted request for the comms
+    /// timeout; the button must be let go once before it releases.
+    fn update_release(&mut self, now: u64, button: bool) {
+        let lapsed = now.saturating_sub(self.last_request_us) > self.config.comms_timeout_us;
+        if (self.host_release || self.open_loop_volts.is_some()) && lapsed {
+            self.host_release = false;
+            self.open_loop_volts = None;
+            self.raise(FaultFlags::COMMS_TIMEOUT);
+        }
+        // A button already held (at boot, or through a fault) must be let go once first.
+        if !button {
+            self.button_armed = true;
+        }
+        self.button_held = button && self.button_armed;
+    }
+
+    fn check_hardware(&mut self, now: u64, position: i64) {
+        // The first layer: the comparator has already cut the bridge through the timer's
+        // break; the core learns it here and keeps the motor off.
+        if self.board.hw_break {
+            self.raise(FaultFlags::HW_OVERCURRENT);
+        }
+        let f = self.config.faults;
+        let i = self.current.step_mean_a();
+        if self
+            .faults
+            .overcurrent(now, i, self.derived.current_limit_a, f.overcurrent_time_us)
+        {
+            self.raise(FaultFlags::OVERCURRENT);
+        }
+        // The encoder's own sign (before the drive direction) against the duty's: a
+        // reversed or miswired encoder would make the speed loop run away.
+        if self.faults.reversed(
+            now,
+            self.enable,
+            self.duty,
+            self.encoder.speed_rad_s(),
+            self.config.supervisor.stop_speed_rad_s,
+            f.reversed_time_us,
+        ) {
+            self.raise(FaultFlags::REVERSED_ENCODER);
+        }
+        // The duty of the last step is the one that drove the bridge since then.
+        let driven = self.enable && self.duty.abs() > f.stall_duty;
+        if self
+            .faults
+            .no_motion(now, driven, position, f.stall_min_counts, f.stall_window_us)
+        {
+            // Not turning by the encoder. If the back-EMF implied by V = R i + ke w says
+            // the motor does turn, the encoder is lost; otherwise the cam is stalled.
+            let m = self.config.motor;
+            let v = self.duty.abs() * self.bus_supply_v();
+            let i = self.current.filtered_a().abs();
+            let w_implied = (v - m.resistance_ohm * i) / m.ke_cam_v_s_per_rad;
+            let w_free = v / m.ke_cam_v_s_per_rad;
+            let near_limit = i >= 0.9 * self.derived.current_limit_a;
+            let flag = if !near_limit && w_implied > 0.5 * w_free {
+                FaultFlags::ENCODER_LOSS
+            } else {
+                FaultFlags::STALL
+            };
+            self.raise(flag);
+        }
+    }
+
+    /// The bridge supply: the measured bus voltage when the board measures one (and it is
+    /// plausible, above 1 V), the configured `supply_v` otherwise, V.
+    pub(crate) fn bus_supply_v(&self) -> f32 {
+        let v = self.board.bus_voltage_v;
+        if v.is_finite() && v > 1.0 {
+            v
+        } else {
+            self.config.supply_v
+        }
+    }
+
+    fn requested_hz(&self) -> f32 {
+        if self.host_release {
+            self.host_target_hz
+        } else {
+            self.config.supervisor.default_freq_hz
+        }
+    }
+
+    fn run_supervisor(&mut self, now: u64, speed: f32, position: i64) {
+        let before = self.supervisor.state();
+        let open_loop_settled = self
+            .open_loop_volts
+            .map(|_| self.open_loop_settled(now, position));
+        let mut inputs = SupervisorInputs {
+            now_us: now,
+            open_loop_settled,
+            release_live: self.host_release || self.button_held || open_loop_settled.is_some(),
+            requested_hz: self.requested_hz().min(self.derived.max_hz),
+            faulted: !self.faults.latched().is_empty(),
+            zero_ready: self.current.zero_valid() && !self.current.zeroing(),
+            cam_speed_rad_s: speed,
+        };
+        let raised = self.supervisor.update(&inputs);
+        if !raised.is_empty() {
+            self.raise(raised);
+            inputs.faulted = true;
+            self.supervisor.update(&inputs);
+        }
+        let after = self.supervisor.state();
+        if after == before {
+            return;
+        }
+        if after == SupervisorState::SpinUp && before != SupervisorState::Vibrating {
+            self.speed_loop.reset(speed);
+        }
+        if after == SupervisorState::Vibrating {
+            self.estimator.start(now, position);
+        } else if before == SupervisorState::Vibrating {
+            self.estimator.stop();
+        }
+    }
+
+    /// Open-loop drive: the voltage ramp is done and two consecutive cam revolutions took
+    /// the same time within 2 % (a revolution mean: the cam's speed ripples within a turn).
+    fn open_loop_settled(&mut self, now: u64, position: i64) -> bool {
+        let goal = self.open_loop_volts.unwrap_or(0.0) / self.bus_supply_v() * self.direction();
+        let ramp_done = (self.duty - goal).abs() < 1e-3;
+        let per_rev = i64::from(self.config.counts_per_rev());
+        let (start_pos, start_us, last_period) = self.open_loop_rev;
+        if !ramp_done {
+            self.open_loop_rev = (position, now, 0);
+            self.open_loop_steady = false;
+        } else if (position - start_pos).abs() >= per_rev {
+            let period = now.saturating_sub(start_us);
+            let diff = period.abs_diff(last_period);
+            self.open_loop_steady = last_period > 0 && diff * 50 <= last_period;
+            self.open_loop_rev = (position, now, period);
+        }
+        self.open_loop_steady
+    }
+}

@@ -1,0 +1,269 @@
+//! `rig experiment <procedure>`: the paper's experiments on a rig (a real one with
+//! `--port`, the virtual one with `--sim` or a served port): `torque-sweep` (Figs. 8-9),
+//! `hold-release` (Fig. 5), `backdrive` (Table 1). On a real rig (or with `--operator`) the
+//! operator is prompted on stderr and answers on stdin; Ctrl-C locks the gear.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Subcommand};
+
+use super::connect::{DeviceOpts, interrupt_flag};
+use crate::RigError;
+use crate::experiment::bench::{Bench, DeviceBench, Operator};
+use crate::experiment::sweep::{SweepSetup, Window};
+use crate::experiment::{Plan, backdrive, hold_release, sweep};
+
+/// Arguments of `rig experiment`.
+#[derive(Debug, Args)]
+pub struct ExperimentArgs {
+    /// The procedure.
+    #[command(subcommand)]
+    pub procedure: Procedure,
+    /// Prompt the operator (hang loads, judge the output) even on a virtual rig.
+    #[arg(long, global = true)]
+    pub operator: bool,
+}
+
+/// The procedures.
+#[derive(Debug, Subcommand)]
+pub enum Procedure {
+    /// Figs. 8-9: loads x supply voltages (or frequencies), repeats, random order; writes
+    /// `rig explain`'s CSV.
+    TorqueSweep(SweepArgs),
+    /// Fig. 5: the time history before, during and after a release, to CSV and SVG.
+    HoldRelease(HoldArgs),
+    /// Table 1: held or backdriven, without and with vibration.
+    Backdrive(BackdriveArgs),
+}
+
+/// Arguments of `rig experiment torque-sweep`.
+#[derive(Debug, Args)]
+pub struct SweepArgs {
+    /// `paper` (150 runs: Figs. 8-9), `quick` (12 runs) or a plan file (docs/plans.md).
+    #[arg(long, default_value = "paper")]
+    pub plan: String,
+    /// The short plan (same as `--plan quick`).
+    #[arg(long)]
+    pub quick: bool,
+    /// The CSV to write (rows are appended as they complete).
+    #[arg(long)]
+    pub csv: PathBuf,
+    /// Continue an interrupted run in the same CSV with the same plan.
+    #[arg(long)]
+    pub resume: bool,
+    /// Averaging window: `start` (the paper: window_s from constant rotation) or
+    /// `revolutions` (at least window_s, whole cam revolutions).
+    #[arg(long, value_enum, default_value_t = Window::Start)]
+    pub window: Window,
+    /// Also draw Figs. 8-9 (means and spread over repeats, cam speed) to this SVG.
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+    /// Print a JSON summary.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `rig experiment hold-release`.
+#[derive(Debug, Args)]
+pub struct HoldArgs {
+    /// The CSV to write (t_s, phase, state, output_angle_rad, cam_speed_rad_s, current_a).
+    #[arg(long)]
+    pub csv: PathBuf,
+    /// The SVG plot to write (default: the CSV's name with .svg).
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+    /// Load, N m (Fig. 5: 1.0 kg on 75 mm).
+    #[arg(long, default_value_t = model::paper::FIG5_LOAD.torque(), value_parser = crate::args::non_negative)]
+    pub load: f64,
+    /// Hold without vibration, s (the paper: 14.5).
+    #[arg(long, default_value_t = model::paper::FIG5_HOLD_S, value_parser = crate::args::non_negative)]
+    pub hold: f64,
+    /// Vibration frequency, Hz.
+    #[arg(long, default_value_t = 5.0, value_parser = crate::args::positive)]
+    pub freq: f64,
+    /// Vibration time, s.
+    #[arg(long, default_value_t = 2.0, value_parser = crate::args::positive)]
+    pub release: f64,
+    /// Recorded after the vibration stops, s.
+    #[arg(long, default_value_t = 1.5, value_parser = crate::args::non_negative)]
+    pub after: f64,
+}
+
+/// Arguments of `rig experiment backdrive`.
+#[derive(Debug, Args)]
+pub struct BackdriveArgs {
+    /// Load, N m (Table 1: 3.68).
+    #[arg(long, default_value_t = model::paper::TAU_ROT_MAX, value_parser = crate::args::non_negative)]
+    pub load: f64,
+    /// Hold without vibration, s.
+    #[arg(long, default_value_t = 1.0, value_parser = crate::args::positive)]
+    pub hold: f64,
+    /// Vibration frequency, Hz.
+    #[arg(long, default_value_t = 10.0, value_parser = crate::args::positive)]
+    pub freq: f64,
+    /// Vibration time, s.
+    #[arg(long, default_value_t = 1.5, value_parser = crate::args::positive)]
+    pub release: f64,
+    /// Run Table 1's six gear sets: the operator fits each in turn (real rig).
+    #[arg(long)]
+    pub all_sets: bool,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn plan_of(a: &SweepArgs) -> Result<Plan, RigError> {
+    if a.quick {
+        return Ok(Plan::quick());
+    }
+    match a.plan.as_str() {
+        "paper" => Ok(Plan::paper()),
+        "quick" => Ok(Plan::quick()),
+        file => Plan::read(std::path::Path::new(file)),
+    }
+}
+
+/// Runs `rig experiment`.
+pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    let stop = interrupt_flag();
+    let mut operator = Operator::stdin(a.operator, stop);
+    // Check the arguments before the rig moves.
+    let plan = match &a.procedure {
+        Procedure::TorqueSweep(s) => Some(plan_of(s)?),
+        _ => None,
+    };
+    let mut bench = DeviceBench::new(dev.connect()?);
+    let mut out = std::io::stdout().lock();
+    let result = match a.procedure {
+        Procedure::TorqueSweep(s) => {
+            let setup = SweepSetup {
+                plan: plan.unwrap_or_else(Plan::quick),
+                window: s.window,
+                resume: s.resume,
+                command: std::env::args().collect::<Vec<_>>().join(" "),
+            };
+            let quiet = s.json;
+            let r = sweep::run(&mut bench, &mut operator, &setup, &s.csv, &mut |line| {
+                if !quiet {
+                    eprintln!("{line}");
+                }
+            });
+            match r {
+                Ok(o) => {
+                    if let Some(svg) = &s.svg {
+                        let (rows, _) = sweep::read_rows(&s.csv)?;
+                        crate::sweep_report::experiment_figure(svg, &rows)?;
+                    }
+                    if s.json {
+                        super::print_json(&mut out, &o)?;
+                    } else {
+                        writeln!(
+                            out,
+                            "torque sweep: {} of {} runs written to {} ({} resumed, {} skipped)",
+                            o.written + o.resumed,
+                            o.planned,
+                            s.csv.display(),
+                            o.resumed,
+                            o.skipped
+                        )?;
+                    }
+                    Ok(())
+                }
+                Err(e) => {
+                    let kept = sweep::read_rows(&s.csv).map(|r| r.0.len()).unwrap_or(0);
+                    eprintln!(
+                        "stopped: {kept} completed rows kept in {}; continue with `rig experiment torque-sweep --resume --csv {}` and the same plan",
+                        s.csv.display(),
+                        s.csv.display()
+                    );
+                    Err(e)
+                }
+            }
+        }
+        Procedure::HoldRelease(h) => {
+            let opts = hold_release::HoldRelease {
+                load_nm: Some(h.load),
+                hold_s: h.hold,
+                hz: h.freq,
+                release_s: h.release,
+                after_s: h.after,
+            };
+            let samples =
+                hold_release::run(&mut bench, &mut operator, &opts, &mut |l| eprintln!("{l}"))?;
+            hold_release::write_csv(&samples, &h.csv)?;
+            let svg = h.svg.unwrap_or_else(|| h.csv.with_extension("svg"));
+            if !samples.is_empty() {
+                hold_release::write_svg(&samples, &svg)?;
+            }
+            writeln!(
+                out,
+                "hold-release: {} samples to {} and {}",
+                samples.len(),
+                h.csv.display(),
+                svg.display()
+            )?;
+            Ok(())
+        }
+        Procedure::Backdrive(b) => {
+            let opts = backdrive::Backdrive {
+                load_nm: b.load,
+                hold_s: b.hold,
+                hz: b.freq,
+                release_s: b.release,
+            };
+            let sets: Vec<Option<[u32; 4]>> = if b.all_sets {
+                model::TABLE1.iter().copied().map(Some).collect()
+            } else {
+                vec![None]
+            };
+            if b.all_sets && !operator.forced && bench.is_virtual() {
+                return Err(RigError::BadValue {
+                    what: "--all-sets".into(),
+                    why: "a virtual device has one gear set: `rig sim table1` runs all six, or add --operator".into(),
+                });
+            }
+            let mut verdicts = Vec::new();
+            for z in sets {
+                if let Some(z) = z {
+                    let q = format!(
+                        "fit gear set (Z1, Z2, Z3, Z4) = ({})",
+                        z.map(|v| v.to_string()).join(", ")
+                    );
+                    if operator.before(&q)? == crate::experiment::bench::Go::Skip {
+                        continue;
+                    }
+                }
+                if let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, z)? {
+                    verdicts.push(v);
+                }
+            }
+            if b.json {
+                super::print_json(&mut out, &verdicts)?;
+            } else {
+                for v in &verdicts {
+                    let word = |m: bool| if m { "backdriven" } else { "held" };
+                    writeln!(
+                        out,
+                        "{}{} N m: without vibration {}, with vibration {} (judged by {})",
+                        v.z.map(|z| format!("{:?} ", z)).unwrap_or_default(),
+                        reporting::human(v.load_nm),
+                        word(v.backdriven_without_vibration),
+                        word(v.backdriven_with_vibration),
+                        v.judged_by
+                    )?;
+                }
+            }
+            Ok(())
+        }
+    };
+    match result {
+        Ok(()) => Ok(ExitCode::SUCCESS),
+        Err(e) if operator.interrupted() => {
+            eprintln!("{e}");
+            Ok(ExitCode::from(130))
+        }
+        Err(e) => Err(e),
+    }
+}

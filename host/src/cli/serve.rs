@@ -1,0 +1,128 @@
+//! `rig sim serve`: the virtual rig on a pseudo-terminal that any serial client can open
+//! (`rig --port P ...`, the user's own scripts: docs/examples/rig_client.py), until SIGINT
+//! or SIGTERM. One firmware core and one plant live for the whole run, so state lasts
+//! between client sessions: a calibration written stays written, a latched fault stays
+//! latched until cleared.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use clap::Args;
+use serde::Serialize;
+
+use crate::RigError;
+use crate::device::{VirtualDevice, WallNoise};
+use sim::{EffectSpec, Preset, SimConfig};
+
+/// Arguments of `rig sim serve`.
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// Virtual seconds per wall-clock second (1 = real time; up to 1000).
+    #[arg(long, default_value_t = 1.0, value_parser = super::connect::parse_speed)]
+    pub speed: f64,
+    /// Seed of the sensor noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The plant: `paper` behaves as the paper's rig measured (docs/presets.md), `ideal` is the
+    /// paper's equations alone.
+    #[arg(long, default_value = "paper", value_parser = clap::builder::PossibleValuesParser::new(sim::preset::PRESETS))]
+    pub preset: String,
+    /// Hide an effect in the plant: NAME[:k=v,...] with `rig explain`'s effect and parameter
+    /// names (e.g. current-sensor-offset:offset_a=0.05); repeatable.
+    #[arg(long = "effect", value_name = "NAME[:k=v,...]")]
+    pub effects: Vec<String>,
+    /// A rig file: the virtual rig is built from it (gear, friction, calibration stored in
+    /// flash) and, when it has a fitted [model], runs with those effects.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// Print one JSON line with the port when ready.
+    #[arg(long)]
+    pub json: bool,
+    /// Mix this many random bytes per second into each direction of the line (tests).
+    #[arg(long, hide = true, default_value_t = 0.0, value_parser = crate::args::non_negative)]
+    pub line_noise_bytes_per_s: f64,
+}
+
+/// What `rig sim serve --json` prints when ready.
+#[derive(Debug, Serialize)]
+pub struct Ready {
+    /// The pseudo-terminal to open as a serial port.
+    pub port: String,
+    /// Virtual seconds per wall-clock second.
+    pub speed: f64,
+    /// The preset.
+    pub preset: String,
+    /// The effects hidden in the plant (as given).
+    pub effects: Vec<String>,
+    /// Seed of the sensor noise.
+    pub seed: u64,
+}
+
+/// The virtual rig the options describe.
+pub fn config(a: &ServeArgs) -> Result<SimConfig, RigError> {
+    let preset = Preset::by_name(&a.preset)?;
+    let mut config = match &a.model {
+        Some(path) => {
+            let rig = rigfile::RigFile::load(path)?;
+            let mut c = SimConfig::from_rig_file(&rig)?;
+            c.core.board_name = "virtual";
+            // The file's fitted model is the plant; without one, the preset.
+            if rig.model.is_none() {
+                preset.apply(&mut c.plant);
+            }
+            c
+        }
+        None => VirtualDevice::paper_config(&preset),
+    };
+    for e in &a.effects {
+        EffectSpec::parse(e)?.apply(&mut config.plant)?;
+    }
+    config.seed = a.seed;
+    Ok(config)
+}
+
+/// Runs `rig sim serve`.
+pub fn run(a: ServeArgs) -> Result<ExitCode, RigError> {
+    let config = config(&a)?;
+    let stop = super::connect::interrupt_flag();
+    let noise = (a.line_noise_bytes_per_s > 0.0).then_some(WallNoise {
+        bytes_per_s: a.line_noise_bytes_per_s,
+        seed: a.seed,
+    });
+    let dev = VirtualDevice::start_with_noise(config, a.speed, noise)?;
+    let mut out = std::io::stdout().lock();
+    if a.json {
+        let ready = Ready {
+            port: dev.port_name().to_string(),
+            speed: a.speed,
+            preset: a.preset.clone(),
+            effects: a.effects.clone(),
+            seed: a.seed,
+        };
+        super::print_json_line(&mut out, &ready)?;
+    } else {
+        writeln!(
+            out,
+            "virtual rig ({} preset{}) on {} at {}x real time; open it with `rig --port {} info`. Ctrl-C stops it.",
+            a.preset,
+            if a.effects.is_empty() {
+                String::new()
+            } else {
+                format!(", effects {}", a.effects.join(" "))
+            },
+            dev.port_name(),
+            a.speed,
+            dev.port_name()
+        )?;
+    }
+    out.flush()?;
+    drop(out);
+    while !stop.load(Ordering::SeqCst) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(dev);
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,118 @@
+//! Which device a device verb talks to ([`DeviceOpts`], resolved from the command line)
+//! and the session it opens with it ([`Session`]). Below the command line: `demo` and the
+//! verbs both use it.
+
+use protocol::DeviceInfo;
+
+use crate::RigError;
+use crate::client::{Client, ClientOptions, SerialTransport, open_serial};
+use crate::device::VirtualDevice;
+use crate::ports;
+
+/// The device to talk to, with every default applied.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceOpts {
+    /// Serial port of the rig; `None`: $RIG_PORT, else the only ST-LINK port plugged in.
+    pub port: Option<String>,
+    /// Baud rate of the serial port.
+    pub baud: u32,
+    /// Use the virtual device.
+    pub sim: bool,
+    /// With `sim`: virtual seconds per wall-clock second.
+    pub speed: f64,
+}
+
+impl Default for DeviceOpts {
+    /// No port named, the firmware's baud rate, real time.
+    fn default() -> Self {
+        Self {
+            port: None,
+            baud: protocol::DEFAULT_BAUD_RATE,
+            sim: false,
+            speed: 1.0,
+        }
+    }
+}
+
+/// An open session with the device, and the virtual device when `--sim` made one.
+pub struct Session {
+    /// The client, connected and version-checked.
+    pub client: Client<SerialTransport>,
+    /// What the device said at `Hello`.
+    pub info: DeviceInfo,
+    /// The virtual device (dropped after the client: fields drop in order).
+    pub device: Option<VirtualDevice>,
+}
+
+impl Session {
+    /// The port's name.
+    pub fn port(&self) -> &str {
+        &self.client.options().port_name
+    }
+
+    /// Device seconds per wall-clock second.
+    pub fn time_scale(&self) -> f64 {
+        self.client.options().time_scale
+    }
+}
+
+impl DeviceOpts {
+    /// The port to open (none for `--sim`).
+    pub fn resolve_port(&self) -> Result<String, RigError> {
+        if let Some(p) = &self.port {
+            return Ok(p.clone());
+        }
+        if let Ok(p) = std::env::var("RIG_PORT")
+            && !p.trim().is_empty()
+        {
+            return Ok(p.trim().to_owned());
+        }
+        let stlinks: Vec<_> = ports::list().into_iter().filter(|p| p.stlink).collect();
+        match stlinks.as_slice() {
+            [one] => Ok(one.port.clone()),
+            [] => Err(RigError::NoDevice),
+            many => Err(RigError::BadValue {
+                what: "--port".into(),
+                why: format!(
+                    "several ST-LINK ports are plugged in ({}): choose one with --port",
+                    many.iter()
+                        .map(|p| p.port.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            }),
+        }
+    }
+
+    /// Opens the device (starting the virtual one for `--sim`) and says `Hello`.
+    pub fn connect(&self) -> Result<Session, RigError> {
+        if !self.sim && self.speed != 1.0 {
+            return Err(RigError::BadValue {
+                what: format!("--speed {}", self.speed),
+                why: "only the virtual device can run faster: add --sim".into(),
+            });
+        }
+        let (device, port, name) = if self.sim {
+            let dev = VirtualDevice::paper(self.speed)?;
+            let port = dev.port_name().to_owned();
+            let name = format!("the virtual device ({port})");
+            (Some(dev), port, name)
+        } else {
+            let port = self.resolve_port()?;
+            (None, port.clone(), port)
+        };
+        let io = open_serial(&port, self.baud)?;
+        let mut opts = ClientOptions::new(name);
+        if self.sim {
+            opts.time_scale = self.speed;
+            // Pseudo-terminal bytes wait for a kernel worker: on a busy machine, long.
+            opts.reply_timeout = std::time::Duration::from_secs(1);
+        }
+        let (client, info) = Client::connect(io, opts)?;
+        Ok(Session {
+            client,
+            info,
+            device,
+        })
+    }
+}

@@ -1,0 +1,452 @@
+//! [`Bench`]: the one interface the procedures drive a rig through, with its two
+//! implementations: [`SimBench`] (the in-process virtual rig, [`sim::SimLink`], virtual
+//! time) and [`DeviceBench`] (a device over the serial client: a real rig, a served virtual
+//! rig, or `--sim`); and [`Operator`], the person at the bench (prompts on stderr, answers
+//! on stdin).
+
+use std::io::BufRead;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use protocol::{
+    Capabilities, DeviceInfo, DeviceMessage, NackCode, Reply, Request, RigParameters, SimCommand,
+    TelemetrySample,
+};
+
+use crate::RigError;
+use crate::connection::Session;
+
+/// Output rotation that counts as "the output moved", rad: 0.1 mm of rope on the paper's
+/// 75 mm pulley.
+pub const MOTION_RAD: f64 = sim::scenarios::MOTION_RAD;
+
+/// A rig the procedures drive: requests, telemetry and time, the same on the virtual rig
+/// and on a real one.
+pub trait Bench {
+    /// What the device said at `Hello`.
+    fn info(&self) -> &DeviceInfo;
+    /// Sends `req`; a refusal is [`RigError::Refused`].
+    fn request(&mut self, req: &Request) -> Result<Reply, RigError>;
+    /// Sends heartbeats during every wait (true) or not.
+    fn keep_alive(&mut self, on: bool);
+    /// The next telemetry sample, waiting up to about 2 device seconds (`None`: none came).
+    fn sample(&mut self) -> Result<Option<TelemetrySample>, RigError>;
+    /// Lets `seconds` of device time pass (heartbeats continue when kept alive).
+    fn wait(&mut self, seconds: f64) -> Result<(), RigError>;
+    /// The motor temperature of the newest health sample, deg C, when sensed.
+    fn motor_temp_c(&self) -> Option<f64>;
+    /// The output angle as someone standing at a virtual rig sees it, rad (`None` on a
+    /// real rig: there the output encoder reports it in telemetry, or the operator does).
+    fn peek_output(&mut self) -> Option<f64>;
+
+    /// The device's calibration.
+    fn calibration(&mut self) -> Result<RigParameters, RigError> {
+        match self.request(&Request::GetParameters)? {
+            Reply::Parameters(p) => Ok(p),
+            _ => Err(RigError::Protocol(
+                "the device answered GetParameters with something else".into(),
+            )),
+        }
+    }
+
+    /// Whether the device is a virtual rig that serves `Request::Simulation`.
+    fn is_virtual(&self) -> bool {
+        self.info().capabilities.contains(Capabilities::SIMULATION)
+    }
+
+    /// Hangs `tau_rot_nm` on a virtual rig's output through `SimCommand::SetLoad`; false
+    /// when the device is real (it refuses with `SimulationOnly`): then the operator does.
+    fn set_load(&mut self, tau_rot_nm: f64) -> Result<bool, RigError> {
+        let req = Request::Simulation(SimCommand::SetLoad {
+            tau_rot_nm: tau_rot_nm as f32,
+        });
+        match self.request(&req) {
+            Ok(_) => Ok(true),
+            Err(RigError::Refused {
+                code: NackCode::SimulationOnly | NackCode::UnknownMessage,
+                ..
+            }) => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Sends `req` and requires an `Ack`.
+    fn ack(&mut self, req: &Request) -> Result<(), RigError> {
+        match self.request(req)? {
+            Reply::Ack => Ok(()),
+            _ => Err(RigError::Protocol(format!(
+                "the device answered {} with something else than Ack",
+                req.name()
+            ))),
+        }
+    }
+
+    /// Open-loop drive at `volts` (0 stops), kept alive while on.
+    fn open_loop(&mut self, volts: f64) -> Result<(), RigError> {
+        self.ack(&Request::OpenLoop {
+            volts: volts as f32,
+        })?;
+        self.keep_alive(volts != 0.0);
+        Ok(())
+    }
+
+    /// Release at `hz` (closed loop) or lock (`on` false), kept alive while on.
+    fn release(&mut self, on: bool, hz: f64) -> Result<(), RigError> {
+        self.ack(&Request::Release {
+            on,
+            target_hz: if on { hz as f32 } else { 0.0 },
+        })?;
+        self.keep_alive(on);
+        Ok(())
+    }
+
+    /// Locks the gear whatever runs: open loop off, release off, heartbeats off. Best
+    /// effort (the device stops at its comms timeout anyway).
+    fn lock_gear(&mut self) {
+        let _ = self.request(&Request::OpenLoop { volts: 0.0 });
+        let _ = self.request(&Request::Release {
+            on: false,
+            target_hz: 0.0,
+        });
+        self.keep_alive(false);
+    }
+
+    /// Starts telemetry at `rate_hz`.
+    fn start_telemetry(&mut self, rate_hz: u16) -> Result<(), RigError> {
+        self.ack(&Request::StartTelemetry { rate_hz })
+    }
+
+    /// Stops telemetry.
+    fn stop_telemetry(&mut self) -> Result<(), RigError> {
+        self.ack(&Request::StopTelemetry)
+    }
+}
+
+/// The in-process virtual rig, in virtual time (as fast as the machine runs it).
+pub struct SimBench {
+    /// The session with the simulated rig.
+    pub link: sim::SimLink,
+    info: DeviceInfo,
+    rate_hz: f64,
+    last_seq: Option<u32>,
+}
+
+impl SimBench {
+    /// Boots `config`'s rig and opens the session (hello).
+    pub fn new(mut config: sim::SimConfig) -> Result<Self, RigError> {
+        virtual_release_limit(&mut config);
+        let mut link = sim::SimLink::new(sim::SimRig::new(config));
+        let hello = protocol::session::Session::hello();
+        let reply = link.request(&hello)?;
+        let info = match protocol::session::hello_outcome(&reply) {
+            Some(Ok(info)) => info.clone(),
+            Some(Err(e)) => return Err(RigError::Protocol(e.to_string())),
+            None => {
+                return Err(RigError::Protocol(
+                    "the simulated rig did not answer Hello".into(),
+                ));
+            }
+        };
+        Ok(Self {
+            link,
+            info,
+            rate_hz: 50.0,
+            last_seq: None,
+        })
+    }
+}
+
+impl Bench for SimBench {
+    fn info(&self) -> &DeviceInfo {
+        &self.info
+    }
+
+    fn request(&mut self, req: &Request) -> Result<Reply, RigError> {
+        if let Request::StartTelemetry { rate_hz } = req {
+            self.rate_hz = f64::from((*rate_hz).max(1));
+        }
+        match self.link.request(req)? {
+            Reply::Nack(code) => Err(RigError::Refused {
+                request: req.name(),
+                code,
+                advice: crate::client::nack_advice(code),
+            }),
+            reply => Ok(reply),
+        }
+    }
+
+    fn keep_alive(&mut self, on: bool) {
+        self.link
+            .keep_alive(on.then_some(sim::scenarios::HEARTBEAT_S));
+    }
+
+    fn sample(&mut self) -> Result<Option<TelemetrySample>, RigError> {
+        let step = 1.0 / self.rate_hz;
+        let mut waited = 0.0;
+        while waited < 0.5 {
+            self.link.wait(step);
+            waited += step;
+            if let Some(t) = self.link.last_telemetry
+                && Some(t.seq) != self.last_seq
+            {
+                self.last_seq = Some(t.seq);
+                return Ok(Some(t));
+            }
+        }
+        Ok(None)
+    }
+
+    fn wait(&mut self, seconds: f64) -> Result<(), RigError> {
+        self.link.wait(seconds);
+        Ok(())
+    }
+
+    fn motor_temp_c(&self) -> Option<f64> {
+        // The virtual rig's thermistor when it reports one, else the plant's own.
+        let sensed = self
+            .link
+            .last_health
+            .map(|h| f64::from(h.motor_temp_c))
+            .filter(|t| t.is_finite());
+        sensed.or(Some(self.link.rig.plant().state().temperature))
+    }
+
+    fn peek_output(&mut self) -> Option<f64> {
+        Some(self.link.rig.plant().state().output_angle)
+    }
+}
+
+/// A device over the serial client: a real rig, a served virtual rig, or `--sim`.
+pub struct DeviceBench {
+    /// The session.
+    pub session: Session,
+    temp_c: Option<f64>,
+}
+
+impl DeviceBench {
+    /// Wraps an open session.
+    pub fn new(session: Session) -> Self {
+        Self {
+            session,
+            temp_c: None,
+        }
+    }
+
+    fn note(&mut self, msg: &DeviceMessage) {
+        if let DeviceMessage::Health(h) = msg
+            && h.motor_temp_c.is_finite()
+            && self
+                .session
+                .info
+                .capabilities
+                .contains(Capabilities::MOTOR_TEMP)
+        {
+            self.temp_c = Some(f64::from(h.motor_temp_c));
+        }
+    }
+}
+
+impl Bench for DeviceBench {
+    fn info(&self) -> &DeviceInfo {
+        &self.session.info
+    }
+
+    fn request(&mut self, req: &Request) -> Result<Reply, RigError> {
+        self.session.client.request(req)
+    }
+
+    fn keep_alive(&mut self, on: bool) {
+        if on {
+            self.session.client.start_keep_alive();
+        } else {
+            self.session.client.stop_keep_alive();
+        }
+    }
+
+    fn sample(&mut self) -> Result<Option<TelemetrySample>, RigError> {
+        let scale = self.session.time_scale().max(1e-9);
+        // Two device seconds, and at least one wall-clock second: a virtual device on a busy
+        // machine stalls for longer than its speed-up suggests.
+        let deadline = Instant::now() + Duration::from_secs_f64((2.0 / scale).max(1.0));
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.session.client.recv(left)? {
+                Some(DeviceMessage::Telemetry(t)) => return Ok(Some(t)),
+                Some(other) => self.note(&other),
+                None => return Ok(None),
+            }
+        }
+    }
+
+    fn wait(&mut self, seconds: f64) -> Result<(), RigError> {
+        let scale = self.session.time_scale().max(1e-9);
+        let deadline = Instant::now() + Duration::from_secs_f64((seconds / scale).max(0.0));
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(());
+            }
+            if let Some(msg) = self.session.client.recv(left)? {
+                self.note(&msg);
+            }
+        }
+    }
+
+    fn motor_temp_c(&self) -> Option<f64> {
+        self.temp_c
+    }
+
+    fn peek_output(&mut self) -> Option<f64> {
+        self.session
+            .device
+            .as_ref()
+            .map(|d| d.with_plant(|p| p.state().output_angle))
+    }
+}
+
+/// The person at the bench: prompts on stderr, answers from stdin. On a virtual rig
+/// (unless `forced`) nobody is asked.
+pub struct Operator {
+    /// Ask even on a virtual rig (`--operator`).
+    pub forced: bool,
+    /// Set by Ctrl-C.
+    pub stop: Arc<AtomicBool>,
+    input: Box<dyn BufRead + Send>,
+}
+
+/// An operator's answer to a prompt before a point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Go {
+    /// Run the point.
+    Run,
+    /// Skip the point.
+    Skip,
+}
+
+/// An operator's verdict after a point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// Keep the point; the output moved (Some(true)), did not (Some(false)), or unknown.
+    Keep(Option<bool>),
+    /// Run the point again.
+    Redo,
+}
+
+impl Operator {
+    /// An operator on this process's stdin.
+    pub fn stdin(forced: bool, stop: Arc<AtomicBool>) -> Self {
+        Self {
+            forced,
+            stop,
+            input: Box::new(std::io::BufReader::new(std::io::stdin())),
+        }
+    }
+
+    /// An operator answering from `input` (tests).
+    pub fn scripted(input: &'static [u8], forced: bool) -> Self {
+        Self {
+            forced,
+            stop: Arc::new(AtomicBool::new(false)),
+            input: Box::new(input),
+        }
+    }
+
+    /// Whether Ctrl-C was pressed.
+    pub fn interrupted(&self) -> bool {
+        self.stop.load(Ordering::SeqCst)
+    }
+
+    /// Asks `question` (on stderr) and returns the trimmed, lower-case answer; the end of
+    /// the input or Ctrl-C is an interruption.
+    pub fn ask(&mut self, question: &str) -> Result<String, RigError> {
+        eprint!("{question} ");
+        let mut line = String::new();
+        let n = self.input.read_line(&mut line)?;
+        if self.interrupted() {
+            return Err(interrupted());
+        }
+        if n == 0 {
+            eprintln!();
+            return Err(RigError::Operator(
+                "the operator's input ended (stdin closed): stopped, the gear is locked".into(),
+            ));
+        }
+        Ok(line.trim().to_lowercase())
+    }
+
+    /// Before a point: Enter runs it, `s` skips it.
+    pub fn before(&mut self, question: &str) -> Result<Go, RigError> {
+        loop {
+            match self
+                .ask(&format!("{question}, then Enter (s: skip this point)"))?
+                .as_str()
+            {
+                "" => return Ok(Go::Run),
+                "s" | "skip" => return Ok(Go::Skip),
+                other => eprintln!("  '{other}': press Enter to run the point, or s to skip it"),
+            }
+        }
+    }
+
+    /// After a point: did the output move (asked only when `ask_moved`), or redo it.
+    pub fn after(&mut self, summary: &str, ask_moved: bool) -> Result<Verdict, RigError> {
+        loop {
+            let q = if ask_moved {
+                format!("{summary}: did the output move? [y/n] (r: redo the point)")
+            } else {
+                format!("{summary}: Enter keeps it (r: redo the point)")
+            };
+            match (self.ask(&q)?.as_str(), ask_moved) {
+                ("r" | "redo", _) => return Ok(Verdict::Redo),
+                ("y" | "yes", true) => return Ok(Verdict::Keep(Some(true))),
+                ("n" | "no", true) => return Ok(Verdict::Keep(Some(false))),
+                ("", false) => return Ok(Verdict::Keep(None)),
+                (other, _) => eprintln!("  '{other}': answer y, n or r"),
+            }
+        }
+    }
+
+    /// A yes/no question.
+    pub fn yes_no(&mut self, question: &str) -> Result<bool, RigError> {
+        loop {
+            match self.ask(&format!("{question} [y/n]"))?.as_str() {
+                "y" | "yes" => return Ok(true),
+                "n" | "no" => return Ok(false),
+                other => eprintln!("  '{other}': answer y or n"),
+            }
+        }
+    }
+}
+
+/// On a virtual rig, raises the release limit (`max_release_load_nm`, the paper's
+/// calibration has 1.0 N m) above `top_nm`, up to the board's cap, so the paper's heavier loads can be released; a
+/// real rig's limit is the operator's to set (`rig calibration set`).
+pub fn allow_load<B: Bench + ?Sized>(bench: &mut B, top_nm: f64) -> Result<(), RigError> {
+    if !bench.is_virtual() {
+        return Ok(());
+    }
+    let mut cal = bench.calibration()?;
+    // Never above the board's cap (the gear's tooth strength): the firmware refuses that, and
+    // the core allows estimate noise around the cap itself.
+    let wanted = (1.25 * top_nm).min(model::BoardLimits::PAPER.max_release_load_nm);
+    if f64::from(cal.max_release_load_nm) < wanted {
+        cal.max_release_load_nm = wanted as f32;
+        bench.ack(&Request::SetParameters(cal))?;
+    }
+    Ok(())
+}
+
+/// The virtual rig's stored record releases the paper's heaviest load with room for the
+/// estimate's noise (as the simulator's own sweep does): a record stored in flash is taken
+/// as it is, where `SetParameters` would refuse a limit above the board's cap.
+pub fn virtual_release_limit(config: &mut sim::SimConfig) {
+    let wanted = (1.25 * model::paper::TAU_ROT_MAX) as f32;
+    let limit = &mut config.calibration.max_release_load_nm;
+    *limit = limit.max(wanted);
+}
+
+/// The error for Ctrl-C during a procedure.
+pub fn interrupted() -> RigError {
+    RigError::Operator("interrupted (Ctrl-C): the gear is locked".into())
+}

@@ -1,0 +1,252 @@
+//! `hold-release` (Fig. 5): the load hangs on the locked gear (held without vibration),
+//! the vibrator runs (the gear releases, the load falls), the vibrator stops (with
+//! mu_d Lambda < 1 the load keeps falling). The whole time history from telemetry, as
+//! CSV and an SVG plot.
+
+use std::path::Path;
+
+use protocol::SupervisorState;
+use reporting::plot::{self, PALETTE, Series, XyPanel};
+use serde::Serialize;
+
+use super::bench::{Bench, Go, Operator, interrupted};
+use crate::RigError;
+
+/// Telemetry rate of the time history, Hz.
+pub const TELEMETRY_HZ: u16 = 100;
+
+/// The procedure's settings.
+#[derive(Debug, Clone, Copy)]
+pub struct HoldRelease {
+    /// Load hung on the output, N m (Fig. 5: 1.0 kg on 75 mm, 0.736 N m); `None`: the
+    /// load already on the rig (nobody is asked, nothing is set).
+    pub load_nm: Option<f64>,
+    /// Hold without vibration, s (the paper: 14.5 s).
+    pub hold_s: f64,
+    /// Vibration frequency, Hz (the paper: 3.6 V, about 5 Hz).
+    pub hz: f64,
+    /// How long the vibrator runs, s.
+    pub release_s: f64,
+    /// Recorded after the vibrator is switched off, s.
+    pub after_s: f64,
+}
+
+impl Default for HoldRelease {
+    fn default() -> Self {
+        Self {
+            load_nm: Some(model::paper::FIG5_LOAD.torque()),
+            hold_s: model::paper::FIG5_HOLD_S,
+            hz: model::paper::VIBRATION_HZ[0],
+            release_s: 2.0,
+            after_s: 1.5,
+        }
+    }
+}
+
+/// One sample of the time history (one CSV row).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Sample {
+    /// Time since the procedure started, s.
+    pub t_s: f64,
+    /// `hold`, `release` or `after`.
+    pub phase: &'static str,
+    /// Supervisor state.
+    pub state: &'static str,
+    /// Output angle since the start, rad (empty when nothing senses it).
+    pub output_angle_rad: Option<f64>,
+    /// Cam speed, rad/s.
+    pub cam_speed_rad_s: f64,
+    /// Motor current, A.
+    pub current_a: f64,
+}
+
+/// Runs the procedure; `progress` gets a line per phase.
+pub fn run<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &mut Operator,
+    opts: &HoldRelease,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Vec<Sample>, RigError> {
+    if let Some(load) = opts.load_nm {
+        let asks = operator.forced || !bench.is_virtual();
+        let set_by_rig = !operator.forced && bench.set_load(load)?;
+        if !set_by_rig
+            && asks
+            && operator.before(&format!(
+                "hang {} N m on the pulley (Fig. 5: 1.0 kg on 75 mm)",
+                reporting::human(load)
+            ))? == Go::Skip
+        {
+            return Ok(Vec::new());
+        }
+    }
+    bench.start_telemetry(TELEMETRY_HZ)?;
+    let mut samples = Vec::new();
+    let result = record(bench, operator, opts, &mut samples, progress);
+    bench.lock_gear();
+    let _ = bench.stop_telemetry();
+    result.map(|()| samples)
+}
+
+fn record<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &Operator,
+    opts: &HoldRelease,
+    samples: &mut Vec<Sample>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(), RigError> {
+    let mut t0: Option<u64> = None;
+    let mut angle0: Option<f64> = None;
+    let phases = [
+        ("hold", opts.hold_s),
+        ("release", opts.release_s),
+        ("after", opts.after_s),
+    ];
+    let mut end = 0.0;
+    for (phase, length) in phases {
+        progress(&format!("{phase}: {} s", reporting::human(length)));
+        match phase {
+            "release" => bench.release(true, opts.hz)?,
+            "after" => bench.release(false, 0.0)?,
+            _ => {}
+        }
+        end += length;
+        loop {
+            if operator.interrupted() {
+                return Err(interrupted());
+            }
+            let Some(t) = bench.sample()? else {
+                return Err(RigError::Protocol(
+                    "telemetry stopped during hold-release: check the link".into(),
+                ));
+            };
+            let start = *t0.get_or_insert(t.device_time_us);
+            let t_s = t.device_time_us.saturating_sub(start) as f64 / 1e6;
+            let angle = Some(f64::from(t.output_angle_rad))
+                .filter(|a| a.is_finite())
+                .or_else(|| bench.peek_output());
+            let base = *angle0.get_or_insert(angle.unwrap_or(0.0));
+            samples.push(Sample {
+                t_s,
+                phase,
+                state: t.state.name(),
+                output_angle_rad: angle.map(|a| a - base),
+                cam_speed_rad_s: f64::from(t.cam_speed_rad_s),
+                current_a: f64::from(t.current_a),
+            });
+            if !t.faults.is_empty() || t.state == SupervisorState::Fault {
+                return Err(RigError::DeviceFault {
+                    what: format!("hold-release ({phase})"),
+                    faults: t.faults.to_string(),
+                });
+            }
+            if t_s >= end {
+                break;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Writes the time history as CSV, atomically.
+pub fn write_csv(samples: &[Sample], path: &Path) -> Result<(), RigError> {
+    reporting::write_atomic_with(path, |tmp| {
+        let mut w = csv::Writer::from_path(tmp).map_err(|e| RigError::BadValue {
+            what: path.display().to_string(),
+            why: format!("cannot write the CSV: {e}"),
+        })?;
+        for s in samples {
+            w.serialize(s).map_err(|e| RigError::BadValue {
+                what: path.display().to_string(),
+                why: format!("cannot write the CSV: {e}"),
+            })?;
+        }
+        w.flush()?;
+        Ok(())
+    })
+}
+
+/// Draws the time history (output angle, cam speed, current against time) into the SVG
+/// file `path`, atomically.
+pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
+    let panel =
+        |caption: &str, y: &str, color: usize, f: &dyn Fn(&Sample) -> Option<f64>| XyPanel {
+            caption: Some(caption.into()),
+            x_label: "t, s".into(),
+            y_label: y.into(),
+            series: vec![Series::line(
+                PALETTE[color % PALETTE.len()],
+                2,
+                samples
+                    .iter()
+                    .filter_map(|s| f(s).map(|v| (s.t_s, v)))
+                    .collect(),
+            )],
+            x_range: Some(plot::span(samples.iter().map(|s| s.t_s), 0.02, true)),
+            fine_grid: true,
+            ..XyPanel::default()
+        };
+    let panels = [
+        panel("output angle (Fig. 5)", "output angle, rad", 0, &|s| {
+            s.output_angle_rad
+        }),
+        panel("cam speed", "w_n, rad/s", 1, &|s| Some(s.cam_speed_rad_s)),
+        panel("motor current", "i_in, A", 2, &|s| Some(s.current_a)),
+    ];
+    Ok(plot::columns_figure(
+        path,
+        (420, 360),
+        Some("hold, release, after"),
+        &panels,
+    )?)
+}
+
+/// Fig. 5's numbers from a time history: whether the load held, when it moved after the
+/// release request, the output speed when the vibration stopped and at the end, and the
+/// rope paid out on a pulley of `radius_m`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fig5Numbers {
+    /// The output stayed within 0.1 mm of rope during the hold.
+    pub held_without_vibration: bool,
+    /// From the release request to the first motion, s.
+    pub release_to_motion_s: Option<f64>,
+    /// Output speed at the end of the release, rad/s.
+    pub output_speed_at_stop_rad_s: f64,
+    /// Output speed at the end of the record, rad/s.
+    pub output_speed_after_stop_rad_s: f64,
+    /// Rope paid out, m.
+    pub load_drop_m: f64,
+}
+
+/// Reads [`Fig5Numbers`] from `samples`.
+pub fn fig5_numbers(samples: &[Sample], radius_m: f64) -> Fig5Numbers {
+    let motion = super::bench::MOTION_RAD;
+    let angle = |s: &Sample| s.output_angle_rad.unwrap_or(0.0);
+    let held = samples
+        .iter()
+        .filter(|s| s.phase == "hold")
+        .all(|s| angle(s).abs() <= motion);
+    let release: Vec<&Sample> = samples.iter().filter(|s| s.phase == "release").collect();
+    // The release is requested just before its first sample.
+    let start = samples
+        .iter()
+        .rfind(|s| s.phase == "hold")
+        .or(release.first().copied())
+        .map_or(0.0, |s| s.t_s);
+    let release_to_motion_s = release
+        .iter()
+        .find(|s| angle(s).abs() > motion)
+        .map(|s| ((s.t_s - start) * 1e3).round() / 1e3);
+    let speed = |set: &[&Sample]| match set {
+        [.., a, b] if b.t_s > a.t_s => (angle(b) - angle(a)) / (b.t_s - a.t_s),
+        _ => 0.0,
+    };
+    let all: Vec<&Sample> = samples.iter().collect();
+    Fig5Numbers {
+        held_without_vibration: held,
+        release_to_motion_s,
+        output_speed_at_stop_rad_s: speed(&release),
+        output_speed_after_stop_rad_s: speed(&all),
+        load_drop_m: samples.last().map_or(0.0, |s| angle(s) * radius_m),
+    }
+}

@@ -1,0 +1,661 @@
+//! `torque-sweep` (Figs. 8-9): every run of a [`Plan`] on a [`Bench`]: hang the load, drive
+//! the vibrator (open loop at a supply voltage, as the paper's bench supply, or closed
+//! loop at a frequency), average the current and the cam speed over the window that
+//! starts with constant cam rotation (as the paper: 0.5 s) or over whole revolutions,
+//! stop, note whether the output moved, rest. Each row is appended to the CSV (`rig
+//! explain`'s columns) as it completes, and synced, so an interruption keeps every
+//! completed row and `--resume` continues the plan.
+
+use std::io::Write;
+use std::path::Path;
+
+use protocol::{SupervisorState, TelemetrySample};
+use serde::{Deserialize, Serialize};
+
+use super::bench::{Bench, Go, MOTION_RAD, Operator, Verdict, interrupted};
+use super::plan::{Plan, Run};
+use crate::RigError;
+
+/// Telemetry rate during a point, Hz.
+pub const TELEMETRY_HZ: u16 = 100;
+
+/// Longest wait for constant cam rotation, device s.
+const SPIN_UP_LIMIT_S: f64 = 8.0;
+
+/// How the averaging window is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Window {
+    /// `window_s` from the start of constant cam rotation (the paper: 0.5 s).
+    #[default]
+    Start,
+    /// From the start of constant rotation, at least `window_s`, ended at a whole number
+    /// of cam revolutions (the cam's torque ripple averages out).
+    Revolutions,
+}
+
+/// One row of the sweep's CSV. The first columns are those `rig explain` reads.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    /// Position in the plan's run order (`--resume` skips the ones written).
+    pub point: usize,
+    /// Repeat, 0-based.
+    pub repeat: u32,
+    /// Start of the averaging window, device clock, s.
+    pub t_s: f64,
+    /// Open-loop supply, V (empty in closed loop).
+    pub v_in_v: Option<f64>,
+    /// Closed-loop target frequency, Hz (empty in open loop).
+    pub target_hz: Option<f64>,
+    /// Mean cam speed over the window, rad/s.
+    pub omega_n_rad_s: f64,
+    /// Load torque hung on the output, N m.
+    pub tau_rot_nm: f64,
+    /// Mean motor current over the window, A.
+    pub i_in_a: f64,
+    /// Motor temperature at the window's start, deg C (empty when not sensed).
+    pub temp_c: Option<f64>,
+    /// The firmware's tau_cam estimate, mean over the window, N m.
+    pub tau_cam_est_nm: f64,
+    /// Whether the output moved (1) or held (0); empty when nobody could tell.
+    pub backdriven: Option<u8>,
+}
+
+/// What a sweep did.
+#[derive(Debug, Clone, Serialize)]
+pub struct SweepOutcome {
+    /// Runs in the plan.
+    pub planned: usize,
+    /// Rows already in the file before this run (`--resume`).
+    pub resumed: usize,
+    /// Rows written by this run.
+    pub written: usize,
+    /// Runs the operator skipped.
+    pub skipped: usize,
+    /// The rows this run measured, in order.
+    #[serde(skip)]
+    pub rows: Vec<Row>,
+}
+
+/// The sweep's settings beyond the plan.
+#[derive(Debug, Clone)]
+pub struct SweepSetup {
+    /// The plan.
+    pub plan: Plan,
+    /// How the averaging window is chosen.
+    pub window: Window,
+    /// Continue the plan in an existing CSV.
+    pub resume: bool,
+    /// The command line, for the provenance.
+    pub command: String,
+}
+
+/// The provenance header: `#` lines `rig explain` skips.
+pub fn provenance<B: Bench + ?Sized>(
+    bench: &mut B,
+    setup: &SweepSetup,
+) -> Result<String, RigError> {
+    let info = bench.info().clone();
+    let cal = bench.calibration()?;
+    let fw = info.firmware_version;
+    let date = httpdate(std::time::SystemTime::now());
+    Ok(format!(
+        "# rig experiment torque-sweep ({})\n# date: {date}\n# host: rig {}\n# firmware: {}.{}.{} build {} board {} protocol {} capabilities {}\n# calibration ({}): {}\n# window: {}\n# plan: {}\n",
+        setup.command,
+        env!("CARGO_PKG_VERSION"),
+        fw.major,
+        fw.minor,
+        fw.patch,
+        info.firmware_build.as_str(),
+        info.board.as_str(),
+        info.protocol_version,
+        if info.capabilities.is_empty() {
+            "none".to_string()
+        } else {
+            info.capabilities.to_string()
+        },
+        info.parameters_status.name(),
+        serde_json::to_string(&cal).unwrap_or_default(),
+        match setup.window {
+            Window::Start => "start of constant cam rotation",
+            Window::Revolutions => "whole cam revolutions from the start of constant rotation",
+        },
+        setup.plan.one_line(),
+    ))
+}
+
+/// A UTC date and time, `2026-11-22T23:55:00Z`.
+fn httpdate(t: std::time::SystemTime) -> String {
+    let secs = t
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let (days, rem) = (secs / 86_400, secs % 86_400);
+    // Civil from days (Howard Hinnant's algorithm).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
+/// The rows already in `path` and its plan line (for `--resume`).
+pub fn read_rows(path: &Path) -> Result<(Vec<Row>, Option<String>), RigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| RigError::File {
+        action: "read",
+        path: path.display().to_string(),
+        source,
+    })?;
+    let plan = text
+        .lines()
+        .find_map(|l| l.strip_prefix("# plan: "))
+        .map(str::to_string);
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .flexible(true)
+        .from_reader(text.as_bytes());
+    let mut rows = Vec::new();
+    for r in reader.deserialize::<Row>() {
+        // A row cut short by a crash mid-write is not a completed row.
+        match r {
+            Ok(row) => rows.push(row),
+            Err(_) => break,
+        }
+    }
+    Ok((rows, plan))
+}
+
+/// The CSV header line.
+fn header() -> String {
+    "point,repeat,t_s,v_in_v,target_hz,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,tau_cam_est_nm,backdriven\n"
+        .into()
+}
+
+fn csv_line(row: &Row) -> Result<String, RigError> {
+    let mut w = csv::WriterBuilder::new()
+        .has_headers(false)
+        .from_writer(Vec::new());
+    w.serialize(row).map_err(|e| RigError::BadValue {
+        what: "a sweep row".into(),
+        why: e.to_string(),
+    })?;
+    let bytes = w.into_inner().map_err(|e| RigError::BadValue {
+        what: "a sweep row".into(),
+        why: e.to_string(),
+    })?;
+    Ok(String::from_utf8_lossy(&bytes).into_owned())
+}
+
+/// An append-only CSV whose every write is synced to disk.
+struct Appender {
+    file: std::fs::File,
+    path: String,
+}
+
+impl Appender {
+    fn write(&mut self, text: &str) -> Result<(), RigError> {
+        let fail = |source| RigError::File {
+            action: "write",
+            path: self.path.clone(),
+            source,
+        };
+        self.file.write_all(text.as_bytes()).map_err(fail)?;
+        self.file.sync_data().map_err(fail)
+    }
+}
+
+/// Runs the sweep on `bench`, writing rows to `csv`; `progress` gets a line per point.
+pub fn run<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &mut Operator,
+    setup: &SweepSetup,
+    csv: &Path,
+    progress: &mut dyn FnMut(&str),
+) -> Result<SweepOutcome, RigError> {
+    run_to(bench, operator, setup, Some(csv), progress)
+}
+
+/// As [`run`], writing the CSV only when `csv` is given (the rows are in the outcome).
+pub fn run_to<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &mut Operator,
+    setup: &SweepSetup,
+    csv: Option<&Path>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<SweepOutcome, RigError> {
+    let runs = setup.plan.runs();
+    let top = runs.iter().map(|r| r.load_nm).fold(0.0, f64::max);
+    super::bench::allow_load(bench, top)?;
+    let (done, mut out) = match csv {
+        Some(csv) => {
+            let (done, out) = open_csv(bench, setup, csv)?;
+            (done, Some(out))
+        }
+        None => (Vec::new(), None),
+    };
+    let resumed = done.len();
+    let mut outcome = SweepOutcome {
+        planned: runs.len(),
+        resumed,
+        written: 0,
+        skipped: 0,
+        rows: Vec::new(),
+    };
+    // The release limit sits above the heaviest load on a virtual rig (its calibration is
+    // the paper's 1.0 N m); a real rig's is the operator's business (`rig calibration`).
+    bench.start_telemetry(TELEMETRY_HZ)?;
+    let mut hung: Option<f64> = None;
+    let todo: Vec<&Run> = runs
+        .iter()
+        .filter(|r| !done.iter().any(|d| d.point == r.index))
+        .collect();
+    let result = (|| {
+        for run in todo {
+            if operator.interrupted() {
+                return Err(interrupted());
+            }
+            loop {
+                let load_changed = hung != Some(run.load_nm);
+                let asks = operator.forced || !bench.is_virtual();
+                if load_changed {
+                    let set_by_rig = !operator.forced && bench.set_load(run.load_nm)?;
+                    if !set_by_rig && asks {
+                        let q = format!(
+                            "point {}/{}: hang {} N m on the pulley",
+                            run.index + 1,
+                            runs.len(),
+                            reporting::human(run.load_nm)
+                        );
+                        if operator.before(&q)? == Go::Skip {
+                            outcome.skipped += 1;
+                            break;
+                        }
+                    }
+                    hung = Some(run.load_nm);
+                }
+                wait_for_temperature(bench, operator, run)?;
+                let mut row = measure(bench, operator, setup, run)?;
+                let summary = format!(
+                    "point {}/{}: {} N m, {}: i = {:.3} A, w = {:.1} rad/s",
+                    run.index + 1,
+                    runs.len(),
+                    reporting::human(run.load_nm),
+                    drive_text(run),
+                    row.i_in_a,
+                    row.omega_n_rad_s
+                );
+                if asks {
+                    match operator.after(&summary, row.backdriven.is_none())? {
+                        Verdict::Redo => continue,
+                        Verdict::Keep(moved) => {
+                            if let Some(m) = moved {
+                                row.backdriven = Some(u8::from(m));
+                            }
+                        }
+                    }
+                } else {
+                    progress(&summary);
+                }
+                if let Some(out) = out.as_mut() {
+                    out.write(&csv_line(&row)?)?;
+                }
+                outcome.rows.push(row);
+                outcome.written += 1;
+                bench.wait(setup.plan.rest_s)?;
+                break;
+            }
+        }
+        Ok(())
+    })();
+    bench.lock_gear();
+    let _ = bench.stop_telemetry();
+    result.map(|()| outcome)
+}
+
+fn drive_text(run: &Run) -> String {
+    match (run.volts, run.hz) {
+        (Some(v), _) => format!("{} V", reporting::human(v)),
+        (_, Some(hz)) => format!("{} Hz", reporting::human(hz)),
+        _ => String::new(),
+    }
+}
+
+fn open_csv<B: Bench + ?Sized>(
+    bench: &mut B,
+    setup: &SweepSetup,
+    csv: &Path,
+) -> Result<(Vec<Row>, Appender), RigError> {
+    let path = csv.display().to_string();
+    let open = |append: bool| {
+        std::fs::OpenOptions::new()
+            .create(true)
+            .write(true)
+            .append(append)
+            .truncate(!append)
+            .open(csv)
+            .map_err(|source| RigError::File {
+                action: "write",
+                path: path.clone(),
+                source,
+            })
+    };
+    if setup.resume && csv.exists() {
+        let (rows, plan) = read_rows(csv)?;
+        if plan.as_deref() != Some(setup.plan.one_line().as_str()) {
+            return Err(RigError::BadValue {
+                what: format!("--resume {path}"),
+                why: "the file was written with another plan (its `# plan:` line differs): give the same --plan/--quick as the interrupted run, or a new --csv".into(),
+            });
+        }
+        // Drop a partial last line so appended rows start on their own line.
+        let text = std::fs::read_to_string(csv).unwrap_or_default();
+        let mut out = Appender {
+            file: open(true)?,
+            path,
+        };
+        if !text.is_empty() && !text.ends_with('\n') {
+            out.write("\n")?;
+        }
+        return Ok((rows, out));
+    }
+    let head = provenance(bench, setup)? + &header();
+    let mut out = Appender {
+        file: open(false)?,
+        path,
+    };
+    out.write(&head)?;
+    Ok((Vec::new(), out))
+}
+
+fn wait_for_temperature<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &Operator,
+    run: &Run,
+) -> Result<(), RigError> {
+    let Some(want) = run.temp_c else {
+        return Ok(());
+    };
+    // Cooling only happens at rest: wait (bounded) while the motor is warmer than asked.
+    let mut waited = 0.0;
+    while bench.motor_temp_c().is_some_and(|t| t > want) && waited < 600.0 {
+        if operator.interrupted() {
+            return Err(interrupted());
+        }
+        bench.wait(1.0)?;
+        waited += 1.0;
+    }
+    Ok(())
+}
+
+fn fault_error(t: &TelemetrySample, run: &Run) -> RigError {
+    RigError::DeviceFault {
+        what: format!(
+            "the sweep at {} N m, {}",
+            reporting::human(run.load_nm),
+            drive_text(run)
+        ),
+        faults: t.faults.to_string(),
+    }
+}
+
+/// One run: drive, wait for constant rotation, average, stop.
+fn measure<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &Operator,
+    setup: &SweepSetup,
+    run: &Run,
+) -> Result<Row, RigError> {
+    let before = output_angle(bench, None);
+    match (run.volts, run.hz) {
+        (Some(v), _) => bench.open_loop(v)?,
+        (_, Some(hz)) => bench.release(true, hz)?,
+        _ => unreachable_drive()?,
+    }
+    let result = (|| {
+        // The start of constant cam rotation, as the firmware judges it: `Vibrating`.
+        let mut waited = 0.0;
+        let mut last = None;
+        loop {
+            if operator.interrupted() {
+                return Err(interrupted());
+            }
+            let Some(t) = bench.sample()? else {
+                return Err(RigError::Protocol(
+                    "telemetry stopped during the sweep: check the link".into(),
+                ));
+            };
+            if !t.faults.is_empty() || t.state == SupervisorState::Fault {
+                return Err(fault_error(&t, run));
+            }
+            if let Some(prev) = last {
+                waited += (t.device_time_us.saturating_sub(prev)) as f64 / 1e6;
+            }
+            last = Some(t.device_time_us);
+            if t.state == SupervisorState::Vibrating {
+                break average(bench, operator, setup, run, t);
+            }
+            if waited > SPIN_UP_LIMIT_S {
+                return Err(RigError::Protocol(format!(
+                    "the cam did not reach constant rotation within {SPIN_UP_LIMIT_S} s at {} N m, {} (state {}, cam {:.1} rad/s): the load may be too heavy for this drive",
+                    reporting::human(run.load_nm),
+                    drive_text(run),
+                    t.state.name(),
+                    t.cam_speed_rad_s
+                )));
+            }
+        }
+    })();
+    let stop = match (run.volts, run.hz) {
+        (Some(_), _) => bench.open_loop(0.0),
+        _ => bench.release(false, 0.0),
+    };
+    let (mut row, last) = result?;
+    stop?;
+    // The cam comes to rest before the output is judged and the next point starts.
+    let mut waited = 0.0;
+    while waited < 3.0 {
+        match bench.sample()? {
+            Some(t) if t.state == SupervisorState::Locked && t.cam_speed_rad_s.abs() < 0.5 => {
+                break;
+            }
+            Some(_) => waited += 1.0 / f64::from(TELEMETRY_HZ),
+            None => break,
+        }
+    }
+    let after = output_angle(bench, last.as_ref());
+    row.backdriven = match (before, after) {
+        (Some(a), Some(b)) => Some(u8::from((b - a).abs() > MOTION_RAD)),
+        _ => None,
+    };
+    Ok(row)
+}
+
+fn unreachable_drive() -> Result<(), RigError> {
+    Err(RigError::BadValue {
+        what: "plan point".into(),
+        why: "gives neither volts nor hz".into(),
+    })
+}
+
+/// The output angle from the output encoder (telemetry) or, on a virtual rig, as seen.
+fn output_angle<B: Bench + ?Sized>(bench: &mut B, t: Option<&TelemetrySample>) -> Option<f64> {
+    let from_encoder = match t {
+        Some(t) => Some(t.output_angle_rad),
+        None => bench.sample().ok().flatten().map(|t| t.output_angle_rad),
+    }
+    .map(f64::from)
+    .filter(|a| a.is_finite());
+    from_encoder.or_else(|| bench.peek_output())
+}
+
+/// Averages over the window; returns the row (without `backdriven`) and the last sample.
+fn average<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &Operator,
+    setup: &SweepSetup,
+    run: &Run,
+    first: TelemetrySample,
+) -> Result<(Row, Option<TelemetrySample>), RigError> {
+    let t0 = first.device_time_us;
+    let temp_c = bench.motor_temp_c();
+    let (mut sum_i, mut sum_w, mut n) = (0.0, 0.0, 0u32);
+    // The firmware's estimate changes once per cam revolution: average the fresh ones.
+    let mut estimates: Vec<f64> = Vec::new();
+    let mut angle = 0.0;
+    let mut prev = first;
+    let mut prev_tau = first.tau_cam_nm;
+    let mut last;
+    let window = setup.plan.window_s;
+    loop {
+        if operator.interrupted() {
+            return Err(interrupted());
+        }
+        let Some(t) = bench.sample()? else {
+            return Err(RigError::Protocol(
+                "telemetry stopped during the sweep: check the link".into(),
+            ));
+        };
+        if !t.faults.is_empty() || t.state == SupervisorState::Fault {
+            return Err(fault_error(&t, run));
+        }
+        let dt = t.device_time_us.saturating_sub(prev.device_time_us) as f64 / 1e6;
+        angle += 0.5 * f64::from(t.cam_speed_rad_s + prev.cam_speed_rad_s).abs() * dt;
+        prev = t;
+        last = t;
+        sum_i += f64::from(t.current_a);
+        sum_w += f64::from(t.cam_speed_rad_s).abs();
+        if t.tau_cam_nm.is_finite() && t.tau_cam_nm != prev_tau {
+            estimates.push(f64::from(t.tau_cam_nm));
+        }
+        prev_tau = t.tau_cam_nm;
+        n += 1;
+        let elapsed = t.device_time_us.saturating_sub(t0) as f64 / 1e6;
+        let long_enough = elapsed >= window - 0.5 / f64::from(TELEMETRY_HZ);
+        let whole = match setup.window {
+            Window::Start => true,
+            Window::Revolutions => {
+                let rev = std::f64::consts::TAU;
+                // Within one sample of a whole revolution.
+                let step = f64::from(t.cam_speed_rad_s.abs()) / f64::from(TELEMETRY_HZ);
+                angle >= rev && (angle % rev) < step.max(1e-6)
+            }
+        };
+        if long_enough && whole {
+            break;
+        }
+        if elapsed > window + 10.0 {
+            break;
+        }
+    }
+    if let Some(d) = run.duration_s {
+        let elapsed = last.device_time_us.saturating_sub(t0) as f64 / 1e6;
+        if d > elapsed {
+            bench.wait(d - elapsed)?;
+        }
+    }
+    let n = f64::from(n.max(1));
+    Ok((
+        Row {
+            point: run.index,
+            repeat: run.repeat,
+            t_s: t0 as f64 / 1e6,
+            v_in_v: run.volts,
+            target_hz: run.hz,
+            omega_n_rad_s: sum_w / n,
+            tau_rot_nm: run.load_nm,
+            i_in_a: sum_i / n,
+            temp_c,
+            tau_cam_est_nm: if estimates.is_empty() {
+                f64::from(last.tau_cam_nm)
+            } else {
+                estimates.iter().sum::<f64>() / estimates.len() as f64
+            },
+            backdriven: None,
+        },
+        Some(last),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::bench::SimBench;
+
+    #[test]
+    fn dates_are_iso() {
+        let t = std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_795_910_400);
+        assert_eq!(httpdate(t), "2026-11-29T00:00:00Z");
+    }
+
+    #[test]
+    fn quick_sweep_on_the_virtual_rig_is_read_by_explain() {
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("sweep.csv");
+        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut op = Operator::scripted(b"", false);
+        let setup = SweepSetup {
+            plan: Plan::quick(),
+            window: Window::Start,
+            resume: false,
+            command: "test".into(),
+        };
+        let out = run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).unwrap();
+        assert_eq!((out.planned, out.written), (12, 12));
+        let data = explain::Dataset::read_csv(&csv).unwrap();
+        assert_eq!(data.len(), 12);
+        let (rows, plan) = read_rows(&csv).unwrap();
+        assert_eq!(plan.unwrap(), setup.plan.one_line());
+        // Current grows with load at every voltage; cam speed with the voltage.
+        for v in model::paper::SUPPLY_VOLTAGES {
+            let mut at: Vec<&Row> = rows.iter().filter(|r| r.v_in_v == Some(v)).collect();
+            at.sort_by(|a, b| a.tau_rot_nm.total_cmp(&b.tau_rot_nm));
+            assert!(at.windows(2).all(|w| w[1].i_in_a > w[0].i_in_a), "{v} V");
+        }
+        let speed = |v: f64| {
+            rows.iter()
+                .filter(|r| r.v_in_v == Some(v))
+                .map(|r| r.omega_n_rad_s)
+                .sum::<f64>()
+        };
+        assert!(speed(3.6) < speed(6.2) && speed(6.2) < speed(8.8));
+        assert!(rows.iter().all(|r| r.backdriven.is_some()));
+    }
+
+    #[test]
+    fn closed_loop_plan_over_whole_revolutions() {
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("cl.csv");
+        let plan = Plan::parse(
+            "mode = \"closed-loop\"\nrest_s = 0.2\n[[points]]\nload_nm = 1.0\nhz = 5.0\n[[points]]\nload_nm = 1.0\nhz = 10.0\n",
+            "cl.toml",
+        )
+        .unwrap();
+        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut op = Operator::scripted(b"", false);
+        let setup = SweepSetup {
+            plan,
+            window: Window::Revolutions,
+            resume: false,
+            command: "test".into(),
+        };
+        run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).unwrap();
+        let (rows, _) = read_rows(&csv).unwrap();
+        assert_eq!(rows.len(), 2);
+        for r in &rows {
+            let hz = r.target_hz.unwrap();
+            assert!(r.v_in_v.is_none());
+            let measured = r.omega_n_rad_s / std::f64::consts::TAU;
+            assert!((measured - hz).abs() < 0.1 * hz, "{measured} Hz at {hz} Hz");
+            assert_eq!(r.backdriven, Some(1), "1 N m falls once released");
+        }
+    }
+}

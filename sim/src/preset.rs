@@ -1,0 +1,271 @@
+//! Presets of the virtual rig, and effects hidden in its plant by name.
+//!
+//! * [`Preset::ideal`]: the paper's equations alone (Eqs. 6-10 with Table 2's calibration):
+//!   every effect of [`model::plant::PlantEffects`] off.
+//! * [`Preset::paper`]: what the paper *measured*, not only its model. Two effects the paper
+//!   itself names as the explanation of its discrepancies are switched on:
+//!
+//! | Effect (`rig explain` name) | Plant setting | Value | Where it comes from |
+//! |---|---|---|---|
+//! | `speed-dependent-axial-friction` | `axial_friction_speed = (depth, omega0)` | `(0.6, 35 rad/s)` | The paper measured less torque than Eq. (10) at 3.6 V (about 5 Hz, 31 rad/s) and explains it by mu_ax falling at low cam speed. The dip mu_ax = mu (1 - 0.6 exp(-w / 35)) lowers mu_ax by 25 % at 31 rad/s, 10 % at 62 rad/s (6.2 V) and 4 % at 95 rad/s (8.8 V), so the mean of (measured - Eq. 10) is most negative at 3.6 V. |
+//! | `linear-bush-friction` | `bush_friction`, `bush_hold_arm`, `bush_omega` | `1 N`, `1.75 m`, `20 rad/s` | The paper saw no backdrive at 0.368 N m with 3.6 and 6.2 V and explains it by the carrier's linear bush. Its hold T_0 / (1 + w / w_b) with T_0 = 1.75 N m and w_b = 20 rad/s is 0.69 N m at 31 rad/s (below Fig. 5's 0.736 N m, which still falls), 0.41 N m at 65 rad/s (above 0.368 N m: held at 6.2 V) and 0.30 N m at 97 rad/s (below 0.368 N m: backdriven at 8.8 V, as measured). The force (1 N, an effective value) only adds (2/pi) F e = 0.64 mN m to the cam torque; the lever arm is T_0 / F. |
+//!
+//! Table 1 (3.68 N m) is far above the bush's hold at any cam speed, so its verdicts do not
+//! change; the trends of Figs. 8-9 (current and torque grow with load and speed) stay.
+
+use std::collections::BTreeMap;
+
+use model::effects::{Effect, EffectParams};
+use model::plant::{PlantEffects, PlantParams};
+
+use crate::SimError;
+
+/// A named configuration of the plant's effects.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Preset {
+    /// Its name on the command line (`paper`, `ideal`).
+    pub name: &'static str,
+    /// The plant's effects.
+    pub effects: PlantEffects,
+}
+
+/// The presets' names, default first.
+pub const PRESETS: [&str; 2] = ["paper", "ideal"];
+
+/// `paper`'s speed-dependent axial friction: depth of the dip of mu_ax at standstill.
+pub const PAPER_AXIAL_DIP_DEPTH: f64 = 0.6;
+/// `paper`'s speed-dependent axial friction: cam speed over which the dip fades, rad/s.
+pub const PAPER_AXIAL_DIP_OMEGA0: f64 = 35.0;
+/// `paper`'s linear bush: Coulomb force, N (an effective value, see the module docs).
+pub const PAPER_BUSH_FORCE_N: f64 = 1.0;
+/// `paper`'s linear bush: holding torque at rest T_0, N m.
+pub const PAPER_BUSH_HOLD_NM: f64 = 1.75;
+/// `paper`'s linear bush: cam speed at which the hold has halved, rad/s.
+pub const PAPER_BUSH_OMEGA_RAD_S: f64 = 20.0;
+
+impl Preset {
+    /// The paper's equations alone: no effect.
+    pub fn ideal() -> Self {
+        Self {
+            name: "ideal",
+            effects: PlantEffects::default(),
+        }
+    }
+
+    /// What the paper measured (see the module documentation for each value).
+    pub fn paper() -> Self {
+        Self {
+            name: "paper",
+            effects: PlantEffects {
+                axial_friction_speed: Some((PAPER_AXIAL_DIP_DEPTH, PAPER_AXIAL_DIP_OMEGA0)),
+                bush_friction: PAPER_BUSH_FORCE_N,
+                bush_hold_arm: PAPER_BUSH_HOLD_NM / PAPER_BUSH_FORCE_N,
+                bush_omega: PAPER_BUSH_OMEGA_RAD_S,
+                ..PlantEffects::default()
+            },
+        }
+    }
+
+    /// The preset called `name` ([`PRESETS`]).
+    pub fn by_name(name: &str) -> Result<Self, SimError> {
+        match name {
+            "paper" => Ok(Self::paper()),
+            "ideal" => Ok(Self::ideal()),
+            other => Err(SimError::BadValue {
+                what: format!("preset '{other}'"),
+                why: format!("unknown preset: give one of {}", PRESETS.join(", ")),
+            }),
+        }
+    }
+
+    /// Puts the preset's effects into `plant` (replacing its effects).
+    pub fn apply(&self, plant: &mut PlantParams) {
+        plant.effects = self.effects;
+    }
+}
+
+/// An effect hidden in the plant, as `--effect NAME[:k=v,...]` gives it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectSpec {
+    /// The effect.
+    pub effect: Effect,
+    /// Its parameters by the names of `rig explain` (the effects table), SI with the unit
+    /// in the name.
+    pub params: BTreeMap<String, f64>,
+}
+
+impl EffectSpec {
+    /// Parses `NAME[:k=v,...]`, e.g. `current-sensor-offset:offset_a=0.05`.
+    pub fn parse(s: &str) -> Result<Self, SimError> {
+        let bad = |why: String| SimError::BadValue {
+            what: format!("--effect {s}"),
+            why,
+        };
+        let (name, rest) = match s.split_once(':') {
+            Some((n, r)) => (n.trim(), Some(r)),
+            None => (s.trim(), None),
+        };
+        let effect = Effect::from_name(name).ok_or_else(|| {
+            bad(format!(
+                "unknown effect '{name}': give one of {}",
+                Effect::ALL.map(|e| e.name()).join(", ")
+            ))
+        })?;
+        let mut params = BTreeMap::new();
+        for kv in rest.into_iter().flat_map(|r| r.split(',')) {
+            let kv = kv.trim();
+            if kv.is_empty() {
+                continue;
+            }
+            let (k, v) = kv.split_once('=').ok_or_else(|| {
+                bad(format!(
+                    "'{kv}' is not key=value (for example {name}:{}=1.0)",
+                    plant_keys(effect).first().copied().unwrap_or("key")
+                ))
+            })?;
+            let v: f64 = v
+                .trim()
+                .parse()
+                .ok()
+                .filter(|v: &f64| v.is_finite())
+                .ok_or_else(|| bad(format!("{k} = '{v}' is not a finite number")))?;
+            params.insert(k.trim().to_string(), v);
+        }
+        Ok(Self { effect, params })
+    }
+
+    /// Puts the effect into `plant` with its parameters (defaults: the paper preset's
+    /// values for its two effects, otherwise a clearly visible strength).
+    pub fn apply(&self, plant: &mut PlantParams) -> Result<(), SimError> {
+        let name = self.effect.name();
+        let bad = |why: String| SimError::BadValue {
+            what: format!("--effect {name}"),
+            why,
+        };
+        let get = |key: &str, default: f64| self.params.get(key).copied().unwrap_or(default);
+        // The plant's own law for the speed-dependent friction is a variant (see
+        // `PlantEffects::axial_friction_speed`); its parameters are the variant's.
+        if self.effect == Effect::SpeedDependentAxialFriction {
+            for k in self.params.keys() {
+                if !["depth", "omega0_rad_s"].contains(&k.as_str()) {
+                    return Err(bad(format!(
+                        "the plant runs this effect as mu (1 - depth exp(-w / omega0)): it takes depth and omega0_rad_s, not {k}"
+                    )));
+                }
+            }
+            let depth = get("depth", PAPER_AXIAL_DIP_DEPTH);
+            let omega0 = get("omega0_rad_s", PAPER_AXIAL_DIP_OMEGA0);
+            if !(0.0..=1.0).contains(&depth) || omega0 <= 0.0 {
+                return Err(bad(
+                    "depth must be in [0, 1] and omega0_rad_s above 0".to_string()
+                ));
+            }
+            plant.effects.axial_friction_speed = Some((depth, omega0));
+            return Ok(());
+        }
+        let mut p = EffectParams {
+            load_exponent: 0.3,
+            current_offset: 0.05,
+            thermal_coeff: 0.004,
+            viscous_loss: 0.15e-3,
+            bush_force: PAPER_BUSH_FORCE_N,
+            bush_hold_torque: PAPER_BUSH_HOLD_NM,
+            bush_corner_speed: PAPER_BUSH_OMEGA_RAD_S,
+            rectification: -0.5,
+            ..EffectParams::default()
+        };
+        rigfile::apply_params(self.effect, &self.params, &mut p).map_err(bad)?;
+        let e = &mut plant.effects;
+        match self.effect {
+            Effect::LoadDependentFriction => {
+                e.load_friction =
+                    Some((p.load_exponent, model::effects::LOAD_FRICTION_REFERENCE_NM));
+            }
+            Effect::CurrentSensorOffset => e.current_offset = p.current_offset,
+            Effect::ThermalDrift => e.thermal_drift = Some(p.thermal_coeff),
+            Effect::VibratorViscousLoss => e.extra_viscous = p.viscous_loss,
+            Effect::LinearBushFriction => {
+                if p.bush_force <= 0.0 {
+                    return Err(bad("force_n must be above 0".into()));
+                }
+                e.bush_friction = p.bush_force;
+                e.bush_hold_arm = p.bush_hold_torque / p.bush_force;
+                e.bush_omega = p.bush_corner_speed;
+            }
+            Effect::InertiaRectification => plant.regeneration = p.rectification < -0.75,
+            other => {
+                return Err(bad(format!(
+                    "the plant cannot represent {} (it runs: {})",
+                    other.name(),
+                    PLANT_EFFECTS.join(", ")
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The effects the plant can run (`--effect`).
+pub const PLANT_EFFECTS: [&str; 7] = [
+    "speed-dependent-axial-friction",
+    "load-dependent-friction",
+    "current-sensor-offset",
+    "thermal-drift",
+    "vibrator-viscous-loss",
+    "inertia-rectification",
+    "linear-bush-friction",
+];
+
+fn plant_keys(effect: Effect) -> Vec<&'static str> {
+    if effect == Effect::SpeedDependentAxialFriction {
+        vec!["depth", "omega0_rad_s"]
+    } else {
+        effect.info().keys().collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_and_effects_parse() {
+        assert_eq!(
+            Preset::by_name("ideal").unwrap().effects,
+            PlantEffects::default()
+        );
+        let p = Preset::paper().effects;
+        assert!((p.bush_hold_torque(0.0) - PAPER_BUSH_HOLD_NM).abs() < 1e-12);
+        // The hold's design points (module docs).
+        assert!(p.bush_hold_torque(31.4) < 0.736);
+        assert!(p.bush_hold_torque(65.0) > 0.368);
+        assert!(p.bush_hold_torque(97.0) < 0.368);
+        assert!(
+            Preset::by_name("real")
+                .unwrap_err()
+                .to_string()
+                .contains("paper, ideal")
+        );
+        let mut plant = crate::SimConfig::paper().plant;
+        let s = EffectSpec::parse("current-sensor-offset:offset_a=0.1").unwrap();
+        s.apply(&mut plant).unwrap();
+        assert!((plant.effects.current_offset - 0.1).abs() < 1e-12);
+        EffectSpec::parse("speed-dependent-axial-friction")
+            .unwrap()
+            .apply(&mut plant)
+            .unwrap();
+        assert_eq!(plant.effects.axial_friction_speed, Some((0.6, 35.0)));
+        let e = EffectSpec::parse("no-such").unwrap_err().to_string();
+        assert!(e.contains("linear-bush-friction"), "{e}");
+        let e = EffectSpec::parse("thermal-drift:k=x")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not a finite number"), "{e}");
+        let e = EffectSpec::parse("tooth-compliance")
+            .unwrap()
+            .apply(&mut plant)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot represent"), "{e}");
+    }
+}

@@ -1,0 +1,62 @@
+//! The virtual rig built from a rig file: the paper's file is the paper's rig, and a file's
+//! gear set, calibration, limits and fitted model reach the plant and the firmware.
+
+use model::plant::Load;
+use rigfile::{EffectEntry, RigFile};
+use sim::{SimConfig, SimRig};
+
+#[test]
+fn the_papers_rig_file_is_the_papers_virtual_rig() {
+    let from_file = SimConfig::from_rig_file(&RigFile::paper()).unwrap();
+    let paper = SimConfig::paper();
+    assert_eq!(from_file.plant, paper.plant);
+    assert_eq!(from_file.core, paper.core);
+    assert_eq!(from_file.calibration, paper.calibration);
+    assert_eq!(from_file.calibration_status, paper.calibration_status);
+}
+
+#[test]
+fn a_files_rig_reaches_the_plant_and_the_firmware() {
+    let text = "[gear]\nz = [52, 48, 50, 50]\n[cam]\neccentricity_mm = 0.8\n[friction]\nmu_s = 0.25\nmu_d = 0.16\n[calibration]\nc1 = 60.0\ntemperature_c = 30.0\n[limits]\nmax_freq_hz = 12.0\n[model]\nmu = 0.22\n[[model.effects]]\nname = \"current-sensor-offset\"\nparams = { offset_a = 0.03 }\n[[model.effects]]\nname = \"inertia-rectification\"\nparams = { kappa = -1.0 }\n";
+    let rig = RigFile::parse(text, "rig.toml").unwrap();
+    let c = SimConfig::from_rig_file(&rig).unwrap();
+    assert_eq!(c.plant.drive.gear.z(), [52, 48, 50, 50]);
+    assert!((c.plant.drive.eccentricity - 0.8e-3).abs() < 1e-15);
+    assert_eq!(
+        (c.plant.mu_s, c.plant.mu_d, c.plant.mu_ax),
+        (0.25, 0.16, 0.22)
+    );
+    // The motor is built around C1 (N m/A at the cam shaft) at the calibration temperature.
+    assert!((c.plant.motor.torque_per_amp - 0.060).abs() < 1e-12);
+    assert_eq!(c.plant.motor.ambient_c, 30.0);
+    assert_eq!(c.plant.effects.current_offset, 0.03);
+    assert!(
+        c.plant.regeneration,
+        "kappa = -1: the drive takes the power back"
+    );
+    // The firmware boots with exactly what `rig calibration set` would send.
+    assert_eq!(c.calibration, rig.to_wire().unwrap());
+    assert_eq!(c.calibration.max_freq_hz, 12.0);
+    assert_eq!(c.calibration.z, [52, 48, 50, 50]);
+    let mut sim = SimRig::new(c);
+    sim.advance(0.05);
+    assert_eq!(sim.flash(), Some(rig.to_wire().unwrap()));
+    assert_eq!(sim.plant().params().load, Load::Torque(0.0));
+}
+
+#[test]
+fn a_file_the_device_would_refuse_is_refused() {
+    let mut rig = RigFile::paper();
+    rig.friction.mu_d = 0.5;
+    let e = SimConfig::from_rig_file(&rig).unwrap_err().to_string();
+    assert!(e.contains("mu_d"), "{e}");
+    let rig = RigFile::paper().with_model(
+        0.2,
+        vec![EffectEntry {
+            name: "gremlins".into(),
+            params: Default::default(),
+        }],
+    );
+    let e = SimConfig::from_rig_file(&rig).unwrap_err().to_string();
+    assert!(e.contains("gremlins"), "{e}");
+}
