@@ -9,7 +9,7 @@ use model::effects::{CurrentEvaluator, CurrentModel, Effect, OperatingPoint, PAR
 use super::library;
 use super::points::{HoldCheck, TestPoints};
 use super::stats;
-use super::terms::Term;
+use super::terms::{ModelAt, Needs, Term};
 
 /// Assumed rate at which a backdrive observation is wrong (a slip, a misread), for the
 /// likelihood of the `backdriven` column.
@@ -308,20 +308,59 @@ fn mean_jacobian(
     if terms.is_empty() {
         return (f, jac);
     }
-    let base = term_sum(points, &state.model, terms, &state.term_x);
+    // The model's quantities once for the terms' own coordinates (the model stays); each
+    // term's part apart, so a coordinate's column moves only its term.
+    let inputs = points.inputs();
+    let needs = terms
+        .iter()
+        .fold(Needs::default(), |n, &t| n.or(points.terms[t].needs()));
+    let at = ModelAt::new(&state.model, &points.ops, needs);
+    let parts: Vec<Vec<f64>> = terms
+        .iter()
+        .zip(&state.term_x)
+        .map(|(&t, x)| {
+            let mut out = vec![0.0; points.len()];
+            points.terms[t].add_at(&at, &inputs, x, &mut out);
+            out
+        })
+        .collect();
+    let mut base = vec![0.0; points.len()];
+    for part in &parts {
+        for (b, v) in base.iter_mut().zip(part) {
+            *b += v;
+        }
+    }
     for (r, &k) in subset.iter().enumerate() {
         f[r] += base[k];
     }
     let theta = state.theta(free);
+    // Which term and coordinate each unknown after the free parameters is.
+    let coords: Vec<(usize, usize)> = state
+        .term_x
+        .iter()
+        .enumerate()
+        .flat_map(|(j, x)| (0..x.len()).map(move |c| (j, c)))
+        .collect();
     for i in 0..q {
         let h = DIFF_STEP * (bounds[i].1 - bounds[i].0).max(1e-12);
-        let mut shifted = theta.clone();
-        shifted[i] += h;
-        let mut s = state.clone();
-        s.set(free, &shifted);
-        let moved = term_sum(points, &s.model, terms, &s.term_x);
-        for (r, &k) in subset.iter().enumerate() {
-            jac[r * q + i] += (moved[k] - base[k]) / h;
+        if i < p {
+            let mut shifted = theta.clone();
+            shifted[i] += h;
+            let mut s = state.clone();
+            s.set(free, &shifted);
+            let moved = term_sum(points, &s.model, terms, &s.term_x);
+            for (r, &k) in subset.iter().enumerate() {
+                jac[r * q + i] += (moved[k] - base[k]) / h;
+            }
+        } else {
+            let (j, c) = coords[i - p];
+            let mut x = state.term_x[j].clone();
+            x[c] += h;
+            let mut moved = vec![0.0; points.len()];
+            points.terms[terms[j]].add_at(&at, &inputs, &x, &mut moved);
+            for (r, &k) in subset.iter().enumerate() {
+                jac[r * q + i] += (moved[k] - parts[j][k]) / h;
+            }
         }
     }
     (f, jac)
@@ -346,6 +385,19 @@ pub fn fit_from(
     spec: &ModelSpec,
     start: &CurrentModel,
     start_terms: &[Vec<f64>],
+) -> Fit {
+    fit_capped(points, subset, spec, start, start_terms, MAX_ITERATIONS)
+}
+
+/// [`fit_from`] with at most `max_iterations` Levenberg-Marquardt iterations per round (a
+/// quick look at where a start leads).
+pub fn fit_capped(
+    points: &TestPoints,
+    subset: &[usize],
+    spec: &ModelSpec,
+    start: &CurrentModel,
+    start_terms: &[Vec<f64>],
+    max_iterations: usize,
 ) -> Fit {
     let mut model = *start;
     // Effects not in the spec are switched off; those in it keep their start values.
@@ -372,6 +424,7 @@ pub fn fit_from(
         &free,
         &spec.terms,
         &bounds,
+        max_iterations,
     );
     let residuals_of = |state: &State| -> (Vec<f64>, Vec<f64>) {
         let all = predict(points, &state.model, &spec.terms, &state.term_x);
@@ -398,8 +451,16 @@ pub fn fit_from(
                 }
                 w
             };
-            result =
-                levenberg_marquardt(points, subset, &w, &mut state, &free, &spec.terms, &bounds);
+            result = levenberg_marquardt(
+                points,
+                subset,
+                &w,
+                &mut state,
+                &free,
+                &spec.terms,
+                &bounds,
+                max_iterations,
+            );
         }
     }
     let (residuals, fric) = residuals_of(&state);
@@ -712,6 +773,7 @@ fn levenberg_marquardt(
     free: &[Param],
     terms: &[usize],
     bounds: &[(f64, f64)],
+    max_iterations: usize,
 ) -> LmResult {
     let p = bounds.len();
     // Start inside the bounds.
@@ -724,7 +786,7 @@ fn levenberg_marquardt(
         normal_equations(points, subset, weights, state, free, terms, bounds);
     let mut lambda = 1e-3;
     let mut converged = false;
-    for _ in 0..MAX_ITERATIONS {
+    for _ in 0..max_iterations {
         let theta = state.theta(free);
         let mut accepted = false;
         let mut small_step = false;

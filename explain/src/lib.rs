@@ -353,13 +353,13 @@ pub fn term_registry(rig: &RigFile) -> Result<Vec<Term>, ExplainError> {
             .collect();
         out.push(
             Term::user(&u.name, &u.expression, params)
-                .map(|t| Term {
-                    note: format!("user effect {} = {}", u.name, u.expression),
-                    ..t
+                .map(|mut t| {
+                    t.note = format!("user effect {} = {}", u.name, u.expression);
+                    t
                 })
                 .map_err(|why| ExplainError::RigFile {
                     file: "(--model)".into(),
-                    why,
+                    why: format!("[[user_effects]] {}, field `expression`: {why}", u.name),
                 })?,
         );
     }
@@ -380,7 +380,7 @@ fn check_user_terms(
             return Err(ExplainError::RigFile {
                 file: "(--model)".into(),
                 why: format!(
-                    "user effect {} gives {worst:.3e} A at its null parameters ({}): it must vanish there (0 A), so that the model without it is nested in the model with it; set each parameter's null to the value without the effect",
+                    "[[user_effects]] {}, field `params`: the effect gives {worst:.3e} A at its null parameters ({}): it must vanish there (0 A), so that the model without it is nested in the model with it; set each parameter's null to the value without the effect",
                     term.name,
                     term.params
                         .iter()

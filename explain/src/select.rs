@@ -311,16 +311,40 @@ fn shape_grid(points: &TestPoints, t: usize) -> Vec<Vec<f64>> {
 /// Fits term `t` jointly with `current` from each start of its shape grid; the best fit wins.
 fn fit_term(points: &TestPoints, current: &Fit, t: usize) -> Fit {
     let spec = current.spec.with_term(t);
-    shape_grid(points, t)
+    let grid = shape_grid(points, t);
+    let starts = |x: Vec<f64>| {
+        let mut starts = current.term_x.clone();
+        starts.push(x);
+        starts
+    };
+    if grid.len() == 1 {
+        let x = grid.into_iter().next().expect("one start");
+        return fit::fit_from(points, &points.all, &spec, &current.model, &starts(x));
+    }
+    // A few iterations from each start show which basin is best; the fit finishes there.
+    let best = grid
         .into_iter()
         .map(|x| {
-            let mut starts = current.term_x.clone();
-            starts.push(x);
-            fit::fit_from(points, &points.all, &spec, &current.model, &starts)
+            fit::fit_capped(
+                points,
+                &points.all,
+                &spec,
+                &current.model,
+                &starts(x),
+                SHAPE_LOOK_ITERATIONS,
+            )
         })
         .min_by(|a, b| a.bic.total_cmp(&b.bic))
-        .expect("a shape grid has a start")
+        .expect("a shape grid has a start");
+    if best.converged {
+        return best;
+    }
+    fit::fit_from(points, &points.all, &spec, &best.model, &best.term_x)
 }
+
+/// Levenberg-Marquardt iterations from each start of a term's shape grid before the best
+/// one is followed to the end.
+const SHAPE_LOOK_ITERATIONS: usize = 4;
 
 /// Fits `cand` jointly with `current`.
 fn fit_candidate(points: &TestPoints, current: &Fit, cand: Cand) -> Fit {

@@ -195,6 +195,130 @@ pub struct Term {
     pub params: Vec<TermParam>,
     /// Its law.
     pub kind: TermKind,
+    /// The warm-up's heated shares by time constant, last used first.
+    heat: HeatCache,
+}
+
+/// The model quantities a term's law uses.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Needs {
+    /// The model's current.
+    pub current: bool,
+    /// Its friction current.
+    pub friction: bool,
+    /// The inertia term's current.
+    pub inertia: bool,
+    /// The axial tooth force.
+    pub axial: bool,
+}
+
+impl Needs {
+    /// Both sets.
+    pub fn or(self, other: Needs) -> Needs {
+        Needs {
+            current: self.current || other.current,
+            friction: self.friction || other.friction,
+            inertia: self.inertia || other.inertia,
+            axial: self.axial || other.axial,
+        }
+    }
+}
+
+/// A model's quantities at each point (empty where not needed).
+#[derive(Debug, Clone, Default)]
+pub struct ModelAt {
+    /// The model's current, A.
+    pub current: Vec<f64>,
+    /// Its friction current, A.
+    pub friction: Vec<f64>,
+    /// The inertia term's current, A.
+    pub inertia: Vec<f64>,
+    /// The axial tooth force, N.
+    pub axial: Vec<f64>,
+    /// The cam's eccentricity, m.
+    pub eccentricity: f64,
+}
+
+impl ModelAt {
+    /// `model`'s quantities `needs` at `ops`.
+    pub fn new(model: &CurrentModel, ops: &[OperatingPoint], needs: Needs) -> Self {
+        let col = |on: bool, f: &dyn Fn(&OperatingPoint) -> f64| -> Vec<f64> {
+            if on {
+                ops.iter().map(f).collect()
+            } else {
+                Vec::new()
+            }
+        };
+        Self {
+            current: col(needs.current, &|op| model.current(op)),
+            friction: col(needs.friction, &|op| model.friction_current(op)),
+            inertia: col(needs.inertia, &|op| inertia_current(model, op)),
+            axial: col(needs.axial, &|op| model.axial_force(op)),
+            eccentricity: model.drive.eccentricity,
+        }
+    }
+}
+
+/// Entries of a [`HeatCache`].
+const HEAT_CACHE_ENTRIES: usize = 8;
+
+/// The heated shares ([`heated_share`]) of the last few time constants and point sets: a
+/// fit asks for the same ones over and over (one per Jacobian column).
+#[derive(Debug, Default)]
+struct HeatCache(std::sync::Mutex<Vec<(HeatKey, std::sync::Arc<Vec<f64>>)>>);
+
+/// What a heated share depends on: the time constant and the points' times and order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct HeatKey {
+    tau: u64,
+    len: usize,
+    times: u64,
+    order: u64,
+}
+
+impl HeatKey {
+    fn new(inputs: &Inputs, tau: f64) -> Self {
+        let mix = |h: u64, v: u64| (h ^ v).wrapping_mul(0x100_0000_01b3).rotate_left(5);
+        Self {
+            tau: tau.to_bits(),
+            len: inputs.time.len(),
+            times: inputs
+                .time
+                .iter()
+                .fold(0xcbf2_9ce4_8422_2325, |h, t| mix(h, t.to_bits())),
+            order: inputs
+                .order
+                .iter()
+                .fold(0xcbf2_9ce4_8422_2325, |h, &k| mix(h, k as u64)),
+        }
+    }
+}
+
+impl Clone for HeatCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl HeatCache {
+    /// The heated share at `inputs` for time constant `tau`, computed once.
+    fn get(&self, inputs: &Inputs, tau: f64) -> std::sync::Arc<Vec<f64>> {
+        let key = HeatKey::new(inputs, tau);
+        if let Ok(mut entries) = self.0.lock()
+            && let Some(i) = entries.iter().position(|(k, _)| *k == key)
+        {
+            let hit = entries.remove(i);
+            let value = hit.1.clone();
+            entries.insert(0, hit);
+            return value;
+        }
+        let value = std::sync::Arc::new(heated_share(inputs.time, inputs.order, tau));
+        if let Ok(mut entries) = self.0.lock() {
+            entries.insert(0, (key, value.clone()));
+            entries.truncate(HEAT_CACHE_ENTRIES);
+        }
+        value
+    }
 }
 
 /// The conditions of a set of points, for evaluating terms.
@@ -218,6 +342,7 @@ impl Term {
             note: format!("{} in its {} form", form.effect().name(), form.name()),
             params: form.params(),
             kind: TermKind::Family(form),
+            heat: HeatCache::default(),
         }
     }
 
@@ -265,6 +390,7 @@ impl Term {
                 expr,
                 slots,
             })),
+            heat: HeatCache::default(),
         })
     }
 
@@ -325,9 +451,45 @@ impl Term {
             .collect()
     }
 
+    /// The model quantities the term's law uses.
+    pub fn needs(&self) -> Needs {
+        match &self.kind {
+            TermKind::Family(Form::WarmUpInTime) => Needs {
+                current: true,
+                ..Needs::default()
+            },
+            TermKind::Family(Form::LightLoad) => Needs {
+                friction: true,
+                ..Needs::default()
+            },
+            TermKind::Family(Form::SaturatingCompliance) => Needs {
+                friction: true,
+                axial: true,
+                ..Needs::default()
+            },
+            TermKind::Family(Form::LoadDependentReturn) => Needs {
+                inertia: true,
+                ..Needs::default()
+            },
+            TermKind::User(_) => Needs {
+                current: true,
+                friction: true,
+                inertia: true,
+                axial: true,
+            },
+        }
+    }
+
     /// Adds the term's current at every point of `inputs` (model `model`, fit coordinates
     /// `x`) to `out`.
     pub fn add(&self, model: &CurrentModel, inputs: &Inputs, x: &[f64], out: &mut [f64]) {
+        let at = ModelAt::new(model, inputs.ops, self.needs());
+        self.add_at(&at, inputs, x, out);
+    }
+
+    /// [`Term::add`] with the model's quantities at the points computed beforehand (`at`
+    /// must carry [`Term::needs`]).
+    pub fn add_at(&self, at: &ModelAt, inputs: &Inputs, x: &[f64], out: &mut [f64]) {
         let v = self.values(x);
         match &self.kind {
             TermKind::Family(Form::WarmUpInTime) => {
@@ -335,30 +497,33 @@ impl Term {
                 if k == 0.0 {
                     return;
                 }
-                let heat = heated_share(inputs.time, inputs.order, tau);
-                for (j, op) in inputs.ops.iter().enumerate() {
+                let heat = self.heat.get(inputs, tau);
+                for j in 0..inputs.ops.len() {
                     let factor = (1.0 - k * tau * heat[j]).max(0.1);
-                    out[j] += model.current(op) * (1.0 / factor - 1.0);
+                    out[j] += at.current[j] * (1.0 / factor - 1.0);
                 }
             }
             TermKind::Family(Form::LightLoad) => {
                 let (a, tau0) = (v[0], v[1]);
                 for (j, op) in inputs.ops.iter().enumerate() {
-                    out[j] += a * (-op.tau_rot.abs() / tau0).exp() * model.friction_current(op);
+                    out[j] += a * (-op.tau_rot.abs() / tau0).exp() * at.friction[j];
                 }
             }
             TermKind::Family(Form::SaturatingCompliance) => {
                 let (c, f_s) = (v[0] * 1e-6, v[1]);
-                let e = model.drive.eccentricity;
-                for (j, op) in inputs.ops.iter().enumerate() {
-                    let f = model.axial_force(op);
-                    out[j] -= model.friction_current(op) * c * f_s * (f / f_s).tanh() / e;
+                if c == 0.0 {
+                    return;
+                }
+                let e = at.eccentricity;
+                for j in 0..inputs.ops.len() {
+                    let f = at.axial[j];
+                    out[j] -= at.friction[j] * c * f_s * (f / f_s).tanh() / e;
                 }
             }
             TermKind::Family(Form::LoadDependentReturn) => {
                 let (kappa, per_nm) = (v[0], v[1]);
                 for (j, op) in inputs.ops.iter().enumerate() {
-                    out[j] += (kappa + per_nm * op.tau_rot.abs()) * inertia_current(model, op);
+                    out[j] += (kappa + per_nm * op.tau_rot.abs()) * at.inertia[j];
                 }
             }
             TermKind::User(u) => {
@@ -369,10 +534,10 @@ impl Term {
                         op.tau_rot,
                         inputs.time[j],
                         inputs.temp[j],
-                        model.current(op),
-                        model.friction_current(op),
-                        inertia_current(model, op),
-                        model.axial_force(op),
+                        at.current[j],
+                        at.friction[j],
+                        at.inertia[j],
+                        at.axial[j],
                     ];
                     for (slot, val) in u.slots.iter().zip(vars.iter_mut()) {
                         *val = if *slot < data.len() {

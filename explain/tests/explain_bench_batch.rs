@@ -452,7 +452,7 @@ fn full_bench_batch() {
         "false findings on effect-free data: {false_findings} of {clean} ({:.1} %)",
         100.0 * false_findings as f64 / clean as f64
     );
-    assert!(false_findings as f64 <= 0.03 * clean as f64);
+    assert!(false_findings as f64 <= 0.02 * clean as f64);
 }
 
 #[test]
@@ -513,4 +513,62 @@ fn corrupt_row_batch() {
         findings.len()
     );
     assert!(findings.is_empty(), "{findings:#?}");
+}
+
+#[test]
+#[ignore = "diagnostic: what wins over the other forms (EXPLAIN_DIAG_FORM = index into Form::ALL)"]
+fn diagnose_form_misses() {
+    let k: usize = std::env::var("EXPLAIN_DIAG_FORM")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    let truth = Truth::Other(Form::ALL[k]);
+    let rigs = rigs();
+    let sessions = sessions();
+    for (ri, (_, rig)) in rigs.iter().enumerate() {
+        for (si, (_, session)) in sessions.iter().enumerate() {
+            for noise in NOISE_A {
+                let plan = SweepPlan {
+                    noise_a: noise,
+                    ..SweepPlan::default()
+                };
+                let seed = 7_000_003 + 10_007 * ri as u64 + 1009 * si as u64 + noise as u64;
+                let data = dataset(rig, truth, &plan, session, seed);
+                let e = explain::explain(&data, rig, &Options::default())
+                    .unwrap()
+                    .explanation;
+                let mut c: Vec<_> = e
+                    .candidates
+                    .iter()
+                    .filter(|c| c.delta_bic.is_some())
+                    .collect();
+                c.sort_by(|a, b| a.delta_bic.unwrap().total_cmp(&b.delta_bic.unwrap()));
+                let top: Vec<String> = c
+                    .iter()
+                    .take(4)
+                    .map(|c| {
+                        format!(
+                            "{}{} {:.1}",
+                            c.name,
+                            c.form
+                                .as_deref()
+                                .map(|f| format!("/{f}"))
+                                .unwrap_or_default(),
+                            c.delta_bic.unwrap()
+                        )
+                    })
+                    .collect();
+                println!(
+                    "rig {ri} session {si} noise {noise}: {:?} {:?} {:?} | {}",
+                    e.verdict,
+                    e.effects
+                        .iter()
+                        .map(|f| f.name.as_str())
+                        .collect::<Vec<_>>(),
+                    e.ambiguous,
+                    top.join(", ")
+                );
+            }
+        }
+    }
 }
