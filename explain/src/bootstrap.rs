@@ -155,8 +155,8 @@ impl Lin {
             for i in 0..p {
                 let gi = grad[i];
                 cell.u[i] += w * gi * e;
-                for j in 0..=i {
-                    cell.a[i * p + j] += w * gi * grad[j];
+                for (j, gj) in grad.iter().enumerate().take(i + 1) {
+                    cell.a[i * p + j] += w * gi * gj;
                 }
             }
             cell.c += (n * e * e + points.within_ss[k]) / v;

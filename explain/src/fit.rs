@@ -764,7 +764,8 @@ fn normal_equations(
 }
 
 /// Bounded Levenberg-Marquardt on the free parameters and the terms' coordinates of `state`
-/// (updated in place).
+/// (updated in place), at most `max_iterations` iterations.
+#[allow(clippy::too_many_arguments)] // normal_equations' pieces and the iteration cap
 fn levenberg_marquardt(
     points: &TestPoints,
     subset: &[usize],

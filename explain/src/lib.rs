@@ -376,7 +376,7 @@ fn check_user_terms(
         let mut out = vec![0.0; points.len()];
         term.add(start, &points.inputs(), &term.null_point(), &mut out);
         let worst = out.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        if !(worst <= 1e-9) {
+        if worst.is_nan() || worst > 1e-9 {
             return Err(ExplainError::RigFile {
                 file: "(--model)".into(),
                 why: format!(

@@ -787,9 +787,8 @@ impl PointParts {
             scaled_sse: Vec::with_capacity(points.len()),
             log_var: Vec::with_capacity(points.len()),
         };
-        for k in 0..points.len() {
-            let op = &points.ops[k];
-            let e = points.current[k] - predicted[k];
+        for (k, (op, pred)) in points.ops.iter().zip(predicted.iter()).enumerate() {
+            let e = points.current[k] - pred;
             let n = points.weight[k];
             let v = if rho > 0.0 {
                 let f = ev.friction_current(op);

@@ -498,9 +498,9 @@ impl Term {
                     return;
                 }
                 let heat = self.heat.get(inputs, tau);
-                for j in 0..inputs.ops.len() {
-                    let factor = (1.0 - k * tau * heat[j]).max(0.1);
-                    out[j] += at.current[j] * (1.0 / factor - 1.0);
+                for ((o, h), i) in out.iter_mut().zip(heat.iter()).zip(&at.current) {
+                    let factor = (1.0 - k * tau * h).max(0.1);
+                    *o += i * (1.0 / factor - 1.0);
                 }
             }
             TermKind::Family(Form::LightLoad) => {
@@ -515,9 +515,8 @@ impl Term {
                     return;
                 }
                 let e = at.eccentricity;
-                for j in 0..inputs.ops.len() {
-                    let f = at.axial[j];
-                    out[j] -= at.friction[j] * c * f_s * (f / f_s).tanh() / e;
+                for ((o, f), fr) in out.iter_mut().zip(&at.axial).zip(&at.friction) {
+                    *o -= fr * c * f_s * (f / f_s).tanh() / e;
                 }
             }
             TermKind::Family(Form::LoadDependentReturn) => {
