@@ -20,13 +20,12 @@
 
 use std::collections::BTreeMap;
 
-use model::effects::{Effect, PARAM_COUNT};
+use model::effects::Effect;
 use model::plant::NoiseSource;
 
 use crate::fit::{self, Fit};
-use crate::library;
 use crate::points::TestPoints;
-use crate::select::{self, Options, Selection};
+use crate::select::{self, Cand, Options, Selection};
 use crate::stats;
 
 /// Seed of the block draws, fixed so a run repeats exactly.
@@ -111,19 +110,18 @@ struct Lin {
     /// Backdrive errors and observations per block.
     hold_errors: Vec<f64>,
     hold_total: Vec<f64>,
-    /// Parameters counted by the BIC.
+    /// Parameters counted by the BIC, and the shapes among them.
     k: usize,
+    shapes: usize,
 }
 
 impl Lin {
     fn of(points: &TestPoints, fit: &Fit) -> Self {
         let blocks = points.blocks;
         let folds = points.folds.max(1);
-        let p = fit.free.len();
-        let idx: Vec<usize> = fit.free.iter().map(|q| q.index()).collect();
-        let params = fit.model.params();
-        let theta: Vec<f64> = idx.iter().map(|&i| params[i]).collect();
-        let (lo, hi): (Vec<f64>, Vec<f64>) = fit.free.iter().map(|&q| library::bounds(q)).unzip();
+        let (theta, bounds) = fit::unknowns(points, fit);
+        let (lo, hi): (Vec<f64>, Vec<f64>) = bounds.into_iter().unzip();
+        let (mean, jac, p) = fit::jacobian(points, fit);
         let ev = fit.model.evaluator();
         let s2 = fit.sigma0 * fit.sigma0;
         let r = fit.model.effects.mesh_ripple_rms;
@@ -138,12 +136,12 @@ impl Lin {
             hold_errors: vec![0.0; blocks],
             hold_total: vec![0.0; blocks],
             k: fit.k,
+            shapes: fit.shapes,
         };
-        let mut grad = [0.0; PARAM_COUNT];
         for k in 0..points.len() {
             let op = &points.ops[k];
-            let f = ev.current_and_gradient(op, &mut grad);
-            let e = points.current[k] - f;
+            let grad = &jac[k * p..(k + 1) * p];
+            let e = points.current[k] - mean[k];
             let v = if rho > 0.0 {
                 let fr = ev.friction_current(op);
                 1.0 + rho * fr * fr
@@ -155,10 +153,10 @@ impl Lin {
             let fold = if points.folds == 0 { 0 } else { points.fold[k] };
             let cell = &mut lin.cells[points.block[k] as usize * folds + fold];
             for i in 0..p {
-                let gi = grad[idx[i]];
+                let gi = grad[i];
                 cell.u[i] += w * gi * e;
-                for j in 0..=i {
-                    cell.a[i * p + j] += w * gi * grad[idx[j]];
+                for (j, gj) in grad.iter().enumerate().take(i + 1) {
+                    cell.a[i * p + j] += w * gi * gj;
                 }
             }
             cell.c += (n * e * e + points.within_ss[k]) / v;
@@ -226,7 +224,9 @@ impl Lin {
             } else {
                 0.0
             };
-        let bic = -2.0 * ll + self.k as f64 * n.ln();
+        let bic = -2.0 * ll
+            + (self.k - self.shapes) as f64 * n.ln()
+            + self.shapes as f64 * crate::terms::SHAPE_PENALTY;
         let held_out = (folds > 1).then(|| {
             let (mut sse, mut nlpd, mut rows) = (0.0, 0.0, 0.0);
             for test in per_fold.iter().filter(|s| s.n > 0.0) {
@@ -318,7 +318,7 @@ fn bounded_step(a: &[f64], u: &[f64], p: usize, theta: &[f64], lo: &[f64], hi: &
 #[derive(Debug, Clone)]
 struct StepNode {
     critical: f64,
-    children: Vec<Effect>,
+    children: Vec<Cand>,
 }
 
 /// What the bootstrap found.
@@ -333,17 +333,17 @@ pub struct Bootstrap {
     /// The seed of the draws.
     pub seed: u64,
     /// The effects each replicate selected (beyond the loaded ones), sorted.
-    pub selected: Vec<Vec<Effect>>,
+    pub selected: Vec<Vec<Cand>>,
 }
 
 impl Bootstrap {
-    /// Share of replicates that select `effect`.
-    pub fn inclusion(&self, effect: Effect) -> f64 {
-        self.share(|s| s.contains(&effect))
+    /// Share of replicates that select `cand`.
+    pub fn inclusion(&self, cand: Cand) -> f64 {
+        self.share(|s| s.contains(&cand))
     }
 
     /// Share of replicates whose selection satisfies `pred`.
-    pub fn share(&self, pred: impl Fn(&[Effect]) -> bool) -> f64 {
+    pub fn share(&self, pred: impl Fn(&[Cand]) -> bool) -> f64 {
         if self.selected.is_empty() {
             return 0.0;
         }
@@ -351,19 +351,19 @@ impl Bootstrap {
     }
 
     /// Share of replicates that select exactly `set` (any order).
-    pub fn set_share(&self, set: &[Effect]) -> f64 {
+    pub fn set_share(&self, set: &[Cand]) -> f64 {
         let mut want = set.to_vec();
         want.sort();
         self.share(|s| s == want.as_slice())
     }
 
     /// The distinct selections with their shares, most frequent first.
-    pub fn sets(&self) -> Vec<(Vec<Effect>, f64)> {
-        let mut counts: BTreeMap<&Vec<Effect>, usize> = BTreeMap::new();
+    pub fn sets(&self) -> Vec<(Vec<Cand>, f64)> {
+        let mut counts: BTreeMap<&Vec<Cand>, usize> = BTreeMap::new();
         for s in &self.selected {
             *counts.entry(s).or_default() += 1;
         }
-        let mut out: Vec<(Vec<Effect>, f64)> = counts
+        let mut out: Vec<(Vec<Cand>, f64)> = counts
             .into_iter()
             .map(|(s, c)| (s.clone(), c as f64 / self.selected.len() as f64))
             .collect();
@@ -396,8 +396,8 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         .max_effects
         .saturating_sub(selection.start.spec.effects.len());
     // Fits and steps by path (the effects added, in order), seeded from the real selection.
-    let mut fits: BTreeMap<Vec<Effect>, Fit> = BTreeMap::new();
-    let mut steps: BTreeMap<Vec<Effect>, StepNode> = BTreeMap::new();
+    let mut fits: BTreeMap<Vec<Cand>, Fit> = BTreeMap::new();
+    let mut steps: BTreeMap<Vec<Cand>, StepNode> = BTreeMap::new();
     let mut path = Vec::new();
     fits.insert(path.clone(), selection.start.clone());
     for step in &selection.steps {
@@ -405,9 +405,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         for c in &step.candidates {
             if let Some(f) = &c.fit {
                 let mut child = path.clone();
-                child.push(c.effect);
+                child.push(c.cand);
                 fits.insert(child, f.clone());
-                children.push(c.effect);
+                children.push(c.cand);
             }
         }
         steps.insert(
@@ -418,17 +418,17 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             },
         );
         match step.best() {
-            Some(b) if step.accepted => path.push(b.effect),
+            Some(b) if step.accepted => path.push(b.cand),
             _ => break,
         }
     }
-    let mut lins: BTreeMap<Vec<Effect>, Lin> = BTreeMap::new();
+    let mut lins: BTreeMap<Vec<Cand>, Lin> = BTreeMap::new();
     let m = draws(opts.replicates, points.blocks);
-    let mut paths: Vec<Vec<Effect>> = vec![Vec::new(); opts.replicates];
+    let mut paths: Vec<Vec<Cand>> = vec![Vec::new(); opts.replicates];
     let mut active = vec![true; opts.replicates];
     for _level in 0..depth {
         // Explore the paths the replicates reached that the real selection did not.
-        let mut reached: BTreeMap<&Vec<Effect>, usize> = BTreeMap::new();
+        let mut reached: BTreeMap<&Vec<Cand>, usize> = BTreeMap::new();
         for (p, _) in paths
             .iter()
             .zip(&active)
@@ -437,12 +437,12 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             *reached.entry(p).or_default() += 1;
         }
         let min_count = (MIN_PATH_SHARE * opts.replicates as f64).ceil() as usize;
-        let wanted: Vec<Vec<Effect>> = reached
+        let wanted: Vec<Vec<Cand>> = reached
             .iter()
             .filter(|&(_, &c)| c >= min_count)
             .map(|(p, _)| (*p).clone())
             .collect();
-        let rare: Vec<Vec<Effect>> = reached
+        let rare: Vec<Vec<Cand>> = reached
             .iter()
             .filter(|&(_, &c)| c < min_count)
             .map(|(p, _)| (*p).clone())
@@ -454,10 +454,10 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         let explored = fit::par_map(&wanted, |p| {
             let current = &fits[p];
             select::explore(points, current, &alt_opts).map(|ex| {
-                let children: Vec<(Effect, Fit)> = ex
+                let children: Vec<(Cand, Fit)> = ex
                     .candidates
                     .into_iter()
-                    .filter_map(|c| c.fit.map(|f| (c.effect, f)))
+                    .filter_map(|c| c.fit.map(|f| (c.cand, f)))
                     .collect();
                 (ex.critical, children)
             })
@@ -493,7 +493,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             );
         }
         // Linearise every model the replicates compare at this level.
-        let mut needed: Vec<Vec<Effect>> = Vec::new();
+        let mut needed: Vec<Vec<Cand>> = Vec::new();
         for (p, _) in paths.iter().zip(&active).filter(|(_, a)| **a) {
             needed.push(p.clone());
             for &c in &steps[p].children {
@@ -517,7 +517,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             let p = &paths[r];
             let node = &steps[p];
             let here = lins[p].score(&m[r]);
-            let mut best: Option<(Effect, f64, Score)> = None;
+            let mut best: Option<(Cand, f64, Score)> = None;
             for &c in &node.children {
                 let mut child = p.clone();
                 child.push(c);
@@ -529,9 +529,13 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             }
             let (e, gain, s) = best?;
             let confirmed = match (here.held_out, s.held_out) {
-                (Some(b), Some(a)) if e == Effect::MeshLoadSharingRipple => a.nlpd < b.nlpd,
+                (Some(b), Some(a)) if e == Cand::Effect(Effect::MeshLoadSharingRipple) => {
+                    a.nlpd < b.nlpd
+                }
                 // The bush's evidence is the backdrive observations (as the selection's rule).
-                (Some(b), Some(a)) if e == Effect::LinearBushFriction => a.rmse <= 1.01 * b.rmse,
+                (Some(b), Some(a)) if e == Cand::Effect(Effect::LinearBushFriction) => {
+                    a.rmse <= 1.01 * b.rmse
+                }
                 (Some(b), Some(a)) => a.rmse < b.rmse,
                 _ => true,
             };

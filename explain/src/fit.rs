@@ -1,13 +1,15 @@
 //! Fitting the current model to the test points: bounded Levenberg-Marquardt on the mean
-//! parameters (normal equations solved by Cholesky on a few unknowns), a profiled variance
-//! parameter for the mesh ripple, a threshold fit for the linear bush's holding, the Gaussian
-//! (and backdrive) likelihood with BIC, and blocked held-out validation.
+//! parameters and the terms' coordinates (normal equations solved by Cholesky on a few
+//! unknowns; the model's derivatives analytic, the terms' by forward differences), a profiled
+//! variance parameter for the mesh ripple, a threshold fit for the linear bush's holding, the
+//! Gaussian (and backdrive) likelihood with BIC, and blocked held-out validation.
 
 use model::effects::{CurrentEvaluator, CurrentModel, Effect, OperatingPoint, PARAM_COUNT, Param};
 
 use super::library;
 use super::points::{HoldCheck, TestPoints};
 use super::stats;
+use super::terms::{ModelAt, Needs, Term};
 
 /// Assumed rate at which a backdrive observation is wrong (a slip, a misread), for the
 /// likelihood of the `backdriven` column.
@@ -16,12 +18,16 @@ pub const HOLD_LABEL_ERROR: f64 = 0.01;
 const MAX_ITERATIONS: usize = 60;
 /// Alternations between the mean and the ripple variance.
 const RIPPLE_ROUNDS: usize = 3;
+/// Forward-difference step of a coordinate, as a share of its bounds' width.
+const DIFF_STEP: f64 = 1e-7;
 
 /// Which effects a model carries on top of the paper's.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct ModelSpec {
-    /// The effects, in the order they were added.
+    /// The library effects in their own laws, in the order they were added.
     pub effects: Vec<Effect>,
+    /// The terms ([`TestPoints::terms`] indices), in the order they were added.
+    pub terms: Vec<usize>,
 }
 
 impl ModelSpec {
@@ -39,25 +45,49 @@ impl ModelSpec {
         s
     }
 
-    /// Whether the model carries `effect`.
+    /// This model with term `term` added.
+    pub fn with_term(&self, term: usize) -> Self {
+        let mut s = self.clone();
+        if !s.terms.contains(&term) {
+            s.terms.push(term);
+        }
+        s
+    }
+
+    /// Whether the model carries `effect` in its library law.
     pub fn has(&self, effect: Effect) -> bool {
         self.effects.contains(&effect)
     }
 
-    /// Parameters of the mean current that are fitted: mu and one per effect.
+    /// Parameters of the mean current that are fitted: mu and one per effect (the terms'
+    /// coordinates follow them in a fit).
     pub fn free_params(&self) -> Vec<Param> {
         let mut p = vec![Param::Mu];
         p.extend(self.effects.iter().filter_map(|e| e.mean_param()));
         p
     }
 
-    /// Parameters counted by the information criterion (noise level included).
-    pub fn parameter_count(&self) -> usize {
+    /// BIC penalty for `n` rows: ln n per parameter (noise level included), the terms'
+    /// shapes at [`crate::terms::SHAPE_PENALTY`].
+    pub fn penalty(&self, terms: &[Term], n: f64) -> f64 {
+        let shapes: usize = self.terms.iter().map(|&t| terms[t].shape_count()).sum();
+        (self.parameter_count(terms) - shapes) as f64 * n.ln()
+            + shapes as f64 * crate::terms::SHAPE_PENALTY
+    }
+
+    /// Parameters counted by the information criterion (noise level included), the terms of
+    /// `terms`.
+    pub fn parameter_count(&self, terms: &[Term]) -> usize {
         2 + self
             .effects
             .iter()
             .map(|&e| library::parameter_count(e))
             .sum::<usize>()
+            + self
+                .terms
+                .iter()
+                .map(|&t| terms[t].parameter_count())
+                .sum::<usize>()
     }
 }
 
@@ -68,8 +98,10 @@ pub struct Fit {
     pub spec: ModelSpec,
     /// The fitted model (mean, ripple and bush hold parameters).
     pub model: CurrentModel,
-    /// The fitted mean parameters, in the order of `cov`.
+    /// The fitted mean parameters, in the order of `cov` (the terms' coordinates follow).
     pub free: Vec<Param>,
+    /// The fitted coordinates of each term of `spec.terms`.
+    pub term_x: Vec<Vec<f64>>,
     /// Measured minus fitted current of the fitted points (of each point's mean current), A.
     pub residuals: Vec<f64>,
     /// Sum of squared residuals of the fitted rows (the points' spread included), A^2.
@@ -86,9 +118,12 @@ pub struct Fit {
     pub n: usize,
     /// Number of parameters.
     pub k: usize,
+    /// Shape parameters among them (penalised at [`crate::terms::SHAPE_PENALTY`]).
+    pub shapes: usize,
     /// Bayesian information criterion, -2 ln L + k ln n.
     pub bic: f64,
-    /// Covariance of the free parameters (row-major), NaN where a parameter sits on a bound.
+    /// Covariance of the free parameters then the terms' coordinates (row-major), NaN where
+    /// one sits on a bound.
     pub cov: Vec<f64>,
     /// Whether the iteration converged.
     pub converged: bool,
@@ -105,12 +140,26 @@ impl Fit {
         self.loglik_current + self.loglik_hold
     }
 
+    fn unknowns(&self) -> usize {
+        self.free.len() + self.term_x.iter().map(Vec::len).sum::<usize>()
+    }
+
+    fn std_error_at(&self, i: usize) -> Option<f64> {
+        let p = self.unknowns();
+        let v = *self.cov.get(i * p + i)?;
+        (v.is_finite() && v >= 0.0).then(|| v.sqrt())
+    }
+
     /// Standard error of a free parameter, if it is free and off its bounds.
     pub fn std_error(&self, param: Param) -> Option<f64> {
-        let p = self.free.len();
         let i = self.free.iter().position(|&q| q == param)?;
-        let v = self.cov[i * p + i];
-        (v.is_finite() && v >= 0.0).then(|| v.sqrt())
+        self.std_error_at(i)
+    }
+
+    /// Standard error of coordinate `coord` of the `t`-th term of the spec.
+    pub fn term_std_error(&self, t: usize, coord: usize) -> Option<f64> {
+        let offset = self.free.len() + self.term_x[..t].iter().map(Vec::len).sum::<usize>();
+        self.std_error_at(offset + coord)
     }
 
     /// Noise standard deviation at `op`, A (the ripple scatters the friction term).
@@ -128,10 +177,228 @@ impl Fit {
             (self.sigma0 * self.sigma0 + f * f).sqrt()
         }
     }
+
+    /// The fitted mean current at every point, A.
+    pub fn predict(&self, points: &TestPoints) -> Vec<f64> {
+        predict(points, &self.model, &self.spec.terms, &self.term_x)
+    }
+
+    /// The fitted mean current of every row of [`TestPoints::row_view`] (time order), A.
+    pub fn predict_rows(&self, points: &TestPoints) -> Vec<f64> {
+        let rv = &points.row_view;
+        let ev = self.model.evaluator();
+        if self.spec.terms.is_empty() {
+            return (0..rv.len()).map(|j| ev.current(&rv.op(j))).collect();
+        }
+        let ops: Vec<OperatingPoint> = (0..rv.len()).map(|j| rv.op(j)).collect();
+        let mut out: Vec<f64> = ops.iter().map(|op| ev.current(op)).collect();
+        let order: Vec<usize> = (0..rv.len()).collect();
+        let inputs = super::terms::Inputs {
+            ops: &ops,
+            time: &rv.time_s,
+            temp: &rv.temp_c,
+            order: &order,
+        };
+        for (&t, x) in self.spec.terms.iter().zip(&self.term_x) {
+            points.terms[t].add(&self.model, &inputs, x, &mut out);
+        }
+        out
+    }
 }
 
-/// Fits `spec` to the points `subset` of `points`, starting from `start`.
+/// The terms' current at every point (zeros without terms), A.
+fn term_sum(
+    points: &TestPoints,
+    model: &CurrentModel,
+    terms: &[usize],
+    term_x: &[Vec<f64>],
+) -> Vec<f64> {
+    let mut out = vec![0.0; points.len()];
+    if terms.is_empty() {
+        return out;
+    }
+    let inputs = points.inputs();
+    for (&t, x) in terms.iter().zip(term_x) {
+        points.terms[t].add(model, &inputs, x, &mut out);
+    }
+    out
+}
+
+/// The mean current of `model` with `terms` at `term_x` at every point, A.
+pub fn predict(
+    points: &TestPoints,
+    model: &CurrentModel,
+    terms: &[usize],
+    term_x: &[Vec<f64>],
+) -> Vec<f64> {
+    let ev = model.evaluator();
+    let mut out = term_sum(points, model, terms, term_x);
+    for (o, op) in out.iter_mut().zip(&points.ops) {
+        *o += ev.current(op);
+    }
+    out
+}
+
+/// The value a fit's unknowns take, and how to put them back.
+#[derive(Debug, Clone)]
+struct State {
+    model: CurrentModel,
+    term_x: Vec<Vec<f64>>,
+}
+
+impl State {
+    fn theta(&self, free: &[Param]) -> Vec<f64> {
+        let p = self.model.params();
+        free.iter()
+            .map(|q| p[q.index()])
+            .chain(self.term_x.iter().flatten().copied())
+            .collect()
+    }
+
+    fn set(&mut self, free: &[Param], theta: &[f64]) {
+        let mut p = self.model.params();
+        for (q, v) in free.iter().zip(theta) {
+            p[q.index()] = *v;
+        }
+        self.model.set_params(&p);
+        let mut k = free.len();
+        for x in &mut self.term_x {
+            for v in x.iter_mut() {
+                *v = theta[k];
+                k += 1;
+            }
+        }
+    }
+}
+
+/// Bounds of the unknowns: the free parameters', then the terms' coordinates'.
+fn bounds_of(points: &TestPoints, free: &[Param], terms: &[usize]) -> Vec<(f64, f64)> {
+    free.iter()
+        .map(|&q| library::bounds(q))
+        .chain(
+            terms
+                .iter()
+                .flat_map(|&t| points.terms[t].params.iter().map(|p| p.fit_bounds())),
+        )
+        .collect()
+}
+
+/// Mean current at every point of `subset` and its derivatives with respect to the free
+/// parameters then the terms' coordinates (row-major, `subset.len()` x unknowns).
+fn mean_jacobian(
+    points: &TestPoints,
+    subset: &[usize],
+    state: &State,
+    free: &[Param],
+    terms: &[usize],
+    bounds: &[(f64, f64)],
+) -> (Vec<f64>, Vec<f64>) {
+    let p = free.len();
+    let q = bounds.len();
+    let mut f = Vec::with_capacity(subset.len());
+    let mut jac = vec![0.0; subset.len() * q];
+    let mut grad = [0.0; PARAM_COUNT];
+    let ev = state.model.evaluator();
+    for (r, &k) in subset.iter().enumerate() {
+        f.push(ev.current_and_gradient(&points.ops[k], &mut grad));
+        for i in 0..p {
+            jac[r * q + i] = grad[free[i].index()];
+        }
+    }
+    if terms.is_empty() {
+        return (f, jac);
+    }
+    // The model's quantities once for the terms' own coordinates (the model stays); each
+    // term's part apart, so a coordinate's column moves only its term.
+    let inputs = points.inputs();
+    let needs = terms
+        .iter()
+        .fold(Needs::default(), |n, &t| n.or(points.terms[t].needs()));
+    let at = ModelAt::new(&state.model, &points.ops, needs);
+    let parts: Vec<Vec<f64>> = terms
+        .iter()
+        .zip(&state.term_x)
+        .map(|(&t, x)| {
+            let mut out = vec![0.0; points.len()];
+            points.terms[t].add_at(&at, &inputs, x, &mut out);
+            out
+        })
+        .collect();
+    let mut base = vec![0.0; points.len()];
+    for part in &parts {
+        for (b, v) in base.iter_mut().zip(part) {
+            *b += v;
+        }
+    }
+    for (r, &k) in subset.iter().enumerate() {
+        f[r] += base[k];
+    }
+    let theta = state.theta(free);
+    // Which term and coordinate each unknown after the free parameters is.
+    let coords: Vec<(usize, usize)> = state
+        .term_x
+        .iter()
+        .enumerate()
+        .flat_map(|(j, x)| (0..x.len()).map(move |c| (j, c)))
+        .collect();
+    for i in 0..q {
+        let h = DIFF_STEP * (bounds[i].1 - bounds[i].0).max(1e-12);
+        if i < p {
+            let mut shifted = theta.clone();
+            shifted[i] += h;
+            let mut s = state.clone();
+            s.set(free, &shifted);
+            let moved = term_sum(points, &s.model, terms, &s.term_x);
+            for (r, &k) in subset.iter().enumerate() {
+                jac[r * q + i] += (moved[k] - base[k]) / h;
+            }
+        } else {
+            let (j, c) = coords[i - p];
+            let mut x = state.term_x[j].clone();
+            x[c] += h;
+            let mut moved = vec![0.0; points.len()];
+            points.terms[terms[j]].add_at(&at, &inputs, &x, &mut moved);
+            for (r, &k) in subset.iter().enumerate() {
+                jac[r * q + i] += (moved[k] - parts[j][k]) / h;
+            }
+        }
+    }
+    (f, jac)
+}
+
+/// Fits `spec` to the points `subset` of `points`, starting from `start` (the terms at their
+/// first starts).
 pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &CurrentModel) -> Fit {
+    let starts: Vec<Vec<f64>> = spec
+        .terms
+        .iter()
+        .map(|&t| points.terms[t].start_point())
+        .collect();
+    fit_from(points, subset, spec, start, &starts)
+}
+
+/// Fits `spec` to the points `subset` of `points`, starting from `start` and the terms'
+/// coordinates `start_terms`.
+pub fn fit_from(
+    points: &TestPoints,
+    subset: &[usize],
+    spec: &ModelSpec,
+    start: &CurrentModel,
+    start_terms: &[Vec<f64>],
+) -> Fit {
+    fit_capped(points, subset, spec, start, start_terms, MAX_ITERATIONS)
+}
+
+/// [`fit_from`] with at most `max_iterations` Levenberg-Marquardt iterations per round (a
+/// quick look at where a start leads).
+pub fn fit_capped(
+    points: &TestPoints,
+    subset: &[usize],
+    spec: &ModelSpec,
+    start: &CurrentModel,
+    start_terms: &[Vec<f64>],
+    max_iterations: usize,
+) -> Fit {
     let mut model = *start;
     // Effects not in the spec are switched off; those in it keep their start values.
     for e in Effect::ALL {
@@ -140,14 +407,41 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
         }
     }
     let free = spec.free_params();
+    let bounds = bounds_of(points, &free, &spec.terms);
+    let mut state = State {
+        model,
+        term_x: start_terms.to_vec(),
+    };
     let ripple = spec.has(Effect::MeshLoadSharingRipple);
     let counts: Vec<f64> = subset.iter().map(|&k| points.weight[k]).collect();
     let n = counts.iter().sum::<f64>();
     let within: f64 = subset.iter().map(|&k| points.within_ss[k]).sum();
-    let mut result = levenberg_marquardt(points, subset, &points.weight, &mut model, &free);
+    let mut result = levenberg_marquardt(
+        points,
+        subset,
+        &points.weight,
+        &mut state,
+        &free,
+        &spec.terms,
+        &bounds,
+        max_iterations,
+    );
+    let residuals_of = |state: &State| -> (Vec<f64>, Vec<f64>) {
+        let all = predict(points, &state.model, &spec.terms, &state.term_x);
+        let ev = state.model.evaluator();
+        subset
+            .iter()
+            .map(|&k| {
+                (
+                    points.current[k] - all[k],
+                    ev.friction_current(&points.ops[k]),
+                )
+            })
+            .unzip()
+    };
     if ripple {
         for _ in 0..RIPPLE_ROUNDS {
-            let (e, fric) = residuals_and_friction(points, subset, &model);
+            let (e, fric) = residuals_of(&state);
             let sse = point_sse(points, subset, &e);
             let rho = ripple_profile(&sse, &counts, &fric).0;
             let w: Vec<f64> = {
@@ -157,19 +451,20 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
                 }
                 w
             };
-            result = levenberg_marquardt(points, subset, &w, &mut model, &free);
+            result = levenberg_marquardt(
+                points,
+                subset,
+                &w,
+                &mut state,
+                &free,
+                &spec.terms,
+                &bounds,
+                max_iterations,
+            );
         }
     }
-    let (residuals, fric) = if ripple {
-        residuals_and_friction(points, subset, &model)
-    } else {
-        let ev = model.evaluator();
-        let r = subset
-            .iter()
-            .map(|&k| points.current[k] - ev.current(&points.ops[k]))
-            .collect();
-        (r, Vec::new())
-    };
+    let (residuals, fric) = residuals_of(&state);
+    let mut model = state.model;
     let point_sse = point_sse(points, subset, &residuals);
     let sse: f64 = point_sse.iter().sum();
     let (sigma0, loglik_current) = if ripple {
@@ -203,17 +498,16 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
         (errors, hold_loglik(hold_rows(&points.holds), errors as f64))
     };
 
-    // Covariance of the parameters off their bounds: s^2 (J^T W J)^-1.
-    let p = free.len();
+    // Covariance of the unknowns off their bounds: s^2 (J^T W J)^-1.
+    let theta = state.theta(&free);
+    let p = theta.len();
     let mut cov = vec![f64::NAN; p * p];
     let dof = (n - p as f64).max(1.0);
     let s2 = (result.cost + within) / dof;
-    let theta = model.params();
     let inner: Vec<usize> = (0..p)
         .filter(|&i| {
-            let (lo, hi) = library::bounds(free[i]);
-            let v = theta[free[i].index()];
-            v > lo && v < hi && result.jtj[i * p + i] > 0.0
+            let (lo, hi) = bounds[i];
+            theta[i] > lo && theta[i] < hi && result.jtj[i * p + i] > 0.0
         })
         .collect();
     let q = inner.len();
@@ -230,12 +524,18 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
         }
     }
 
-    let k = spec.parameter_count();
+    let k = spec.parameter_count(&points.terms);
+    let shapes: usize = spec
+        .terms
+        .iter()
+        .map(|&t| points.terms[t].shape_count())
+        .sum();
     let loglik = loglik_current + loglik_hold;
     Fit {
         spec: spec.clone(),
         model,
         free,
+        term_x: state.term_x,
         residuals,
         sse,
         sigma0,
@@ -244,7 +544,8 @@ pub fn fit(points: &TestPoints, subset: &[usize], spec: &ModelSpec, start: &Curr
         hold_errors,
         n: n.round() as usize,
         k,
-        bic: -2.0 * loglik + k as f64 * n.ln(),
+        shapes,
+        bic: -2.0 * loglik + spec.penalty(&points.terms, n),
         cov,
         converged: result.converged,
     }
@@ -267,22 +568,6 @@ fn point_sse(points: &TestPoints, subset: &[usize], e: &[f64]) -> Vec<f64> {
         .zip(e)
         .map(|(&k, e)| points.weight[k] * e * e + points.within_ss[k])
         .collect()
-}
-
-/// Residuals and friction currents of `subset` under `model`.
-fn residuals_and_friction(
-    points: &TestPoints,
-    subset: &[usize],
-    model: &CurrentModel,
-) -> (Vec<f64>, Vec<f64>) {
-    let ev = model.evaluator();
-    subset
-        .iter()
-        .map(|&k| {
-            let op = &points.ops[k];
-            (points.current[k] - ev.current(op), ev.friction_current(op))
-        })
-        .unzip()
 }
 
 /// Rows observed not to backdrive.
@@ -434,35 +719,33 @@ pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec
 struct LmResult {
     /// Weighted sum of squared residuals of the points at the end (their spread aside).
     cost: f64,
-    /// J^T W J at the end (free parameters).
+    /// J^T W J at the end (all unknowns).
     jtj: Vec<f64>,
     /// Whether the iteration converged.
     converged: bool,
 }
 
-/// Weighted cost, J^T W J and J^T W r at `model`.
+/// Weighted cost, J^T W J and J^T W r at `state`.
 fn normal_equations(
     points: &TestPoints,
     subset: &[usize],
     weights: &[f64],
-    model: &CurrentModel,
+    state: &State,
     free: &[Param],
+    terms: &[usize],
+    bounds: &[(f64, f64)],
 ) -> (f64, Vec<f64>, Vec<f64>) {
-    let p = free.len();
-    let idx: Vec<usize> = free.iter().map(|q| q.index()).collect();
+    let p = bounds.len();
+    let (f, jac) = mean_jacobian(points, subset, state, free, terms, bounds);
     let mut a = vec![0.0; p * p];
     let mut g = vec![0.0; p];
     let mut cost = 0.0;
-    let mut grad = [0.0; PARAM_COUNT];
-    let mut j = [0.0; PARAM_COUNT];
-    let ev = model.evaluator();
-    for &k in subset {
-        let f = ev.current_and_gradient(&points.ops[k], &mut grad);
+    for (row, &k) in subset.iter().enumerate() {
         let w = weights[k];
-        let r = points.current[k] - f;
+        let r = points.current[k] - f[row];
         cost += w * r * r;
+        let j = &jac[row * p..(row + 1) * p];
         for i in 0..p {
-            j[i] = grad[idx[i]];
             g[i] += w * j[i] * r;
         }
         for i in 0..p {
@@ -480,48 +763,54 @@ fn normal_equations(
     (cost, a, g)
 }
 
-/// Bounded Levenberg-Marquardt on the parameters `free` of `model` (updated in place).
+/// Bounded Levenberg-Marquardt on the free parameters and the terms' coordinates of `state`
+/// (updated in place), at most `max_iterations` iterations.
+#[allow(clippy::too_many_arguments)] // normal_equations' pieces and the iteration cap
 fn levenberg_marquardt(
     points: &TestPoints,
     subset: &[usize],
     weights: &[f64],
-    model: &mut CurrentModel,
+    state: &mut State,
     free: &[Param],
+    terms: &[usize],
+    bounds: &[(f64, f64)],
+    max_iterations: usize,
 ) -> LmResult {
-    let p = free.len();
+    let p = bounds.len();
     // Start inside the bounds.
-    let mut theta = model.params();
-    for &q in free {
-        let (lo, hi) = library::bounds(q);
-        theta[q.index()] = theta[q.index()].clamp(lo, hi);
+    let mut theta = state.theta(free);
+    for (v, &(lo, hi)) in theta.iter_mut().zip(bounds) {
+        *v = v.clamp(lo, hi);
     }
-    model.set_params(&theta);
-    let (mut cost, mut a, mut g) = normal_equations(points, subset, weights, model, free);
+    state.set(free, &theta);
+    let (mut cost, mut a, mut g) =
+        normal_equations(points, subset, weights, state, free, terms, bounds);
     let mut lambda = 1e-3;
     let mut converged = false;
-    for _ in 0..MAX_ITERATIONS {
-        let theta = model.params();
+    for _ in 0..max_iterations {
+        let theta = state.theta(free);
         let mut accepted = false;
         let mut small_step = false;
         while lambda < 1e14 {
-            let Some(step) = bounded_step(&a, &g, p, lambda, free, &theta) else {
+            let Some(step) = bounded_step(&a, &g, p, lambda, bounds, &theta) else {
                 break;
             };
-            let mut trial = theta;
+            let mut trial = theta.clone();
             let mut largest = 0.0f64;
-            for (i, &q) in free.iter().enumerate() {
-                let (lo, hi) = library::bounds(q);
-                trial[q.index()] = (theta[q.index()] + step[i]).clamp(lo, hi);
+            for i in 0..p {
+                let (lo, hi) = bounds[i];
+                trial[i] = (theta[i] + step[i]).clamp(lo, hi);
                 largest = largest.max(step[i].abs() * a[i * p + i].sqrt());
             }
-            let mut m = *model;
-            m.set_params(&trial);
+            let mut s = state.clone();
+            s.set(free, &trial);
             // Cost and normal equations at the trial point in one pass.
-            let (c, a_new, g_new) = normal_equations(points, subset, weights, &m, free);
+            let (c, a_new, g_new) =
+                normal_equations(points, subset, weights, &s, free, terms, bounds);
             let negligible = largest <= 1e-9 * cost.sqrt().max(1e-300);
             if c.is_finite() && c < cost {
                 let gain = cost - c;
-                *model = m;
+                *state = s;
                 (cost, a, g) = (c, a_new, g_new);
                 lambda = (lambda * 0.2).max(1e-12);
                 accepted = true;
@@ -546,23 +835,23 @@ fn levenberg_marquardt(
     }
 }
 
-/// Scaled, damped Gauss-Newton step; parameters on a bound that the step would push out of
+/// Scaled, damped Gauss-Newton step; unknowns on a bound that the step would push out of
 /// the box are held. `None` when the system is singular.
 fn bounded_step(
     a: &[f64],
     g: &[f64],
     p: usize,
     lambda: f64,
-    free: &[Param],
-    theta: &[f64; PARAM_COUNT],
+    bounds: &[(f64, f64)],
+    theta: &[f64],
 ) -> Option<Vec<f64>> {
     let mut held = vec![false; p];
-    for (i, &q) in free.iter().enumerate() {
+    for i in 0..p {
         if a[i * p + i] <= 0.0 {
             held[i] = true;
         }
-        let (lo, hi) = library::bounds(q);
-        let v = theta[q.index()];
+        let (lo, hi) = bounds[i];
+        let v = theta[i];
         if (v <= lo && g[i] < 0.0) || (v >= hi && g[i] > 0.0) {
             held[i] = true;
         }
@@ -589,11 +878,11 @@ fn bounded_step(
         for (x, &i) in act.iter().enumerate() {
             step[i] = sol[x] / d[x];
         }
-        // Hold any parameter the step pushes through its bound from the bound itself.
+        // Hold any unknown the step pushes through its bound from the bound itself.
         let mut changed = false;
-        for (i, &q) in free.iter().enumerate() {
-            let (lo, hi) = library::bounds(q);
-            let v = theta[q.index()];
+        for i in 0..p {
+            let (lo, hi) = bounds[i];
+            let v = theta[i];
             if !held[i] && ((v <= lo && step[i] < 0.0) || (v >= hi && step[i] > 0.0)) {
                 held[i] = true;
                 changed = true;
@@ -615,9 +904,15 @@ pub struct HeldOut {
     pub nlpd: f64,
 }
 
-/// Refits `spec` with each fold held out (starting from `start`) and scores the predictions
-/// of the held-out points; `None` when the data has too few blocks to hold any out.
-pub fn held_out(points: &TestPoints, spec: &ModelSpec, start: &CurrentModel) -> Option<HeldOut> {
+/// Refits `spec` with each fold held out (starting from `start` and the terms at
+/// `start_terms`) and scores the predictions of the held-out points; `None` when the data
+/// has too few blocks to hold any out.
+pub fn held_out(
+    points: &TestPoints,
+    spec: &ModelSpec,
+    start: &CurrentModel,
+    start_terms: &[Vec<f64>],
+) -> Option<HeldOut> {
     if points.folds == 0 {
         return None;
     }
@@ -627,12 +922,13 @@ pub fn held_out(points: &TestPoints, spec: &ModelSpec, start: &CurrentModel) -> 
         if train.len() < 3 || test.is_empty() {
             return (0.0, 0.0, 0.0);
         }
-        let fit = fit(points, &train, spec, start);
+        let fit = fit_from(points, &train, spec, start, start_terms);
         let ev = fit.model.evaluator();
+        let all = fit.predict(points);
         let (mut sse, mut nlpd, mut count) = (0.0, 0.0, 0.0);
         for &k in &test {
             let op = &points.ops[k];
-            let e = points.current[k] - ev.current(op);
+            let e = points.current[k] - all[k];
             let s = fit.sigma_with(&ev, op).max(1e-12);
             let (n, e2) = (
                 points.weight[k],
@@ -653,43 +949,112 @@ pub fn held_out(points: &TestPoints, spec: &ModelSpec, start: &CurrentModel) -> 
     })
 }
 
+/// A direction of the score tests beyond a fit's own unknowns.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Column {
+    /// A mean parameter of the model.
+    Param(Param),
+    /// Coordinate `coord` of term `term` ([`TestPoints::terms`]) at the term's coordinates
+    /// `at`.
+    Term {
+        /// The term.
+        term: usize,
+        /// Its coordinate.
+        coord: usize,
+        /// Where the derivative is taken.
+        at: Vec<f64>,
+    },
+}
+
 /// Score statistics of a fitted model over every point: the Gram matrix of the noise-whitened
-/// derivative columns of its free parameters followed by `extra` parameters, the scores
-/// (whitened columns times whitened residuals), and the standardised score of a ripple
-/// variance (the friction current's square against the squared residuals).
+/// derivative columns of its unknowns followed by `extra` columns, the scores (whitened
+/// columns times whitened residuals), and the standardised score of a ripple variance (the
+/// friction current's square against the squared residuals).
 #[derive(Debug, Clone)]
 pub struct Scores {
     /// (p + extra) x (p + extra) Gram matrix, row-major.
     pub gram: Vec<f64>,
     /// Scores, p + extra.
     pub score: Vec<f64>,
+    /// The fit's own unknowns (the first columns).
+    pub own: usize,
     /// Standardised score of a ripple variance at zero (about N(0, 1) without ripple).
     pub ripple_z: f64,
 }
 
-/// The [`Scores`] of `fit` with the `extra` parameters.
-pub fn scores(points: &TestPoints, fit: &Fit, extra: &[Param]) -> Scores {
-    let cols: Vec<usize> = fit.free.iter().chain(extra).map(|q| q.index()).collect();
-    let m = cols.len();
+/// The derivative of term `term` at coordinates `at` (coordinate `coord`) under `model`, at
+/// every point.
+fn term_column(
+    points: &TestPoints,
+    model: &CurrentModel,
+    term: usize,
+    coord: usize,
+    at: &[f64],
+) -> Vec<f64> {
+    let t = &points.terms[term];
+    let (lo, hi) = t.params[coord].fit_bounds();
+    let h = DIFF_STEP * (hi - lo).max(1e-12) * 10.0;
+    let inputs = points.inputs();
+    let mut base = vec![0.0; points.len()];
+    t.add(model, &inputs, at, &mut base);
+    let mut moved = vec![0.0; points.len()];
+    let mut x = at.to_vec();
+    x[coord] += h;
+    t.add(model, &inputs, &x, &mut moved);
+    moved.iter().zip(&base).map(|(m, b)| (m - b) / h).collect()
+}
+
+/// The [`Scores`] of `fit` with the `extra` columns.
+pub fn scores(points: &TestPoints, fit: &Fit, extra: &[Column]) -> Scores {
+    let state = State {
+        model: fit.model,
+        term_x: fit.term_x.clone(),
+    };
+    let bounds = bounds_of(points, &fit.free, &fit.spec.terms);
+    let own = bounds.len();
+    let (f, jac) = mean_jacobian(
+        points,
+        &points.all,
+        &state,
+        &fit.free,
+        &fit.spec.terms,
+        &bounds,
+    );
+    let mut grad = [0.0; PARAM_COUNT];
+    let ev = fit.model.evaluator();
+    let term_cols: Vec<Option<Vec<f64>>> = extra
+        .iter()
+        .map(|c| match c {
+            Column::Term { term, coord, at } => {
+                Some(term_column(points, &fit.model, *term, *coord, at))
+            }
+            Column::Param(_) => None,
+        })
+        .collect();
+    let m = own + extra.len();
     let mut gram = vec![0.0; m * m];
     let mut score = vec![0.0; m];
-    let mut grad = [0.0; PARAM_COUNT];
     let mut j = vec![0.0; m];
-    let ev = fit.model.evaluator();
     let (mut f2_sum, mut f4_sum, mut f2e2_sum) = (0.0, 0.0, 0.0);
     for k in 0..points.len() {
         let op = &points.ops[k];
-        let f = ev.current_and_gradient(op, &mut grad);
+        ev.current_and_gradient(op, &mut grad);
         let sigma = fit.sigma_with(&ev, op).max(1e-12);
         let w = 1.0 / sigma;
         let n = points.weight[k];
-        let e = points.current[k] - f;
+        let e = points.current[k] - f[k];
         let r = e * w;
-        for (x, &c) in cols.iter().enumerate() {
-            j[x] = w * grad[c];
-            score[x] += n * j[x] * r;
+        for x in 0..own {
+            j[x] = w * jac[k * own + x];
+        }
+        for (x, c) in extra.iter().enumerate() {
+            j[own + x] = w * match c {
+                Column::Param(q) => grad[q.index()],
+                Column::Term { .. } => term_cols[x].as_ref().expect("a term column")[k],
+            };
         }
         for x in 0..m {
+            score[x] += n * j[x] * r;
             let jx = n * j[x];
             for y in 0..=x {
                 gram[x * m + y] += jx * j[y];
@@ -718,8 +1083,40 @@ pub fn scores(points: &TestPoints, fit: &Fit, extra: &[Param]) -> Scores {
     Scores {
         gram,
         score,
+        own,
         ripple_z,
     }
+}
+
+/// The derivatives of `fit`'s mean current at every point with respect to its unknowns (free
+/// parameters, then terms' coordinates), row-major, and the fitted mean.
+pub fn jacobian(points: &TestPoints, fit: &Fit) -> (Vec<f64>, Vec<f64>, usize) {
+    let state = State {
+        model: fit.model,
+        term_x: fit.term_x.clone(),
+    };
+    let bounds = bounds_of(points, &fit.free, &fit.spec.terms);
+    let (f, jac) = mean_jacobian(
+        points,
+        &points.all,
+        &state,
+        &fit.free,
+        &fit.spec.terms,
+        &bounds,
+    );
+    (f, jac, bounds.len())
+}
+
+/// Bounds of `fit`'s unknowns and their fitted values.
+pub fn unknowns(points: &TestPoints, fit: &Fit) -> (Vec<f64>, Vec<(f64, f64)>) {
+    let state = State {
+        model: fit.model,
+        term_x: fit.term_x.clone(),
+    };
+    (
+        state.theta(&fit.free),
+        bounds_of(points, &fit.free, &fit.spec.terms),
+    )
 }
 
 #[cfg(test)]
@@ -785,8 +1182,8 @@ mod tests {
             "{}",
             with.model.effects.axial_corner_speed
         );
-        let ho_base = held_out(&pts, &ModelSpec::base(), &base.model).unwrap();
-        let ho_with = held_out(&pts, &spec, &with.model).unwrap();
+        let ho_base = held_out(&pts, &ModelSpec::base(), &base.model, &[]).unwrap();
+        let ho_with = held_out(&pts, &spec, &with.model, &[]).unwrap();
         assert!(ho_with.rmse < ho_base.rmse);
     }
 

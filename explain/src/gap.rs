@@ -114,7 +114,12 @@ fn bin_from_sums(label: String, centre: f64, n: usize, sum: f64, sq: f64) -> Bin
 pub fn gap(points: &TestPoints, fit: &Fit) -> Gap {
     let rv = &points.row_view;
     let ev = fit.model.evaluator();
-    let res = rv.residuals(&ev);
+    let res: Vec<f64> = rv
+        .current
+        .iter()
+        .zip(fit.predict_rows(points))
+        .map(|(y, f)| y - f)
+        .collect();
     let n = res.len();
     let point = |j: usize| rv.point[j] as usize;
     let by_speed = group(

@@ -37,6 +37,7 @@ pub mod robust;
 pub mod select;
 pub mod stats;
 pub mod synth;
+pub mod terms;
 
 use std::collections::BTreeMap;
 
@@ -54,7 +55,9 @@ use fit::{Fit, ModelSpec};
 use gap::Gap;
 use library::ThermalDriver;
 use points::TestPoints;
-use rigfile::{EffectEntry, RigFile};
+use rigfile::{EffectEntry, RigFile, TermEntry};
+use select::Cand;
+use terms::{Form, Term, TermParam};
 
 /// What `rig explain` concludes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -84,6 +87,8 @@ impl Verdict {
 pub struct EffectReport {
     /// The effect's name.
     pub name: String,
+    /// The family form of its law, when not the library's own (e.g. `warm-up-in-time`).
+    pub form: Option<String>,
     /// Its fitted parameters (see [`library`] for names and units).
     pub params: BTreeMap<String, f64>,
     /// 95 % intervals of the parameters that have one.
@@ -99,8 +104,8 @@ pub struct EffectReport {
     /// Share of the block-bootstrap replicates of the whole selection that select it (null
     /// without a bootstrap).
     pub inclusion_probability: Option<f64>,
-    /// BIC weight of the model with it among the models of its step (the model without it
-    /// and every candidate).
+    /// BIC weight of the models with it (in any of its laws) among the models of its step
+    /// (the model without it and every candidate).
     pub bic_weight: f64,
 }
 
@@ -109,6 +114,8 @@ pub struct EffectReport {
 pub struct CandidateReport {
     /// The effect's name.
     pub name: String,
+    /// The family form of its law, when not the library's own.
+    pub form: Option<String>,
     /// Whether the data can show it.
     pub applicable: bool,
     /// Why not, when it cannot.
@@ -296,7 +303,8 @@ pub struct Outcome {
 }
 
 impl Outcome {
-    /// The rig file with the final model (mu and every effect, loaded ones first).
+    /// The rig file with the final model (mu and every effect, loaded ones first; terms
+    /// under `[[model.terms]]`).
     pub fn augmented_rig(&self) -> RigFile {
         let effects = self
             .after
@@ -308,8 +316,151 @@ impl Outcome {
                 params: library::report_params(e, &self.after.model.effects, self.points.thermal),
             })
             .collect();
-        self.rig.with_model(self.after.model.mu, effects)
+        let terms = self
+            .after
+            .spec
+            .terms
+            .iter()
+            .zip(&self.after.term_x)
+            .map(|(&t, x)| {
+                let term = &self.points.terms[t];
+                TermEntry {
+                    name: term.name.clone(),
+                    form: term.form().map(|f| f.name().to_string()),
+                    params: term.report(x),
+                }
+            })
+            .collect();
+        self.rig
+            .with_model_terms(self.after.model.mu, effects, terms)
     }
+}
+
+/// The terms a data set may use: every family form and the rig file's user effects.
+pub fn term_registry(rig: &RigFile) -> Result<Vec<Term>, ExplainError> {
+    let mut out: Vec<Term> = Form::ALL.into_iter().map(Term::family).collect();
+    for u in &rig.user_effects {
+        let params = u
+            .params
+            .iter()
+            .map(|(k, p)| TermParam {
+                key: k.clone(),
+                unit: p.unit.clone(),
+                bounds: (p.bounds[0], p.bounds[1]),
+                null: p.null,
+                start: p.start.unwrap_or(p.null),
+                log: p.log,
+            })
+            .collect();
+        out.push(
+            Term::user(&u.name, &u.expression, params)
+                .map(|mut t| {
+                    t.note = format!("user effect {} = {}", u.name, u.expression);
+                    t
+                })
+                .map_err(|why| ExplainError::RigFile {
+                    file: "(--model)".into(),
+                    why: format!("[[user_effects]] {}, field `expression`: {why}", u.name),
+                })?,
+        );
+    }
+    Ok(out)
+}
+
+/// Every user effect must vanish at its parameters' null values on this data, so the model
+/// without it is nested in the model with it.
+fn check_user_terms(
+    points: &TestPoints,
+    start: &model::effects::CurrentModel,
+) -> Result<(), ExplainError> {
+    for term in points.terms.iter().filter(|t| t.form().is_none()) {
+        let mut out = vec![0.0; points.len()];
+        term.add(start, &points.inputs(), &term.null_point(), &mut out);
+        let worst = out.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if worst.is_nan() || worst > 1e-9 {
+            return Err(ExplainError::RigFile {
+                file: "(--model)".into(),
+                why: format!(
+                    "[[user_effects]] {}, field `params`: the effect gives {worst:.3e} A at its null parameters ({}): it must vanish there (0 A), so that the model without it is nested in the model with it; set each parameter's null to the value without the effect",
+                    term.name,
+                    term.params
+                        .iter()
+                        .map(|p| format!("{} = {}", p.key, p.null))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The rig file's `[[model.terms]]` as registry indices and fit coordinates.
+fn known_terms(
+    rig: &RigFile,
+    registry: &[Term],
+) -> Result<(Vec<usize>, Vec<Vec<f64>>), ExplainError> {
+    let mut idx = Vec::new();
+    let mut coords = Vec::new();
+    for entry in rig.term_entries() {
+        let bad = |why: String| ExplainError::RigFile {
+            file: "(--model)".into(),
+            why: format!("[[model.terms]] {}: {why}", entry.name),
+        };
+        let t = match &entry.form {
+            Some(form) => {
+                let f = Form::from_name(form).ok_or_else(|| {
+                    bad(format!(
+                        "unknown form '{form}' (known: {})",
+                        Form::ALL
+                            .map(|f| format!("{} of {}", f.name(), f.effect().name()))
+                            .join(", ")
+                    ))
+                })?;
+                if f.effect().name() != entry.name {
+                    return Err(bad(format!(
+                        "form {form} belongs to {}, not {}",
+                        f.effect().name(),
+                        entry.name
+                    )));
+                }
+                registry.iter().position(|t| t.form() == Some(f))
+            }
+            None => registry
+                .iter()
+                .position(|t| t.form().is_none() && t.name == entry.name),
+        }
+        .ok_or_else(|| bad("no such term".into()))?;
+        let term = &registry[t];
+        let mut x = term.start_point();
+        for (k, &v) in &entry.params {
+            let c = term
+                .params
+                .iter()
+                .position(|p| &p.key == k)
+                .ok_or_else(|| {
+                    bad(format!(
+                        "no parameter {k} (it takes {})",
+                        term.params
+                            .iter()
+                            .map(|p| p.key.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
+            let p = &term.params[c];
+            if !(v.is_finite() && v >= p.bounds.0 && v <= p.bounds.1) {
+                return Err(bad(format!(
+                    "{k} = {v} is outside its bounds [{}, {}]",
+                    p.bounds.0, p.bounds.1
+                )));
+            }
+            x[c] = p.to_fit(v);
+        }
+        idx.push(t);
+        coords.push(x);
+    }
+    Ok((idx, coords))
 }
 
 /// 95 % intervals of `effect`'s parameters in `fit`, in reported units.
@@ -333,19 +484,110 @@ fn intervals(effect: Effect, fit: &Fit, thermal: ThermalDriver) -> BTreeMap<Stri
     out
 }
 
+/// 95 % interval of a term's first linear coordinate in `fit`.
+fn term_intervals(points: &TestPoints, t: usize, fit: &Fit) -> BTreeMap<String, [f64; 2]> {
+    let mut out = BTreeMap::new();
+    let Some(pos) = fit.spec.terms.iter().position(|&x| x == t) else {
+        return out;
+    };
+    let term = &points.terms[t];
+    if let Some(c) = term.params.iter().position(|p| !p.log)
+        && let Some(se) = fit.term_std_error(pos, c)
+    {
+        let v = fit.term_x[pos][c];
+        out.insert(term.params[c].key.clone(), [v - 1.96 * se, v + 1.96 * se]);
+    }
+    out
+}
+
+/// The reported parameters of `cand` in `fit`.
+fn cand_params(
+    points: &TestPoints,
+    cand: Cand,
+    fit: &Fit,
+    thermal: ThermalDriver,
+) -> BTreeMap<String, f64> {
+    match cand {
+        Cand::Effect(e) => library::report_params(e, &fit.model.effects, thermal),
+        Cand::Term(t) => fit
+            .spec
+            .terms
+            .iter()
+            .position(|&x| x == t)
+            .map(|pos| points.terms[t].report(&fit.term_x[pos]))
+            .unwrap_or_default(),
+    }
+}
+
+/// The intervals of `cand`'s parameters in `fit`.
+fn cand_intervals(
+    points: &TestPoints,
+    cand: Cand,
+    fit: &Fit,
+    thermal: ThermalDriver,
+) -> BTreeMap<String, [f64; 2]> {
+    match cand {
+        Cand::Effect(e) => intervals(e, fit, thermal),
+        Cand::Term(t) => term_intervals(points, t, fit),
+    }
+}
+
+/// What `cand` means in `fit`.
+fn cand_description(points: &TestPoints, cand: Cand, fit: &Fit, thermal: ThermalDriver) -> String {
+    match cand {
+        Cand::Effect(e) => library::describe(e, &fit.model.effects, thermal),
+        Cand::Term(t) => fit
+            .spec
+            .terms
+            .iter()
+            .position(|&x| x == t)
+            .map(|pos| points.terms[t].describe(&fit.term_x[pos]))
+            .unwrap_or_default(),
+    }
+}
+
+/// One row per effect: an effect's laws (its own and its family forms) are one candidate,
+/// shown by its best law (the rows come best first); the row's BIC weight is the family's.
+fn merge_by_name(rows: Vec<CandidateReport>) -> Vec<CandidateReport> {
+    let mut out: Vec<CandidateReport> = Vec::new();
+    for row in rows {
+        match out.iter_mut().find(|r| r.name == row.name) {
+            Some(kept) => {
+                if let (Some(a), Some(b)) = (kept.bic_weight, row.bic_weight) {
+                    kept.bic_weight = Some(a + b);
+                }
+            }
+            None => out.push(row),
+        }
+    }
+    out
+}
+
+/// A label of `cand` with its form, for lists of models.
+fn cand_label(points: &TestPoints, cand: Cand) -> String {
+    match cand.form(points) {
+        Some(f) => format!("{} ({f})", cand.name(points)),
+        None => cand.name(points).to_string(),
+    }
+}
+
 fn candidate_report(
+    points: &TestPoints,
     c: &select::Candidate,
     thermal: ThermalDriver,
     weight: Option<f64>,
     inclusion: Option<f64>,
 ) -> CandidateReport {
+    let name = c.cand.name(points).to_string();
+    let form = c.cand.form(points).map(str::to_string);
     match &c.fit {
         Some(f) => CandidateReport {
-            name: c.effect.name().to_string(),
+            name,
+            form,
             applicable: true,
             note: None,
-            params: library::report_params(c.effect, &f.model.effects, thermal),
-            intervals: intervals(c.effect, f, thermal),
+            params: cand_params(points, c.cand, f, thermal),
+            intervals: cand_intervals(points, c.cand, f, thermal),
             delta_bic: Some(-c.improvement),
             rmse_a: Some(f.rmse()),
             holdout_rmse_a: c.held_out.map(|h| h.rmse),
@@ -353,7 +595,8 @@ fn candidate_report(
             inclusion_probability: inclusion,
         },
         None if c.estimated => CandidateReport {
-            name: c.effect.name().to_string(),
+            name,
+            form,
             applicable: true,
             note: Some(
                 "not fitted: on large data only the leaders of the score test are; delta_bic is the score-test estimate".into(),
@@ -367,7 +610,8 @@ fn candidate_report(
             inclusion_probability: inclusion,
         },
         None => CandidateReport {
-            name: c.effect.name().to_string(),
+            name,
+            form,
             applicable: false,
             note: c.not_applicable.map(str::to_string),
             params: BTreeMap::new(),
@@ -463,17 +707,32 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         why,
     })?;
     let mut warnings = robust::check_rig(rig)?;
+    let registry = term_registry(rig)?;
+    let (known_terms, known_x) = known_terms(rig, &registry)?;
     let spec = ModelSpec {
         effects: known.clone(),
+        terms: known_terms.clone(),
     };
-    let (points, outliers, data_warnings) = screened_points(data, rig, &spec, &start, options)?;
+    let base_spec = ModelSpec {
+        effects: known.clone(),
+        terms: Vec::new(),
+    };
+    let (mut points, outliers, data_warnings) =
+        screened_points(data, rig, &base_spec, &start, options)?;
+    points.terms = registry;
+    check_user_terms(&points, &start)?;
     warnings.extend(data_warnings);
-    let selection = select::select(&points, &spec, &start, options);
+    let selection = select::select_from(&points, &spec, &start, &known_x, options);
     let boot = bootstrap::bootstrap(&points, &selection, options);
-    let inclusion = |e: Effect| boot.as_ref().map(|b| b.inclusion(e));
     let thermal = points.thermal;
     let before = selection.start.clone();
     let after = selection.end.clone();
+    let name_of = |c: &Cand| c.name(&points).to_string();
+    // Inclusion of an effect by name: in any of its laws.
+    let inclusion_of = |name: &str| {
+        boot.as_ref()
+            .map(|b| b.share(|s| s.iter().any(|c| c.name(&points) == name)))
+    };
 
     // BIC weights of every step's models, and of every model fitted.
     let mut current_bic = before.bic;
@@ -485,12 +744,12 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         for c in &step.candidates {
             if let Some(f) = &c.fit {
                 let mut effects = path.clone();
-                effects.push(c.effect.name().to_string());
+                effects.push(cand_label(&points, c.cand));
                 all_models.push((effects, f.bic));
             }
         }
         if let (true, Some(b)) = (step.accepted, step.best()) {
-            path.push(b.effect.name().to_string());
+            path.push(cand_label(&points, b.cand));
             current_bic = b.fit.as_ref().map_or(current_bic, |f| f.bic);
         }
     }
@@ -516,37 +775,56 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     {
         let best = step.best().expect("an accepted step has a best candidate");
         let f = best.fit.as_ref().expect("fitted");
+        let in_final = best.cand.in_spec(&after.spec);
+        let source = if in_final { &after } else { f };
         effects.push(EffectReport {
-            name: best.effect.name().to_string(),
-            params: library::report_params(best.effect, &after.model.effects, thermal),
-            intervals: if after.spec.has(best.effect) {
-                intervals(best.effect, &after, thermal)
-            } else {
-                intervals(best.effect, f, thermal)
-            },
+            name: name_of(&best.cand),
+            form: best.cand.form(&points).map(str::to_string),
+            params: cand_params(&points, best.cand, source, thermal),
+            intervals: cand_intervals(&points, best.cand, source, thermal),
             delta_bic: -best.improvement,
             p_value: step.p_value,
             holdout_rmse_a: best.held_out.map(|h| h.rmse),
-            description: library::describe(best.effect, &after.model.effects, thermal),
-            inclusion_probability: inclusion(best.effect),
-            bic_weight: weights_by_step[k][0].unwrap_or(0.0),
+            description: cand_description(&points, best.cand, source, thermal),
+            inclusion_probability: inclusion_of(best.cand.name(&points)),
+            // The effect's weight: all its laws'.
+            bic_weight: step
+                .candidates
+                .iter()
+                .zip(&weights_by_step[k])
+                .filter(|(c, _)| c.cand.name(&points) == best.cand.name(&points))
+                .filter_map(|(_, w)| *w)
+                .sum(),
         });
     }
     let named = selection.added();
-    // A competitor selected instead of a named effect in enough replicates: ambiguous.
-    let traits = points.traits();
-    let competitors: Vec<Effect> = Effect::ALL
-        .into_iter()
-        .filter(|e| !after.spec.has(*e) && library::not_applicable(*e, &traits).is_none())
+    let named_names: Vec<String> = named.iter().map(name_of).collect();
+    let known_names: Vec<String> = known
+        .iter()
+        .map(|e| e.name().to_string())
+        .chain(known_terms.iter().map(|&t| points.terms[t].name.clone()))
         .collect();
-    let rivals_of = |e: Effect| -> Vec<Effect> {
+    // Competitors by name: every applicable effect (any law) not named and not loaded.
+    let traits = points.traits();
+    let mut competitors: Vec<String> = select::pending(&points, &ModelSpec::base())
+        .into_iter()
+        .filter(|c| c.not_applicable(&points, &traits).is_none())
+        .map(|c| name_of(&c))
+        .filter(|n| !named_names.contains(n) && !known_names.contains(n))
+        .collect();
+    competitors.dedup();
+    competitors.sort();
+    competitors.dedup();
+    // A competitor selected instead of a named effect in enough replicates: ambiguous.
+    let rivals_of = |name: &str| -> Vec<String> {
         let Some(b) = &boot else {
             return Vec::new();
         };
-        let mut r: Vec<(Effect, f64)> = competitors
+        let has = |s: &[Cand], n: &str| s.iter().any(|c| c.name(&points) == n);
+        let mut r: Vec<(String, f64)> = competitors
             .iter()
-            .map(|&c| (c, b.share(|s| s.contains(&c) && !s.contains(&e))))
-            .filter(|&(_, share)| share >= options.ambiguity_share)
+            .map(|c| (c.clone(), b.share(|s| has(s, c) && !has(s, name))))
+            .filter(|(_, share)| *share >= options.ambiguity_share)
             .collect();
         r.sort_by(|a, b| b.1.total_cmp(&a.1));
         r.into_iter().map(|(c, _)| c).collect()
@@ -554,14 +832,14 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     // The verdict turns on the leading finding; rivals of later effects are listed with
     // their step.
     let mut ambiguous_candidates = Vec::new();
-    if let Some(&e) = named.first() {
-        let rivals = rivals_of(e);
+    if let Some(first) = named_names.first() {
+        let rivals = rivals_of(first);
         if !rivals.is_empty() {
-            ambiguous_candidates = std::iter::once(e)
+            ambiguous_candidates = std::iter::once(first.clone())
                 .chain(rivals)
                 .map(|c| AmbiguousCandidate {
-                    name: c.name().to_string(),
-                    probability: inclusion(c).unwrap_or(0.0),
+                    probability: inclusion_of(&c).unwrap_or(0.0),
+                    name: c,
                 })
                 .collect();
         }
@@ -578,12 +856,11 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         Verdict::Explained
     };
     let mut inclusion_probabilities = BTreeMap::new();
-    if let Some(b) = &boot {
-        for e in Effect::ALL {
-            if known.contains(&e) || library::not_applicable(e, &traits).is_some() {
-                continue;
+    if boot.is_some() {
+        for name in competitors.iter().chain(&named_names) {
+            if let Some(p) = inclusion_of(name) {
+                inclusion_probabilities.insert(name.clone(), p);
             }
-            inclusion_probabilities.insert(e.name().to_string(), b.inclusion(e));
         }
     }
     let steps: Vec<StepReport> = selection
@@ -591,29 +868,38 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         .iter()
         .zip(&weights_by_step)
         .map(|(s, w)| StepReport {
-            best: s.best().map(|c| c.effect.name().to_string()),
+            best: s.best().map(|c| name_of(&c.cand)),
             accepted: s.accepted,
             p_value: s.p_value,
             reason: s.reason.clone(),
             ambiguous_with: match s.best() {
-                Some(b) if s.accepted => rivals_of(b.effect)
-                    .iter()
-                    .map(|e| e.name().to_string())
-                    .collect(),
+                Some(b) if s.accepted => rivals_of(b.cand.name(&points)),
                 _ => Vec::new(),
             },
             critical_delta_bic: -s.critical,
-            candidates: s
-                .candidates
-                .iter()
-                .zip(w)
-                .map(|(c, &w)| candidate_report(c, thermal, w, inclusion(c.effect)))
-                .collect(),
+            candidates: merge_by_name(
+                s.candidates
+                    .iter()
+                    .zip(w)
+                    .map(|(c, &w)| {
+                        candidate_report(&points, c, thermal, w, inclusion_of(c.cand.name(&points)))
+                    })
+                    .collect(),
+            ),
         })
         .collect();
     let gap_before = gap::gap(&points, &before);
     let gap_after = gap::gap(&points, &after);
-    let mut residuals = points.row_view.residuals(&after.model.evaluator());
+    let mut residuals: Vec<f64> = {
+        let f = after.predict_rows(&points);
+        points
+            .row_view
+            .current
+            .iter()
+            .zip(f)
+            .map(|(y, f)| y - f)
+            .collect()
+    };
     let robust_sigma_a = robust::robust_scale(&mut residuals);
     drop(residuals);
     let bootstrap = boot.as_ref().map(|b| BootstrapReport {
@@ -626,7 +912,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             .into_iter()
             .take(5)
             .map(|(set, share)| BootstrapSet {
-                effects: set.iter().map(|e| e.name().to_string()).collect(),
+                effects: set.iter().map(|c| cand_label(&points, *c)).collect(),
                 share,
             })
             .collect(),
@@ -656,7 +942,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         mu_after: after.model.mu,
         rows: points.n_rows,
         held_rows: points.traits().held_rows,
-        known_effects: known.iter().map(|e| e.name().to_string()).collect(),
+        known_effects: known_names,
         candidates: steps
             .first()
             .map(|s| s.candidates.clone())

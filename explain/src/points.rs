@@ -18,6 +18,7 @@ use model::plant::NoiseSource;
 
 use super::data::Dataset;
 use super::library::{DataTraits, ThermalDriver};
+use super::terms::{Inputs, Term};
 
 /// Seed of the fold assignment, fixed so a run repeats exactly.
 const FOLD_SEED: u64 = 0x0f01_d5ee_d000_0006;
@@ -56,6 +57,10 @@ pub struct RowView {
     pub tau_rot: Vec<f64>,
     /// Thermal driver (see [`OperatingPoint::thermal`]).
     pub thermal: Vec<f64>,
+    /// Time since the first test, s (0 without a `t_s` column).
+    pub time_s: Vec<f64>,
+    /// Motor temperature, deg C (the calibration's without a `temp_c` column).
+    pub temp_c: Vec<f64>,
     /// Measured current, A.
     pub current: Vec<f64>,
     /// The fitting point the row belongs to.
@@ -165,6 +170,15 @@ pub struct TestPoints {
     pub pooled: bool,
     /// The rows, in time order.
     pub row_view: RowView,
+    /// Time of each point since the first test, s (0 without a `t_s` column).
+    pub time_s: Vec<f64>,
+    /// Motor temperature of each point, deg C (the calibration's without `temp_c`).
+    pub temp_c: Vec<f64>,
+    /// The points in time order.
+    pub time_order: Vec<usize>,
+    /// The term effects the selection may use ([`crate::terms`]); empty until
+    /// [`crate::explain`] sets them.
+    pub terms: Vec<Term>,
 }
 
 /// Groups `values` (with `weights`) into levels: sorted values split where the gap exceeds
@@ -237,6 +251,8 @@ struct Pool {
     thermal: f64,
     shift: f64,
     shift_sq: f64,
+    time: f64,
+    temp: f64,
     first_row: usize,
     block: u32,
 }
@@ -276,6 +292,10 @@ impl TestPoints {
             ThermalDriver::Unavailable => 0.0,
         };
         let (omega, tau, current) = (data.omega_n(), data.tau_rot(), data.i_in());
+        let time_of = |k: usize| t.map_or(0.0, |t| t[k] - t0);
+        let temp_of = |k: usize| data.temp_c().map_or(reference_c, |c| c[k]);
+        let mut time_s = Vec::new();
+        let mut temp_c = Vec::new();
 
         // Every kept row in time order (by t_s, else file order), and its bootstrap block.
         let mut order: Vec<u32> = (0..data.len() as u32)
@@ -319,6 +339,8 @@ impl TestPoints {
                 within_ss.push(0.0);
                 rows.push(k);
                 block.push(block_of_row[k]);
+                time_s.push(time_of(k));
+                temp_c.push(temp_of(k));
             }
         } else {
             let ev = reference.evaluator();
@@ -378,6 +400,8 @@ impl TestPoints {
                 p.thermal += x;
                 p.shift += shift;
                 p.shift_sq += shift * shift;
+                p.time += time_of(k);
+                p.temp += temp_of(k);
             }
             for p in &pools {
                 let n = p.count;
@@ -389,6 +413,8 @@ impl TestPoints {
                 within_ss.push((p.shift_sq - n * mean_shift * mean_shift).max(0.0));
                 rows.push(p.first_row);
                 block.push(p.block);
+                time_s.push(p.time / n);
+                temp_c.push(p.temp / n);
             }
         }
         let n = ops.len();
@@ -453,6 +479,8 @@ impl TestPoints {
         row_view.omega_n = timed.iter().map(|&k| omega[k]).collect();
         row_view.tau_rot = timed.iter().map(|&k| tau[k]).collect();
         row_view.thermal = timed.iter().map(|&k| x_of(k)).collect();
+        row_view.time_s = timed.iter().map(|&k| time_of(k)).collect();
+        row_view.temp_c = timed.iter().map(|&k| temp_of(k)).collect();
         if thermal != ThermalDriver::Unavailable {
             row_view.thermal_bin = quantile_bins(&row_view.thermal, THERMAL_BINS);
         }
@@ -520,7 +548,13 @@ impl TestPoints {
             }
             _ => Vec::new(),
         };
+        let mut time_order: Vec<usize> = (0..n).collect();
+        time_order.sort_by(|&a, &b| time_s[a].total_cmp(&time_s[b]).then(a.cmp(&b)));
         Self {
+            time_s,
+            temp_c,
+            time_order,
+            terms: Vec::new(),
             ops,
             current: cur,
             weight,
@@ -574,6 +608,16 @@ impl TestPoints {
     /// Points outside fold `f` (training) and inside it (held out).
     pub fn split(&self, f: usize) -> (Vec<usize>, Vec<usize>) {
         (0..self.len()).partition(|&k| self.fold[k] != f)
+    }
+
+    /// The points' conditions, for evaluating terms.
+    pub fn inputs(&self) -> Inputs<'_> {
+        Inputs {
+            ops: &self.ops,
+            time: &self.time_s,
+            temp: &self.temp_c,
+            order: &self.time_order,
+        }
     }
 
     /// Rows behind the points of `subset`.

@@ -1,7 +1,8 @@
 //! Forward selection of missing effects.
 //!
-//! Each step fits every applicable candidate jointly with the current model and ranks them by
-//! the BIC improvement. The best is added only when
+//! Each step fits every applicable candidate (a library effect in its own law, a family form
+//! of one, or a user effect: [`Cand`]) jointly with the current model and ranks them by the
+//! BIC improvement. The best is added only when
 //! 1. its BIC improvement is positive,
 //! 2. it beats the null distribution of the best improvement over all candidates (a guard
 //!    against false discovery: a parametric bootstrap of the score statistics, drawn from the
@@ -18,11 +19,11 @@
 //! Which candidates the data cannot tell apart is judged by the block bootstrap of the whole
 //! selection ([`crate::bootstrap`]).
 
-use model::effects::{CurrentModel, Effect, Param};
+use model::effects::{CurrentModel, Effect};
 use model::plant::NoiseSource;
 
-use super::fit::{self, Fit, HeldOut, ModelSpec};
-use super::library;
+use super::fit::{self, Column, Fit, HeldOut, ModelSpec};
+use super::library::{self, DataTraits};
 use super::points::TestPoints;
 use super::stats;
 
@@ -69,11 +70,116 @@ impl Default for Options {
     }
 }
 
+/// A candidate effect: a library effect in its own law, or a term ([`TestPoints::terms`]: a
+/// family form of a library effect or a user effect).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Cand {
+    /// A library effect in its own law.
+    Effect(Effect),
+    /// A term.
+    Term(usize),
+}
+
+impl Cand {
+    /// The name reports give it (a family form has its library effect's).
+    pub fn name<'a>(&self, points: &'a TestPoints) -> &'a str {
+        match *self {
+            Cand::Effect(e) => e.name(),
+            Cand::Term(t) => &points.terms[t].name,
+        }
+    }
+
+    /// The library effect it is a law of, if any.
+    pub fn effect(&self, points: &TestPoints) -> Option<Effect> {
+        match *self {
+            Cand::Effect(e) => Some(e),
+            Cand::Term(t) => points.terms[t].effect(),
+        }
+    }
+
+    /// The family form's name, for a family member.
+    pub fn form(&self, points: &TestPoints) -> Option<&'static str> {
+        match *self {
+            Cand::Effect(_) => None,
+            Cand::Term(t) => points.terms[t].form().map(|f| f.name()),
+        }
+    }
+
+    /// Why the data cannot show it, or `None`.
+    pub fn not_applicable(&self, points: &TestPoints, traits: &DataTraits) -> Option<&'static str> {
+        match *self {
+            Cand::Effect(e) => library::not_applicable(e, traits),
+            Cand::Term(t) => points.terms[t].not_applicable(traits),
+        }
+    }
+
+    /// Parameters it adds to the likelihood.
+    pub fn parameter_count(&self, points: &TestPoints) -> usize {
+        match *self {
+            Cand::Effect(e) => library::parameter_count(e),
+            Cand::Term(t) => points.terms[t].parameter_count(),
+        }
+    }
+
+    /// Its BIC penalty for `n` rows.
+    pub fn penalty(&self, points: &TestPoints, n: f64) -> f64 {
+        match *self {
+            Cand::Effect(e) => library::parameter_count(e) as f64 * n.ln(),
+            Cand::Term(t) => points.terms[t].penalty(n),
+        }
+    }
+
+    /// Whether `spec` carries it.
+    pub fn in_spec(&self, spec: &ModelSpec) -> bool {
+        match *self {
+            Cand::Effect(e) => spec.has(e),
+            Cand::Term(t) => spec.terms.contains(&t),
+        }
+    }
+
+    /// `spec` with it added.
+    pub fn added_to(&self, spec: &ModelSpec) -> ModelSpec {
+        match *self {
+            Cand::Effect(e) => spec.with(e),
+            Cand::Term(t) => spec.with_term(t),
+        }
+    }
+}
+
+/// Whether `spec` already carries library effect `e` in some law (its own or a form).
+fn carries(points: &TestPoints, spec: &ModelSpec, e: Effect) -> bool {
+    spec.has(e)
+        || spec
+            .terms
+            .iter()
+            .any(|&t| points.terms[t].effect() == Some(e))
+}
+
+/// The candidates `spec` does not carry yet (applicable or not): every library effect not in
+/// it in any law, every family form of those, every user effect not in it.
+pub fn pending(points: &TestPoints, spec: &ModelSpec) -> Vec<Cand> {
+    let mut out: Vec<Cand> = Effect::ALL
+        .into_iter()
+        .filter(|&e| !carries(points, spec, e))
+        .map(Cand::Effect)
+        .collect();
+    for (t, term) in points.terms.iter().enumerate() {
+        let free = match term.effect() {
+            Some(e) => !carries(points, spec, e),
+            None => !spec.terms.contains(&t),
+        };
+        if free {
+            out.push(Cand::Term(t));
+        }
+    }
+    out
+}
+
 /// One candidate at one step.
 #[derive(Debug, Clone)]
 pub struct Candidate {
-    /// The effect.
-    pub effect: Effect,
+    /// The candidate.
+    pub cand: Cand,
     /// Why it cannot show in this data, if it cannot.
     pub not_applicable: Option<&'static str>,
     /// Its joint fit with the current model.
@@ -128,22 +234,22 @@ pub struct Selection {
 }
 
 impl Selection {
-    /// Effects added, strongest (first added) first.
-    pub fn added(&self) -> Vec<Effect> {
+    /// Candidates added, strongest (first added) first.
+    pub fn added(&self) -> Vec<Cand> {
         self.steps
             .iter()
             .filter(|s| s.accepted)
-            .filter_map(|s| s.best().map(|c| c.effect))
+            .filter_map(|s| s.best().map(|c| c.cand))
             .collect()
     }
 }
 
-/// Fits `effect` jointly with `current`, from a start with the effect at zero.
-fn fit_candidate(points: &TestPoints, current: &Fit, effect: Effect) -> Fit {
+/// Fits library effect `effect` jointly with `current`, from a start with the effect at zero.
+fn fit_effect(points: &TestPoints, current: &Fit, effect: Effect) -> Fit {
     let spec = current.spec.with(effect);
     let mut start = current.model;
     library::clear_params(effect, &mut start.effects);
-    let first = fit::fit(points, &points.all, &spec, &start);
+    let first = fit::fit_from(points, &points.all, &spec, &start, &current.term_x);
     // The nonlinear effects get a second start away from zero and the better fit wins; on
     // large data only when the first start stalled at zero or did not converge.
     let stalled = effect
@@ -168,7 +274,7 @@ fn fit_candidate(points: &TestPoints, current: &Fit, effect: Effect) -> Fit {
                 .expect("nonlinear effects are mean effects");
             p[q.index()] = v;
             start.set_params(&p);
-            let second = fit::fit(points, &points.all, &spec, &start);
+            let second = fit::fit_from(points, &points.all, &spec, &start, &current.term_x);
             if second.bic < first.bic {
                 second
             } else {
@@ -179,28 +285,186 @@ fn fit_candidate(points: &TestPoints, current: &Fit, effect: Effect) -> Fit {
     }
 }
 
+/// The shape values a term's fit starts from and its score test looks along: its start, a
+/// third of it and three times it (for a term with one shape parameter, fitted in ln).
+fn shape_grid(points: &TestPoints, t: usize) -> Vec<Vec<f64>> {
+    let term = &points.terms[t];
+    let start = term.start_point();
+    let shapes: Vec<usize> = (0..term.params.len())
+        .filter(|&c| term.params[c].log)
+        .collect();
+    if shapes.len() != 1 {
+        return vec![start];
+    }
+    let c = shapes[0];
+    let (lo, hi) = term.params[c].fit_bounds();
+    [0.0, -3f64.ln(), 3f64.ln()]
+        .iter()
+        .map(|d| {
+            let mut x = start.clone();
+            x[c] = (x[c] + d).clamp(lo, hi);
+            x
+        })
+        .collect()
+}
+
+/// Fits term `t` jointly with `current` from each start of its shape grid; the best fit wins.
+fn fit_term(points: &TestPoints, current: &Fit, t: usize) -> Fit {
+    let spec = current.spec.with_term(t);
+    let grid = shape_grid(points, t);
+    let starts = |x: Vec<f64>| {
+        let mut starts = current.term_x.clone();
+        starts.push(x);
+        starts
+    };
+    if grid.len() == 1 {
+        let x = grid.into_iter().next().expect("one start");
+        return fit::fit_from(points, &points.all, &spec, &current.model, &starts(x));
+    }
+    // A few iterations from each start show which basin is best; the fit finishes there.
+    let best = grid
+        .into_iter()
+        .map(|x| {
+            fit::fit_capped(
+                points,
+                &points.all,
+                &spec,
+                &current.model,
+                &starts(x),
+                SHAPE_LOOK_ITERATIONS,
+            )
+        })
+        .min_by(|a, b| a.bic.total_cmp(&b.bic))
+        .expect("a shape grid has a start");
+    if best.converged {
+        return best;
+    }
+    fit::fit_from(points, &points.all, &spec, &best.model, &best.term_x)
+}
+
+/// Levenberg-Marquardt iterations from each start of a term's shape grid before the best
+/// one is followed to the end.
+const SHAPE_LOOK_ITERATIONS: usize = 4;
+
+/// Fits `cand` jointly with `current`.
+fn fit_candidate(points: &TestPoints, current: &Fit, cand: Cand) -> Fit {
+    match cand {
+        Cand::Effect(e) => fit_effect(points, current, e),
+        Cand::Term(t) => fit_term(points, current, t),
+    }
+}
+
+/// A subspace of score columns a candidate's effect can move along (one per shape of a term).
+#[derive(Debug, Clone)]
+struct Block {
+    /// Indices into the kept columns.
+    cols: Vec<usize>,
+    /// Inverse of their score covariance.
+    inv: Vec<f64>,
+    /// A single column whose null sits on its bound: only positive scores count.
+    one_sided: bool,
+}
+
+impl Block {
+    /// The approximate likelihood ratio of scores `u` (all kept columns).
+    fn lr(&self, u: &[f64]) -> f64 {
+        let b = self.cols.len();
+        if self.one_sided && b == 1 {
+            let v = u[self.cols[0]].max(0.0);
+            return v * v * self.inv[0];
+        }
+        let mut q = 0.0;
+        for x in 0..b {
+            for y in 0..b {
+                q += u[self.cols[x]] * self.inv[x * b + y] * u[self.cols[y]];
+            }
+        }
+        q.max(0.0)
+    }
+}
+
 /// Score tests of the candidates against the current model: the approximate likelihood ratio
-/// of each (from the scores projected past the fitted parameters) and their joint null
-/// distribution, for screening and for the false-discovery guard.
+/// of each (from the scores projected past the fitted unknowns, the largest over its
+/// blocks) and their joint null distribution, for screening and for the false-discovery
+/// guard.
 struct ScoreTests {
     /// Approximate likelihood ratio per mean candidate (`None`: no direction of its own).
     lr: Vec<Option<f64>>,
     /// Approximate likelihood ratio of the ripple variance.
     ripple_lr: f64,
-    /// Identifiable mean candidates (indices into the candidate list).
-    keep: Vec<usize>,
-    /// Cholesky factor of their score correlation.
+    /// The candidates' blocks.
+    blocks: Vec<Vec<Block>>,
+    /// Kept columns and the Cholesky factor of their score covariance.
+    q: usize,
     chol: Vec<f64>,
 }
 
-fn score_tests(points: &TestPoints, current: &Fit, mean: &[Effect]) -> ScoreTests {
-    let extra: Vec<Param> = mean.iter().filter_map(|e| e.mean_param()).collect();
-    let p = current.free.len();
+/// The score columns of a mean candidate: blocks of (column, one-sided) lists.
+fn columns_of(points: &TestPoints, cand: Cand) -> Vec<Vec<(Column, bool)>> {
+    match cand {
+        Cand::Effect(e) => match e.mean_param() {
+            Some(q) => vec![vec![(Column::Param(q), library::one_sided(e))]],
+            None => Vec::new(),
+        },
+        Cand::Term(t) => {
+            let term = &points.terms[t];
+            let linear: Vec<usize> = (0..term.params.len())
+                .filter(|&c| !term.params[c].log)
+                .collect();
+            let single_one_sided = linear.len() == 1 && {
+                let p = &term.params[linear[0]];
+                p.null <= p.bounds.0
+            };
+            shape_grid(points, t)
+                .into_iter()
+                .map(|mut at| {
+                    for &c in &linear {
+                        at[c] = term.params[c].to_fit(term.params[c].null);
+                    }
+                    linear
+                        .iter()
+                        .map(|&c| {
+                            (
+                                Column::Term {
+                                    term: t,
+                                    coord: c,
+                                    at: at.clone(),
+                                },
+                                single_one_sided,
+                            )
+                        })
+                        .collect()
+                })
+                .collect()
+        }
+    }
+}
+
+fn score_tests(points: &TestPoints, current: &Fit, mean: &[Cand]) -> ScoreTests {
+    let layout: Vec<Vec<Vec<(Column, bool)>>> =
+        mean.iter().map(|&c| columns_of(points, c)).collect();
+    let mut extra: Vec<Column> = Vec::new();
+    let mut where_: Vec<Vec<(Vec<usize>, bool)>> = Vec::new();
+    for blocks in &layout {
+        let mut out = Vec::new();
+        for block in blocks {
+            let mut idx = Vec::new();
+            let mut one = false;
+            for (col, one_sided) in block {
+                idx.push(extra.len());
+                extra.push(col.clone());
+                one = *one_sided;
+            }
+            out.push((idx, one));
+        }
+        where_.push(out);
+    }
+    let sc = fit::scores(points, current, &extra);
+    let p = sc.own;
     let k = extra.len();
     let m = p + k;
-    let sc = fit::scores(points, current, &extra);
     let gram = &sc.gram;
-    // Schur complement: the candidates' scores after projecting out the fitted parameters.
+    // Schur complement: the candidates' scores after projecting out the fitted unknowns.
     let gff: Vec<f64> = (0..p)
         .flat_map(|i| (0..p).map(move |j| (i, j)))
         .map(|(i, j)| {
@@ -213,60 +477,90 @@ fn score_tests(points: &TestPoints, current: &Fit, mean: &[Effect]) -> ScoreTest
         })
         .collect();
     let inv = stats::invert_spd(&gff, p).unwrap_or_else(|| vec![0.0; p * p]);
+    // G_eo G_oo^-1, k x p.
+    let mut proj = vec![0.0; k * p];
+    for a in 0..k {
+        for j in 0..p {
+            proj[a * p + j] = (0..p).map(|i| gram[(p + a) * m + i] * inv[i * p + j]).sum();
+        }
+    }
     let mut schur = vec![0.0; k * k];
     let mut projected = vec![0.0; k];
     for a in 0..k {
-        let mut u = sc.score[p + a];
-        for i in 0..p {
-            for j in 0..p {
-                u -= gram[(p + a) * m + i] * inv[i * p + j] * sc.score[j];
-            }
-        }
-        projected[a] = u;
+        projected[a] = sc.score[p + a] - (0..p).map(|j| proj[a * p + j] * sc.score[j]).sum::<f64>();
         for b in 0..k {
-            let mut v = gram[(p + a) * m + p + b];
-            for i in 0..p {
-                for j in 0..p {
-                    v -= gram[(p + a) * m + i] * inv[i * p + j] * gram[j * m + p + b];
-                }
-            }
-            schur[a * k + b] = v;
+            schur[a * k + b] = gram[(p + a) * m + p + b]
+                - (0..p)
+                    .map(|j| proj[a * p + j] * gram[j * m + p + b])
+                    .sum::<f64>();
         }
     }
     let identifiable =
         |a: usize| schur[a * k + a] > 1e-9 * gram[(p + a) * m + p + a].abs().max(1e-300);
     let keep: Vec<usize> = (0..k).filter(|&a| identifiable(a)).collect();
-    let lr = (0..k)
-        .map(|a| {
-            identifiable(a).then(|| {
-                let u = projected[a];
-                let u = if library::one_sided(mean[a]) {
-                    u.max(0.0)
-                } else {
-                    u
-                };
-                u * u / schur[a * k + a]
-            })
-        })
-        .collect();
+    let position = |a: usize| keep.iter().position(|&x| x == a);
     let q = keep.len();
+    let u: Vec<f64> = keep.iter().map(|&a| projected[a]).collect();
+    let mut blocks = Vec::new();
+    let mut lr = Vec::new();
+    for cand_blocks in &where_ {
+        let mut bs = Vec::new();
+        for (idx, one_sided) in cand_blocks {
+            let cols: Vec<usize> = idx.iter().filter_map(|&a| position(a)).collect();
+            if cols.is_empty() {
+                continue;
+            }
+            let b = cols.len();
+            let sub: Vec<f64> = cols
+                .iter()
+                .flat_map(|&x| cols.iter().map(move |&y| (x, y)))
+                .map(|(x, y)| {
+                    schur[keep[x] * k + keep[y]]
+                        + if x == y {
+                            1e-9 * schur[keep[x] * k + keep[x]]
+                        } else {
+                            0.0
+                        }
+                })
+                .collect();
+            if let Some(inv) = stats::invert_spd(&sub, b) {
+                bs.push(Block {
+                    cols,
+                    inv,
+                    one_sided: *one_sided,
+                });
+            }
+        }
+        lr.push(
+            bs.iter()
+                .map(|b| b.lr(&u))
+                .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v)))),
+        );
+        blocks.push(bs);
+    }
     let mut cov = vec![0.0; q * q];
     for (x, &a) in keep.iter().enumerate() {
         for (y, &b) in keep.iter().enumerate() {
-            let s = (schur[a * k + a] * schur[b * k + b]).sqrt();
-            cov[x * q + y] = schur[a * k + b] / s + if x == y { 1e-9 } else { 0.0 };
+            cov[x * q + y] = schur[a * k + b] + if x == y { 1e-9 * schur[a * k + a] } else { 0.0 };
         }
     }
     let chol = stats::cholesky(&cov, q).unwrap_or_else(|| {
         // Numerically indefinite: treat the scores as independent.
         (0..q * q)
-            .map(|i| if i % (q + 1) == 0 { 1.0 } else { 0.0 })
+            .map(|i| {
+                if i % (q + 1) == 0 {
+                    cov[i].max(0.0).sqrt()
+                } else {
+                    0.0
+                }
+            })
             .collect()
     });
     ScoreTests {
         lr,
         ripple_lr: sc.ripple_z.max(0.0).powi(2),
-        keep,
+        blocks,
+        q,
         chol,
     }
 }
@@ -275,39 +569,31 @@ fn score_tests(points: &TestPoints, current: &Fit, mean: &[Effect]) -> ScoreTest
 /// when `ripple`): draws of the linearised score statistics under the current model with
 /// Gaussian noise.
 fn null_best_improvements(
+    points: &TestPoints,
     tests: &ScoreTests,
-    mean: &[Effect],
+    mean: &[Cand],
     ripple: bool,
     n: usize,
     draws: usize,
 ) -> Vec<f64> {
     let ln_n = (n as f64).ln();
-    let q = tests.keep.len();
+    let q = tests.q;
     let l = &tests.chol;
-    let one_sided: Vec<bool> = tests
-        .keep
-        .iter()
-        .map(|&a| library::one_sided(mean[a]))
-        .collect();
-    let penalty: Vec<f64> = tests
-        .keep
-        .iter()
-        .map(|&a| library::parameter_count(mean[a]) as f64 * ln_n)
-        .collect();
+    let penalty: Vec<f64> = mean.iter().map(|c| c.penalty(points, n as f64)).collect();
     let mut rng = NoiseSource::new(NULL_SEED);
     let mut z = vec![0.0; q];
+    let mut u = vec![0.0; q];
     (0..draws)
         .map(|_| {
             z.iter_mut().for_each(|v| *v = rng.normal());
-            let mut best = f64::NEG_INFINITY;
             for x in 0..q {
-                let u: f64 = (0..=x).map(|y| l[x * q + y] * z[y]).sum();
-                let lr = if one_sided[x] {
-                    u.max(0.0).powi(2)
-                } else {
-                    u * u
-                };
-                best = best.max(lr - penalty[x]);
+                u[x] = (0..=x).map(|y| l[x * q + y] * z[y]).sum();
+            }
+            let mut best = f64::NEG_INFINITY;
+            for (blocks, pen) in tests.blocks.iter().zip(&penalty) {
+                for b in blocks {
+                    best = best.max(b.lr(&u) - pen);
+                }
             }
             let zr = rng.normal();
             if ripple {
@@ -327,20 +613,21 @@ fn p_text(p: f64) -> String {
     }
 }
 
-/// Whether the held-out validation confirms adding `effect`.
+/// Whether the held-out validation confirms adding `effect` (a library effect's law or a
+/// term, `None`).
 fn confirmed(
-    effect: Effect,
+    effect: Option<Effect>,
     before: Option<HeldOut>,
     after: Option<HeldOut>,
     hold_gain: bool,
 ) -> (bool, String) {
     match (before, after) {
         (Some(b), Some(a)) => match effect {
-            Effect::MeshLoadSharingRipple => (
+            Some(Effect::MeshLoadSharingRipple) => (
                 a.nlpd < b.nlpd,
                 format!("held-out log score {:.3} -> {:.3}", -b.nlpd, -a.nlpd),
             ),
-            Effect::LinearBushFriction if hold_gain => (
+            Some(Effect::LinearBushFriction) if hold_gain => (
                 a.rmse <= 1.01 * b.rmse,
                 format!(
                     "explains non-backdriven points; held-out RMSE {:.1} -> {:.1} mA",
@@ -399,31 +686,30 @@ fn critical_value(null: &[f64], alpha: f64) -> f64 {
 pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Explored> {
     let traits = points.traits();
     let full_table = points.len() <= FULL_TABLE_POINTS;
-    let applicable: Vec<Effect> = Effect::ALL
+    let applicable: Vec<Cand> = pending(points, &current.spec)
         .into_iter()
-        .filter(|e| !current.spec.has(*e))
-        .filter(|&e| library::not_applicable(e, &traits).is_none())
+        .filter(|c| c.not_applicable(points, &traits).is_none())
         .collect();
     if applicable.is_empty() {
         return None;
     }
-    let mean: Vec<Effect> = applicable
+    let ripple_cand = Cand::Effect(Effect::MeshLoadSharingRipple);
+    let mean: Vec<Cand> = applicable
         .iter()
         .copied()
-        .filter(|e| e.mean_param().is_some())
+        .filter(|c| *c != ripple_cand)
         .collect();
-    let ripple = applicable.contains(&Effect::MeshLoadSharingRipple);
+    let ripple = applicable.contains(&ripple_cand);
     let tests = score_tests(points, current, &mean);
-    let ln_n = (current.n as f64).ln();
     // Score-test estimate of each candidate's BIC improvement, for screening.
-    let estimate = |e: Effect| -> f64 {
-        let k = library::parameter_count(e) as f64 * ln_n;
-        if e == Effect::MeshLoadSharingRipple {
+    let estimate = |c: Cand| -> f64 {
+        let k = c.penalty(points, current.n as f64);
+        if c == ripple_cand {
             return tests.ripple_lr - k;
         }
-        let a = mean.iter().position(|&m| m == e).expect("a mean candidate");
+        let a = mean.iter().position(|&m| m == c).expect("a mean candidate");
         let mut lr = tests.lr[a].unwrap_or(0.0);
-        if e == Effect::LinearBushFriction && !points.holds.is_empty() {
+        if c == Cand::Effect(Effect::LinearBushFriction) && !points.holds.is_empty() {
             let (_, _, errors) = fit::fit_hold(&points.holds);
             let before = current.hold_errors as f64;
             lr += 2.0
@@ -432,20 +718,22 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
         }
         lr - k
     };
-    let mut ranked: Vec<(Effect, f64)> = applicable.iter().map(|&e| (e, estimate(e))).collect();
+    let mut ranked: Vec<(Cand, f64)> = applicable.iter().map(|&c| (c, estimate(c))).collect();
     ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let to_fit: Vec<Effect> = ranked
+    let to_fit: Vec<Cand> = ranked
         .iter()
         .enumerate()
-        .filter(|(i, (e, _))| full_table || *i < SCREEN_KEEP || *e == Effect::LinearBushFriction)
-        .map(|(_, (e, _))| *e)
+        .filter(|(i, (c, _))| {
+            full_table || *i < SCREEN_KEEP || *c == Cand::Effect(Effect::LinearBushFriction)
+        })
+        .map(|(_, (c, _))| *c)
         .collect();
-    let fits = fit::par_map(&to_fit, |&e| fit_candidate(points, current, e));
+    let fits = fit::par_map(&to_fit, |&c| fit_candidate(points, current, c));
     let mut candidates: Vec<Candidate> = to_fit
         .iter()
         .zip(fits)
-        .map(|(&effect, f)| Candidate {
-            effect,
+        .map(|(&cand, f)| Candidate {
+            cand,
             not_applicable: None,
             improvement: current.bic - f.bic,
             estimated: false,
@@ -455,10 +743,10 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
         .collect();
     candidates.sort_by(|a, b| b.improvement.total_cmp(&a.improvement));
     // The screened-out candidates follow with their estimates.
-    for &(e, est) in &ranked {
-        if !to_fit.contains(&e) {
+    for &(c, est) in &ranked {
+        if !to_fit.contains(&c) {
             candidates.push(Candidate {
-                effect: e,
+                cand: c,
                 not_applicable: None,
                 fit: None,
                 improvement: est,
@@ -467,7 +755,7 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
             });
         }
     }
-    let null = null_best_improvements(&tests, &mean, ripple, current.n, opts.null_draws);
+    let null = null_best_improvements(points, &tests, &mean, ripple, current.n, opts.null_draws);
     let critical = critical_value(&null, opts.alpha);
     let critical_influence = critical_value(&null, INFLUENCE_ALPHA.max(opts.alpha));
     Some(Explored {
@@ -490,6 +778,7 @@ struct PointParts {
 impl PointParts {
     fn of(points: &TestPoints, fit: &Fit) -> Self {
         let ev = fit.model.evaluator();
+        let predicted = fit.predict(points);
         let s2 = fit.sigma0 * fit.sigma0;
         let r = fit.model.effects.mesh_ripple_rms;
         let rho = if r > 0.0 && s2 > 0.0 { r * r / s2 } else { 0.0 };
@@ -498,9 +787,8 @@ impl PointParts {
             scaled_sse: Vec::with_capacity(points.len()),
             log_var: Vec::with_capacity(points.len()),
         };
-        for k in 0..points.len() {
-            let op = &points.ops[k];
-            let e = points.current[k] - ev.current(op);
+        for (k, (op, pred)) in points.ops.iter().zip(predicted.iter()).enumerate() {
+            let e = points.current[k] - pred;
             let n = points.weight[k];
             let v = if rho > 0.0 {
                 let f = ev.friction_current(op);
@@ -540,6 +828,7 @@ fn improvement_without_top_point(points: &TestPoints, current: &Fit, with: &Fit)
     let b = PointParts::of(points, with);
     let (ta, tb) = (a.totals(), b.totals());
     let dk = (with.k as f64 - current.k as f64).max(0.0);
+    let dshapes = (with.shapes as f64 - current.shapes as f64).max(0.0);
     let mut worst = (f64::INFINITY, 0usize);
     for k in 0..points.len() {
         let n = ta.0 - a.rows[k];
@@ -550,7 +839,8 @@ fn improvement_without_top_point(points: &TestPoints, current: &Fit, with: &Fit)
             * (b.loglik_without(tb, k) + with.loglik_hold
                 - a.loglik_without(ta, k)
                 - current.loglik_hold)
-            - dk * n.ln();
+            - (dk - dshapes) * n.ln()
+            - dshapes * crate::terms::SHAPE_PENALTY;
         if gain < worst.0 {
             worst = (gain, k);
         }
@@ -558,28 +848,43 @@ fn improvement_without_top_point(points: &TestPoints, current: &Fit, with: &Fit)
     worst
 }
 
-/// Forward selection from the model `spec` started at `start`.
+/// Forward selection from the model `spec` started at `start` (its terms at their first
+/// starts).
 pub fn select(
     points: &TestPoints,
     spec: &ModelSpec,
     start: &CurrentModel,
     opts: &Options,
 ) -> Selection {
+    let starts: Vec<Vec<f64>> = spec
+        .terms
+        .iter()
+        .map(|&t| points.terms[t].start_point())
+        .collect();
+    select_from(points, spec, start, &starts, opts)
+}
+
+/// Forward selection from the model `spec` started at `start` and its terms at
+/// `start_terms`.
+pub fn select_from(
+    points: &TestPoints,
+    spec: &ModelSpec,
+    start: &CurrentModel,
+    start_terms: &[Vec<f64>],
+    opts: &Options,
+) -> Selection {
     let traits = points.traits();
-    let first = fit::fit(points, &points.all, spec, start);
+    let first = fit::fit_from(points, &points.all, spec, start, start_terms);
     // Refit from the first fit so a loaded model and a selected one end at the same optimum.
-    let mut current = fit::fit(points, &points.all, spec, &first.model);
+    let mut current = fit::fit_from(points, &points.all, spec, &first.model, &first.term_x);
     let start_fit = current.clone();
-    let start_held_out = fit::held_out(points, spec, &current.model);
+    let start_held_out = fit::held_out(points, spec, &current.model, &current.term_x);
     let mut current_held_out = start_held_out;
     let mut steps = Vec::new();
     let full_table = points.len() <= FULL_TABLE_POINTS;
 
     while current.spec.effects.len() < opts.max_effects {
-        let pending: Vec<Effect> = Effect::ALL
-            .into_iter()
-            .filter(|e| !current.spec.has(*e))
-            .collect();
+        let pending = pending(points, &current.spec);
         let Some(Explored {
             mut candidates,
             null,
@@ -602,7 +907,7 @@ pub fn select(
         let scores = fit::par_map(&scored, |&i| {
             let c = &candidates[i];
             let f = c.fit.as_ref().expect("filtered to fitted candidates");
-            fit::held_out(points, &f.spec, &f.model)
+            fit::held_out(points, &f.spec, &f.model, &f.term_x)
         });
         for (&i, s) in scored.iter().zip(scores) {
             candidates[i].held_out = s;
@@ -611,14 +916,21 @@ pub fn select(
         let best = &candidates[0];
         let best_fit = best.fit.as_ref().expect("fitted");
         let hold_gain = best_fit.hold_errors + 2 <= current.hold_errors;
-        let (ok_held_out, held_note) =
-            confirmed(best.effect, current_held_out, best.held_out, hold_gain);
+        let (ok_held_out, held_note) = confirmed(
+            match best.cand {
+                Cand::Effect(e) => Some(e),
+                Cand::Term(_) => None,
+            },
+            current_held_out,
+            best.held_out,
+            hold_gain,
+        );
         let (accepted, reason) = if best_improvement <= 0.0 {
             (
                 false,
                 format!(
                     "no candidate improves the BIC (best: {} by {:.1})",
-                    best.effect.name(),
+                    best.cand.name(points),
                     best_improvement
                 ),
             )
@@ -627,7 +939,7 @@ pub fn select(
                 false,
                 format!(
                     "{} improves the BIC by {:.1}, but effect-free data does that with probability {:.3} (guard {})",
-                    best.effect.name(),
+                    best.cand.name(points),
                     best_improvement,
                     p_value,
                     opts.alpha
@@ -638,7 +950,7 @@ pub fn select(
                 false,
                 format!(
                     "{} improves the BIC by {:.1} ({}) but does not predict held-out points better ({held_note})",
-                    best.effect.name(),
+                    best.cand.name(points),
                     best_improvement,
                     p_text(p_value)
                 ),
@@ -650,7 +962,7 @@ pub fn select(
                     false,
                     format!(
                         "{} improves the BIC by {:.1} ({}), but without the single test point at data row {} (the one that contributes most) only by {:.1}, below the {:.1} that effect-free data reaches with probability {}: one point does not make a finding",
-                        best.effect.name(),
+                        best.cand.name(points),
                         best_improvement,
                         p_text(p_value),
                         points.rows[k] + 1,
@@ -664,7 +976,7 @@ pub fn select(
                     true,
                     format!(
                         "{} improves the BIC by {:.1} ({}); {held_note}",
-                        best.effect.name(),
+                        best.cand.name(points),
                         best_improvement,
                         p_text(p_value)
                     ),
@@ -672,10 +984,10 @@ pub fn select(
             }
         };
         // The inapplicable candidates close the table.
-        for e in pending {
-            if let Some(why) = library::not_applicable(e, &traits) {
+        for c in pending {
+            if let Some(why) = c.not_applicable(points, &traits) {
                 candidates.push(Candidate {
-                    effect: e,
+                    cand: c,
                     not_applicable: Some(why),
                     fit: None,
                     improvement: f64::NAN,
@@ -698,7 +1010,7 @@ pub fn select(
                 current = f;
                 current_held_out = match h {
                     Some(h) => Some(h),
-                    None => fit::held_out(points, &current.spec, &current.model),
+                    None => fit::held_out(points, &current.spec, &current.model, &current.term_x),
                 };
             }
             _ => break,

@@ -35,14 +35,25 @@ enum Form {
     /// The drive returns a share of the inertial power that grows with the load:
     /// kappa(tau) = kappa_1 tau / tau_max.
     LoadDependentPowerReturn,
+    /// Light-load friction in another shape than the family's exponential:
+    /// mu (1 + a / (1 + (tau / tau0)^2)).
+    LightLoadLorentzian,
+    /// Saturating deflection in another shape than the family's tanh: d = d_max F / (F + F_s).
+    SaturatingRational,
+    /// Power return in another shape than the family's linear one:
+    /// kappa(tau) = kappa_1 sqrt(tau / tau_max).
+    PowerReturnSqrt,
 }
 
 impl Form {
-    const ALL: [Form; 4] = [
+    const ALL: [Form; 7] = [
         Form::WarmUpInTime,
         Form::LightLoadFriction,
         Form::SaturatingCompliance,
         Form::LoadDependentPowerReturn,
+        Form::LightLoadLorentzian,
+        Form::SaturatingRational,
+        Form::PowerReturnSqrt,
     ];
 
     fn name(self) -> &'static str {
@@ -51,6 +62,9 @@ impl Form {
             Form::LightLoadFriction => "light-load friction",
             Form::SaturatingCompliance => "saturating compliance",
             Form::LoadDependentPowerReturn => "load-dependent power return",
+            Form::LightLoadLorentzian => "light-load friction, 1 / (1 + x^2)",
+            Form::SaturatingRational => "saturating compliance, F / (F + F_s)",
+            Form::PowerReturnSqrt => "power return ~ sqrt(load)",
         }
     }
 
@@ -60,7 +74,9 @@ impl Form {
             Form::WarmUpInTime => Effect::ThermalDrift,
             Form::LightLoadFriction => Effect::LoadDependentFriction,
             Form::SaturatingCompliance => Effect::ToothCompliance,
-            Form::LoadDependentPowerReturn => Effect::InertiaRectification,
+            Form::LoadDependentPowerReturn | Form::PowerReturnSqrt => Effect::InertiaRectification,
+            Form::LightLoadLorentzian => Effect::LoadDependentFriction,
+            Form::SaturatingRational => Effect::ToothCompliance,
         }
     }
 }
@@ -190,6 +206,34 @@ fn dataset(rig: &RigFile, truth: Truth, plan: &SweepPlan, session: &Session, see
             Some(Box::new(move |m: &CurrentModel, c: &Conditions| {
                 let inertia = m.drive.required_inertia_torque(c.op.omega_n);
                 k1 * c.op.tau_rot.abs() / tau_max * inertia / m.torque_constant(&c.op)
+            }))
+        }
+        Truth::Other(Form::LightLoadLorentzian) => {
+            let a = signed(&mut rng, 0.15, 0.3);
+            let tau0 = uniform(&mut rng, 0.5, 1.0);
+            Some(Box::new(move |m: &CurrentModel, c: &Conditions| {
+                let x = c.op.tau_rot.abs() / tau0;
+                a / (1.0 + x * x) * m.friction_current(&c.op)
+            }))
+        }
+        Truth::Other(Form::SaturatingRational) => {
+            // 6-15 % shorter stroke at the largest load, half of the saturation reached at
+            // a quarter of the largest force.
+            let share = uniform(&mut rng, 0.06, 0.15);
+            let f_s = 0.25 * f_max;
+            let d_max = share * ecc * (f_max + f_s) / f_max;
+            Some(Box::new(move |m: &CurrentModel, c: &Conditions| {
+                let f = m.axial_force(&c.op);
+                -(2.0 / std::f64::consts::PI) * f * d_max * f
+                    / (f.abs() + f_s)
+                    / m.torque_constant(&c.op)
+            }))
+        }
+        Truth::Other(Form::PowerReturnSqrt) => {
+            let k1 = signed(&mut rng, 0.4, 1.0);
+            Some(Box::new(move |m: &CurrentModel, c: &Conditions| {
+                let inertia = m.drive.required_inertia_torque(c.op.omega_n);
+                k1 * (c.op.tau_rot.abs() / tau_max).sqrt() * inertia / m.torque_constant(&c.op)
             }))
         }
     };
@@ -408,7 +452,7 @@ fn full_bench_batch() {
         "false findings on effect-free data: {false_findings} of {clean} ({:.1} %)",
         100.0 * false_findings as f64 / clean as f64
     );
-    assert!(false_findings as f64 <= 0.03 * clean as f64);
+    assert!(false_findings as f64 <= 0.02 * clean as f64);
 }
 
 #[test]
@@ -469,4 +513,62 @@ fn corrupt_row_batch() {
         findings.len()
     );
     assert!(findings.is_empty(), "{findings:#?}");
+}
+
+#[test]
+#[ignore = "diagnostic: what wins over the other forms (EXPLAIN_DIAG_FORM = index into Form::ALL)"]
+fn diagnose_form_misses() {
+    let k: usize = std::env::var("EXPLAIN_DIAG_FORM")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    let truth = Truth::Other(Form::ALL[k]);
+    let rigs = rigs();
+    let sessions = sessions();
+    for (ri, (_, rig)) in rigs.iter().enumerate() {
+        for (si, (_, session)) in sessions.iter().enumerate() {
+            for noise in NOISE_A {
+                let plan = SweepPlan {
+                    noise_a: noise,
+                    ..SweepPlan::default()
+                };
+                let seed = 7_000_003 + 10_007 * ri as u64 + 1009 * si as u64 + noise as u64;
+                let data = dataset(rig, truth, &plan, session, seed);
+                let e = explain::explain(&data, rig, &Options::default())
+                    .unwrap()
+                    .explanation;
+                let mut c: Vec<_> = e
+                    .candidates
+                    .iter()
+                    .filter(|c| c.delta_bic.is_some())
+                    .collect();
+                c.sort_by(|a, b| a.delta_bic.unwrap().total_cmp(&b.delta_bic.unwrap()));
+                let top: Vec<String> = c
+                    .iter()
+                    .take(4)
+                    .map(|c| {
+                        format!(
+                            "{}{} {:.1}",
+                            c.name,
+                            c.form
+                                .as_deref()
+                                .map(|f| format!("/{f}"))
+                                .unwrap_or_default(),
+                            c.delta_bic.unwrap()
+                        )
+                    })
+                    .collect();
+                println!(
+                    "rig {ri} session {si} noise {noise}: {:?} {:?} {:?} | {}",
+                    e.verdict,
+                    e.effects
+                        .iter()
+                        .map(|f| f.name.as_str())
+                        .collect::<Vec<_>>(),
+                    e.ambiguous,
+                    top.join(", ")
+                );
+            }
+        }
+    }
 }

@@ -19,11 +19,80 @@ pub struct PlantSetup {
 }
 
 impl RigFile {
+    /// The `[[model.terms]]` entries (`rig explain` checks their forms and parameters).
+    pub fn term_entries(&self) -> &[crate::TermEntry] {
+        self.model.as_ref().map_or(&[], |m| m.terms.as_slice())
+    }
+
+    /// Checks `[[user_effects]]` (names, bounds, null and start values) and that each
+    /// `[[model.terms]]` entry names a library effect with a form or a user effect; the
+    /// expressions themselves are checked by `rig explain`.
+    pub(crate) fn check_user_effects(&self) -> Result<(), String> {
+        let mut names: Vec<&str> = Vec::new();
+        for u in &self.user_effects {
+            let what = format!("[[user_effects]] {}", u.name);
+            if u.name.is_empty()
+                || Effect::from_name(&u.name).is_some()
+                || names.contains(&u.name.as_str())
+            {
+                return Err(format!(
+                    "{what}: give each user effect a name of its own, not empty and not a library effect's"
+                ));
+            }
+            names.push(&u.name);
+            if u.expression.trim().is_empty() {
+                return Err(format!(
+                    "{what}: expression is empty: give the extra current in A as an expression"
+                ));
+            }
+            for (k, p) in &u.params {
+                let [lo, hi] = p.bounds;
+                let start = p.start.unwrap_or(p.null);
+                if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                    return Err(format!(
+                        "{what}: parameter {k} bounds = [{lo}, {hi}]: give finite bounds, low < high"
+                    ));
+                }
+                if !(lo..=hi).contains(&p.null) || !(lo..=hi).contains(&start) {
+                    return Err(format!(
+                        "{what}: parameter {k}: null {} and start {start} must lie within [{lo}, {hi}]",
+                        p.null
+                    ));
+                }
+                if p.log && lo <= 0.0 {
+                    return Err(format!(
+                        "{what}: parameter {k} is fitted in ln (log = true): its bounds must be positive"
+                    ));
+                }
+            }
+        }
+        for t in self.term_entries() {
+            let known = match &t.form {
+                Some(_) => Effect::from_name(&t.name).is_some(),
+                None => names.contains(&t.name.as_str()),
+            };
+            if !known {
+                return Err(format!(
+                    "[[model.terms]] {}: give a library effect's name with a form, or the name of a [[user_effects]] definition",
+                    t.name
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// The effects of `[model]` with their parameters, in file order.
     pub fn effects(&self) -> Result<(Vec<Effect>, EffectParams), String> {
         let mut list = Vec::new();
         let mut params = EffectParams::default();
+        let terms = self.term_entries();
         for entry in self.model.iter().flat_map(|m| &m.effects) {
+            if terms.iter().any(|t| t.name == entry.name) {
+                return Err(format!(
+                    "effect {} is listed twice (once under [[model.terms]])",
+                    entry.name
+                ));
+            }
             let effect = Effect::from_name(&entry.name).ok_or_else(|| {
                 format!(
                     "unknown effect '{}' (known: {})",

@@ -43,7 +43,15 @@ impl fmt::Display for KeySpec {
 }
 
 /// The sections a rig file may have; any other section is kept as it is but not read.
-pub const SECTIONS: [&str; 6] = ["gear", "cam", "friction", "calibration", "limits", "model"];
+pub const SECTIONS: [&str; 7] = [
+    "gear",
+    "cam",
+    "friction",
+    "calibration",
+    "limits",
+    "model",
+    "user_effects",
+];
 
 const fn key(
     section: &'static str,

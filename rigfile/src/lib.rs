@@ -43,6 +43,22 @@
 //! params = { omega_c_rad_s = 21.0 }
 //! ```
 //!
+//! The effect names and their parameters are those of `rig explain` (see
+//! `explain::library`); an effect listed without a parameter starts at zero. An entry of
+//! `[[model.terms]]` with `form = "..."` is a library effect in one of its family forms, and
+//! one named after a `[[user_effects]]` definition is that user effect (both are `rig
+//! explain`'s terms, `explain::terms`; [`RigFile::term_entries`]).
+//!
+//! ```toml
+//! # A user-defined effect: an expression over w, tau, t, temp, i, i_f, i_m and f_ax (see
+//! # docs/rig-file.md) giving an extra current in A, with its parameters.
+//! [[user_effects]]
+//! name = "brush-drag"
+//! expression = "c * (w / 100)^2"
+//! params = { c = { unit = "A", bounds = [-0.5, 0.5] } }   # null (the value without the
+//!                                                         # effect) 0, start = null
+//! ```
+//!
 //! Every section and key is optional: what is left out is the paper's (49, 51, 50, 50) rig
 //! ([`Loaded::defaulted`] says which keys a file left out). Unknown keys inside a known
 //! section are an error naming the key and the section, so a typo does not silently fall
@@ -73,7 +89,8 @@ pub use keys::KeySpec;
 pub use parse::{FileFormat, Loaded};
 pub use sections::{
     CALIBRATION_TEMPERATURE_C, CalibrationSection, CamSection, EffectEntry, FitSection,
-    FrictionSection, GearSection, LimitsSection, ModelSection,
+    FrictionSection, GearSection, LimitsSection, ModelSection, TermEntry, UserEffectDef,
+    UserParamDef,
 };
 
 /// The first line of every rig file the tools write.
@@ -97,6 +114,9 @@ pub struct RigFile {
     /// The fitted model, when `rig explain` wrote one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelSection>,
+    /// User-defined effects (`[[user_effects]]`), candidates of `rig explain`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub user_effects: Vec<UserEffectDef>,
     /// Sections this version does not read (tables or arrays of tables, by name), kept as
     /// they were when the file is rewritten.
     #[serde(skip)]
@@ -209,8 +229,18 @@ impl RigFile {
 
     /// This rig with `[model]` set to `mu` and `effects` (name and parameters each).
     pub fn with_model(&self, mu: f64, effects: Vec<EffectEntry>) -> Self {
+        self.with_model_terms(mu, effects, Vec::new())
+    }
+
+    /// This rig with `[model]` set to `mu`, `effects` and `terms`.
+    pub fn with_model_terms(
+        &self,
+        mu: f64,
+        effects: Vec<EffectEntry>,
+        terms: Vec<TermEntry>,
+    ) -> Self {
         let mut r = self.clone();
-        r.model = Some(ModelSection { mu, effects });
+        r.model = Some(ModelSection { mu, effects, terms });
         r
     }
 }

@@ -339,5 +339,6 @@ fn check(loaded: &Loaded, name: &str) -> Result<(), RigFileError> {
         rig.effects()
             .map_err(|why| bad(name, format!("[model] effects: {why}")))?;
     }
+    rig.check_user_effects().map_err(|why| bad(name, why))?;
     Ok(())
 }

@@ -364,6 +364,9 @@ pub struct ModelSection {
     /// The effects on top of the paper's model, strongest first.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub effects: Vec<EffectEntry>,
+    /// Effects in a family form or of the user's own (`rig explain`'s terms).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub terms: Vec<TermEntry>,
 }
 
 /// `[[model.effects]]`: one effect with its parameters.
@@ -375,4 +378,54 @@ pub struct EffectEntry {
     /// Its parameters by name (e.g. `omega_c_rad_s`).
     #[serde(default)]
     pub params: BTreeMap<String, f64>,
+}
+
+/// `[[model.terms]]`: an effect of `rig explain`'s terms (`explain::terms`): a library effect
+/// in one of its family forms, or a user effect of `[[user_effects]]`, with its parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TermEntry {
+    /// The effect's name (a library effect's with `form`, else a user effect's).
+    pub name: String,
+    /// The family form of a library effect (e.g. `warm-up-in-time`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub form: Option<String>,
+    /// Its parameters by name.
+    #[serde(default)]
+    pub params: BTreeMap<String, f64>,
+}
+
+/// `[[user_effects]]`: an effect of the user's own: a named expression for an extra current
+/// (`docs/rig-file.md`, "User-defined effects").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UserEffectDef {
+    /// Its name (not a library effect's).
+    pub name: String,
+    /// The extra current in A, an expression over the model's quantities and the parameters
+    /// (checked by `rig explain`).
+    pub expression: String,
+    /// Its parameters by name.
+    #[serde(default)]
+    pub params: BTreeMap<String, UserParamDef>,
+}
+
+/// One parameter of a user effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UserParamDef {
+    /// Its unit (for reports).
+    #[serde(default)]
+    pub unit: String,
+    /// The range the fit keeps it in, [low, high].
+    pub bounds: [f64; 2],
+    /// The value at which the effect vanishes (default 0).
+    #[serde(default)]
+    pub null: f64,
+    /// The fit's start (default: `null`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start: Option<f64>,
+    /// Fit the parameter in ln (a positive scale; bounds must be positive).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub log: bool,
 }

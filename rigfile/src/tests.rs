@@ -308,3 +308,39 @@ fn the_older_rig_files_load() {
     assert_eq!(r.to_wire().unwrap(), protocol::RigParameters::paper());
     assert_eq!(loaded.defaulted().len(), 3);
 }
+
+#[test]
+fn user_effects_and_terms_round_trip() {
+    let text = "[[user_effects]]\nname = \"brush-drag\"\nexpression = \"c * (w / 100)^2\"\nparams = { c = { unit = \"A\", bounds = [-0.5, 0.5] } }\n[model]\nmu = 0.27\n[[model.effects]]\nname = \"current-sensor-offset\"\nparams = { offset_a = 0.01 }\n[[model.terms]]\nname = \"brush-drag\"\nparams = { c = 0.1 }\n[[model.terms]]\nname = \"thermal-drift\"\nform = \"warm-up-in-time\"\nparams = { k_per_s = 1e-6, tau_s = 900.0 }\n";
+    let r = RigFile::parse(text, "rig.toml").unwrap();
+    assert_eq!(r.user_effects[0].params["c"].bounds, [-0.5, 0.5]);
+    assert_eq!(r.term_entries().len(), 2);
+    assert!(r.extra.is_empty());
+    let (effects, p) = r.effects().unwrap();
+    assert_eq!(effects, [model::effects::Effect::CurrentSensorOffset]);
+    assert_eq!(p.current_offset, 0.01);
+    let back = RigFile::parse(&r.to_toml().unwrap(), "back.toml").unwrap();
+    assert_eq!(back, r);
+    // A term that names nothing known, a library name used twice, bad bounds.
+    let e = RigFile::parse(
+        "[model]\nmu = 0.27\n[[model.terms]]\nname = \"gremlin\"\n",
+        "r.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("gremlin") && e.contains("[[user_effects]]"),
+        "{e}"
+    );
+    let e = RigFile::parse("[model]\nmu = 0.27\n[[model.effects]]\nname = \"thermal-drift\"\n[[model.terms]]\nname = \"thermal-drift\"\nform = \"warm-up-in-time\"\n", "r.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("listed twice"), "{e}");
+    let e = RigFile::parse("[[user_effects]]\nname = \"x\"\nexpression = \"c\"\nparams = { c = { bounds = [1.0, -1.0] } }\n", "r.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("low < high") && e.contains("[[user_effects]] x"),
+        "{e}"
+    );
+}

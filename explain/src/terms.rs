@@ -1,0 +1,776 @@
+//! Effects whose law is an extra term of the current: the physically plausible families of
+//! the library's laws ([`Form`]) and the user's own effects from the rig file ([`UserEffect`]).
+//!
+//! A term adds a current (A) at each test point, computed from the point's conditions and
+//! the model's own quantities there (its current, friction current, inertia current and
+//! axial force), with parameters of its own. It enters the same selection as the library's
+//! effects: fitted jointly with the model, scored by BIC, guarded by the same null
+//! simulation and confirmed on held-out points. A term vanishes at its parameters' null
+//! values, so the model without it is nested in the model with it.
+//!
+//! The families (each nests its library law or generalises it where the data need it):
+//!
+//! | effect | form | law | when it is a candidate |
+//! |---|---|---|---|
+//! | `thermal-drift` | `warm-up-in-time` | C1 -> C1 (1 - k x), x = tau_th h(t): h the motor's heated share, rising as 1 - exp(-on / tau_th) while testing and falling as exp(-off / tau_th) in rests (gaps over twice the usual spacing); tau_th -> infinity gives x = t | only the time is logged |
+//! | `load-dependent-friction` | `light-load` | mu -> mu (1 + a exp(-tau_rot / tau_0)): friction that changes at light load only | three or more loads |
+//! | `tooth-compliance` | `saturating` | stroke e - c F_s tanh(F_ax / F_s): the teeth yield c F_ax at first, at most c F_s | three or more loads |
+//! | `inertia-rectification` | `load-dependent` | inertia term (1 + kappa + kappa_tau tau_rot) M_hat w_n^2 e^2 / pi: the share of the carrier's inertial power the drive returns changes with load | two or more speeds and three or more loads |
+//!
+//! User effects: an expression (parsed by [`exmex`], with symbolic partial derivatives) over
+//! `w` (cam speed, rad/s), `tau` (load, N m), `t` (time since the first test, s; 0 without a
+//! `t_s` column), `temp` (motor temperature, deg C; the calibration's without a `temp_c`
+//! column), `i` (the model's current, A), `i_f` (its friction current, A), `i_m` (the inertia
+//! term's current, A) and `f_ax` (the axial tooth force, N), and the effect's parameters; its
+//! value is the extra current in A.
+
+use model::effects::{CurrentModel, Effect, OperatingPoint};
+
+use crate::library::{DataTraits, ThermalDriver};
+
+/// BIC penalty of a shape parameter: 2 ln 3, the price of choosing among the three shapes
+/// its fit starts from and its score test looks along (a shape is a nuisance the null
+/// simulation of the guard accounts for; counting it as a full parameter, ln n, would let a
+/// simpler impostor beat the true law whenever the data cannot pin the shape).
+pub const SHAPE_PENALTY: f64 = 2.197_224_577_336_219_4;
+
+/// Variables a user effect may use, in the order of the data vector of [`Term::add`].
+pub const USER_VARIABLES: [&str; 8] = ["w", "tau", "t", "temp", "i", "i_f", "i_m", "f_ax"];
+
+/// A family member of a library law.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Form {
+    /// thermal-drift against the time, levelling off (and cooling in rests).
+    WarmUpInTime,
+    /// load-dependent-friction at light load only.
+    LightLoad,
+    /// tooth-compliance that saturates.
+    SaturatingCompliance,
+    /// inertia-rectification that changes with load.
+    LoadDependentReturn,
+}
+
+impl Form {
+    /// Every family member.
+    pub const ALL: [Form; 4] = [
+        Form::WarmUpInTime,
+        Form::LightLoad,
+        Form::SaturatingCompliance,
+        Form::LoadDependentReturn,
+    ];
+
+    /// The library effect whose family it is.
+    pub fn effect(self) -> Effect {
+        match self {
+            Form::WarmUpInTime => Effect::ThermalDrift,
+            Form::LightLoad => Effect::LoadDependentFriction,
+            Form::SaturatingCompliance => Effect::ToothCompliance,
+            Form::LoadDependentReturn => Effect::InertiaRectification,
+        }
+    }
+
+    /// Its name, as in reports and rig files (`form = "..."`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Form::WarmUpInTime => "warm-up-in-time",
+            Form::LightLoad => "light-load",
+            Form::SaturatingCompliance => "saturating",
+            Form::LoadDependentReturn => "load-dependent",
+        }
+    }
+
+    /// The form called `name`.
+    pub fn from_name(name: &str) -> Option<Form> {
+        Form::ALL.into_iter().find(|f| f.name() == name)
+    }
+
+    fn params(self) -> Vec<TermParam> {
+        let p = |key: &str, unit: &str, bounds, null, start, log| TermParam {
+            key: key.into(),
+            unit: unit.into(),
+            bounds,
+            null,
+            start,
+            log,
+        };
+        match self {
+            Form::WarmUpInTime => vec![
+                p("k_per_s", "1/s", (-1e-3, 1e-3), 0.0, 0.0, false),
+                p("tau_s", "s", (60.0, 1.0e5), 1200.0, 1200.0, true),
+            ],
+            Form::LightLoad => vec![
+                p("a", "1", (-0.95, 5.0), 0.0, 0.0, false),
+                p("tau_0_nm", "N m", (0.05, 10.0), 0.5, 0.5, true),
+            ],
+            Form::SaturatingCompliance => vec![
+                p("compliance_um_per_n", "um/N", (0.0, 1.0e3), 0.0, 0.0, false),
+                p("f_s_n", "N", (1.0, 1.0e5), 100.0, 100.0, true),
+            ],
+            Form::LoadDependentReturn => vec![
+                p("kappa", "1", (-1.0, 20.0), 0.0, 0.0, false),
+                p("kappa_per_nm", "1/(N m)", (-5.0, 5.0), 0.0, 0.0, false),
+            ],
+        }
+    }
+
+    /// Why the data cannot show this form, or `None`.
+    fn not_applicable(self, data: &DataTraits) -> Option<&'static str> {
+        match self {
+            Form::WarmUpInTime if data.thermal != ThermalDriver::Time => Some(
+                "needs a t_s column without temp_c (with the temperature the law is linear in it)",
+            ),
+            Form::LightLoad | Form::SaturatingCompliance if data.load_levels < 3 => {
+                Some("needs tests at three or more loads")
+            }
+            Form::LoadDependentReturn if data.speed_levels < 2 || data.load_levels < 3 => {
+                Some("needs tests at two or more speeds and three or more loads")
+            }
+            _ => None,
+        }
+    }
+}
+
+/// One parameter of a term.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TermParam {
+    /// Name in reports and rig files.
+    pub key: String,
+    /// Unit of the value.
+    pub unit: String,
+    /// The range the fit keeps it in.
+    pub bounds: (f64, f64),
+    /// The value at which the term vanishes (for shape parameters: any value; the start).
+    pub null: f64,
+    /// The fit's first start.
+    pub start: f64,
+    /// Fitted in ln (a positive scale).
+    pub log: bool,
+}
+
+impl TermParam {
+    /// The fit's coordinate of value `v`.
+    pub fn to_fit(&self, v: f64) -> f64 {
+        if self.log { v.max(1e-300).ln() } else { v }
+    }
+
+    /// The value of fit coordinate `x`.
+    pub fn from_fit(&self, x: f64) -> f64 {
+        if self.log { x.exp() } else { x }
+    }
+
+    /// Bounds in the fit's coordinate.
+    pub fn fit_bounds(&self) -> (f64, f64) {
+        (self.to_fit(self.bounds.0), self.to_fit(self.bounds.1))
+    }
+}
+
+/// A user effect's expression with its derivatives.
+#[derive(Debug, Clone)]
+pub struct UserEffect {
+    /// The expression as written.
+    pub expression: String,
+    expr: exmex::FlatEx<f64>,
+    /// For each variable of the expression (alphabetical, exmex's order): an index into
+    /// the data variables (< 8) or 8 + the parameter's index.
+    slots: Vec<usize>,
+}
+
+/// What a term is.
+#[derive(Debug, Clone)]
+pub enum TermKind {
+    /// A family member of a library law.
+    Family(Form),
+    /// The user's own.
+    User(Box<UserEffect>),
+}
+
+/// A term effect: a name, a form, parameters, its law.
+#[derive(Debug, Clone)]
+pub struct Term {
+    /// The effect's name (the library effect's for a family member).
+    pub name: String,
+    /// Units and meaning of the value, for reports.
+    pub note: String,
+    /// Its parameters.
+    pub params: Vec<TermParam>,
+    /// Its law.
+    pub kind: TermKind,
+    /// The warm-up's heated shares by time constant, last used first.
+    heat: HeatCache,
+}
+
+/// The model quantities a term's law uses.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Needs {
+    /// The model's current.
+    pub current: bool,
+    /// Its friction current.
+    pub friction: bool,
+    /// The inertia term's current.
+    pub inertia: bool,
+    /// The axial tooth force.
+    pub axial: bool,
+}
+
+impl Needs {
+    /// Both sets.
+    pub fn or(self, other: Needs) -> Needs {
+        Needs {
+            current: self.current || other.current,
+            friction: self.friction || other.friction,
+            inertia: self.inertia || other.inertia,
+            axial: self.axial || other.axial,
+        }
+    }
+}
+
+/// A model's quantities at each point (empty where not needed).
+#[derive(Debug, Clone, Default)]
+pub struct ModelAt {
+    /// The model's current, A.
+    pub current: Vec<f64>,
+    /// Its friction current, A.
+    pub friction: Vec<f64>,
+    /// The inertia term's current, A.
+    pub inertia: Vec<f64>,
+    /// The axial tooth force, N.
+    pub axial: Vec<f64>,
+    /// The cam's eccentricity, m.
+    pub eccentricity: f64,
+}
+
+impl ModelAt {
+    /// `model`'s quantities `needs` at `ops`.
+    pub fn new(model: &CurrentModel, ops: &[OperatingPoint], needs: Needs) -> Self {
+        let col = |on: bool, f: &dyn Fn(&OperatingPoint) -> f64| -> Vec<f64> {
+            if on {
+                ops.iter().map(f).collect()
+            } else {
+                Vec::new()
+            }
+        };
+        Self {
+            current: col(needs.current, &|op| model.current(op)),
+            friction: col(needs.friction, &|op| model.friction_current(op)),
+            inertia: col(needs.inertia, &|op| inertia_current(model, op)),
+            axial: col(needs.axial, &|op| model.axial_force(op)),
+            eccentricity: model.drive.eccentricity,
+        }
+    }
+}
+
+/// Entries of a [`HeatCache`].
+const HEAT_CACHE_ENTRIES: usize = 8;
+
+/// The heated shares ([`heated_share`]) of the last few time constants and point sets: a
+/// fit asks for the same ones over and over (one per Jacobian column).
+#[derive(Debug, Default)]
+struct HeatCache(std::sync::Mutex<Vec<(HeatKey, std::sync::Arc<Vec<f64>>)>>);
+
+/// What a heated share depends on: the time constant and the points' times and order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct HeatKey {
+    tau: u64,
+    len: usize,
+    times: u64,
+    order: u64,
+}
+
+impl HeatKey {
+    fn new(inputs: &Inputs, tau: f64) -> Self {
+        let mix = |h: u64, v: u64| (h ^ v).wrapping_mul(0x100_0000_01b3).rotate_left(5);
+        Self {
+            tau: tau.to_bits(),
+            len: inputs.time.len(),
+            times: inputs
+                .time
+                .iter()
+                .fold(0xcbf2_9ce4_8422_2325, |h, t| mix(h, t.to_bits())),
+            order: inputs
+                .order
+                .iter()
+                .fold(0xcbf2_9ce4_8422_2325, |h, &k| mix(h, k as u64)),
+        }
+    }
+}
+
+impl Clone for HeatCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl HeatCache {
+    /// The heated share at `inputs` for time constant `tau`, computed once.
+    fn get(&self, inputs: &Inputs, tau: f64) -> std::sync::Arc<Vec<f64>> {
+        let key = HeatKey::new(inputs, tau);
+        if let Ok(mut entries) = self.0.lock()
+            && let Some(i) = entries.iter().position(|(k, _)| *k == key)
+        {
+            let hit = entries.remove(i);
+            let value = hit.1.clone();
+            entries.insert(0, hit);
+            return value;
+        }
+        let value = std::sync::Arc::new(heated_share(inputs.time, inputs.order, tau));
+        if let Ok(mut entries) = self.0.lock() {
+            entries.insert(0, (key, value.clone()));
+            entries.truncate(HEAT_CACHE_ENTRIES);
+        }
+        value
+    }
+}
+
+/// The conditions of a set of points, for evaluating terms.
+#[derive(Debug, Clone, Copy)]
+pub struct Inputs<'a> {
+    /// Operating points.
+    pub ops: &'a [OperatingPoint],
+    /// Time since the first test, s (0 when unknown).
+    pub time: &'a [f64],
+    /// Motor temperature, deg C (the calibration's when unknown).
+    pub temp: &'a [f64],
+    /// The points in time order.
+    pub order: &'a [usize],
+}
+
+impl Term {
+    /// The family member `form`.
+    pub fn family(form: Form) -> Self {
+        Self {
+            name: form.effect().name().to_string(),
+            note: format!("{} in its {} form", form.effect().name(), form.name()),
+            params: form.params(),
+            kind: TermKind::Family(form),
+            heat: HeatCache::default(),
+        }
+    }
+
+    /// A user effect `name` with `expression` over [`USER_VARIABLES`] and `params`. An error
+    /// (what to fix) when the expression does not parse, uses an unknown name, or leaves a
+    /// parameter out.
+    pub fn user(name: &str, expression: &str, params: Vec<TermParam>) -> Result<Self, String> {
+        let rewritten = leading_minus(expression)
+            .map_err(|why| format!("user effect {name}: expression '{expression}': {why}"))?;
+        let expr = exmex::parse::<f64>(&rewritten).map_err(|e| {
+            format!("user effect {name}: expression '{expression}' does not parse: {e}")
+        })?;
+        let mut slots = Vec::new();
+        for v in exmex::Express::var_names(&expr) {
+            if let Some(k) = USER_VARIABLES.iter().position(|u| u == v) {
+                slots.push(k);
+            } else if let Some(k) = params.iter().position(|p| &p.key == v) {
+                slots.push(USER_VARIABLES.len() + k);
+            } else {
+                return Err(format!(
+                    "user effect {name}: '{v}' in '{expression}' is neither a variable ({}) nor one of its parameters ({}): declare it under params or fix the name",
+                    USER_VARIABLES.join(", "),
+                    params
+                        .iter()
+                        .map(|p| p.key.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
+        }
+        for (k, p) in params.iter().enumerate() {
+            if !slots.contains(&(USER_VARIABLES.len() + k)) {
+                return Err(format!(
+                    "user effect {name}: parameter {} is not used in '{expression}': use it or drop it",
+                    p.key
+                ));
+            }
+        }
+        Ok(Self {
+            name: name.to_string(),
+            note: format!("user effect {expression}"),
+            params,
+            kind: TermKind::User(Box::new(UserEffect {
+                expression: expression.to_string(),
+                expr,
+                slots,
+            })),
+            heat: HeatCache::default(),
+        })
+    }
+
+    /// The family member, if this is one.
+    pub fn form(&self) -> Option<Form> {
+        match self.kind {
+            TermKind::Family(f) => Some(f),
+            TermKind::User(_) => None,
+        }
+    }
+
+    /// The library effect whose family this is, if any.
+    pub fn effect(&self) -> Option<Effect> {
+        self.form().map(Form::effect)
+    }
+
+    /// Why the data cannot show the term, or `None`.
+    pub fn not_applicable(&self, data: &DataTraits) -> Option<&'static str> {
+        match self.kind {
+            TermKind::Family(f) => f.not_applicable(data),
+            TermKind::User(_) => None,
+        }
+    }
+
+    /// Parameters the term adds to the likelihood.
+    pub fn parameter_count(&self) -> usize {
+        self.params.len()
+    }
+
+    /// Its shape parameters (fitted in ln): a shape costs [`SHAPE_PENALTY`] in the BIC
+    /// rather than ln n.
+    pub fn shape_count(&self) -> usize {
+        self.params.iter().filter(|p| p.log).count()
+    }
+
+    /// Its BIC penalty for `n` rows: ln n per linear parameter, [`SHAPE_PENALTY`] per shape.
+    pub fn penalty(&self, n: f64) -> f64 {
+        let shapes = self.shape_count();
+        (self.params.len() - shapes) as f64 * n.ln() + shapes as f64 * SHAPE_PENALTY
+    }
+
+    /// The fit coordinates at the term's null (start values for shape parameters).
+    pub fn null_point(&self) -> Vec<f64> {
+        self.params.iter().map(|p| p.to_fit(p.null)).collect()
+    }
+
+    /// The fit coordinates of the first start.
+    pub fn start_point(&self) -> Vec<f64> {
+        self.params.iter().map(|p| p.to_fit(p.start)).collect()
+    }
+
+    /// Parameter values (reported units) from fit coordinates `x`.
+    pub fn values(&self, x: &[f64]) -> Vec<f64> {
+        self.params
+            .iter()
+            .zip(x)
+            .map(|(p, &x)| p.from_fit(x))
+            .collect()
+    }
+
+    /// The model quantities the term's law uses.
+    pub fn needs(&self) -> Needs {
+        match &self.kind {
+            TermKind::Family(Form::WarmUpInTime) => Needs {
+                current: true,
+                ..Needs::default()
+            },
+            TermKind::Family(Form::LightLoad) => Needs {
+                friction: true,
+                ..Needs::default()
+            },
+            TermKind::Family(Form::SaturatingCompliance) => Needs {
+                friction: true,
+                axial: true,
+                ..Needs::default()
+            },
+            TermKind::Family(Form::LoadDependentReturn) => Needs {
+                inertia: true,
+                ..Needs::default()
+            },
+            TermKind::User(_) => Needs {
+                current: true,
+                friction: true,
+                inertia: true,
+                axial: true,
+            },
+        }
+    }
+
+    /// Adds the term's current at every point of `inputs` (model `model`, fit coordinates
+    /// `x`) to `out`.
+    pub fn add(&self, model: &CurrentModel, inputs: &Inputs, x: &[f64], out: &mut [f64]) {
+        let at = ModelAt::new(model, inputs.ops, self.needs());
+        self.add_at(&at, inputs, x, out);
+    }
+
+    /// [`Term::add`] with the model's quantities at the points computed beforehand (`at`
+    /// must carry [`Term::needs`]).
+    pub fn add_at(&self, at: &ModelAt, inputs: &Inputs, x: &[f64], out: &mut [f64]) {
+        let v = self.values(x);
+        match &self.kind {
+            TermKind::Family(Form::WarmUpInTime) => {
+                let (k, tau) = (v[0], v[1]);
+                if k == 0.0 {
+                    return;
+                }
+                let heat = self.heat.get(inputs, tau);
+                for ((o, h), i) in out.iter_mut().zip(heat.iter()).zip(&at.current) {
+                    let factor = (1.0 - k * tau * h).max(0.1);
+                    *o += i * (1.0 / factor - 1.0);
+                }
+            }
+            TermKind::Family(Form::LightLoad) => {
+                let (a, tau0) = (v[0], v[1]);
+                for (j, op) in inputs.ops.iter().enumerate() {
+                    out[j] += a * (-op.tau_rot.abs() / tau0).exp() * at.friction[j];
+                }
+            }
+            TermKind::Family(Form::SaturatingCompliance) => {
+                let (c, f_s) = (v[0] * 1e-6, v[1]);
+                if c == 0.0 {
+                    return;
+                }
+                let e = at.eccentricity;
+                for ((o, f), fr) in out.iter_mut().zip(&at.axial).zip(&at.friction) {
+                    *o -= fr * c * f_s * (f / f_s).tanh() / e;
+                }
+            }
+            TermKind::Family(Form::LoadDependentReturn) => {
+                let (kappa, per_nm) = (v[0], v[1]);
+                for (j, op) in inputs.ops.iter().enumerate() {
+                    out[j] += (kappa + per_nm * op.tau_rot.abs()) * at.inertia[j];
+                }
+            }
+            TermKind::User(u) => {
+                let mut vars = vec![0.0; u.slots.len()];
+                for (j, op) in inputs.ops.iter().enumerate() {
+                    let data = [
+                        op.omega_n,
+                        op.tau_rot,
+                        inputs.time[j],
+                        inputs.temp[j],
+                        at.current[j],
+                        at.friction[j],
+                        at.inertia[j],
+                        at.axial[j],
+                    ];
+                    for (slot, val) in u.slots.iter().zip(vars.iter_mut()) {
+                        *val = if *slot < data.len() {
+                            data[*slot]
+                        } else {
+                            v[*slot - data.len()]
+                        };
+                    }
+                    let r = exmex::Express::eval(&u.expr, &vars).unwrap_or(f64::NAN);
+                    out[j] += if r.is_finite() { r } else { 0.0 };
+                }
+            }
+        }
+    }
+
+    /// The term's parameters as reported and stored in rig files.
+    pub fn report(&self, x: &[f64]) -> std::collections::BTreeMap<String, f64> {
+        self.params
+            .iter()
+            .zip(self.values(x))
+            .map(|(p, v)| (p.key.clone(), v))
+            .collect()
+    }
+
+    /// One sentence on what the term means at `x`.
+    pub fn describe(&self, x: &[f64]) -> String {
+        let v = self.values(x);
+        match &self.kind {
+            TermKind::Family(Form::WarmUpInTime) => format!(
+                "the torque constant drifts as the motor warms, levelling off with a time constant of {:.0} s (and cooling in rests): {:.3} % per minute at first, {:.2} % once warm (no temperature column: the time and the rests stand in for the motor temperature)",
+                v[1],
+                v[0] * 6000.0,
+                v[0] * v[1] * 100.0
+            ),
+            TermKind::Family(Form::LightLoad) => format!(
+                "the tooth friction coefficient is {:+.0} % off at light load, fading over {:.2} N m of load (mu (1 + a exp(-tau / tau_0)))",
+                v[0] * 100.0,
+                v[1]
+            ),
+            TermKind::Family(Form::SaturatingCompliance) => format!(
+                "the tooth contacts yield {:.2} um per N at first, at most {:.1} um (F_s = {:.0} N), shortening the sliding stroke under load",
+                v[0],
+                v[0] * v[1],
+                v[1]
+            ),
+            TermKind::Family(Form::LoadDependentReturn) => format!(
+                "the inertia term is (1 {:+.2} {:+.3}/N m x tau_rot) M w^2 e^2 / pi: the share of the carrier's inertial power the drive takes back changes with load",
+                v[0], v[1]
+            ),
+            TermKind::User(u) => format!(
+                "the user effect {} = {} A with {}",
+                self.name,
+                u.expression,
+                self.params
+                    .iter()
+                    .zip(&v)
+                    .map(|(p, v)| format!("{} = {v:.4} {}", p.key, p.unit))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    }
+}
+
+/// `expression` with each leading (unary) minus written as `(-1)*`, so that it binds as in
+/// mathematics (`-x^2` is `-(x^2)`; exmex itself binds a unary operator tighter than `^`).
+/// A minus right after `/` or `^` is refused (what to write instead), since no such
+/// rewriting keeps its meaning.
+fn leading_minus(expression: &str) -> Result<String, String> {
+    let mut out = String::with_capacity(expression.len() + 8);
+    let mut previous: Option<char> = None;
+    for c in expression.chars() {
+        if c == '-' {
+            match previous {
+                None | Some('(' | ',' | '+' | '-' | '*') => {
+                    out.push_str("(-1)*");
+                    previous = Some('*');
+                    continue;
+                }
+                Some(p @ ('/' | '^')) => {
+                    return Err(format!(
+                        "a minus right after '{p}' is ambiguous: put the negative in parentheses (x{p}(-2), not x{p}-2)"
+                    ));
+                }
+                _ => {}
+            }
+        }
+        out.push(c);
+        if !c.is_whitespace() {
+            previous = Some(c);
+        }
+    }
+    Ok(out)
+}
+
+/// The inertia term's current at `op` (the paper's M_hat w^2 e^2 / pi over the torque
+/// constant), A.
+pub fn inertia_current(model: &CurrentModel, op: &OperatingPoint) -> f64 {
+    model.drive.required_inertia_torque(op.omega_n) / model.torque_constant(op)
+}
+
+/// The motor's heated share at each point (in time order `order`): rising as
+/// 1 - exp(-on / tau) over the test time and falling as exp(-off / tau) in rests, a rest
+/// being the part of a gap between tests beyond twice the usual (median) spacing.
+pub fn heated_share(time: &[f64], order: &[usize], tau: f64) -> Vec<f64> {
+    let mut out = vec![0.0; time.len()];
+    if order.is_empty() {
+        return out;
+    }
+    let mut gaps: Vec<f64> = order
+        .windows(2)
+        .map(|w| (time[w[1]] - time[w[0]]).max(0.0))
+        .filter(|g| *g > 0.0)
+        .collect();
+    let usual = if gaps.is_empty() {
+        0.0
+    } else {
+        let mid = gaps.len() / 2;
+        *gaps.select_nth_unstable_by(mid, f64::total_cmp).1
+    };
+    let mut h = 0.0f64;
+    let mut prev = 0.0f64;
+    for &k in order {
+        let gap = (time[k] - prev).max(0.0);
+        let on = if usual > 0.0 {
+            gap.min(2.0 * usual)
+        } else {
+            gap
+        };
+        let off = gap - on;
+        h *= (-off / tau).exp();
+        h = 1.0 - (1.0 - h) * (-on / tau).exp();
+        out[k] = h;
+        prev = time[k];
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use model::{CamDrive, paper};
+
+    fn model() -> CurrentModel {
+        CurrentModel::paper(
+            CamDrive::paper(paper::RIG_GEARS),
+            paper::CALIBRATION,
+            paper::MU_S,
+        )
+    }
+
+    #[test]
+    fn warm_up_levels_off_and_cools_in_rests() {
+        let time: Vec<f64> = (0..40)
+            .map(|k| 20.0 * k as f64 + if k >= 20 { 3000.0 } else { 0.0 })
+            .collect();
+        let order: Vec<usize> = (0..40).collect();
+        let h = heated_share(&time, &order, 600.0);
+        assert!(h[19] > 0.4 && h[19] < 0.5, "{}", h[19]);
+        assert!(h[20] < 0.1, "{}", h[20]);
+        // A long time constant gives the time itself: tau h -> t.
+        let h = heated_share(&time[..20], &order[..20], 1e7);
+        assert!((1e7 * h[19] - 380.0).abs() < 0.1, "{}", 1e7 * h[19]);
+    }
+
+    #[test]
+    fn family_terms_vanish_at_their_null_and_nest_the_library_law() {
+        let m = model();
+        let ops: Vec<OperatingPoint> = (1..=10)
+            .map(|k| OperatingPoint::new(31.4 * (1 + k % 3) as f64, 0.368 * k as f64, 0.0))
+            .collect();
+        let time: Vec<f64> = (0..10).map(|k| 20.0 * k as f64).collect();
+        let temp = vec![25.0; 10];
+        let order: Vec<usize> = (0..10).collect();
+        let inputs = Inputs {
+            ops: &ops,
+            time: &time,
+            temp: &temp,
+            order: &order,
+        };
+        for form in Form::ALL {
+            let t = Term::family(form);
+            let mut out = vec![0.0; 10];
+            t.add(&m, &inputs, &t.null_point(), &mut out);
+            assert!(out.iter().all(|v| *v == 0.0), "{form:?}");
+        }
+        // The load-dependent return with kappa_per_nm = 0 is the library's kappa.
+        let t = Term::family(Form::LoadDependentReturn);
+        let mut out = vec![0.0; 10];
+        t.add(&m, &inputs, &[-0.5, 0.0], &mut out);
+        let mut lib = m;
+        lib.effects.rectification = -0.5;
+        for (j, op) in ops.iter().enumerate() {
+            assert!((m.current(op) + out[j] - lib.current(op)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn user_effects_parse_and_name_what_is_wrong() {
+        let p = |key: &str| TermParam {
+            key: key.into(),
+            unit: "A".into(),
+            bounds: (-1.0, 1.0),
+            null: 0.0,
+            start: 0.0,
+            log: false,
+        };
+        let t = Term::user("brush", "c * (w / 100)^2", vec![p("c")]).unwrap();
+        let ops = [OperatingPoint::new(50.0, 1.0, 0.0)];
+        let inputs = Inputs {
+            ops: &ops,
+            time: &[0.0],
+            temp: &[25.0],
+            order: &[0],
+        };
+        let mut out = [0.0];
+        t.add(&model(), &inputs, &[0.2], &mut out);
+        assert!((out[0] - 0.05).abs() < 1e-12);
+        let e = Term::user("brush", "c * speed", vec![p("c")]).unwrap_err();
+        assert!(e.contains("'speed'") && e.contains("w, tau"), "{e}");
+        let e = Term::user("brush", "c * w", vec![p("c"), p("d")]).unwrap_err();
+        assert!(e.contains("parameter d is not used"), "{e}");
+        assert!(Term::user("brush", "c * (w", vec![p("c")]).is_err());
+        // A leading minus binds as in mathematics: -x^2 is -(x^2).
+        let t = Term::user("bump", "c * exp(-(w / 50)^2)", vec![p("c")]).unwrap();
+        let mut out = [0.0];
+        t.add(&model(), &inputs, &[1.0], &mut out);
+        assert!((out[0] - (-1.0f64).exp()).abs() < 1e-12, "{}", out[0]);
+        assert_eq!(leading_minus("-x^2").unwrap(), "(-1)*x^2");
+        assert_eq!(leading_minus("a - -b * 1e-3").unwrap(), "a - (-1)*b * 1e-3");
+        let e = Term::user("bump", "c * w^-2", vec![p("c")]).unwrap_err();
+        assert!(
+            e.contains("bump") && e.contains("expression") && e.contains("x^(-2)"),
+            "{e}"
+        );
+    }
+}
