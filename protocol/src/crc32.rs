@@ -18,9 +18,9 @@ const NIBBLE_TABLE: [u32; 16] = nibble_table();
 /// Builds [`NIBBLE_TABLE`] at compile time.
 const fn nibble_table() -> [u32; 16] {
     let mut table = [0u32; 16];
-    let mut i = 0;
+    let mut i: u32 = 0;
     while i < 16 {
-        let mut crc = i as u32;
+        let mut crc = i;
         let mut bit = 0;
         while bit < 4 {
             crc = if crc & 1 != 0 {
@@ -30,7 +30,7 @@ const fn nibble_table() -> [u32; 16] {
             };
             bit += 1;
         }
-        table[i] = crc;
+        table[i as usize] = crc;
         i += 1;
     }
     table
