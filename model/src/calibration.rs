@@ -891,6 +891,52 @@ mod tests {
     }
 
     #[test]
+    fn limits_in_f32_judge_as_in_f64() {
+        // The firmware's caps are f32: the f32 check gives the f64 check's verdict on the
+        // same numbers widened, at the caps themselves, one f32 step either side, and for
+        // NaN, infinities, zero and negatives.
+        let caps = [3.68f32, 4.8, 20.0];
+        let wide = caps.map(f64::from);
+        for (i, &cap) in caps.iter().enumerate() {
+            let below = f32::from_bits(cap.to_bits() - 1);
+            let above = f32::from_bits(cap.to_bits() + 1);
+            let values = [
+                cap,
+                below,
+                above,
+                f32::NAN,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                0.0,
+                -0.0,
+                -1.0,
+                f32::MIN_POSITIVE,
+            ];
+            for v in values {
+                let mut requested = caps;
+                requested[i] = v;
+                let narrow = check_limits(requested, caps);
+                let double = check_limits(requested.map(f64::from), wide);
+                assert_eq!(
+                    narrow.map_err(|e| (e.field, e.kind)),
+                    double.map_err(|e| (e.field, e.kind)),
+                    "limit {i} = {v}"
+                );
+            }
+        }
+        let e = check_limits([1.0f32, 9.0, 1.0], caps).unwrap_err();
+        assert_eq!(
+            (e.field, e.kind, e.value, e.cap),
+            (
+                LimitField::MaxCurrent,
+                LimitIssueKind::AboveCap,
+                9.0,
+                4.8f32.into()
+            )
+        );
+    }
+
+    #[test]
     fn numbers_print_as_people_write_them() {
         let s = |x: f64| format!("{}", Sig(x));
         assert_eq!(s(0.0621 * 1e3), "62.1");

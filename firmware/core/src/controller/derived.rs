@@ -436,4 +436,58 @@ mod tests {
         }
         assert!(d.holds_at_rest && d.keeps_moving);
     }
+
+    #[test]
+    fn the_cores_f32_check_is_the_hosts() {
+        // `SetParameters` (f32 limits, motor constants converted once) refuses exactly what
+        // `check_rules` (the host's, f64 limits against `board_limits`) refuses.
+        let config = CoreConfig::default();
+        let motor = MotorRules::new(&config.motor.constants);
+        let paper = RigParameters::paper();
+        let caps = [
+            config.supervisor.max_release_load_nm,
+            config.faults.overcurrent_a,
+            config.supervisor.max_freq_hz,
+        ];
+        let mut cases = vec![paper];
+        for (i, &cap) in caps.iter().enumerate() {
+            for v in [
+                cap,
+                f32::from_bits(cap.to_bits() - 1),
+                f32::from_bits(cap.to_bits() + 1),
+                f32::NAN,
+                f32::INFINITY,
+                0.0,
+                -1.0,
+            ] {
+                let mut p = paper;
+                match i {
+                    0 => p.max_release_load_nm = v,
+                    1 => p.max_current_a = v,
+                    _ => p.max_freq_hz = v,
+                }
+                cases.push(p);
+            }
+        }
+        for c1 in [0.0, 20.0, 62.1, 2258.0, f32::NAN] {
+            cases.push(RigParameters {
+                c1_nmm_per_a: c1,
+                ..paper
+            });
+        }
+        for c3 in [0.235, 0.5, -1.0] {
+            cases.push(RigParameters {
+                c3_nmm_s_per_rad: c3,
+                ..paper
+            });
+        }
+        let mut refused = 0;
+        for p in cases {
+            let host = check_rules(&p, &config.board_limits(), &config.motor.constants);
+            let core = check_board_caps(&p, &config, &motor);
+            assert_eq!(core, host, "{p:?}");
+            refused += usize::from(core.is_err());
+        }
+        assert!(refused >= 20, "{refused}");
+    }
 }
