@@ -81,6 +81,7 @@ impl Core {
     /// A core in `Locked`, measuring the current zero. A watchdog reset or an invalid
     /// parameter record latches its fault from the start.
     pub fn new(config: CoreConfig, boot: BootInfo) -> Self {
+        let motor_rules = MotorRules::new(&config.motor.constants);
         let (parameters, status, derived) = match Derived::new(&boot.parameters, &config) {
             Ok(d) if boot.parameters_status != ParametersStatus::Invalid => {
                 (boot.parameters, boot.parameters_status, d)
@@ -135,7 +136,7 @@ impl Core {
             board: BoardInputs::default(),
             reset_cause: boot.reset_cause,
             firmware_build: boot.firmware_build,
-            motor_rules: MotorRules::new(&config.motor.constants),
+            motor_rules,
             config,
             parameters,
             parameters_status: status,
