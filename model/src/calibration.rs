@@ -508,40 +508,52 @@ impl BoardLimits {
     };
 
     /// Whether `requested` (the limits a calibration asks for) is positive, finite and
-    /// within these caps: the first field that is not, or `Ok`.
+    /// within these caps: the first field that is not, or `Ok` ([`check_limits`] in `f64`).
     pub fn check(&self, requested: &BoardLimits) -> Result<(), LimitIssue> {
-        let fields = [
-            (
-                LimitField::MaxReleaseLoad,
+        check_limits(
+            [
                 requested.max_release_load_nm,
-                self.max_release_load_nm,
-            ),
-            (
-                LimitField::MaxCurrent,
                 requested.max_current_a,
+                requested.max_freq_hz,
+            ],
+            [
+                self.max_release_load_nm,
                 self.max_current_a,
-            ),
-            (LimitField::MaxFreq, requested.max_freq_hz, self.max_freq_hz),
-        ];
-        for (field, value, cap) in fields {
-            let kind = if !value.is_finite() {
-                LimitIssueKind::NotFinite
-            } else if value <= 0.0 {
-                LimitIssueKind::NotPositive
-            } else if value > cap {
-                LimitIssueKind::AboveCap
-            } else {
-                continue;
-            };
-            return Err(LimitIssue {
-                field,
-                value,
-                cap,
-                kind,
-            });
-        }
-        Ok(())
+                self.max_freq_hz,
+            ],
+        )
     }
+}
+
+/// [`BoardLimits::check`]'s rule in the precision `T`: `requested` and `caps` in the order
+/// of [`LimitField`] (release load, current, frequency); the first requested limit that is
+/// not finite, not positive or above its cap (values reported as `f64`), or `Ok`. The
+/// firmware evaluates it in `f32` (its caps are `f32`, so the verdicts are those of the
+/// `f64` check on the same numbers widened), the host in `f64`.
+pub fn check_limits<T: CheckFloat>(requested: [T; 3], caps: [T; 3]) -> Result<(), LimitIssue> {
+    let fields = [
+        LimitField::MaxReleaseLoad,
+        LimitField::MaxCurrent,
+        LimitField::MaxFreq,
+    ];
+    for ((field, value), cap) in fields.into_iter().zip(requested).zip(caps) {
+        let kind = if !value.finite() {
+            LimitIssueKind::NotFinite
+        } else if value <= T::ZERO {
+            LimitIssueKind::NotPositive
+        } else if value > cap {
+            LimitIssueKind::AboveCap
+        } else {
+            continue;
+        };
+        return Err(LimitIssue {
+            field,
+            value: value.to_f64(),
+            cap: cap.to_f64(),
+            kind,
+        });
+    }
+    Ok(())
 }
 
 impl Default for BoardLimits {
@@ -876,6 +888,52 @@ mod tests {
         );
         asked.max_freq_hz = 20.5;
         assert_eq!(board.check(&asked).unwrap_err().field, LimitField::MaxFreq);
+    }
+
+    #[test]
+    fn limits_in_f32_judge_as_in_f64() {
+        // The firmware's caps are f32: the f32 check gives the f64 check's verdict on the
+        // same numbers widened, at the caps themselves, one f32 step either side, and for
+        // NaN, infinities, zero and negatives.
+        let caps = [3.68f32, 4.8, 20.0];
+        let wide = caps.map(f64::from);
+        for (i, &cap) in caps.iter().enumerate() {
+            let below = f32::from_bits(cap.to_bits() - 1);
+            let above = f32::from_bits(cap.to_bits() + 1);
+            let values = [
+                cap,
+                below,
+                above,
+                f32::NAN,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                0.0,
+                -0.0,
+                -1.0,
+                f32::MIN_POSITIVE,
+            ];
+            for v in values {
+                let mut requested = caps;
+                requested[i] = v;
+                let narrow = check_limits(requested, caps);
+                let double = check_limits(requested.map(f64::from), wide);
+                assert_eq!(
+                    narrow.map_err(|e| (e.field, e.kind)),
+                    double.map_err(|e| (e.field, e.kind)),
+                    "limit {i} = {v}"
+                );
+            }
+        }
+        let e = check_limits([1.0f32, 9.0, 1.0], caps).unwrap_err();
+        assert_eq!(
+            (e.field, e.kind, e.value, e.cap),
+            (
+                LimitField::MaxCurrent,
+                LimitIssueKind::AboveCap,
+                9.0,
+                4.8f32.into()
+            )
+        );
     }
 
     #[test]

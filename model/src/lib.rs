@@ -40,7 +40,7 @@ pub mod plant;
 
 pub use calibration::{
     BoardLimits, Calibration, CalibrationConsistency, CalibrationField, CalibrationIssue,
-    CheckFloat, IssueKind, LimitField, LimitIssue, LimitIssueKind, check_constants,
+    CheckFloat, IssueKind, LimitField, LimitIssue, LimitIssueKind, check_constants, check_limits,
 };
 pub use dynamics::{Inertias, OutputShaft};
 pub use excitation::CamDrive;

@@ -13,7 +13,6 @@
 //! output, the CRC is appended, and COBS then encodes that in place, front to back, into
 //! the output's start (see [`encode_frame`]).
 
-use crc::{CRC_32_ISO_HDLC, Crc};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -41,8 +40,6 @@ pub const CRC_LEN: usize = 4;
 /// Longest run of non-zero bytes one COBS block carries.
 const COBS_BLOCK: usize = 254;
 
-static CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
-
 /// Encodes `msg` with sequence number `seq` into `out` and returns the frame, both
 /// delimiters included. An `out` of [`crate::MAX_FRAME_SIZE`] bytes always suffices for
 /// [`crate::Request`] and [`crate::DeviceMessage`].
@@ -64,7 +61,7 @@ pub fn encode_frame<'o, M: Serialize + ?Sized>(
             _ => Error::Serialize,
         })?
         .len();
-    let crc = CRC32.checksum(&raw[..body]).to_le_bytes();
+    let crc = crate::crc32::checksum(&raw[..body]).to_le_bytes();
     raw.get_mut(body..body + CRC_LEN)
         .ok_or(Error::BufferTooSmall)?
         .copy_from_slice(&crc);
@@ -141,13 +138,13 @@ pub fn frame_body(frame: &mut [u8]) -> Result<&[u8], Error> {
     };
     let (body, crc) = decoded.split_at(body_len);
     let crc = u32::from_le_bytes([crc[0], crc[1], crc[2], crc[3]]);
-    if CRC32.checksum(body) != crc {
+    if crate::crc32::checksum(body) != crc {
         return Err(Error::Crc);
     }
     Ok(body)
 }
 
-/// COBS-decodes `buf` (no delimiters in it) in place, block by block (one `copy_within`
+/// COBS-decodes `buf` (no delimiters in it) in place, block by block (one tight copy loop
 /// per block rather than a state machine per byte: receive runs under the firmware's core
 /// lock); the decoded length, or `None` when a block runs past the end or is empty.
 fn cobs_decode_in_place(buf: &mut [u8]) -> Option<usize> {
@@ -158,7 +155,11 @@ fn cobs_decode_in_place(buf: &mut [u8]) -> Option<usize> {
         if code == 0 || end > buf.len() {
             return None;
         }
-        buf.copy_within(r + 1..end, w);
+        // Forward byte copy (`w <= r`: the write never overtakes the read) instead of
+        // `copy_within`, whose `memmove` is 1.5 KB of the firmware's flash.
+        for i in r + 1..end {
+            buf[w + i - (r + 1)] = buf[i];
+        }
         w += code - 1;
         r = end;
         if code != 0xFF && r < buf.len() {
@@ -189,7 +190,7 @@ mod tests {
     /// The frame built step by step with one-shot calls, to check the streaming path.
     fn reference_frame(body: &[u8]) -> Vec<u8> {
         let mut raw = body.to_vec();
-        raw.extend_from_slice(&CRC32.checksum(body).to_le_bytes());
+        raw.extend_from_slice(&crate::crc32::checksum(body).to_le_bytes());
         let mut out = vec![0; crate::cobs_max_encoded_len(raw.len())];
         let len = cobs::encode(&raw, &mut out);
         out.truncate(len);
@@ -204,7 +205,7 @@ mod tests {
     #[test]
     fn crc_is_iso_hdlc() {
         // The catalogue's check value: the CRC of "123456789".
-        assert_eq!(CRC32.checksum(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crate::crc32::checksum(b"123456789"), 0xCBF4_3926);
     }
 
     #[test]

@@ -98,6 +98,7 @@
 
 mod capture;
 pub mod compat;
+pub mod crc32;
 mod deframer;
 mod device;
 mod error;

@@ -175,7 +175,7 @@ impl Core {
                     return Answer::nack(NackCode::Busy);
                 }
                 let checked = Derived::new(&parameters, &self.config)
-                    .and_then(|_| check_board_caps(&parameters, &self.config));
+                    .and_then(|_| check_board_caps(&parameters, &self.config, &self.motor_rules));
                 match checked {
                     Err(rejection) => Answer::nack(NackCode::ParametersRejected(rejection)),
                     Ok(()) => {

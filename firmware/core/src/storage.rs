@@ -48,9 +48,11 @@ const _: () = assert!(COMMIT_AT <= 0xFFFF);
 const COMMIT: [u8; 16] = *b"RCAL-COMMITTED!\n";
 const RECORD_LEN: usize = COMMIT_AT + COMMIT.len();
 
-// Bitwise (no table): 84 bytes per load or save do not need the 1 KiB table.
-static CRC32: crc::Crc<u32, crc::NoTable> =
-    crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
+/// The record's CRC-32/ISO-HDLC (the frames' checksum: a 64-byte nibble table on the
+/// target, shared with the framing, rather than a second, bitwise implementation).
+fn crc32(bytes: &[u8]) -> u32 {
+    protocol::crc32::checksum(bytes)
+}
 
 /// Why a save failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -153,7 +155,7 @@ impl<F: NorFlash> CalibrationStore<F> {
         let header_ok = record[..4] == MAGIC
             && u16::from_le_bytes([record[4], record[5]]) == STORAGE_SCHEMA
             && usize::from(u16::from_le_bytes([record[6], record[7]])) == PAYLOAD_LEN;
-        if !header_ok || CRC32.checksum(&record[..BODY_LEN]) != crc {
+        if !header_ok || crc32(&record[..BODY_LEN]) != crc {
             return Slot::Corrupt;
         }
         let calibration = decode(&record[12..BODY_LEN]);
@@ -213,7 +215,7 @@ impl<F: NorFlash> CalibrationStore<F> {
         body[6..8].copy_from_slice(&PAYLOAD_LEN_U16.to_le_bytes());
         body[8..12].copy_from_slice(&seq.to_le_bytes());
         encode(calibration, &mut body[12..BODY_LEN]);
-        let crc = CRC32.checksum(&body[..BODY_LEN]);
+        let crc = crc32(&body[..BODY_LEN]);
         body[BODY_LEN..CRC_END].copy_from_slice(&crc.to_le_bytes());
 
         let offset = Self::slot_offset(slot);

@@ -161,35 +161,81 @@ fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
     Err(ParameterRejection::new(field, reason))
 }
 
+/// The motor's constants as [`model::check_constants`] takes them in `f32`: eta N Kt
+/// (`MotorConstants::cam_torque_constant`, multiplied in f32), the no-load current and
+/// speed. The core converts them once, in [`crate::Core::new`], where the firmware's
+/// constant configuration folds them at compile time (no software double maths left for
+/// `SetParameters`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct MotorRules {
+    kt: f32,
+    i0: f32,
+    w0: f32,
+}
+
+impl MotorRules {
+    /// `motor`'s constants in `f32`.
+    pub(crate) fn new(motor: &model::hardware::MotorConstants) -> Self {
+        let of = <f32 as model::CheckFloat>::of;
+        Self {
+            kt: of(motor.gearhead_efficiency) * of(motor.gear_ratio) * of(motor.kt_motor),
+            i0: of(motor.no_load_current),
+            w0: of(motor.no_load_speed),
+        }
+    }
+}
+
 /// A new record may not ask for more than the board allows, and its vibrator constants
 /// must be plausible for the board's motor: the model's two checks, the ones the host runs
 /// before sending ([`model::BoardLimits::check`] against [`CoreConfig::board_limits`],
 /// [`model::Calibration::check`] against [`crate::MotorConfig::constants`]). A limit above
 /// its cap would be silently lowered, and a fit 36 times off Table 2 would be stored
 /// without a word, so `SetParameters` refuses them naming the field.
+///
+/// The limits go through [`model::check_limits`] in `f32` against the config's own `f32`
+/// caps: the same verdicts as [`check_rules`]' `f64` check against
+/// [`CoreConfig::board_limits`] (those caps widened exactly), without double maths.
 pub(crate) fn check_board_caps(
     p: &RigParameters,
     config: &CoreConfig,
+    motor: &MotorRules,
 ) -> Result<(), ParameterRejection> {
-    check_rules(p, &config.board_limits(), &config.motor.constants)
+    let limits = model::check_limits(
+        [p.max_release_load_nm, p.max_current_a, p.max_freq_hz],
+        [
+            config.supervisor.max_release_load_nm,
+            config.faults.overcurrent_a,
+            config.supervisor.max_freq_hz,
+        ],
+    );
+    rules(p, limits, motor)
 }
 
 /// The record's limits against `caps` and its constants against `motor`: the first field
 /// refused, as the wire names it. The constants go through the model's rules in `f32`
 /// ([`model::check_constants`], the rules of [`model::Calibration::check`]): the target has
-/// no double-precision FPU, and host and firmware both call this function, so they agree.
+/// no double-precision FPU, and host and firmware both use these rules, so they agree.
 pub fn check_rules(
     p: &RigParameters,
     caps: &model::BoardLimits,
     motor: &model::hardware::MotorConstants,
 ) -> Result<(), ParameterRejection> {
-    use model::{CalibrationField as C, LimitField as L, LimitIssueKind};
     let requested = model::BoardLimits {
         max_release_load_nm: f64::from(p.max_release_load_nm),
         max_current_a: f64::from(p.max_current_a),
         max_freq_hz: f64::from(p.max_freq_hz),
     };
-    if let Err(issue) = caps.check(&requested) {
+    rules(p, caps.check(&requested), &MotorRules::new(motor))
+}
+
+/// [`check_rules`] and [`check_board_caps`] after the limits' check (`limits`).
+fn rules(
+    p: &RigParameters,
+    limits: Result<(), model::LimitIssue>,
+    motor: &MotorRules,
+) -> Result<(), ParameterRejection> {
+    use model::{CalibrationField as C, LimitField as L, LimitIssueKind};
+    if let Err(issue) = limits {
         let field = match issue.field {
             L::MaxReleaseLoad => ParameterField::MaxReleaseLoad,
             L::MaxCurrent => ParameterField::MaxCurrent,
@@ -211,14 +257,7 @@ pub fn check_rules(
         p.c5_a_s_per_rad,
         p.c6_a,
     ];
-    let of = <f32 as model::CheckFloat>::of;
-    let checked = model::check_constants(
-        si,
-        // eta N Kt (`MotorConstants::cam_torque_constant`), multiplied in f32.
-        of(motor.gearhead_efficiency) * of(motor.gear_ratio) * of(motor.kt_motor),
-        of(motor.no_load_current),
-        of(motor.no_load_speed),
-    );
+    let checked = model::check_constants(si, motor.kt, motor.i0, motor.w0);
     if let Err(issue) = checked {
         let field = match issue.field {
             C::C1 => ParameterField::C1,
@@ -396,5 +435,59 @@ mod tests {
             }
         }
         assert!(d.holds_at_rest && d.keeps_moving);
+    }
+
+    #[test]
+    fn the_cores_f32_check_is_the_hosts() {
+        // `SetParameters` (f32 limits, motor constants converted once) refuses exactly what
+        // `check_rules` (the host's, f64 limits against `board_limits`) refuses.
+        let config = CoreConfig::default();
+        let motor = MotorRules::new(&config.motor.constants);
+        let paper = RigParameters::paper();
+        let caps = [
+            config.supervisor.max_release_load_nm,
+            config.faults.overcurrent_a,
+            config.supervisor.max_freq_hz,
+        ];
+        let mut cases = vec![paper];
+        for (i, &cap) in caps.iter().enumerate() {
+            for v in [
+                cap,
+                f32::from_bits(cap.to_bits() - 1),
+                f32::from_bits(cap.to_bits() + 1),
+                f32::NAN,
+                f32::INFINITY,
+                0.0,
+                -1.0,
+            ] {
+                let mut p = paper;
+                match i {
+                    0 => p.max_release_load_nm = v,
+                    1 => p.max_current_a = v,
+                    _ => p.max_freq_hz = v,
+                }
+                cases.push(p);
+            }
+        }
+        for c1 in [0.0, 20.0, 62.1, 2258.0, f32::NAN] {
+            cases.push(RigParameters {
+                c1_nmm_per_a: c1,
+                ..paper
+            });
+        }
+        for c3 in [0.235, 0.5, -1.0] {
+            cases.push(RigParameters {
+                c3_nmm_s_per_rad: c3,
+                ..paper
+            });
+        }
+        let mut refused = 0;
+        for p in cases {
+            let host = check_rules(&p, &config.board_limits(), &config.motor.constants);
+            let core = check_board_caps(&p, &config, &motor);
+            assert_eq!(core, host, "{p:?}");
+            refused += usize::from(core.is_err());
+        }
+        assert!(refused >= 20, "{refused}");
     }
 }

@@ -293,7 +293,7 @@ fn other_schema_or_invalid_values_are_invalid() {
     let mut flash = store.into_inner();
     // A record of another layout version (CRC recomputed so only the version differs).
     flash.data[4] = 2;
-    let crc = CRC32.checksum(&flash.data[..BODY_LEN]);
+    let crc = crc32(&flash.data[..BODY_LEN]);
     flash.data[BODY_LEN..CRC_END].copy_from_slice(&crc.to_le_bytes());
     assert_eq!(load(&flash).status, ParametersStatus::Invalid);
 
