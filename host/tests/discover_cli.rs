@@ -119,7 +119,6 @@ impl Drop for Server {
 }
 
 #[test]
-#[ignore = "known failure of the served rig, not of the loop: after a heavy load at 3.6 V (3.3 N m) in a proposed round the served rig latches OUTPUT_OVERSPEED (the released load keeps falling, mu_d Lambda < 1, with no floor) and ClearFaults cannot clear it while the output still turns; plain `rig experiment torque-sweep` on a served ideal rig fails the same way (0.368 then 3.68 N m at 3.6 V: OVERLOAD). The in-process loop passes (test above)"]
 fn discover_names_a_hidden_effect_on_a_served_virtual_rig() {
     let server = Server::start(
         "20",

@@ -232,6 +232,39 @@ impl RigFile {
         self.with_model_terms(mu, effects, Vec::new())
     }
 
+    /// This rig with its drive's inertia term known: `inertia-rectification` at the kappa
+    /// of a drive that does (`regenerative`) or does not take the carrier's power back
+    /// ([`model::effects::drive_kappa`]), added to `[model]` (created with mu = mu_s when
+    /// absent) unless the model already fits it. The virtual rig and the firmware's
+    /// estimator follow the board's decay mode (`model::hardware::board::REGENERATIVE_DECAY`);
+    /// Eq. (10) alone is neither drive, so data measured through the board always carries it.
+    pub fn with_drive_decay(&self, regenerative: bool) -> Self {
+        let listed = self
+            .model
+            .iter()
+            .flat_map(|m| &m.effects)
+            .any(|e| e.name == "inertia-rectification");
+        if listed {
+            return self.clone();
+        }
+        let mut r = self.clone();
+        let model = r.model.get_or_insert_with(|| ModelSection {
+            mu: self.friction.mu_s,
+            effects: Vec::new(),
+            terms: Vec::new(),
+        });
+        let mut params = std::collections::BTreeMap::new();
+        params.insert(
+            "kappa".to_string(),
+            model::effects::drive_kappa(regenerative),
+        );
+        model.effects.push(EffectEntry {
+            name: "inertia-rectification".into(),
+            params,
+        });
+        r
+    }
+
     /// This rig with `[model]` set to `mu`, `effects` and `terms`.
     pub fn with_model_terms(
         &self,

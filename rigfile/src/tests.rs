@@ -344,3 +344,22 @@ fn user_effects_and_terms_round_trip() {
         "{e}"
     );
 }
+
+#[test]
+fn the_drive_decay_is_a_known_inertia_term_unless_the_model_fits_it() {
+    use model::effects::{KAPPA_POWER_NOT_RETURNED, KAPPA_POWER_RETURNED};
+    let paper = RigFile::paper();
+    let eq10 = paper.current_model().unwrap().effects.rectification;
+    assert_eq!(eq10, 0.0, "the paper's rig alone is Eq. (10)");
+    for (regenerative, kappa) in [
+        (false, KAPPA_POWER_NOT_RETURNED),
+        (true, KAPPA_POWER_RETURNED),
+    ] {
+        let rig = paper.with_drive_decay(regenerative);
+        let m = rig.current_model().unwrap();
+        assert_eq!(m.effects.rectification, kappa);
+        assert_eq!(m.mu, paper.friction.mu_s, "mu stays the rig's mu_s");
+        // Applied twice, or over a model that fits kappa itself: unchanged.
+        assert_eq!(rig.with_drive_decay(!regenerative), rig);
+    }
+}

@@ -273,10 +273,13 @@ fn leading(e: &explain::Explanation) -> Option<String> {
 
 /// Runs `rig discover`.
 pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    // The rows come from this project's firmware (real or virtual): its drive's decay mode
+    // is known, as the CSV's provenance says (`rig explain` reads it from there).
     let rig = match &a.model {
         Some(p) => RigFile::load(p)?,
         None => RigFile::paper(),
-    };
+    }
+    .with_drive_decay(model::hardware::board::REGENERATIVE_DECAY);
     let stop = interrupt_flag();
     let mut operator = Operator::stdin(false, stop);
     let mut bench = bench_for(&a, dev)?;

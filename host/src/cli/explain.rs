@@ -230,13 +230,16 @@ pub fn synthetic_sweep(
 
 /// Runs `rig explain`.
 pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
-    let rig = match &args.model {
+    let mut rig = match &args.model {
         Some(p) => RigFile::load(p)?,
         None => RigFile::paper(),
     };
     let (data, truth, source, default_dir) = match (&args.measured, args.synthetic) {
         (Some(path), _) => {
             let data = Dataset::read_csv(path)?;
+            if let Some(regenerative) = crate::experiment::sweep::read_drive(path) {
+                rig = rig.with_drive_decay(regenerative);
+            }
             (
                 data,
                 None,

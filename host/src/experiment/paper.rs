@@ -129,7 +129,7 @@ pub fn table1(
     table1_fitted(sets, hz, seed, effects, None)
 }
 
-/// [`table1`], the plant running with `fitted`'s mu and effects when given (a rig file with
+/// [`table1()`], the plant running with `fitted`'s mu and effects when given (a rig file with
 /// a fitted `[model]`, [`sim::preset::apply_model`]).
 pub fn table1_fitted(
     sets: &[[u32; 4]],
@@ -182,7 +182,7 @@ pub fn fig5(opts: &fig5::Fig5Options) -> Result<fig5::Fig5Result, RigError> {
     fig5_fitted(opts, None)
 }
 
-/// [`fig5`], the plant running with `fitted`'s mu and effects when given (a rig file with a
+/// [`fig5()`], the plant running with `fitted`'s mu and effects when given (a rig file with a
 /// fitted `[model]`, [`sim::preset::apply_model`]).
 pub fn fig5_fitted(
     opts: &fig5::Fig5Options,

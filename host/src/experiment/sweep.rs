@@ -99,7 +99,7 @@ pub fn provenance<B: Bench + ?Sized>(
     let fw = info.firmware_version;
     let date = httpdate(std::time::SystemTime::now());
     Ok(format!(
-        "# rig experiment torque-sweep ({})\n# date: {date}\n# host: rig {}\n# firmware: {}.{}.{} build {} board {} protocol {} capabilities {}\n# calibration ({}): {}\n# window: {}\n# plan: {}\n",
+        "# rig experiment torque-sweep ({})\n# date: {date}\n# host: rig {}\n# firmware: {}.{}.{} build {} board {} protocol {} capabilities {}\n# calibration ({}): {}\n# window: {}\n# plan: {}\n{}",
         setup.command,
         env!("CARGO_PKG_VERSION"),
         fw.major,
@@ -120,7 +120,39 @@ pub fn provenance<B: Bench + ?Sized>(
             Window::Revolutions => "whole cam revolutions from the start of constant rotation",
         },
         setup.plan.one_line(),
+        drive_line(model::hardware::board::REGENERATIVE_DECAY),
     ))
+}
+
+/// The provenance line of the drive's decay mode (the board setting the firmware is built
+/// with and the virtual rig follows), which `rig explain` reads ([`read_drive`]).
+pub fn drive_line(regenerative: bool) -> String {
+    format!(
+        "{DRIVE_PREFIX}{regenerative} (inertia-rectification kappa = {})\n",
+        model::effects::drive_kappa(regenerative)
+    )
+}
+
+const DRIVE_PREFIX: &str = "# drive: regenerative_decay = ";
+
+/// The drive's decay mode from a measured CSV's provenance ([`drive_line`]), if the file
+/// says it (files from `rig experiment torque-sweep` do): only the leading `#` lines are
+/// read.
+pub fn read_drive(path: &Path) -> Option<bool> {
+    use std::io::BufRead;
+    let file = std::fs::File::open(path).ok()?;
+    std::io::BufReader::new(file)
+        .lines()
+        .map_while(Result::ok)
+        .take_while(|l| l.starts_with('#'))
+        .find_map(|l| {
+            let rest = l.strip_prefix(DRIVE_PREFIX)?;
+            match rest.split_whitespace().next()? {
+                "true" => Some(true),
+                "false" => Some(false),
+                _ => None,
+            }
+        })
 }
 
 /// A UTC date and time, `2026-11-22T23:55:00Z`.
@@ -595,6 +627,25 @@ fn average<B: Bench + ?Sized>(
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn the_drive_line_is_read_back_from_the_provenance_only() {
+        let dir = tempfile::tempdir().unwrap();
+        for regenerative in [false, true] {
+            let path = dir.path().join(format!("d{regenerative}.csv"));
+            let text = format!(
+                "# plan: {{}}\n{}point,i_in_a\n0,1.0\n",
+                drive_line(regenerative)
+            );
+            std::fs::write(&path, text).unwrap();
+            assert_eq!(read_drive(&path), Some(regenerative));
+        }
+        // Not in the leading comments (or absent): unknown, the paper's Eq. (10) stays.
+        let path = dir.path().join("late.csv");
+        std::fs::write(&path, format!("point,i_in_a\n{}0,1.0\n", drive_line(true))).unwrap();
+        assert_eq!(read_drive(&path), None);
+        assert!(drive_line(false).contains("kappa = -0.5"));
+    }
     use super::*;
     use crate::experiment::bench::SimBench;
 
