@@ -107,6 +107,14 @@ pub enum RigError {
     /// The device (real or simulated) broke the protocol or did not answer.
     #[error("device protocol: {0}")]
     Protocol(String),
+    /// A test point the rig could not reach (the cam never came to constant rotation).
+    #[error("{what}: {why}")]
+    Unmeasurable {
+        /// The point.
+        what: String,
+        /// What happened and what it suggests.
+        why: String,
+    },
     /// A serial port that would not open.
     #[error(
         "cannot open serial port {port}: {why}; `rig ports` lists the serial ports of this machine (or use --sim for the virtual device)"

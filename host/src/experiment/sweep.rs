@@ -321,7 +321,36 @@ pub fn run_to<B: Bench + ?Sized>(
                     hung = Some(run.load_nm);
                 }
                 wait_for_temperature(bench, operator, run)?;
-                let mut row = measure(bench, operator, setup, run)?;
+                let mut row = match measure(bench, operator, setup, run) {
+                    Ok(row) => row,
+                    Err(RigError::Unmeasurable { what, why }) if bench.is_virtual() => {
+                        // A virtual rig's operator notes the point and goes on.
+                        progress(&format!("{what}: {why}; point skipped"));
+                        bench.lock_gear();
+                        bench.wait(2.0)?;
+                        hung = None;
+                        outcome.skipped += 1;
+                        break;
+                    }
+                    Err(RigError::DeviceFault { what, faults })
+                        if bench.is_virtual() && load_protection_only(&faults) =>
+                    {
+                        // The firmware judged the point too heavy (its load estimate,
+                        // from the current, above the limit, or the current trip): it
+                        // cannot be measured on this rig. A virtual rig's operator lets
+                        // the output come to rest (the gear is locked), clears and goes
+                        // on; a real rig stops here for the operator to look.
+                        progress(&format!(
+                            "{what}: the device latched {faults}; point skipped, fault cleared"
+                        ));
+                        bench.wait(2.0)?;
+                        bench.request(&protocol::Request::ClearFaults)?;
+                        hung = None;
+                        outcome.skipped += 1;
+                        break;
+                    }
+                    Err(e) => return Err(e),
+                };
                 let summary = format!(
                     "point {}/{}: {} N m, {}: i = {:.3} A, w = {:.1} rad/s",
                     run.index + 1,
@@ -434,6 +463,18 @@ fn wait_for_temperature<B: Bench + ?Sized>(
     Ok(())
 }
 
+/// Whether `faults` (as [`fault_error`] names them) are only the protections a heavy
+/// point trips (`LOAD_LIMIT`, `OVERLOAD`: the load judged too heavy for a release;
+/// `OVERCURRENT`: the drive's current trip): the point is beyond what this rig can
+/// measure, nothing else is wrong.
+fn load_protection_only(faults: &str) -> bool {
+    let mut names = faults
+        .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .filter(|n| !n.is_empty())
+        .peekable();
+    names.peek().is_some() && names.all(|n| matches!(n, "LOAD_LIMIT" | "OVERLOAD" | "OVERCURRENT"))
+}
+
 fn fault_error(t: &TelemetrySample, run: &Run) -> RigError {
     RigError::DeviceFault {
         what: format!(
@@ -482,13 +523,18 @@ fn measure<B: Bench + ?Sized>(
                 break average(bench, operator, setup, run, t);
             }
             if waited > SPIN_UP_LIMIT_S {
-                return Err(RigError::Protocol(format!(
-                    "the cam did not reach constant rotation within {SPIN_UP_LIMIT_S} s at {} N m, {} (state {}, cam {:.1} rad/s): the load may be too heavy for this drive",
-                    reporting::human(run.load_nm),
-                    drive_text(run),
-                    t.state.name(),
-                    t.cam_speed_rad_s
-                )));
+                return Err(RigError::Unmeasurable {
+                    what: format!(
+                        "the sweep at {} N m, {}",
+                        reporting::human(run.load_nm),
+                        drive_text(run)
+                    ),
+                    why: format!(
+                        "the cam did not reach constant rotation within {SPIN_UP_LIMIT_S} s (state {}, cam {:.1} rad/s): the load may be too heavy for this drive",
+                        t.state.name(),
+                        t.cam_speed_rad_s
+                    ),
+                });
             }
         }
     })();
@@ -627,6 +673,24 @@ fn average<B: Bench + ?Sized>(
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn only_the_load_protections_skip_a_point() {
+        use protocol::FaultFlags;
+        let name = |f: FaultFlags| f.to_string();
+        assert!(load_protection_only(&name(FaultFlags::LOAD_LIMIT)));
+        assert!(load_protection_only(&name(
+            FaultFlags::LOAD_LIMIT | FaultFlags::OVERLOAD
+        )));
+        assert!(load_protection_only(&name(
+            FaultFlags::OVERLOAD | FaultFlags::OVERCURRENT
+        )));
+        assert!(!load_protection_only(&name(
+            FaultFlags::OVERCURRENT | FaultFlags::ENCODER_LOSS
+        )));
+        assert!(!load_protection_only(&name(FaultFlags::JAM)));
+        assert!(!load_protection_only(""));
+    }
 
     #[test]
     fn the_drive_line_is_read_back_from_the_provenance_only() {
