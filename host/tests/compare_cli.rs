@@ -62,6 +62,11 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
         .assert()
         .success();
     let model = dir.path().join("fitted.toml");
+    // `rig sim torque-sweep`'s CSV has no provenance, so the drive's inertia term (the
+    // board's non-regenerating decay, which the sweep CSVs of `rig experiment` state in a
+    // `# drive:` line) is given the documented way: in the rig file's [model].
+    let board = dir.path().join("board.toml");
+    hidden(&board, "inertia-rectification", "kappa = -0.5");
     let e = json(
         rig()
             .args([
@@ -73,6 +78,8 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
                 "--measured",
             ])
             .arg(&measured)
+            .arg("--rig")
+            .arg(&board)
             .arg("--write-model")
             .arg(&model),
     );

@@ -50,8 +50,8 @@ fn quick_sweep_writes_explains_csv_with_provenance() {
         .get_output()
         .clone();
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(v["planned"], 12);
-    assert_eq!(v["written"], 12);
+    assert_eq!(v["planned"], 30);
+    assert_eq!(v["written"], 30);
     let body = std::fs::read_to_string(&csv).unwrap();
     for want in [
         "# date: ",
@@ -68,7 +68,7 @@ fn quick_sweep_writes_explains_csv_with_provenance() {
     ] {
         assert!(body.contains(want), "missing {want}:\n{body}");
     }
-    assert_eq!(data_rows(&csv).len(), 12);
+    assert_eq!(data_rows(&csv).len(), 30);
     let svg = std::fs::read_to_string(&svg).unwrap();
     assert!(svg.contains("cam speed (Fig. 8)") && svg.contains("3.6 V"));
     // explain reads it (the `#` lines are skipped).

@@ -732,16 +732,32 @@ mod tests {
             command: "test".into(),
         };
         let out = run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).unwrap();
-        assert_eq!((out.planned, out.written), (12, 12));
+        assert_eq!((out.planned, out.written), (30, 30));
         let data = explain::Dataset::read_csv(&csv).unwrap();
-        assert_eq!(data.len(), 12);
+        assert_eq!(data.len(), 30);
         let (rows, plan) = read_rows(&csv).unwrap();
         assert_eq!(plan.unwrap(), setup.plan.one_line());
-        // Current grows with load at every voltage; cam speed with the voltage.
+        // The mean current over the repeats grows with load at every voltage; cam speed
+        // with the voltage.
         for v in model::paper::SUPPLY_VOLTAGES {
-            let mut at: Vec<&Row> = rows.iter().filter(|r| r.v_in_v == Some(v)).collect();
-            at.sort_by(|a, b| a.tau_rot_nm.total_cmp(&b.tau_rot_nm));
-            assert!(at.windows(2).all(|w| w[1].i_in_a > w[0].i_in_a), "{v} V");
+            let mut means: Vec<(f64, f64)> = Vec::new();
+            for load in setup.plan.points.iter().map(|p| p.load_nm) {
+                if means.iter().any(|m| m.0 == load) {
+                    continue;
+                }
+                let at: Vec<f64> = rows
+                    .iter()
+                    .filter(|r| r.v_in_v == Some(v) && r.tau_rot_nm == load)
+                    .map(|r| r.i_in_a)
+                    .collect();
+                assert_eq!(at.len(), 2, "two repeats at {load} N m, {v} V");
+                means.push((load, at.iter().sum::<f64>() / 2.0));
+            }
+            means.sort_by(|a, b| a.0.total_cmp(&b.0));
+            assert!(
+                means.windows(2).all(|w| w[1].1 > w[0].1),
+                "{v} V: {means:?}"
+            );
         }
         let speed = |v: f64| {
             rows.iter()
