@@ -38,7 +38,10 @@ use rigfile::RigFile;
 use serde::Serialize;
 
 use crate::fit::{self, Fit};
-use crate::{Dataset, Outcome, Verdict, library};
+use crate::points::TestPoints;
+use crate::select::{self, Cand};
+use crate::terms::{Form, Inputs};
+use crate::{Dataset, Outcome, Verdict};
 
 /// Lightest load a proposal hangs, N m: the paper's lightest (Figs. 8-9).
 pub const MIN_LOAD_NM: f64 = model::paper::TAU_ROT_MIN_TESTED;
@@ -406,51 +409,119 @@ impl Proposal {
     }
 }
 
-/// A model compared in the design.
+/// A model compared in the design: a fit's mean law with its terms.
 struct Compared {
     name: String,
     model: CurrentModel,
+    terms: Vec<usize>,
+    term_x: Vec<Vec<f64>>,
 }
 
-/// Fits `effect` jointly with `base` (from zero and, for the nonlinear effects, from a
-/// start away from zero; the better fit wins), as the selection does.
-fn fit_with(outcome: &Outcome, base: &Fit, effect: Effect) -> Fit {
-    let points = &outcome.points;
-    let spec = base.spec.with(effect);
-    let mut start = base.model;
-    library::clear_params(effect, &mut start.effects);
-    let first = fit::fit(points, &points.all, &spec, &start);
-    let alt = match effect {
-        Effect::SpeedDependentAxialFriction => {
-            let w = points.speed_centres.first().copied().unwrap_or(30.0);
-            Some(w * w * 0.5)
+impl Compared {
+    fn of(name: String, fit: &Fit) -> Self {
+        Self {
+            name,
+            model: fit.model,
+            terms: fit.spec.terms.clone(),
+            term_x: fit.term_x.clone(),
         }
-        Effect::LoadDependentFriction => Some(0.3),
-        _ => None,
-    };
-    match (alt, effect.mean_param()) {
-        (Some(v), Some(q)) => {
-            let mut p = start.params();
-            p[q.index()] = v;
-            start.set_params(&p);
-            let second = fit::fit(points, &points.all, &spec, &start);
-            if second.bic < first.bic {
-                second
-            } else {
-                first
-            }
+    }
+
+    /// Its mean current at `ops`, A; the terms see every point at time `time` s (the heated
+    /// state a test that long after the start has) and motor temperature `temp` deg C.
+    fn currents(&self, points: &TestPoints, ops: &[OperatingPoint], time: f64, temp: f64) -> Vec<f64> {
+        let ev = self.model.evaluator();
+        let mut out: Vec<f64> = ops.iter().map(|op| ev.current(op)).collect();
+        if self.terms.is_empty() {
+            return out;
         }
-        _ => first,
+        let time = vec![time; ops.len()];
+        let temp = vec![temp; ops.len()];
+        let order: Vec<usize> = (0..ops.len()).collect();
+        let inputs = Inputs {
+            ops,
+            time: &time,
+            temp: &temp,
+            order: &order,
+        };
+        for (&t, x) in self.terms.iter().zip(&self.term_x) {
+            points.terms[t].add(&self.model, &inputs, x, &mut out);
+        }
+        out
     }
 }
 
-/// The candidates' names the design compares, and its goal.
-fn leading(outcome: &Outcome, options: &DesignOptions) -> (Goal, Vec<Effect>) {
+/// A leading candidate: the law the selection fitted it in, and its label.
+#[derive(Debug, Clone)]
+struct Leader {
+    cand: Cand,
+    /// Its name (the effect's; a family form's is its library effect's).
+    name: String,
+    /// Its name with its family form, e.g. `load-dependent-friction (light-load)`.
+    label: String,
+}
+
+/// The candidate named `name` in law `form` (its library law without one).
+fn cand_of(points: &TestPoints, name: &str, form: Option<&str>) -> Option<Cand> {
+    let term = |want: Option<&str>| {
+        points
+            .terms
+            .iter()
+            .position(|t| t.name == name && t.form().map(Form::name) == want)
+            .map(Cand::Term)
+    };
+    match form {
+        Some(f) => term(Some(f)),
+        None => match Effect::from_name(name) {
+            // Only laws that move the mean current can be told apart by it.
+            Some(e) if e.mean_param().is_some() || e == Effect::CurrentSensorOffset => {
+                Some(Cand::Effect(e))
+            }
+            Some(_) => None,
+            // A user effect.
+            None => term(None),
+        },
+    }
+}
+
+/// The law the selection's first step showed `name` in (its best law there), else its
+/// library law.
+fn form_in_table<'a>(outcome: &'a Outcome, name: &str) -> Option<&'a str> {
+    outcome
+        .explanation
+        .candidates
+        .iter()
+        .find(|c| c.name == name)
+        .and_then(|c| c.form.as_deref())
+}
+
+fn leader(outcome: &Outcome, name: &str, form: Option<&str>) -> Option<Leader> {
+    let cand = cand_of(&outcome.points, name, form)?;
+    Some(Leader {
+        cand,
+        name: name.to_string(),
+        label: match form {
+            Some(f) => format!("{name} ({f})"),
+            None => name.to_string(),
+        },
+    })
+}
+
+/// The leading candidates the design compares (in the laws the selection fitted them), and
+/// its goal.
+fn leading(outcome: &Outcome, options: &DesignOptions) -> (Goal, Vec<Leader>) {
     let e = &outcome.explanation;
-    let named = |names: &mut dyn Iterator<Item = &String>| -> Vec<Effect> {
+    let named = |names: &mut dyn Iterator<Item = &String>| -> Vec<Leader> {
         names
-            .filter_map(|n| Effect::from_name(n))
-            .filter(|e| e.mean_param().is_some() || *e == Effect::CurrentSensorOffset)
+            .filter_map(|n| {
+                // The named effect in its selected law, a rival in its best law of the
+                // step that named it (the first: the verdict turns on the leading finding).
+                let form = match e.effects.first() {
+                    Some(f) if &f.name == n => f.form.as_deref(),
+                    _ => form_in_table(outcome, n),
+                };
+                leader(outcome, n, form)
+            })
             .take(options.max_candidates)
             .collect()
     };
@@ -478,28 +549,68 @@ fn leading(outcome: &Outcome, options: &DesignOptions) -> (Goal, Vec<Effect>) {
     }
 }
 
+/// The median of `values` (0 when empty).
+fn median(values: &[f64]) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// The final model with the pinned candidate's main parameter moved by one standard error,
+/// when it has one.
+fn moved_by_one_se(outcome: &Outcome, cand: Cand) -> Option<Compared> {
+    let after = &outcome.after;
+    let mut moved = Compared::of(String::new(), after);
+    match cand {
+        Cand::Effect(e) => {
+            let q = e.mean_param()?;
+            let mut p = moved.model.params();
+            let v = p[q.index()];
+            let step = after
+                .std_error(q)
+                .filter(|s| s.is_finite() && *s > 0.0)
+                .unwrap_or(0.1 * v.abs().max(1e-6));
+            p[q.index()] = v + step;
+            moved.model.set_params(&p);
+        }
+        Cand::Term(t) => {
+            let pos = after.spec.terms.iter().position(|&x| x == t)?;
+            let term = &outcome.points.terms[t];
+            // Its first linear parameter (its size); shapes are fitted in ln.
+            let c = term.params.iter().position(|p| !p.log)?;
+            let v = moved.term_x[pos][c];
+            let step = after
+                .term_std_error(pos, c)
+                .filter(|s| s.is_finite() && *s > 0.0)
+                .unwrap_or(0.1 * v.abs().max(1e-6));
+            moved.term_x[pos][c] = v + step;
+        }
+    }
+    Some(moved)
+}
+
 /// Proposes the test points that best separate the leading candidates of `outcome` (the
 /// explanation), or pin the named effect, within `space`.
 pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Proposal {
-    let (goal, effects) = leading(outcome, options);
+    let (goal, leaders) = leading(outcome, options);
     let sigma = outcome.explanation.robust_sigma_a.max(1e-3);
-    // The thermal driver the predictions use: the data's median.
-    let mut thermal: Vec<f64> = outcome.points.ops.iter().map(|o| o.thermal).collect();
-    thermal.sort_by(f64::total_cmp);
-    let thermal = thermal.get(thermal.len() / 2).copied().unwrap_or(0.0);
+    let points = &outcome.points;
+    // The conditions the predictions use: the data's median thermal driver, time and
+    // motor temperature.
+    let thermal = median(&points.ops.iter().map(|o| o.thermal).collect::<Vec<_>>());
+    let time = median(&points.time_s);
+    let temp = median(&points.temp_c);
+    let fitted = |l: &Leader| {
+        let f = select::fit_candidate(points, &outcome.before, l.cand);
+        Compared::of(l.name.clone(), &f)
+    };
 
     // The models compared, and the pairs to separate.
     let mut models: Vec<Compared> = Vec::new();
     let mut pairs: Vec<(usize, usize)> = Vec::new();
     match goal {
         Goal::Separate => {
-            for &e in &effects {
-                let f = fit_with(outcome, &outcome.before, e);
-                models.push(Compared {
-                    name: e.name().to_string(),
-                    model: f.model,
-                });
-            }
+            models = fit::par_map(&leaders, fitted);
             for a in 0..models.len() {
                 for b in a + 1..models.len() {
                     pairs.push((a, b));
@@ -507,53 +618,22 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
             }
         }
         Goal::Seek => {
-            models.push(Compared {
-                name: "base".into(),
-                model: outcome.before.model,
-            });
-            for &e in &effects {
-                let f = fit_with(outcome, &outcome.before, e);
-                models.push(Compared {
-                    name: e.name().to_string(),
-                    model: f.model,
-                });
-                pairs.push((0, models.len() - 1));
-            }
+            models.push(Compared::of("base".into(), &outcome.before));
+            models.extend(fit::par_map(&leaders, fitted));
+            pairs.extend((1..models.len()).map(|k| (0, k)));
         }
         Goal::Pin => {
-            let after = &outcome.after;
-            if let Some(&e) = effects.first()
-                && let Some(q) = e.mean_param()
-            {
-                let mut moved = after.model;
-                let mut p = moved.params();
-                let v = p[q.index()];
-                let step = after
-                    .std_error(q)
-                    .filter(|s| s.is_finite() && *s > 0.0)
-                    .unwrap_or(0.1 * v.abs().max(1e-6));
-                p[q.index()] = v + step;
-                moved.set_params(&p);
-                models.push(Compared {
-                    name: e.name().to_string(),
-                    model: after.model,
-                });
-                models.push(Compared {
-                    name: format!("{} + 1 se", e.name()),
-                    model: moved,
-                });
-                pairs.push((0, 1));
-            } else if let Some(&e) = effects.first() {
-                // An offset-like effect without a mean parameter of its own: pin it
-                // against the model without it.
-                models.push(Compared {
-                    name: e.name().to_string(),
-                    model: after.model,
-                });
-                models.push(Compared {
-                    name: "base".into(),
-                    model: outcome.before.model,
-                });
+            if let Some(l) = leaders.first() {
+                if let Some(mut moved) = moved_by_one_se(outcome, l.cand) {
+                    moved.name = format!("{} + 1 se", l.name);
+                    models.push(Compared::of(l.name.clone(), &outcome.after));
+                    models.push(moved);
+                } else {
+                    // An offset-like effect without a mean parameter of its own: pin it
+                    // against the model without it.
+                    models.push(Compared::of(l.name.clone(), &outcome.after));
+                    models.push(Compared::of("base".into(), &outcome.before));
+                }
                 pairs.push((0, 1));
             }
         }
@@ -561,10 +641,17 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
 
     // Predictions on the grid (feasible points only).
     let grid = space.grid();
+    let ops: Vec<OperatingPoint> = grid
+        .iter()
+        .map(|g| OperatingPoint::new(g.omega, g.load, thermal))
+        .collect();
+    let by_model: Vec<Vec<f64>> = models
+        .iter()
+        .map(|m| m.currents(points, &ops, time, temp))
+        .collect();
     let mut preds: Vec<(GridPoint, Vec<f64>)> = Vec::new();
-    for g in grid {
-        let op = OperatingPoint::new(g.omega, g.load, thermal);
-        let i: Vec<f64> = models.iter().map(|m| m.model.current(&op)).collect();
+    for (k, g) in grid.into_iter().enumerate() {
+        let i: Vec<f64> = by_model.iter().map(|m| m[k]).collect();
         if i.iter()
             .all(|x| x.is_finite() && *x <= space.max_current_a && *x > 0.0)
         {
@@ -642,7 +729,7 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
             separation_sigma: *sep,
         })
         .collect();
-    let names: Vec<String> = effects.iter().map(|e| e.name().to_string()).collect();
+    let names: Vec<String> = leaders.iter().map(|l| l.label.clone()).collect();
     let best = points
         .iter()
         .map(|p| p.separation_sigma)
