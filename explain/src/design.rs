@@ -3,9 +3,13 @@
 //! named effect's size; written as a plan file in the format of `docs/plans.md` that
 //! `rig experiment torque-sweep --plan FILE` runs.
 //!
-//! 1. Candidate models. Each leading candidate is fitted jointly with the model it competes
-//!    against (the same fit as the selection's), so every candidate agrees with the data
-//!    already measured; they differ where nothing was measured.
+//! 1. Candidate models. Each leading candidate is taken in the law the selection showed it
+//!    in (its library law, a family form such as load-dependent friction's `light-load`, or
+//!    a user effect: the named effect's selected law, a rival's best law in the first step's
+//!    table) and fitted jointly with the model it competes against by the selection's own
+//!    candidate fit, so every candidate agrees with the data already measured; they differ
+//!    where nothing was measured. Each predicts its mean current at a new point with its
+//!    terms.
 //! 2. The space of feasible points: supply voltage (open loop, as the data's `v_in_v`) or
 //!    vibration frequency (closed loop, when the data has no voltage) times load, within the
 //!    rig's and the board's caps ([`model::BoardLimits`], the rig file's `[limits]`, the
@@ -27,8 +31,9 @@
 //! 5. Seeking (verdict `no-missing-effect`): the leading candidates of the first step
 //!    against the starting model: where an effect the data hints at would show most.
 //!
-//! Temperatures: the design predicts at the data's median thermal driver; a point's
-//! `temp_c` is not set (the plan waits for no temperature).
+//! Temperatures: the design predicts at the data's median thermal driver (and, for terms,
+//! the data's median motor temperature and a warm-up's heated state at the data's median
+//! time); a point's `temp_c` is not set (the plan waits for no temperature).
 
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
@@ -429,7 +434,13 @@ impl Compared {
 
     /// Its mean current at `ops`, A; the terms see every point at time `time` s (the heated
     /// state a test that long after the start has) and motor temperature `temp` deg C.
-    fn currents(&self, points: &TestPoints, ops: &[OperatingPoint], time: f64, temp: f64) -> Vec<f64> {
+    fn currents(
+        &self,
+        points: &TestPoints,
+        ops: &[OperatingPoint],
+        time: f64,
+        temp: f64,
+    ) -> Vec<f64> {
         let ev = self.model.evaluator();
         let mut out: Vec<f64> = ops.iter().map(|op| ev.current(op)).collect();
         if self.terms.is_empty() {
@@ -850,6 +861,28 @@ mod separation_tests {
             assert!(proposal.candidates.iter().any(|n| n == name));
             assert!(proposal.test_points() <= DesignOptions::default().max_test_points);
             assert!(proposal.reason.contains(name), "{}", proposal.reason);
+            // Every leader is compared in the law the selection showed it in (a family
+            // form named with it).
+            for n in &b.ambiguous {
+                let form = b
+                    .candidates
+                    .iter()
+                    .find(|c| &c.name == n)
+                    .and_then(|c| c.form.clone());
+                let form = match b.effects.first() {
+                    Some(f) if &f.name == n => f.form.clone(),
+                    _ => form,
+                };
+                let label = match form {
+                    Some(f) => format!("{n} ({f})"),
+                    None => n.clone(),
+                };
+                assert!(
+                    proposal.reason.contains(&label),
+                    "{label}: {}",
+                    proposal.reason
+                );
+            }
             // Spread over the space: not all at one voltage or one load.
             let volts: Vec<f64> = proposal.points.iter().filter_map(|p| p.volts).collect();
             assert!(
@@ -864,6 +897,51 @@ mod separation_tests {
             let a = &after.explanation;
             assert_eq!(a.verdict, Verdict::Explained, "{name} seed {seed}: {a:?}");
             assert_eq!(a.effects[0].name, name);
+        }
+    }
+
+    #[test]
+    fn a_family_form_leader_is_fitted_and_predicted_as_the_selection_does() {
+        // The offset case of the test above: the data cannot tell the offset from the
+        // light-load form of load-dependent friction.
+        let offset = truth(|p| p.current_offset = 0.05);
+        let (before, proposal, _) = before_and_after(&offset, &[0.368, 1.5, 2.4, 3.68], 1);
+        let (goal, leaders) = leading(&before, &DesignOptions::default());
+        assert_eq!(goal, Goal::Separate);
+        let light = leaders
+            .iter()
+            .find(|l| l.label == "load-dependent-friction (light-load)")
+            .unwrap_or_else(|| panic!("{:?}", before.explanation.ambiguous));
+        assert!(matches!(light.cand, Cand::Term(_)), "{light:?}");
+        assert!(
+            proposal
+                .reason
+                .contains("load-dependent-friction (light-load)")
+        );
+        // Its predictions at the data's own points are the selection's fit's.
+        let points = &before.points;
+        let f = select::fit_candidate(points, &before.before, light.cand);
+        assert!(!f.spec.terms.is_empty());
+        let m = Compared::of(light.name.clone(), &f);
+        let ours = m.currents(points, &points.ops, 0.0, 25.0);
+        for (a, b) in ours.iter().zip(f.predict(points)) {
+            assert!((a - b).abs() < 1e-12, "{a} vs {b}");
+        }
+        // At the proposed points the leaders differ by what the proposal says (its widest
+        // pair).
+        for p in &proposal.points {
+            let i: Vec<f64> = p.predicted_a.values().copied().collect();
+            assert_eq!(i.len(), leaders.len(), "{:?}", p.predicted_a);
+            let z = i
+                .iter()
+                .flat_map(|a| i.iter().map(move |b| (a - b).abs()))
+                .fold(0.0, f64::max)
+                / proposal.sigma_a;
+            assert!(
+                (z - p.separation_sigma).abs() < 1e-9,
+                "{z} vs {}",
+                p.separation_sigma
+            );
         }
     }
 
