@@ -347,7 +347,7 @@ fn fit_term(points: &TestPoints, current: &Fit, t: usize) -> Fit {
 const SHAPE_LOOK_ITERATIONS: usize = 4;
 
 /// Fits `cand` jointly with `current`.
-fn fit_candidate(points: &TestPoints, current: &Fit, cand: Cand) -> Fit {
+pub(crate) fn fit_candidate(points: &TestPoints, current: &Fit, cand: Cand) -> Fit {
     match cand {
         Cand::Effect(e) => fit_effect(points, current, e),
         Cand::Term(t) => fit_term(points, current, t),
