@@ -34,6 +34,13 @@ const NULL_SEED: u64 = 0x5eed_0e4f_1a7e_0006;
 const FULL_TABLE_POINTS: usize = 20_000;
 /// Candidates fitted per step on large data.
 const SCREEN_KEEP: usize = 3;
+/// On pooled data a family form or user effect is fitted only when this many times its
+/// score-test estimate of the BIC improvement, plus [`TERM_SCREEN_SLACK`], reaches the guard's
+/// critical value (a fit gains up to about 2.2 times the estimate of a large effect, about the
+/// estimate of a small one).
+const TERM_SCREEN_FACTOR: f64 = 2.0;
+/// See [`TERM_SCREEN_FACTOR`].
+const TERM_SCREEN_SLACK: f64 = 10.0;
 /// Level of the guard that the best improvement must still clear with its most influential
 /// test point left out (at least `Options::alpha`).
 pub const INFLUENCE_ALPHA: f64 = 0.05;
@@ -720,12 +727,25 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
     };
     let mut ranked: Vec<(Cand, f64)> = applicable.iter().map(|&c| (c, estimate(c))).collect();
     ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let null = null_best_improvements(points, &tests, &mean, ripple, current.n, opts.null_draws);
+    let critical = critical_value(&null, opts.alpha);
+    let critical_influence = critical_value(&null, INFLUENCE_ALPHA.max(opts.alpha));
+    // On pooled data a family form or user effect is fitted only when its score test could
+    // reach the guard's critical value (its fit improving the BIC by up to
+    // `TERM_SCREEN_FACTOR` times the estimate plus `TERM_SCREEN_SLACK`); the others keep
+    // their estimates.
+    let could_pass = |c: Cand, est: f64| {
+        !points.pooled
+            || matches!(c, Cand::Effect(_))
+            || TERM_SCREEN_FACTOR * est + TERM_SCREEN_SLACK >= critical
+    };
     let to_fit: Vec<Cand> = ranked
         .iter()
         .enumerate()
         .filter(|(i, (c, _))| {
             full_table || *i < SCREEN_KEEP || *c == Cand::Effect(Effect::LinearBushFriction)
         })
+        .filter(|(_, (c, est))| could_pass(*c, *est))
         .map(|(_, (c, _))| *c)
         .collect();
     let fits = fit::par_map(&to_fit, |&c| fit_candidate(points, current, c));
@@ -755,9 +775,6 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
             });
         }
     }
-    let null = null_best_improvements(points, &tests, &mean, ripple, current.n, opts.null_draws);
-    let critical = critical_value(&null, opts.alpha);
-    let critical_influence = critical_value(&null, INFLUENCE_ALPHA.max(opts.alpha));
     Some(Explored {
         candidates,
         null,
