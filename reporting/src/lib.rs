@@ -131,9 +131,78 @@ pub fn human(value: f64) -> String {
     human_f64(value).to_string()
 }
 
+/// A moment in UTC, split into its civil date and time (proleptic Gregorian), for the
+/// timestamps reports and provenance lines carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UtcTime {
+    /// Year.
+    pub year: i64,
+    /// Month, 1-12.
+    pub month: i64,
+    /// Day of the month, 1-31.
+    pub day: i64,
+    /// Hour, 0-23.
+    pub hour: u64,
+    /// Minute, 0-59.
+    pub minute: u64,
+    /// Second, 0-59.
+    pub second: u64,
+}
+
+impl UtcTime {
+    /// `time` in UTC (a time before 1970 counts as 1970-01-01T00:00:00Z).
+    pub fn of(time: std::time::SystemTime) -> Self {
+        let secs = time
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        let (days, rest) = (secs / 86_400, secs % 86_400);
+        // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
+        let z = i64::try_from(days).unwrap_or(i64::MAX - 719_468) + 719_468;
+        let era = z.div_euclid(146_097);
+        let doe = z - era * 146_097;
+        let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+        let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+        let mp = (5 * doy + 2) / 153;
+        let month = if mp < 10 { mp + 3 } else { mp - 9 };
+        Self {
+            year: yoe + era * 400 + i64::from(month <= 2),
+            month,
+            day: doy - (153 * mp + 2) / 5 + 1,
+            hour: rest / 3600,
+            minute: rest / 60 % 60,
+            second: rest % 60,
+        }
+    }
+
+    /// ISO 8601, `2026-11-22T23:55:00Z`.
+    pub fn iso(&self) -> String {
+        format!(
+            "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}Z",
+            self.year, self.month, self.day, self.hour, self.minute, self.second
+        )
+    }
+
+    /// The compact form for file and folder names, `20261122T235500Z`.
+    pub fn compact(&self) -> String {
+        format!(
+            "{:04}{:02}{:02}T{:02}{:02}{:02}Z",
+            self.year, self.month, self.day, self.hour, self.minute, self.second
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn utc_dates_and_times() {
+        let at = |s| UtcTime::of(std::time::UNIX_EPOCH + std::time::Duration::from_secs(s));
+        assert_eq!(at(0).compact(), "19700101T000000Z");
+        assert_eq!(at(951_827_696).compact(), "20000229T123456Z");
+        assert_eq!(at(1_735_689_599).iso(), "2024-12-31T23:59:59Z");
+        assert_eq!(at(1_795_910_400).iso(), "2026-11-29T00:00:00Z");
+    }
 
     #[test]
     fn a_failed_write_leaves_the_old_file() {
