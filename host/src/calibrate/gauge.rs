@@ -69,14 +69,12 @@ pub fn parse_reading(text: &str, unit: GaugeUnit) -> Result<f64, String> {
     }
 }
 
-/// The points `rig calibrate` wrote (`points.csv`: `test, volts, current_a, current_sd_a,
-/// cam_speed_rad_s, gauge_nmm`), for `--from-points`.
-pub fn read_points_csv(path: &std::path::Path) -> Result<Measurements, RigError> {
-    let name = path.display().to_string();
-    let bad = |why: String| RigError::MeasuredFile {
-        file: name.clone(),
-        why,
-    };
+/// A CSV file of the operator's (fields trimmed, `#` comments skipped) and its header row;
+/// `bad` turns a reason into the file's error.
+fn open_csv(
+    path: &std::path::Path,
+    bad: &dyn Fn(String) -> RigError,
+) -> Result<(csv::Reader<std::fs::File>, csv::StringRecord), RigError> {
     let mut r = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .comment(Some(b'#'))
@@ -86,6 +84,18 @@ pub fn read_points_csv(path: &std::path::Path) -> Result<Measurements, RigError>
         .headers()
         .map_err(|e| bad(format!("no header row ({e})")))?
         .clone();
+    Ok((r, headers))
+}
+
+/// The points `rig calibrate` wrote (`points.csv`: `test, volts, current_a, current_sd_a,
+/// cam_speed_rad_s, gauge_nmm`), for `--from-points`.
+pub fn read_points_csv(path: &std::path::Path) -> Result<Measurements, RigError> {
+    let name = path.display().to_string();
+    let bad = |why: String| RigError::MeasuredFile {
+        file: name.clone(),
+        why,
+    };
+    let (mut r, headers) = open_csv(path, &bad)?;
     let want = [
         "test",
         "volts",
@@ -152,15 +162,7 @@ pub fn read_gauge_csv(path: &std::path::Path, plan: &Plan) -> Result<Vec<f64>, R
         file: name.clone(),
         why,
     };
-    let mut r = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .comment(Some(b'#'))
-        .from_path(path)
-        .map_err(|e| bad(format!("cannot read it ({e})")))?;
-    let headers = r
-        .headers()
-        .map_err(|e| bad(format!("no header row ({e})")))?
-        .clone();
+    let (mut r, headers) = open_csv(path, &bad)?;
     let col = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
     let gauge = col("gauge_nmm").ok_or_else(|| {
         bad(format!(
