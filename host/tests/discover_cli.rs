@@ -2,9 +2,8 @@
 //! test points (the paper's sweep has 150) on the in-process virtual rig (`--sim`) and on a
 //! served one (`rig sim serve`), appends every round to one CSV, and Ctrl-C locks the gear.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use assert_cmd::Command;
@@ -84,43 +83,14 @@ fn discover_names_a_hidden_effect_on_the_in_process_virtual_rig() {
     assert_named(&v, "speed-dependent-axial-friction", &csv);
 }
 
-/// A running `rig sim serve --json`, killed if a test fails before it ends.
-struct Server {
-    child: Child,
-    port: String,
+mod support {
+    pub mod served;
 }
-
-impl Server {
-    fn start(speed: &str, extra: &[&str]) -> Self {
-        let bin = assert_cmd::cargo::cargo_bin("rig");
-        let mut child = std::process::Command::new(bin)
-            .args(["sim", "serve", "--json", "--speed", speed])
-            .args(extra)
-            .env_remove("RIG_PORT")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("rig sim serve starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .expect("a ready line");
-        let ready: Value = serde_json::from_str(&line).unwrap();
-        let port = ready["port"].as_str().unwrap().to_string();
-        Self { child, port }
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+use support::served::Server;
 
 #[test]
 fn discover_names_a_hidden_effect_on_a_served_virtual_rig() {
-    let server = Server::start(
+    let server = Server::start_at(
         "20",
         &[
             "--preset",
@@ -176,7 +146,7 @@ fn discover_refuses_plant_options_without_sim() {
 fn ctrl_c_locks_the_gear_and_keeps_completed_rounds() {
     // A served rig in real time: the first round takes about a minute, so the signal lands
     // mid-run, and the lock goes over the line as on a real rig.
-    let server = Server::start("1", &["--preset", "ideal"]);
+    let server = Server::start_at("1", &["--preset", "ideal"]);
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("stopped.csv");
     let bin = assert_cmd::cargo::cargo_bin("rig");

@@ -1,8 +1,7 @@
 //! `rig sim serve`: the virtual rig served on a pseudo-terminal to separate client
 //! processes, with state lasting between them; and the `paper` preset's sweep.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use assert_cmd::Command;
@@ -14,37 +13,14 @@ fn rig() -> Command {
     c
 }
 
-/// A running `rig sim serve --json`, killed (SIGKILL) if a test fails before it stops it.
-struct Server {
-    child: Child,
-    port: String,
-    ready: Value,
+mod support {
+    pub mod served;
 }
+use support::served::Server;
 
 impl Server {
     fn start(extra: &[&str]) -> Self {
         Self::start_at("5", extra)
-    }
-
-    /// At `speed` virtual seconds per wall-clock second.
-    fn start_at(speed: &str, extra: &[&str]) -> Self {
-        let bin = assert_cmd::cargo::cargo_bin("rig");
-        let mut child = std::process::Command::new(bin)
-            .args(["sim", "serve", "--json", "--speed", speed])
-            .args(extra)
-            .env_remove("RIG_PORT")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("rig sim serve starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .expect("a ready line");
-        let ready: Value =
-            serde_json::from_str(&line).unwrap_or_else(|e| panic!("not JSON ({e}): {line}"));
-        let port = ready["port"].as_str().expect("a port").to_string();
-        Self { child, port, ready }
     }
 
     fn client(&self, args: &[&str]) -> Command {
@@ -80,13 +56,6 @@ impl Server {
             assert!(t0.elapsed() < Duration::from_secs(10), "serve did not stop");
             std::thread::sleep(Duration::from_millis(20));
         }
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 
