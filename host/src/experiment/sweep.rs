@@ -303,33 +303,23 @@ pub fn run_to<B: Bench + ?Sized>(
                 wait_for_temperature(bench, operator, run)?;
                 let mut row = match measure(bench, operator, setup, run) {
                     Ok(row) => row,
-                    Err(RigError::Unmeasurable { what, why }) if bench.is_virtual() => {
-                        // A virtual rig's operator notes the point and goes on.
-                        progress(&format!("{what}: {why}; point skipped"));
-                        bench.lock_gear();
-                        bench.wait(2.0)?;
-                        hung = None;
-                        outcome.skipped += 1;
-                        break;
-                    }
-                    Err(RigError::DeviceFault { what, faults })
-                        if bench.is_virtual() && load_protection_only(&faults) =>
-                    {
-                        // The firmware judged the point too heavy (its load estimate,
-                        // from the current, above the limit, or the current trip): it
-                        // cannot be measured on this rig. A virtual rig's operator lets
-                        // the output come to rest (the gear is locked), clears and goes
-                        // on; a real rig stops here for the operator to look.
-                        progress(&format!(
-                            "{what}: the device latched {faults}; point skipped, fault cleared"
-                        ));
-                        bench.wait(2.0)?;
-                        bench.request(&protocol::Request::ClearFaults)?;
-                        hung = None;
-                        outcome.skipped += 1;
-                        break;
-                    }
-                    Err(e) => return Err(e),
+                    Err(e) => match beyond_the_rig(&e) {
+                        // The point cannot be measured on this rig (see `beyond_the_rig`).
+                        // The drive is already stopped: a virtual rig's operator lets the
+                        // output come to rest with the gear locked, clears a latched
+                        // protection and goes on; a real rig stops here for the operator.
+                        Some((note, latched)) if bench.is_virtual() => {
+                            progress(&note);
+                            bench.wait(2.0)?;
+                            if latched {
+                                bench.request(&protocol::Request::ClearFaults)?;
+                            }
+                            hung = None;
+                            outcome.skipped += 1;
+                            break;
+                        }
+                        _ => return Err(e),
+                    },
                 };
                 let summary = format!(
                     "point {}/{}: {} N m, {}: i = {:.3} A, w = {:.1} rad/s",
@@ -441,6 +431,22 @@ fn wait_for_temperature<B: Bench + ?Sized>(
         waited += 1.0;
     }
     Ok(())
+}
+
+/// Whether `e` says a point is beyond what the rig can measure: the cam never reached
+/// constant rotation, or only the protections a heavy point trips latched
+/// ([`load_protection_only`]). Then the note to print, and whether a fault is latched.
+fn beyond_the_rig(e: &RigError) -> Option<(String, bool)> {
+    match e {
+        RigError::Unmeasurable { what, why } => {
+            Some((format!("{what}: {why}; point skipped"), false))
+        }
+        RigError::DeviceFault { what, faults } if load_protection_only(faults) => Some((
+            format!("{what}: the device latched {faults}; point skipped, fault cleared"),
+            true,
+        )),
+        _ => None,
+    }
 }
 
 /// Whether `faults` (as [`fault_error`] names them) are only the protections a heavy
