@@ -187,15 +187,17 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     record(CrashCause::Panic, line);
     if !PANICKING.swap(true, Ordering::Relaxed) {
         if let Some(at) = info.location() {
-            defmt::error!(
-                "panic at {=str}:{=u32}: bridge off, resetting",
-                at.file(),
-                at.line()
-            );
+            let log: fn(&str, u32) = log_panic;
+            core::hint::black_box(log)(at.file(), at.line());
         }
         cortex_m::asm::delay(RTT_DRAIN_CYCLES);
     }
     SCB::sys_reset()
+}
+
+#[inline(never)]
+fn log_panic(file: &str, line: u32) {
+    defmt::error!("panic at {=str}:{=u32}: bridge off, resetting", file, line);
 }
 
 #[exception(trampoline = false)]

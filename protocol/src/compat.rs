@@ -142,12 +142,24 @@ pub struct LegacyV1Nack {
 }
 
 impl Serialize for LegacyV1Nack {
+    /// The same bytes as `V1DeviceMessage::Nack { seq, code: V1NackCode::VersionMismatch }`
+    /// (a test checks it), written variant by variant so a device's image carries only this
+    /// one variant's encoder, not all of protocol v1's.
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        V1DeviceMessage::Nack {
-            seq: self.hello_seq,
-            code: V1NackCode::VersionMismatch,
-        }
-        .serialize(serializer)
+        use serde::ser::SerializeStructVariant;
+        let mut nack = serializer.serialize_struct_variant("V1DeviceMessage", 2, "Nack", 2)?;
+        nack.serialize_field("seq", &self.hello_seq)?;
+        nack.serialize_field("code", &V1VersionMismatch)?;
+        nack.end()
+    }
+}
+
+/// `V1NackCode::VersionMismatch` alone (see [`LegacyV1Nack`]'s `Serialize`).
+struct V1VersionMismatch;
+
+impl Serialize for V1VersionMismatch {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_unit_variant("V1NackCode", 3, "VersionMismatch")
     }
 }
 
@@ -290,6 +302,16 @@ mod tests {
         // golden `Nack` frame with code 3 instead of 2.
         let frame = encode_frame_vec(7, &LegacyV1Nack { hello_seq: 301 }).unwrap();
         assert_eq!(body_of(&frame), [0x07, 0x02, 0xad, 0x02, 0x03]);
+        // The hand-written encoder writes what v1's own type would.
+        let derived = encode_frame_vec(
+            7,
+            &V1DeviceMessage::Nack {
+                seq: 301,
+                code: V1NackCode::VersionMismatch,
+            },
+        )
+        .unwrap();
+        assert_eq!(frame, derived);
         assert_eq!(
             identify_peer(&body_of(&frame)),
             Some(PeerIdentity {

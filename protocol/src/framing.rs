@@ -61,6 +61,14 @@ pub fn encode_frame<'o, M: Serialize + ?Sized>(
             _ => Error::Serialize,
         })?
         .len();
+    seal_frame(out, start, body)
+}
+
+/// The part of [`encode_frame`] that does not depend on the message type (one copy in a
+/// firmware image however many message types it sends): appends the CRC to the body at
+/// `out[start..start + body]`, COBS-encodes it in place and adds the delimiters.
+fn seal_frame(out: &mut [u8], start: usize, body: usize) -> Result<&[u8], Error> {
+    let raw = &mut out[start..];
     let crc = crate::crc32::checksum(&raw[..body]).to_le_bytes();
     raw.get_mut(body..body + CRC_LEN)
         .ok_or(Error::BufferTooSmall)?

@@ -106,8 +106,8 @@ pub struct MotorConfig {
     /// Drive the cam with a negative duty (direction pin high) instead.
     pub reverse: bool,
     /// The motor's own constants, against which a new calibration's C1-C6 are judged
-    /// ([`model::Calibration::check`]).
-    pub constants: model::MotorConstants,
+    /// ([`model::Calibration::check`]), in `f32`: `MotorRules::new(&model::MotorConstants::…)`.
+    pub rules: MotorRules,
 }
 
 impl Default for MotorConfig {
@@ -125,7 +125,34 @@ impl Default for MotorConfig {
             // current, which itself is 2.3-2.7 A (C6 = 2.25 A) under a 4.5 A limit.
             duty_slew_per_s: 0.5,
             reverse: false,
-            constants: model::MotorConstants::RS735,
+            rules: const { MotorRules::new(&model::MotorConstants::RS735) },
+        }
+    }
+}
+
+/// The motor's constants as [`model::check_constants`] takes them in `f32`: eta N Kt
+/// (`MotorConstants::cam_torque_constant`, multiplied in f32), the no-load current and
+/// speed. [`MotorRules::new`] is a `const fn`: [`MotorConfig::default`] converts the
+/// model's constants at compile time, so the firmware has no software double maths for them
+/// (converted at run time, they cost the image `__aeabi_d2f`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotorRules {
+    pub(crate) kt: f32,
+    pub(crate) i0: f32,
+    pub(crate) w0: f32,
+}
+
+impl MotorRules {
+    /// `motor`'s constants in `f32`.
+    #[allow(
+        clippy::cast_possible_truncation,
+        reason = "the motor's constants, well inside f32's range; rounded to nearest like `CheckFloat::of`"
+    )]
+    pub const fn new(motor: &model::hardware::MotorConstants) -> Self {
+        Self {
+            kt: motor.gearhead_efficiency as f32 * motor.gear_ratio as f32 * motor.kt_motor as f32,
+            i0: motor.no_load_current as f32,
+            w0: motor.no_load_speed as f32,
         }
     }
 }

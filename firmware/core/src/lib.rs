@@ -90,8 +90,8 @@ mod tests;
 
 pub use capture::{CAPTURE_CAPACITY, MIN_SAMPLE_RATE_HZ};
 pub use config::{
-    CoreConfig, CurrentSensorConfig, EstimatorConfig, FaultConfig, MotorConfig, SpeedLoopConfig,
-    SupervisorConfig,
+    CoreConfig, CurrentSensorConfig, EstimatorConfig, FaultConfig, MotorConfig, MotorRules,
+    SpeedLoopConfig, SupervisorConfig,
 };
 pub use controller::{BoardInputs, BootInfo, Core, Inputs, Outputs, Status, check_rules};
 pub use estimator::{Coefficients, EstimatorModel, RevolutionEstimate};

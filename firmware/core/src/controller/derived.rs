@@ -4,7 +4,7 @@ use protocol::{ParameterField, ParameterRejection, RejectReason, RigParameters};
 
 use core::f32::consts::PI;
 
-use crate::config::CoreConfig;
+use crate::config::{CoreConfig, MotorRules};
 use crate::estimator::Coefficients;
 use crate::speed_loop::FeedForward;
 
@@ -159,30 +159,6 @@ fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
         return Ok(());
     };
     Err(ParameterRejection::new(field, reason))
-}
-
-/// The motor's constants as [`model::check_constants`] takes them in `f32`: eta N Kt
-/// (`MotorConstants::cam_torque_constant`, multiplied in f32), the no-load current and
-/// speed. The core converts them once, in [`crate::Core::new`], where the firmware's
-/// constant configuration folds them at compile time (no software double maths left for
-/// `SetParameters`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct MotorRules {
-    kt: f32,
-    i0: f32,
-    w0: f32,
-}
-
-impl MotorRules {
-    /// `motor`'s constants in `f32`.
-    pub(crate) fn new(motor: &model::hardware::MotorConstants) -> Self {
-        let of = <f32 as model::CheckFloat>::of;
-        Self {
-            kt: of(motor.gearhead_efficiency) * of(motor.gear_ratio) * of(motor.kt_motor),
-            i0: of(motor.no_load_current),
-            w0: of(motor.no_load_speed),
-        }
-    }
 }
 
 /// A new record may not ask for more than the board allows, and its vibrator constants
@@ -442,7 +418,7 @@ mod tests {
         // `SetParameters` (f32 limits, motor constants converted once) refuses exactly what
         // `check_rules` (the host's, f64 limits against `board_limits`) refuses.
         let config = CoreConfig::default();
-        let motor = MotorRules::new(&config.motor.constants);
+        let motor = config.motor.rules;
         let paper = RigParameters::paper();
         let caps = [
             config.supervisor.max_release_load_nm,
@@ -483,7 +459,7 @@ mod tests {
         }
         let mut refused = 0;
         for p in cases {
-            let host = check_rules(&p, &config.board_limits(), &config.motor.constants);
+            let host = check_rules(&p, &config.board_limits(), &model::MotorConstants::RS735);
             let core = check_board_caps(&p, &config, &motor);
             assert_eq!(core, host, "{p:?}");
             refused += usize::from(core.is_err());

@@ -25,8 +25,9 @@ use crate::speed_loop::SpeedLoop;
 use crate::supervisor::Supervisor;
 use crate::tx_queue::{CAPTURE_IN_FLIGHT, REPLY_RESERVE, TxQueue};
 
+use crate::config::MotorRules;
 pub use derived::check_rules;
-pub(crate) use derived::{Derived, MotorRules, check_board_caps};
+pub(crate) use derived::{Derived, check_board_caps};
 pub use io::{BoardInputs, BootInfo, Inputs, Outputs, Status};
 pub(crate) use persist::Persist;
 use streams::StepTiming;
@@ -81,7 +82,7 @@ impl Core {
     /// A core in `Locked`, measuring the current zero. A watchdog reset or an invalid
     /// parameter record latches its fault from the start.
     pub fn new(config: CoreConfig, boot: BootInfo) -> Self {
-        let motor_rules = MotorRules::new(&config.motor.constants);
+        let motor_rules = config.motor.rules;
         let (parameters, status, derived) = match Derived::new(&boot.parameters, &config) {
             Ok(d) if boot.parameters_status != ParametersStatus::Invalid => {
                 (boot.parameters, boot.parameters_status, d)
