@@ -96,15 +96,18 @@ use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::{Blocking, FLASH_BASE, Flash};
 use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::mode::Async;
-use embassy_stm32::pac::timer::vals::{Bkinp, Bkp, Dir, FilterValue, Lock, Mms, Ossi};
+use embassy_stm32::pac::timer::vals::{
+    Bkinp, Bkp, Cms, Dir, FilterValue, Lock, Mms, Ocm, Ossi, Urs,
+};
 use embassy_stm32::peripherals::{
     ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, EXTI13, IWDG, PA0, PA1, PA2, PA3, PA8, PA9, PB0, PB5, PB6,
     PB7, PC6, PC7, PC13, TIM1, TIM3, TIM4, USART2,
 };
 use embassy_stm32::time::{Hertz, khz};
-use embassy_stm32::timer::low_level::CountingMode;
+use embassy_stm32::timer::Ch1;
+use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::qei::{self, Qei};
-use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
+use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Config, Peri, Peripherals, bind_interrupts, dma, interrupt, pac, triggers};
@@ -128,7 +131,21 @@ pub const MOTOR_PWM_FREQUENCY: Hertz = khz(20);
 pub const CURRENT_SAMPLE_RATE_HZ: u32 = 10_000;
 /// TIM1 repetition counter: centre-aligned, the counter over- or underflows twice per PWM
 /// period, and an update (ADC trigger) comes every `RCR + 1` of them: 4, every second period.
-const PWM_REPETITION: u16 = (2 * 20_000 / CURRENT_SAMPLE_RATE_HZ - 1) as u16;
+const PWM_REPETITION: u16 = (2 * MOTOR_PWM_FREQUENCY.0 / CURRENT_SAMPLE_RATE_HZ - 1) as u16;
+/// TIM1's counter clock, Hz: the APB2 timer clock, SYSCLK undivided ([`config`]).
+const TIM1_CLOCK_HZ: u32 = 170_000_000;
+/// TIM1's auto-reload, prescaler 1: centre-aligned, the counter runs 0 → ARR → 0, and
+/// `ARR + 1` = clock / (2 × [`MOTOR_PWM_FREQUENCY`]) = 4250 (what embassy's `SimplePwm`
+/// chose for the same frequency; written directly, so the image has no run-time 64-bit
+/// division for it). The compare value for 100 % duty is `ARR + 1`.
+const PWM_ARR: u16 = {
+    let clocks = TIM1_CLOCK_HZ / (2 * MOTOR_PWM_FREQUENCY.0);
+    // ARR + 1 (full duty) must fit the 16-bit compare register too.
+    assert!(clocks >= 2 && clocks <= u16::MAX as u32);
+    (clocks - 1) as u16
+};
+/// TIM1 CH1's compare value for 100 % duty.
+const PWM_FULL_DUTY: u16 = PWM_ARR + 1;
 /// ADC DMA ring: two control steps, so one is read while the DMA fills the other.
 const ADC_DMA_LEN: usize = 2 * analog::BLOCK_LEN;
 /// Baud rate of the host link over the ST-LINK virtual COM port.
@@ -290,7 +307,10 @@ pub enum SamplingPoint {
 /// Built in the safe state (enable low, MOE off, 0 % duty) and returns to it on
 /// [`CamMotor::stop`]. After a hardware trip it refuses to drive until [`CamMotor::rearm`].
 pub struct CamMotor {
-    pwm: SimplePwm<'static, TIM1>,
+    /// TIM1, clocked (dropping it would stop its clock).
+    _timer: Timer<'static, TIM1>,
+    /// PA8 in its TIM1_CH1 function (dropping it would disconnect the pin).
+    _pwm_pin: PwmPin<'static, TIM1, Ch1>,
     direction_pin: Output<'static>,
     enable: Output<'static>,
     direction: Direction,
@@ -310,18 +330,31 @@ impl CamMotor {
         // Enable first, so the bridge is held off before the PWM pin becomes an output.
         let enable = Output::new(enable_pin, Level::Low, Speed::Low);
         let direction_pin = Output::new(direction_pin, Level::Low, Speed::Low);
-        let pwm = SimplePwm::new(
-            tim,
-            Some(PwmPin::new(pwm_pin, OutputType::PushPull)),
-            None,
-            None,
-            None,
-            MOTOR_PWM_FREQUENCY,
-            CountingMode::CenterAlignedUpInterrupts,
-        );
+        let pwm_pin = PwmPin::new(pwm_pin, OutputType::PushPull);
+        // TIM1 clocked and reset: main output (MOE) off, CH1 disabled.
+        let timer = Timer::new(tim);
         let t = pac::TIM1;
-        // `SimplePwm::new` switched the main output on: off at once.
-        t.bdtr().modify(|w| w.set_moe(false));
+        // Centre-aligned mode 2 at MOTOR_PWM_FREQUENCY, CH1 in PWM mode 1 with preloaded
+        // compare and auto-reload, loaded by an update event that sets no flag: the setup
+        // embassy's `SimplePwm` made (`CountingMode::CenterAlignedUpInterrupts`).
+        t.cr1().modify(|w| {
+            w.set_dir(Dir::UP);
+            w.set_cms(Cms::CENTER_ALIGNED2);
+            w.set_arpe(true);
+        });
+        t.psc().write_value(0);
+        t.arr().write(|w| w.set_arr(PWM_ARR));
+        t.ccmr_output(0).modify(|w| {
+            w.set_ocm(0, Ocm::PWM_MODE1);
+            w.set_ocpe(0, true);
+        });
+        t.ccr(0).write(|w| w.set_ccr(0));
+        t.cr1().modify(|w| w.set_urs(Urs::COUNTER_ONLY));
+        t.egr().write(|w| w.set_ug(true));
+        t.cr1().modify(|w| {
+            w.set_urs(Urs::ANY_EVENT);
+            w.set_cen(true);
+        });
         // A debugger halt stops TIM1, which then switches its outputs off. The IWDG is
         // deliberately not frozen: a halt longer than ~250 ms resets the board.
         pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
@@ -344,7 +377,8 @@ impl CamMotor {
         });
         let sampling = start_synchronous_trigger();
         let mut motor = Self {
-            pwm,
+            _timer: timer,
+            _pwm_pin: pwm_pin,
             direction_pin,
             enable,
             direction: Direction::Forward,
@@ -352,7 +386,7 @@ impl CamMotor {
             sampling,
         };
         motor.stop();
-        motor.pwm.ch1().enable();
+        t.ccer().modify(|w| w.set_cce(0, true));
         motor
     }
 
@@ -371,13 +405,13 @@ impl CamMotor {
 
     /// Compare value for 100 % duty (4250 at 170 MHz / 2 / 20 kHz).
     pub fn max_duty(&self) -> u32 {
-        self.pwm.max_duty_cycle()
+        u32::from(PWM_FULL_DUTY)
     }
 
     /// Sets the PWM compare value, clamped to [`CamMotor::max_duty`].
     pub fn set_duty(&mut self, duty: u32) {
-        let duty = duty.min(self.max_duty());
-        self.pwm.ch1().set_duty_cycle(duty);
+        let duty = u16::try_from(duty).map_or(PWM_FULL_DUTY, |d| d.min(PWM_FULL_DUTY));
+        pac::TIM1.ccr(0).write(|w| w.set_ccr(duty));
     }
 
     /// Sets the direction pin and points the trip at that direction's current. A change
@@ -416,7 +450,7 @@ impl CamMotor {
     pub fn stop(&mut self) {
         self.enable.set_low();
         pac::TIM1.bdtr().modify(|w| w.set_moe(false));
-        self.pwm.ch1().set_duty_cycle_fully_off();
+        pac::TIM1.ccr(0).write(|w| w.set_ccr(0));
     }
 
     /// Reads TIM1's break flag (call once per control step): true when the comparator has

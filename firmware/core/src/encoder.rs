@@ -21,11 +21,26 @@ pub struct CamEncoder {
     counts_per_rev: u32,
     last_raw: Option<u16>,
     position: i64,
+    /// `position` modulo `counts_per_rev`, kept in step with it in 32-bit arithmetic
+    /// (`i64::rem_euclid` would be a 64-bit software division on the target).
+    angle_counts: u32,
     // (time us, position) per step, as wrapping 32-bit values: only differences are used.
     history: [(u32, i32); HISTORY],
     head: usize,
     filled: usize,
     speed_rad_s: f32,
+}
+
+/// `(a + delta) mod n` for `a < n`, without overflow and without 64-bit arithmetic.
+fn wrapping_step(a: u32, delta: i32, n: u32) -> u32 {
+    let d = delta.unsigned_abs() % n;
+    if delta >= 0 {
+        if d >= n - a { d - (n - a) } else { a + d }
+    } else if d <= a {
+        a - d
+    } else {
+        n - (d - a)
+    }
 }
 
 impl CamEncoder {
@@ -35,6 +50,7 @@ impl CamEncoder {
             counts_per_rev: counts_per_rev.max(1),
             last_raw: None,
             position: 0,
+            angle_counts: 0,
             history: [(0, 0); HISTORY],
             head: 0,
             filled: 0,
@@ -50,6 +66,7 @@ impl CamEncoder {
         };
         self.last_raw = Some(raw);
         self.position += i64::from(delta);
+        self.angle_counts = wrapping_step(self.angle_counts, delta, self.counts_per_rev);
         self.head = (self.head + 1) % HISTORY;
         #[allow(
             clippy::cast_possible_truncation,
@@ -90,8 +107,7 @@ impl CamEncoder {
 
     /// Cam angle in [0, 2 pi), rad (zero at the first reading).
     pub fn angle_rad(&self) -> f32 {
-        let cpr = i64::from(self.counts_per_rev);
-        self.position.rem_euclid(cpr) as f32 / cpr as f32 * TAU
+        self.angle_counts as f32 / self.counts_per_rev as f32 * TAU
     }
 
     /// Cam speed (signed), rad/s.
@@ -111,6 +127,41 @@ mod tests {
     use super::*;
 
     const CPR: u32 = 8192;
+
+    #[test]
+    fn the_angle_is_the_position_modulo_a_turn() {
+        // `wrapping_step` against i64::rem_euclid, at the edges of its range.
+        for n in [1u32, 2, 3, 7, 100, 8192, 1 << 31, u32::MAX] {
+            for a in [0, 1, n / 2, n - 1].into_iter().filter(|&a| a < n) {
+                for delta in [0, 1, -1, 5, -5, 32_767, -32_768, i32::MAX, i32::MIN] {
+                    let want = (i64::from(a) + i64::from(delta)).rem_euclid(i64::from(n));
+                    assert_eq!(
+                        i64::from(wrapping_step(a, delta, n)),
+                        want,
+                        "{a} {delta} {n}"
+                    );
+                }
+            }
+        }
+        // And through the encoder, back and forth across zero.
+        let mut e = CamEncoder::new(100);
+        let mut raw = 0u16;
+        for (k, step) in [7i16, -30, 250, -999, 3, 32_000, -32_000]
+            .iter()
+            .cycle()
+            .take(50)
+            .enumerate()
+        {
+            raw = raw.wrapping_add(*step as u16);
+            e.update(k as u64 * 1000, raw);
+            let want = e.position().rem_euclid(100) as f32 / 100.0 * TAU;
+            assert!(
+                (e.angle_rad() - want).abs() < 1e-6,
+                "{} {want}",
+                e.angle_rad()
+            );
+        }
+    }
 
     /// Feeds a cam turning at `speed` rad/s for `steps` 1 ms steps, from raw count `start`.
     fn spin(enc: &mut CamEncoder, start: f64, speed: f64, steps: u64) {

@@ -126,7 +126,7 @@ impl Core {
             board: truncated(self.config.board_name),
             parameters_status: self.parameters_status,
             reset_cause: self.reset_cause,
-            uptime_s: u32::try_from(now_us / 1_000_000).unwrap_or(u32::MAX),
+            uptime_s: whole_seconds(now_us),
             capabilities: self.config.capabilities,
         }
     }
@@ -276,6 +276,24 @@ impl Core {
 }
 
 /// `text` cut to the string's capacity at a character boundary.
+/// `now_us / 1_000_000`, saturating at `u32::MAX`. Long division in 12-bit digits: each
+/// partial remainder times 2^12 stays within 32 bits (10^6 x 2^12 < 2^32), so the target
+/// needs no 64-bit software division (about 1 KB of flash).
+#[allow(
+    clippy::cast_possible_truncation,
+    reason = "masked to 12 bits before the cast"
+)]
+fn whole_seconds(now_us: u64) -> u32 {
+    const US_PER_S: u32 = 1_000_000;
+    let (mut q, mut r) = (0u64, 0u32);
+    for digit in (0..6).rev() {
+        let cur = (r << 12) | ((now_us >> (12 * digit)) & 0xFFF) as u32;
+        q = (q << 12) | u64::from(cur / US_PER_S);
+        r = cur % US_PER_S;
+    }
+    u32::try_from(q).unwrap_or(u32::MAX)
+}
+
 fn truncated<const N: usize>(text: &str) -> heapless::String<N> {
     let mut cut = text.len().min(N);
     while !text.is_char_boundary(cut) {
@@ -290,6 +308,25 @@ fn truncated<const N: usize>(text: &str) -> heapless::String<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn whole_seconds_is_the_division() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let last_second = u64::from(u32::MAX) * 1_000_000 + 999_999;
+        let edges = [0, 1, 999_999, 1_000_000, 1_000_001, last_second];
+        let random = (0..10_000).map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x >> (x % 64)
+        });
+        for us in edges.into_iter().chain(random) {
+            let want = u32::try_from(us / 1_000_000).unwrap_or(u32::MAX);
+            assert_eq!(whole_seconds(us), want, "{us}");
+        }
+        assert_eq!(whole_seconds(last_second + 1), u32::MAX);
+        assert_eq!(whole_seconds(u64::MAX), u32::MAX);
+    }
 
     #[test]
     fn version_parses() {

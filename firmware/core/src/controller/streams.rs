@@ -59,8 +59,14 @@ impl StepTiming {
     fn record(&mut self, now_us: u64, cycles: u32) {
         if now_us.saturating_sub(self.window_start_us) >= HEALTH_PERIOD_US {
             if self.count > 0 {
-                let mean = self.sum / u64::from(self.count);
-                self.last = (u32::try_from(mean).unwrap_or(u32::MAX), self.max);
+                // In 32 bits when the sum fits (a second's steps on a 170 MHz core always
+                // do: no 64-bit division in the image); a larger sum, which only a test can
+                // report, to f32's precision.
+                let mean = match u32::try_from(self.sum) {
+                    Ok(sum) => sum.checked_div(self.count),
+                    Err(_) => Some(clamp_to_u32(self.sum as f32 / self.count as f32)),
+                };
+                self.last = (mean.unwrap_or(0), self.max);
             }
             *self = Self {
                 window_start_us: now_us,
@@ -72,6 +78,16 @@ impl StepTiming {
         self.count = self.count.saturating_add(1);
         self.max = self.max.max(cycles);
     }
+}
+
+/// `v` rounded toward zero into `u32` (saturating).
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "float-to-int `as` saturates, which is the intent"
+)]
+fn clamp_to_u32(v: f32) -> u32 {
+    v as u32
 }
 
 impl Core {
