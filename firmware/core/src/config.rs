@@ -106,8 +106,28 @@ pub struct MotorConfig {
     /// Drive the cam with a negative duty (direction pin high) instead.
     pub reverse: bool,
     /// The motor's own constants, against which a new calibration's C1-C6 are judged
-    /// ([`model::Calibration::check`]), in `f32`: `MotorRules::new(&model::MotorConstants::…)`.
-    pub rules: MotorRules,
+    /// ([`model::Calibration::check`]); set them with [`MotorConfig::set_constants`].
+    constants: model::MotorConstants,
+    /// `constants` in `f32`, as the core checks them ([`MotorRules::new`]).
+    rules: MotorRules,
+}
+
+impl MotorConfig {
+    /// The motor's own constants (what the host's [`model::Calibration::check`] takes).
+    pub const fn constants(&self) -> &model::MotorConstants {
+        &self.constants
+    }
+
+    /// The same constants in `f32`, as the core checks a new calibration against them.
+    pub const fn rules(&self) -> MotorRules {
+        self.rules
+    }
+
+    /// Another motor: its constants and their `f32` form together.
+    pub const fn set_constants(&mut self, constants: model::MotorConstants) {
+        self.constants = constants;
+        self.rules = MotorRules::new(&constants);
+    }
 }
 
 impl Default for MotorConfig {
@@ -125,6 +145,9 @@ impl Default for MotorConfig {
             // current, which itself is 2.3-2.7 A (C6 = 2.25 A) under a 4.5 A limit.
             duty_slew_per_s: 0.5,
             reverse: false,
+            constants: model::MotorConstants::RS735,
+            // At compile time: converted at run time, the constants would cost the image
+            // the software `f64` to `f32` conversion.
             rules: const { MotorRules::new(&model::MotorConstants::RS735) },
         }
     }

@@ -174,8 +174,9 @@ impl Core {
                 if !self.motor_idle() || self.persist != Persist::Idle {
                     return Answer::nack(NackCode::Busy);
                 }
-                let checked = Derived::new(&parameters, &self.config)
-                    .and_then(|_| check_board_caps(&parameters, &self.config, &self.motor_rules));
+                let checked = Derived::new(&parameters, &self.config).and_then(|_| {
+                    check_board_caps(&parameters, &self.config, &self.config.motor.rules())
+                });
                 match checked {
                     Err(rejection) => Answer::nack(NackCode::ParametersRejected(rejection)),
                     Ok(()) => {

@@ -184,7 +184,7 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         }
     };
     let result = calibrate::analyse(&measurements)?;
-    let motor = firmware_core::CoreConfig::default().motor.constants;
+    let motor = *firmware_core::CoreConfig::default().motor.constants();
     let plausible = result.calibration.check(&motor);
     if let Err(issue) = &plausible
         && !a.force

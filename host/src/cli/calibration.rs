@@ -175,7 +175,7 @@ fn board_precheck(
     path: &std::path::Path,
 ) -> Result<(), RigError> {
     let config = firmware_core::CoreConfig::default();
-    let (caps, motor) = (config.board_limits(), config.motor.constants);
+    let (caps, motor) = (config.board_limits(), *config.motor.constants());
     let Err(rejection) = firmware_core::check_rules(record, &caps, &motor) else {
         return Ok(());
     };

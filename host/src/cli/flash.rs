@@ -19,7 +19,7 @@ use crate::flash::{self, DEFAULT_CHIP, FirmwareImage, MemoryMap, help, workspace
 #[derive(Debug, Args)]
 pub struct FlashArgs {
     /// Firmware ELF to flash. Default: build the workspace's release firmware
-    /// (cargo build -p firmware --release --target thumbv7em-none-eabihf) and flash that.
+    /// (`cargo xtask firmware --no-check`, the image CI measures) and flash that.
     #[arg(long, value_name = "PATH")]
     pub elf: Option<PathBuf>,
     /// Check the image and print what would be done; neither the chip nor the rig is touched.

@@ -155,7 +155,8 @@ pub enum ElfError {
 
 impl fmt::Display for ElfError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        const FIX: &str = "build the firmware with `cargo build -p firmware --release --target thumbv7em-none-eabihf` (or run `rig flash` without --elf)";
+        const FIX: &str =
+            "build the firmware for thumbv7em-none-eabihf with `cargo fw-build` (or run `rig flash` without --elf)";
         match self {
             Self::NotElf { looks_like } => write!(
                 f,

@@ -1,5 +1,5 @@
 //! Where the firmware ELF comes from when `--elf` is not given: the workspace around the
-//! current directory, built with cargo like `cargo xtask firmware` does.
+//! current directory, built by `cargo xtask firmware --no-check` (the image CI measures).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -80,9 +80,11 @@ pub fn release_elf(root: &Path) -> PathBuf {
 /// Builds the release firmware of the workspace at `root` (cargo's progress on stderr) and
 /// returns the ELF's path.
 pub fn build_release(root: &Path) -> Result<PathBuf, RigError> {
-    eprintln!("building the firmware: cargo build -p firmware --release --target {THUMB}");
+    // Through xtask, which builds the release image exactly as CI measures it (its rustflags
+    // trim registry paths from the panic locations: `thumb_rustflags` in xtask).
+    eprintln!("building the firmware: cargo xtask firmware --no-check");
     let status = cargo()
-        .args(["build", "-p", "firmware", "--release", "--target", THUMB])
+        .args(["xtask", "firmware", "--no-check"])
         .current_dir(root)
         .stdout(std::process::Stdio::null())
         .status()
@@ -94,7 +96,7 @@ pub fn build_release(root: &Path) -> Result<PathBuf, RigError> {
         return Err(RigError::BadValue {
             what: "firmware build".into(),
             why: format!(
-                "cargo build failed ({status}); see its messages above (a missing target: `rustup target add {THUMB}`)"
+                "the firmware build (cargo xtask firmware --no-check) failed ({status}); see its messages above (a missing target: `rustup target add {THUMB}`)"
             ),
         });
     }

@@ -418,7 +418,8 @@ mod tests {
         // `SetParameters` (f32 limits, motor constants converted once) refuses exactly what
         // `check_rules` (the host's, f64 limits against `board_limits`) refuses.
         let config = CoreConfig::default();
-        let motor = config.motor.rules;
+        let motor = config.motor.rules();
+        assert_eq!(motor, MotorRules::new(config.motor.constants()));
         let paper = RigParameters::paper();
         let caps = [
             config.supervisor.max_release_load_nm,
@@ -459,7 +460,7 @@ mod tests {
         }
         let mut refused = 0;
         for p in cases {
-            let host = check_rules(&p, &config.board_limits(), &model::MotorConstants::RS735);
+            let host = check_rules(&p, &config.board_limits(), config.motor.constants());
             let core = check_board_caps(&p, &config, &motor);
             assert_eq!(core, host, "{p:?}");
             refused += usize::from(core.is_err());

@@ -25,7 +25,6 @@ use crate::speed_loop::SpeedLoop;
 use crate::supervisor::Supervisor;
 use crate::tx_queue::{CAPTURE_IN_FLIGHT, REPLY_RESERVE, TxQueue};
 
-use crate::config::MotorRules;
 pub use derived::check_rules;
 pub(crate) use derived::{Derived, check_board_caps};
 pub use io::{BoardInputs, BootInfo, Inputs, Outputs, Status};
@@ -39,8 +38,6 @@ pub struct Core {
     pub(crate) parameters: RigParameters,
     pub(crate) parameters_status: ParametersStatus,
     pub(crate) derived: Derived,
-    /// The motor's constants for `SetParameters`' calibration rules, in `f32`.
-    pub(crate) motor_rules: MotorRules,
     pub(crate) current: CurrentSense,
     encoder: CamEncoder,
     speed_loop: SpeedLoop,
@@ -82,7 +79,6 @@ impl Core {
     /// A core in `Locked`, measuring the current zero. A watchdog reset or an invalid
     /// parameter record latches its fault from the start.
     pub fn new(config: CoreConfig, boot: BootInfo) -> Self {
-        let motor_rules = config.motor.rules;
         let (parameters, status, derived) = match Derived::new(&boot.parameters, &config) {
             Ok(d) if boot.parameters_status != ParametersStatus::Invalid => {
                 (boot.parameters, boot.parameters_status, d)
@@ -137,7 +133,6 @@ impl Core {
             board: BoardInputs::default(),
             reset_cause: boot.reset_cause,
             firmware_build: boot.firmware_build,
-            motor_rules,
             config,
             parameters,
             parameters_status: status,

@@ -307,7 +307,7 @@ fn limits_and_constants_the_host_cannot_lift() {
     };
     let config = crate::CoreConfig::default();
     assert_eq!(
-        crate::check_rules(&bad, &config.board_limits(), &model::MotorConstants::RS735)
+        crate::check_rules(&bad, &config.board_limits(), config.motor.constants())
             .map_err(|r| r.field),
         Err(ParameterField::MaxReleaseLoad)
     );
