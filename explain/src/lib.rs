@@ -720,6 +720,9 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     let (mut points, outliers, data_warnings) =
         screened_points(data, rig, &base_spec, &start, options)?;
     points.terms = registry;
+    for term in &mut points.terms {
+        term.centre_on(&start, &points.ops);
+    }
     check_user_terms(&points, &start)?;
     warnings.extend(data_warnings);
     let selection = select::select_from(&points, &spec, &start, &known_x, options);

@@ -92,6 +92,39 @@ fn confidence_text(e: &Explanation) -> String {
     }
 }
 
+/// Effects that change only the friction torque, as a function of the load: a friction
+/// coefficient that changes with load and a sliding stroke that shortens under load (any
+/// law). For any deflection d(F) the coefficient mu (1 - d(F) / e) draws the same current.
+const FRICTION_TORQUE_OF_LOAD: [&str; 2] = ["load-dependent-friction", "tooth-compliance"];
+
+/// What further tests would separate the candidates of an ambiguous verdict (first
+/// principles, see docs/explain-validation.md): a constant offset stays at zero load, where
+/// an effect on the friction torque draws nothing; two effects on the friction torque as a
+/// function of load are the same current unless the axial force depends on the speed (the
+/// speed-dependent axial friction, which `carried` tells), whatever the loads and speeds
+/// tested.
+fn what_separates(ambiguous: &[String], carried: impl Fn(&str) -> bool) -> String {
+    let has = |n: &str| ambiguous.iter().any(|a| a == n);
+    let friction_pair = FRICTION_TORQUE_OF_LOAD.iter().all(|n| has(n));
+    let axial_with_speed = carried("speed-dependent-axial-friction");
+    let mut out = Vec::new();
+    if has("current-sensor-offset") && FRICTION_TORQUE_OF_LOAD.iter().any(|n| has(n)) {
+        out.push(
+            "an offset stays at zero load, where friction that changes with load or a shortened stroke draws nothing: tests with no load hung (the vibrator running free) separate them",
+        );
+    }
+    if friction_pair && !axial_with_speed {
+        out.push(
+            "load-dependent friction and tooth compliance both change only the friction torque, as a function of the load, and here the axial force does not depend on the speed: no further test of the current at other loads or speeds separates those two (a measured tooth deflection or friction coefficient would)",
+        );
+    }
+    if out.is_empty() {
+        "more tests at other loads, speeds or temperatures would separate them".to_string()
+    } else {
+        out.join("; ")
+    }
+}
+
 /// The finding in words.
 pub fn finding(e: &Explanation, selection: &Selection) -> String {
     let s = finding_core(e, selection);
@@ -183,9 +216,13 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                     .join(", ");
                 let _ = write!(
                     s,
-                    "The data cannot tell {} apart: resampling blocks of consecutive test points selects them in {shares} of the replicates; the model takes {}, more tests at other loads, speeds or temperatures would separate them. ",
+                    "The data cannot tell {} apart: resampling blocks of consecutive test points selects them in {shares} of the replicates; the model takes {}, {}. ",
                     e.ambiguous.join(", "),
-                    e.ambiguous[0]
+                    e.ambiguous[0],
+                    what_separates(&e.ambiguous, |n| {
+                        e.effects.iter().any(|f| f.name == n)
+                            || e.known_effects.iter().any(|k| k == n)
+                    })
                 );
             }
             let w = &e.gap_after.whiteness;
@@ -609,4 +646,50 @@ pub fn write_report(dir: &Path, outcome: &Outcome, source: &str) -> Result<(), E
         y_max,
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_ambiguous_verdict_says_what_would_separate_its_candidates() {
+        let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let none = |_: &str| false;
+        // The offset against an effect on the friction torque: tests at zero load.
+        let t = what_separates(
+            &names(&["current-sensor-offset", "load-dependent-friction"]),
+            none,
+        );
+        assert!(
+            t.contains("no load hung") && !t.contains("no further test"),
+            "{t}"
+        );
+        // Friction that changes with load against a shortened stroke: no test of the current.
+        let pair = names(&["tooth-compliance", "load-dependent-friction"]);
+        let t = what_separates(&pair, none);
+        assert!(
+            t.contains("no further test") && !t.contains("no load hung"),
+            "{t}"
+        );
+        // ... unless the axial force depends on the speed.
+        let t = what_separates(&pair, |n| n == "speed-dependent-axial-friction");
+        assert!(t.contains("other loads, speeds or temperatures"), "{t}");
+        // All three: both sentences.
+        let t = what_separates(
+            &names(&[
+                "current-sensor-offset",
+                "tooth-compliance",
+                "load-dependent-friction",
+            ]),
+            none,
+        );
+        assert!(
+            t.contains("no load hung") && t.contains("no further test"),
+            "{t}"
+        );
+        // Anything else: the general advice.
+        let t = what_separates(&names(&["thermal-drift", "vibrator-viscous-loss"]), none);
+        assert!(t.contains("other loads, speeds or temperatures"), "{t}");
+    }
 }

@@ -394,6 +394,34 @@ impl Term {
         })
     }
 
+    /// Centres a family form's shape on the data (`model`'s quantities at `ops`): the light-load
+    /// fade tau_0 and the saturation force F_s start at the geometric middle of the tested
+    /// loads and of the axial forces there, so the shape grid (the start, a third and three
+    /// times it) spans the data's range whatever the rig and plan. A shape far below the
+    /// range makes the form a change of mu (every tested point saturated or past the fade),
+    /// far above it the library law; either way no start there can find a bend inside the
+    /// range. Other terms, and data without two distinct nonzero values, are left alone.
+    pub fn centre_on(&mut self, model: &CurrentModel, ops: &[OperatingPoint]) {
+        let values: Vec<f64> = match self.form() {
+            Some(Form::LightLoad) => ops.iter().map(|op| op.tau_rot.abs()).collect(),
+            Some(Form::SaturatingCompliance) => {
+                ops.iter().map(|op| model.axial_force(op).abs()).collect()
+            }
+            _ => return,
+        };
+        let positive = values.iter().copied().filter(|v| v.is_finite() && *v > 0.0);
+        let lo = positive.clone().fold(f64::INFINITY, f64::min);
+        let hi = positive.fold(0.0f64, f64::max);
+        if !(lo.is_finite() && hi > lo) {
+            return;
+        }
+        if let Some(shape) = self.params.iter_mut().find(|p| p.log) {
+            let middle = (lo * hi).sqrt().clamp(shape.bounds.0, shape.bounds.1);
+            shape.start = middle;
+            shape.null = middle;
+        }
+    }
+
     /// The family member, if this is one.
     pub fn form(&self) -> Option<Form> {
         match self.kind {
@@ -731,6 +759,65 @@ mod tests {
         lib.effects.rectification = -0.5;
         for (j, op) in ops.iter().enumerate() {
             assert!((m.current(op) + out[j] - lib.current(op)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn shapes_start_in_the_middle_of_the_data() {
+        let m = model();
+        let ops: Vec<OperatingPoint> = (1..=10)
+            .map(|k| OperatingPoint::new(60.0, 0.368 * k as f64, 0.0))
+            .collect();
+        let mut light = Term::family(Form::LightLoad);
+        light.centre_on(&m, &ops);
+        let tau0 = light.params[1].start;
+        assert!((tau0 - (0.368f64 * 3.68).sqrt()).abs() < 1e-9, "{tau0}");
+        assert_eq!(light.params[1].null, tau0);
+        // The saturation force: the middle of the axial forces, whatever the rig's scale.
+        let mut sat = Term::family(Form::SaturatingCompliance);
+        sat.centre_on(&m, &ops);
+        let (f_lo, f_hi) = (m.axial_force(&ops[0]), m.axial_force(&ops[9]));
+        assert!((sat.params[1].start - (f_lo * f_hi).sqrt()).abs() < 1e-9);
+        // The grid the fit starts from spans the data: a third to three times the middle.
+        assert!(sat.params[1].start / 3.0 < 0.5 * f_hi && 3.0 * sat.params[1].start > 2.0 * f_lo);
+        // Other terms, and data at one load, keep their starts.
+        let mut warm = Term::family(Form::WarmUpInTime);
+        warm.centre_on(&m, &ops);
+        assert_eq!(warm.params[1].start, 1200.0);
+        let mut one = Term::family(Form::LightLoad);
+        one.centre_on(&m, &ops[..1]);
+        assert_eq!(one.params[1].start, 0.5);
+    }
+
+    #[test]
+    fn a_stroke_that_shortens_with_load_is_a_friction_that_falls_with_load() {
+        // Why the data cannot tell a saturating compliance from friction that changes with
+        // load: both change only the friction torque, as a function of the load (the axial
+        // force here does not depend on the speed), so for any deflection d(F) the friction
+        // coefficient mu (1 - d(F) / e) gives the same current at every speed and load.
+        let m = model();
+        let ops: Vec<OperatingPoint> = (1..=10)
+            .flat_map(|k| [31.4, 54.7, 94.2].map(|w| OperatingPoint::new(w, 0.368 * k as f64, 0.0)))
+            .collect();
+        let zeros = vec![0.0; ops.len()];
+        let order: Vec<usize> = (0..ops.len()).collect();
+        let inputs = Inputs {
+            ops: &ops,
+            time: &zeros,
+            temp: &zeros,
+            order: &order,
+        };
+        let sat = Term::family(Form::SaturatingCompliance);
+        let (c_um, f_s) = (20.0, 25.0f64);
+        let mut with_sat = vec![0.0; ops.len()];
+        sat.add(&m, &inputs, &[c_um, f_s.ln()], &mut with_sat);
+        let e = m.drive.eccentricity;
+        for (j, op) in ops.iter().enumerate() {
+            let d = c_um * 1e-6 * f_s * (m.axial_force(op) / f_s).tanh();
+            let mut lower_mu = m;
+            lower_mu.mu = m.mu * (1.0 - d / e);
+            let gap = m.current(op) + with_sat[j] - lower_mu.current(op);
+            assert!(gap.abs() < 1e-12, "{gap}");
         }
     }
 
