@@ -155,8 +155,7 @@ pub enum ElfError {
 
 impl fmt::Display for ElfError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        const FIX: &str =
-            "build the firmware for thumbv7em-none-eabihf with `cargo fw-build` (or run `rig flash` without --elf)";
+        const FIX: &str = "build the firmware for thumbv7em-none-eabihf with `cargo fw-build` (or run `rig flash` without --elf)";
         match self {
             Self::NotElf { looks_like } => write!(
                 f,
