@@ -141,6 +141,49 @@ impl VirtualDevice {
         config
     }
 
+    /// The virtual rig a rig file describes (gear, friction, the calibration stored in its
+    /// flash), reporting itself as board `virtual` with an output encoder fitted (as
+    /// [`VirtualDevice::paper_config`]): its plant runs the file's fitted
+    /// `[model]` (every effect, or an error naming the one it cannot run), or `preset` when
+    /// the file has none. `rig sim serve --model` and the device option `--sim --model`
+    /// both build their plant here.
+    pub fn rig_file_config(
+        rig: &rigfile::RigFile,
+        preset: &sim::Preset,
+    ) -> Result<SimConfig, RigError> {
+        let mut config = SimConfig::from_rig_file(rig)?;
+        config.core.board_name = "virtual";
+        config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
+        if rig.model.is_none() {
+            preset.apply(&mut config.plant);
+        } else {
+            sim::preset::apply_model(rig, &mut config.plant)?;
+        }
+        Ok(config)
+    }
+
+    /// [`VirtualDevice::rig_file_config`] of the rig file at `path`, which must have a fitted
+    /// `[model]` (the device option `--model`): errors name the file and what to do.
+    pub fn fitted_config(path: &std::path::Path) -> Result<SimConfig, RigError> {
+        let what = || format!("--model {}", path.display());
+        let rig = rigfile::RigFile::load(path).map_err(|e| RigError::BadValue {
+            what: what(),
+            why: format!(
+                "{e}; give a rig file with a fitted [model] (written by `rig explain --measured X --write-model FILE`, format in docs/rig-file.md)"
+            ),
+        })?;
+        if rig.model.is_none() {
+            return Err(RigError::BadValue {
+                what: what(),
+                why: "the rig file has no fitted [model]: write one with `rig explain --measured X --write-model FILE` (or add a [model] table, docs/rig-file.md)".into(),
+            });
+        }
+        Self::rig_file_config(&rig, &sim::Preset::paper()).map_err(|e| RigError::BadValue {
+            what: what(),
+            why: e.to_string(),
+        })
+    }
+
     /// The pseudo-terminal's port name, to open like a serial port.
     pub fn port_name(&self) -> &str {
         &self.port
