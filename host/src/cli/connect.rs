@@ -230,5 +230,41 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.starts_with("--baud") && e.contains("rig design"), "{e}");
+        // --model goes before or after the verb like the others (after wins).
+        let before = DeviceArgs {
+            sim: true,
+            model: Some("a.toml".into()),
+            ..Default::default()
+        };
+        assert_eq!(before.given(), ["--sim", "--model"]);
+        let d = before.resolve(&VerbDeviceArgs::default()).unwrap();
+        assert_eq!(d.model, Some(PathBuf::from("a.toml")));
+        let after = VerbDeviceArgs {
+            model: Some("b.toml".into()),
+            ..Default::default()
+        };
+        assert_eq!(
+            before.resolve(&after).unwrap().model,
+            Some(PathBuf::from("b.toml"))
+        );
+        let e = DeviceArgs {
+            model: Some("a.toml".into()),
+            ..Default::default()
+        }
+        .refuse_for("sim")
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("--model") && e.contains("own --model"), "{e}");
+        // After `discover` there is no device --model (its own names its rig file).
+        let d = DeviceArgs::default()
+            .resolve(
+                &DiscoverDeviceArgs {
+                    sim: true,
+                    ..Default::default()
+                }
+                .into(),
+            )
+            .unwrap();
+        assert!(d.sim && d.model.is_none());
     }
 }

@@ -322,6 +322,37 @@ mod tests {
     use super::*;
     use crate::client::{Client, ClientOptions, open_serial};
 
+    #[test]
+    fn a_rig_file_builds_the_plant_of_its_fitted_model_or_the_preset() {
+        let rig = |text: &str| rigfile::RigFile::parse(text, "test.toml").unwrap();
+        let paper = sim::Preset::paper();
+        // With a fitted [model]: its effects and mu, not the preset's.
+        let fitted = rig(
+            "[model]\nmu = 0.25\n\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = 0.2 }\n",
+        );
+        let c = VirtualDevice::rig_file_config(&fitted, &paper).unwrap();
+        assert!((c.plant.effects.extra_viscous - 0.2e-3).abs() < 1e-12);
+        assert_eq!(c.plant.effects.axial_friction_speed, None);
+        assert_eq!(c.plant.mu_ax, 0.25);
+        assert_eq!(c.core.board_name, "virtual");
+        assert!(
+            c.core.output_encoder.is_some(),
+            "as the paper's virtual device"
+        );
+        // Without one: the preset.
+        let plain = rig("[friction]\nmu_s = 0.271\n");
+        let c = VirtualDevice::rig_file_config(&plain, &paper).unwrap();
+        assert_eq!(c.plant.effects, paper.effects);
+        // An effect the plant cannot run is named.
+        let tooth = rig(
+            "[model]\nmu = 0.25\n\n[[model.effects]]\nname = \"tooth-compliance\"\nparams = {}\n",
+        );
+        let e = VirtualDevice::rig_file_config(&tooth, &paper)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot run tooth-compliance"), "{e}");
+    }
+
     fn connect(dev: &VirtualDevice) -> Client<crate::client::SerialTransport> {
         let io = open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).unwrap();
         let mut opts = ClientOptions::new(dev.port_name());
