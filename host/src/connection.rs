@@ -2,6 +2,8 @@
 //! and the session it opens with it ([`Session`]). Below the command line: `demo` and the
 //! verbs both use it.
 
+use std::path::PathBuf;
+
 use protocol::DeviceInfo;
 
 use crate::RigError;
@@ -20,6 +22,9 @@ pub struct DeviceOpts {
     pub sim: bool,
     /// With `sim`: virtual seconds per wall-clock second.
     pub speed: f64,
+    /// With `sim`: a rig file with a fitted `[model]`; the virtual device is built from it
+    /// and its plant runs the model's effects ([`VirtualDevice::fitted_config`]).
+    pub model: Option<PathBuf>,
 }
 
 impl Default for DeviceOpts {
@@ -30,6 +35,7 @@ impl Default for DeviceOpts {
             baud: protocol::DEFAULT_BAUD_RATE,
             sim: false,
             speed: 1.0,
+            model: None,
         }
     }
 }
@@ -92,8 +98,19 @@ impl DeviceOpts {
                 why: "only the virtual device can run faster: add --sim".into(),
             });
         }
+        if let (false, Some(model)) = (self.sim, &self.model) {
+            return Err(RigError::BadValue {
+                what: format!("--model {}", model.display()),
+                why: "only the virtual device runs a fitted model (a real rig runs its own physics): add --sim, or leave --model out".into(),
+            });
+        }
         let (device, port, name) = if self.sim {
-            let dev = VirtualDevice::paper(self.speed)?;
+            let dev = match &self.model {
+                Some(path) => {
+                    VirtualDevice::start(VirtualDevice::fitted_config(path)?, self.speed)?
+                }
+                None => VirtualDevice::paper(self.speed)?,
+            };
             let port = dev.port_name().to_owned();
             let name = format!("the virtual device ({port})");
             (Some(dev), port, name)

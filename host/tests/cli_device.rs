@@ -167,12 +167,18 @@ fn monitor_prints_lines_and_logs_csv() {
         "--csv",
         csv.to_str().unwrap(),
     ]));
-    let lines: Vec<&str> = text.lines().collect();
+    // A header of the CSV's column names, then one line per sample in 80 columns.
+    let (head, lines) = text.split_once('\n').unwrap();
+    assert!(
+        head.contains("current_a") && head.ends_with("faults"),
+        "{head}"
+    );
+    let lines: Vec<&str> = lines.lines().collect();
     assert!(lines.len() >= 45, "{} lines", lines.len());
     assert!(
         lines
             .iter()
-            .all(|l| l.contains("locked") && l.contains("faults none")),
+            .all(|l| l.contains("locked") && l.ends_with(" none") && l.len() <= 80),
         "{text}"
     );
     let log = std::fs::read_to_string(&csv).unwrap();

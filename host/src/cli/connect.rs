@@ -1,9 +1,12 @@
-//! The device options (`--port`, `--baud`, `--sim`, `--speed`) as the command line takes
-//! them: before the verb ([`DeviceArgs`]) or after a device verb ([`VerbDeviceArgs`]).
+//! The device options (`--port`, `--baud`, `--sim`, `--speed`, `--model`) as the command
+//! line takes them: before the verb ([`DeviceArgs`]) or after a device verb
+//! ([`VerbDeviceArgs`]; [`DiscoverDeviceArgs`] after `discover`, whose own `--model` is a
+//! rig file its explanations start from).
 //! Only the verbs that use a device accept them; [`DeviceArgs::refuse_for`] is the error
 //! for the others. The resolved options and the session live in [`crate::connection`].
 
 use std::io::IsTerminal;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
@@ -13,14 +16,13 @@ use crate::RigError;
 pub use crate::connection::{DeviceOpts, Session};
 
 /// The verbs that use a device, for messages.
-pub const DEVICE_VERBS: &str =
-    "info, faults, clear, release, monitor, capture, calibrate, calibration, flash and demo";
+pub const DEVICE_VERBS: &str = "info, faults, clear, release, monitor, capture, calibrate, calibration, experiment, discover, flash and demo";
 
 /// The device options as given on the command line (nothing defaulted), declared twice:
 /// before the verb (not global, so a verb without a device does not take them after its
 /// name) and on each device verb (global below it, so `rig calibration get --sim` works).
 macro_rules! device_args {
-    ($(#[$meta:meta])* $name:ident, global = $global:literal, heading = $heading:literal) => {
+    ($(#[$meta:meta])* $name:ident, global = $global:literal, heading = $heading:literal $(, $model:ident)?) => {
         $(#[$meta])*
         #[derive(Debug, Clone, Default, Args)]
         #[command(next_help_heading = $heading)]
@@ -38,6 +40,12 @@ macro_rules! device_args {
             /// With --sim: run the virtual device this many times faster than real time [default: 1].
             #[arg(long, global = $global, value_name = "FACTOR", value_parser = parse_speed)]
             pub speed: Option<f64>,
+            $(
+            /// With --sim: build the virtual device from this rig file, its plant running the
+            /// fitted [model]'s effects (`rig explain --write-model`), as `rig sim serve --model`.
+            #[arg(long, global = $global, value_name = "FILE")]
+            pub $model: Option<PathBuf>,
+            )?
         }
 
         impl $name {
@@ -48,6 +56,7 @@ macro_rules! device_args {
                     ("--baud", self.baud.is_some()),
                     ("--sim", self.sim),
                     ("--speed", self.speed.is_some()),
+                    $(("--model", self.$model.is_some()),)?
                 ]
                 .into_iter()
                 .filter_map(|(name, given)| given.then_some(name))
@@ -61,14 +70,35 @@ device_args!(
     /// Device options before the verb: `rig --sim info`. Device verbs only.
     DeviceArgs,
     global = false,
-    heading = "Device options (for info, faults, clear, release, monitor, capture, calibrate, calibration, demo; also after the verb)"
+    heading = "Device options (for info, faults, clear, release, monitor, capture, calibrate, calibration, experiment, discover, demo; also after the verb)",
+    model
 );
 device_args!(
     /// Device options after a device verb: `rig info --sim`.
     VerbDeviceArgs,
     global = true,
+    heading = "Device options",
+    model
+);
+device_args!(
+    /// Device options after `rig discover`: all but `--model`, which is `discover`'s own
+    /// (the rig file its explanations start from).
+    DiscoverDeviceArgs,
+    global = true,
     heading = "Device options"
 );
+
+impl From<DiscoverDeviceArgs> for VerbDeviceArgs {
+    fn from(d: DiscoverDeviceArgs) -> Self {
+        Self {
+            port: d.port,
+            baud: d.baud,
+            sim: d.sim,
+            speed: d.speed,
+            model: None,
+        }
+    }
+}
 
 impl DeviceArgs {
     /// The error for device options given to `verb`, which uses no device (`Ok` when none
@@ -79,7 +109,12 @@ impl DeviceArgs {
             Some(option) => Err(RigError::BadValue {
                 what: (*option).into(),
                 why: format!(
-                    "`rig {verb}` uses no device, so it takes no device options (--port, --baud, --sim, --speed); they go with {DEVICE_VERBS}"
+                    "`rig {verb}` uses no device, so it takes no device options (--port, --baud, --sim, --speed, --model); they go with {DEVICE_VERBS}{}",
+                    if *option == "--model" && matches!(verb, "sim" | "compare") {
+                        format!(" (`rig {verb}` takes its own --model after its verb)")
+                    } else {
+                        String::new()
+                    }
                 ),
             }),
         }
@@ -101,6 +136,7 @@ impl DeviceArgs {
             baud: after.baud.or(self.baud).unwrap_or(defaults.baud),
             sim,
             speed: after.speed.or(self.speed).unwrap_or(defaults.speed),
+            model: after.model.clone().or_else(|| self.model.clone()),
         })
     }
 }
@@ -194,5 +230,41 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.starts_with("--baud") && e.contains("rig design"), "{e}");
+        // --model goes before or after the verb like the others (after wins).
+        let before = DeviceArgs {
+            sim: true,
+            model: Some("a.toml".into()),
+            ..Default::default()
+        };
+        assert_eq!(before.given(), ["--sim", "--model"]);
+        let d = before.resolve(&VerbDeviceArgs::default()).unwrap();
+        assert_eq!(d.model, Some(PathBuf::from("a.toml")));
+        let after = VerbDeviceArgs {
+            model: Some("b.toml".into()),
+            ..Default::default()
+        };
+        assert_eq!(
+            before.resolve(&after).unwrap().model,
+            Some(PathBuf::from("b.toml"))
+        );
+        let e = DeviceArgs {
+            model: Some("a.toml".into()),
+            ..Default::default()
+        }
+        .refuse_for("sim")
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("--model") && e.contains("own --model"), "{e}");
+        // After `discover` there is no device --model (its own names its rig file).
+        let d = DeviceArgs::default()
+            .resolve(
+                &DiscoverDeviceArgs {
+                    sim: true,
+                    ..Default::default()
+                }
+                .into(),
+            )
+            .unwrap();
+        assert!(d.sim && d.model.is_none());
     }
 }

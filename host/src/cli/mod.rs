@@ -1,8 +1,8 @@
 //! The `rig` command line: one module per verb, each with its clap arguments and a `run`
 //! function that returns the process exit code or a [`crate::RigError`].
 //!
-//! Device options (`--port`, `--baud`, `--sim`, `--speed`) go before the verb or after a
-//! verb that uses a device; any other verb refuses them, naming the option.
+//! Device options (`--port`, `--baud`, `--sim`, `--speed`, `--model`) go before the verb or
+//! after a verb that uses a device; any other verb refuses them, naming the option.
 
 use std::io::Write;
 
@@ -30,7 +30,7 @@ pub mod release;
 pub mod serve;
 pub mod sim;
 
-use connect::{DeviceArgs, VerbDeviceArgs};
+use connect::{DeviceArgs, DiscoverDeviceArgs, VerbDeviceArgs};
 
 /// Tools for the vibration-switched 2K-H planetary gear rig.
 #[derive(Debug, Parser)]
@@ -76,9 +76,9 @@ pub enum Command {
         /// The verb's arguments.
         #[command(flatten)]
         args: discover::DiscoverArgs,
-        /// Device options after the verb.
+        /// Device options after the verb (its own `--model` is the starting rig file).
         #[command(flatten)]
-        device: VerbDeviceArgs,
+        device: DiscoverDeviceArgs,
     },
     /// Replay a measured sweep on the virtual rig with the base and a fitted model: the gap before and after.
     Compare(compare::CompareArgs),
@@ -190,7 +190,15 @@ impl Cli {
                 before.refuse_for("compare")?;
                 compare::run(a)
             }
-            Command::Discover { args, device } => discover::run(args, &before.resolve(&device)?),
+            Command::Discover { args, device } => {
+                if let Some(m) = &before.model {
+                    return Err(crate::RigError::BadValue {
+                        what: format!("--model {}", m.display()),
+                        why: "`rig discover` takes --model after its name, as the rig file its explanations start from; its virtual rig (--sim) is set with --preset and --effect".into(),
+                    });
+                }
+                discover::run(args, &before.resolve(&device.into())?)
+            }
             Command::Ports(a) => {
                 before.refuse_for("ports")?;
                 ports::run(a)
@@ -198,6 +206,12 @@ impl Cli {
             Command::Demo { args, device } => {
                 let mut given = before.given();
                 given.extend(device.given());
+                if given.contains(&"--model") {
+                    return Err(crate::RigError::BadValue {
+                        what: "--model".into(),
+                        why: "`rig demo` runs the paper's rig: leave --model out (`rig sim fig5|table1|torque-sweep --model FILE` run a fitted model)".into(),
+                    });
+                }
                 demo::run(args, &before.resolve(&device)?, &given)
             }
             Command::Experiment { args, device } => {

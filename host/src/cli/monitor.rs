@@ -1,6 +1,7 @@
 //! `rig monitor`: live telemetry. In a terminal, a full-screen view with charts of the
 //! current, cam speed, tau_cam and the load estimate and the supervisor state (ratatui);
-//! `--plain` (or no terminal) prints one line per sample; `--csv FILE` logs every sample.
+//! `--plain` (or no terminal) prints one line per sample in 80 columns under a header of
+//! the CSV's column names; `--csv FILE` logs every sample.
 
 use std::collections::VecDeque;
 use std::fs::File;
@@ -171,19 +172,53 @@ fn csv_row(t: &TelemetrySample) -> [String; 10] {
     ]
 }
 
-/// One line of `--plain` output; the estimates are `-` unless `fresh` ([`Freshness`]).
+/// Widest line of `--plain` output, columns.
+pub const PLAIN_WIDTH: usize = 80;
+
+/// The column heads of `--plain` output, printed once before the first sample: the CSV's
+/// column names (and units), so a line reads the same as a row of `--csv`.
+pub const PLAIN_HEADER: &str =
+    "   time_s state     cam_hz current_a pwm_duty tau_cam_nm tau_rot_nm faults";
+
+/// One sample of `--plain` output, under [`PLAIN_HEADER`], at most [`PLAIN_WIDTH`]
+/// columns; the estimates are `-` unless `fresh` ([`Freshness`]). Faults that do not fit
+/// their column are counted there and listed on the lines below (indented).
 pub fn plain_line(t: &TelemetrySample, fresh: bool) -> String {
-    format!(
-        "{:10.3} s  {:<9} cam {:6.2} Hz  i {:6.3} A  duty {:+.3}  tau_cam {} N mm  tau_rot {} N m  faults {}",
+    let head = format!(
+        "{:9.3} {:<9} {:6.2} {:9.3} {:+8.3} {} {}",
         t.device_time_us as f64 * 1e-6,
         t.state.name(),
         t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
         t.current_a,
         t.pwm_duty,
-        estimate(fresh, t.tau_cam_nm, 1e3, 7, 2),
-        estimate(fresh, t.tau_rot_nm, 1.0, 6, 3),
-        t.faults
-    )
+        estimate(fresh, t.tau_cam_nm, 1.0, 10, 5),
+        estimate(fresh, t.tau_rot_nm, 1.0, 10, 3),
+    );
+    let faults = t.faults.to_string().replace(" | ", "|");
+    if head.len() + 1 + faults.len() <= PLAIN_WIDTH {
+        return format!("{head} {faults}");
+    }
+    // Too many to fit: the count here, the names below, wrapped at '|'.
+    let names: Vec<&str> = faults.split('|').collect();
+    let mut text = format!("{head} {} faults:", names.len());
+    const INDENT: &str = "          ";
+    let mut line = String::from(INDENT);
+    for (k, name) in names.iter().enumerate() {
+        let piece = if k + 1 < names.len() {
+            format!("{name}|")
+        } else {
+            (*name).to_owned()
+        };
+        if line.len() > INDENT.len() && line.len() + piece.len() > PLAIN_WIDTH {
+            text.push('\n');
+            text.push_str(&line);
+            line = String::from(INDENT);
+        }
+        line.push_str(&piece);
+    }
+    text.push('\n');
+    text.push_str(&line);
+    text
 }
 
 /// The full-screen view's state: the last [`MonitorView::WINDOW_S`] seconds of samples.
@@ -497,6 +532,9 @@ fn watch(
                 if a.json {
                     super::print_json_line(&mut out, &sample_json(&t))?;
                 } else if terminal.is_none() {
+                    if count == 1 {
+                        writeln!(out, "{PLAIN_HEADER}")?;
+                    }
                     writeln!(out, "{}", plain_line(&t, fresh))?;
                 }
                 if a.seconds
@@ -639,6 +677,43 @@ mod tests {
     }
 
     #[test]
+    fn plain_lines_fit_80_columns_with_every_field() {
+        let mut t = sample(1500, SupervisorState::Vibrating);
+        t.device_time_us = 86_400_000_000; // a day of uptime
+        t.current_a = -4.999;
+        t.pwm_duty = -1.0;
+        t.tau_cam_nm = -0.123_45;
+        t.tau_rot_nm = -3.68;
+        assert!(PLAIN_HEADER.len() <= PLAIN_WIDTH);
+        let one = plain_line(&t, true);
+        assert!(!one.contains('\n') && one.len() <= PLAIN_WIDTH, "{one}");
+        assert!(one.ends_with(" none"), "{one}");
+        // One fault fits its column; all of them wrap below, every name kept.
+        t.faults = FaultFlags::OVERCURRENT;
+        let one = plain_line(&t, false);
+        assert!(
+            one.ends_with(" OVERCURRENT") && one.len() <= PLAIN_WIDTH,
+            "{one}"
+        );
+        t.faults = FaultFlags::all();
+        let many = plain_line(&t, false);
+        let n = FaultFlags::all().names().count();
+        assert!(
+            many.lines()
+                .next()
+                .unwrap()
+                .ends_with(&format!(" {n} faults:")),
+            "{many}"
+        );
+        for l in many.lines() {
+            assert!(l.len() <= PLAIN_WIDTH, "{} columns: {l}", l.len());
+        }
+        for name in FaultFlags::all().names() {
+            assert!(many.contains(name), "{name} missing:\n{many}");
+        }
+    }
+
+    #[test]
     fn every_status_flag_is_explained() {
         for name in StatusFlags::all().names() {
             assert!(status_meaning(name).is_some(), "{name} has no legend");
@@ -668,7 +743,8 @@ mod tests {
         t.device_time_us = 1_400_000;
         assert!(!f.update(&t), "no revolution for over 1 s: stale");
         let line = plain_line(&locked, false);
-        assert!(line.contains("tau_cam       - N mm"), "{line}");
+        let cols: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!((cols[5], cols[6]), ("-", "-"), "{line}");
     }
 
     #[test]
@@ -702,8 +778,38 @@ mod tests {
     fn plain_line_and_csv_row_agree() {
         let t = sample(1500, SupervisorState::Locked);
         let line = plain_line(&t, false);
+        let cols: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(&cols[..3], ["1.500", "locked", "10.00"], "{line}");
+        // The header names the CSV's columns, each above its values.
+        let heads: Vec<&str> = PLAIN_HEADER.split_whitespace().collect();
+        assert_eq!(
+            heads,
+            [
+                "time_s",
+                "state",
+                "cam_hz",
+                "current_a",
+                "pwm_duty",
+                "tau_cam_nm",
+                "tau_rot_nm",
+                "faults"
+            ]
+        );
+        for h in &heads[2..7] {
+            assert!(CSV_HEADER.contains(h), "{h}");
+        }
+        let mut fresh = t;
+        fresh.tau_cam_nm = 0.016_48;
+        fresh.tau_rot_nm = 0.368;
+        let line = plain_line(&fresh, true);
+        let end_of = |text: &str, word: &str| text.find(word).unwrap() + word.len();
+        for (k, h) in heads.iter().enumerate().take(7).skip(2) {
+            // Right-aligned numbers end under their head.
+            let value = line.split_whitespace().nth(k).unwrap();
+            assert_eq!(end_of(&line, value), end_of(PLAIN_HEADER, h), "{h}: {line}");
+        }
         assert!(
-            line.contains("1.500 s") && line.contains("locked") && line.contains("10.00 Hz"),
+            line.contains(" 0.01648 ") && line.contains(" 0.368 "),
             "{line}"
         );
         let row = csv_row(&t);

@@ -66,19 +66,8 @@ pub struct Ready {
 pub fn config(a: &ServeArgs) -> Result<SimConfig, RigError> {
     let preset = Preset::by_name(&a.preset)?;
     let mut config = match &a.model {
-        Some(path) => {
-            let rig = rigfile::RigFile::load(path)?;
-            let mut c = SimConfig::from_rig_file(&rig)?;
-            c.core.board_name = "virtual";
-            // The file's fitted model is the plant (every effect, or an error naming the one
-            // it cannot run); without one, the preset.
-            if rig.model.is_none() {
-                preset.apply(&mut c.plant);
-            } else {
-                sim::preset::apply_model(&rig, &mut c.plant)?;
-            }
-            c
-        }
+        // The file's fitted model is the plant; without one, the preset.
+        Some(path) => VirtualDevice::rig_file_config(&rigfile::RigFile::load(path)?, &preset)?,
         None => VirtualDevice::paper_config(&preset),
     };
     for e in &a.effects {

@@ -141,6 +141,49 @@ impl VirtualDevice {
         config
     }
 
+    /// The virtual rig a rig file describes (gear, friction, the calibration stored in its
+    /// flash), reporting itself as board `virtual` with an output encoder fitted (as
+    /// [`VirtualDevice::paper_config`]): its plant runs the file's fitted
+    /// `[model]` (every effect, or an error naming the one it cannot run), or `preset` when
+    /// the file has none. `rig sim serve --model` and the device option `--sim --model`
+    /// both build their plant here.
+    pub fn rig_file_config(
+        rig: &rigfile::RigFile,
+        preset: &sim::Preset,
+    ) -> Result<SimConfig, RigError> {
+        let mut config = SimConfig::from_rig_file(rig)?;
+        config.core.board_name = "virtual";
+        config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
+        if rig.model.is_none() {
+            preset.apply(&mut config.plant);
+        } else {
+            sim::preset::apply_model(rig, &mut config.plant)?;
+        }
+        Ok(config)
+    }
+
+    /// [`VirtualDevice::rig_file_config`] of the rig file at `path`, which must have a fitted
+    /// `[model]` (the device option `--model`): errors name the file and what to do.
+    pub fn fitted_config(path: &std::path::Path) -> Result<SimConfig, RigError> {
+        let what = || format!("--model {}", path.display());
+        let rig = rigfile::RigFile::load(path).map_err(|e| RigError::BadValue {
+            what: what(),
+            why: format!(
+                "{e}; give a rig file with a fitted [model] (written by `rig explain --measured X --write-model FILE`, format in docs/rig-file.md)"
+            ),
+        })?;
+        if rig.model.is_none() {
+            return Err(RigError::BadValue {
+                what: what(),
+                why: "the rig file has no fitted [model]: write one with `rig explain --measured X --write-model FILE` (or add a [model] table, docs/rig-file.md)".into(),
+            });
+        }
+        Self::rig_file_config(&rig, &sim::Preset::paper()).map_err(|e| RigError::BadValue {
+            what: what(),
+            why: e.to_string(),
+        })
+    }
+
     /// The pseudo-terminal's port name, to open like a serial port.
     pub fn port_name(&self) -> &str {
         &self.port
@@ -278,6 +321,37 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
 mod tests {
     use super::*;
     use crate::client::{Client, ClientOptions, open_serial};
+
+    #[test]
+    fn a_rig_file_builds_the_plant_of_its_fitted_model_or_the_preset() {
+        let rig = |text: &str| rigfile::RigFile::parse(text, "test.toml").unwrap();
+        let paper = sim::Preset::paper();
+        // With a fitted [model]: its effects and mu, not the preset's.
+        let fitted = rig(
+            "[model]\nmu = 0.25\n\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = 0.2 }\n",
+        );
+        let c = VirtualDevice::rig_file_config(&fitted, &paper).unwrap();
+        assert!((c.plant.effects.extra_viscous - 0.2e-3).abs() < 1e-12);
+        assert_eq!(c.plant.effects.axial_friction_speed, None);
+        assert_eq!(c.plant.mu_ax, 0.25);
+        assert_eq!(c.core.board_name, "virtual");
+        assert!(
+            c.core.output_encoder.is_some(),
+            "as the paper's virtual device"
+        );
+        // Without one: the preset.
+        let plain = rig("[friction]\nmu_s = 0.271\n");
+        let c = VirtualDevice::rig_file_config(&plain, &paper).unwrap();
+        assert_eq!(c.plant.effects, paper.effects);
+        // An effect the plant cannot run is named.
+        let tooth = rig(
+            "[model]\nmu = 0.25\n\n[[model.effects]]\nname = \"tooth-compliance\"\nparams = {}\n",
+        );
+        let e = VirtualDevice::rig_file_config(&tooth, &paper)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot run tooth-compliance"), "{e}");
+    }
 
     fn connect(dev: &VirtualDevice) -> Client<crate::client::SerialTransport> {
         let io = open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).unwrap();
