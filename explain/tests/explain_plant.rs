@@ -182,12 +182,12 @@ fn the_written_model_runs_in_the_plant() {
     assert_eq!(outcome.explanation.verdict, Verdict::Explained);
     let augmented = RigFile::parse(&outcome.augmented_rig().to_toml().unwrap(), "m.toml").unwrap();
     let setup = augmented.plant_effects().unwrap();
-    assert!(setup.regeneration && setup.not_in_plant.is_empty());
+    assert!(setup.regeneration == Some(true) && setup.not_in_plant.is_empty());
     let fitted = setup.effects.extra_viscous;
     assert!((fitted / 0.12e-3 - 1.0).abs() < 0.3, "c_v {fitted}");
     // A plant running the augmented model gives data the augmented model explains.
     let e = explain(
-        sweep_with_drive(setup.effects, setup.regeneration, 2, 22),
+        sweep_with_drive(setup.effects, setup.regeneration == Some(true), 2, 22),
         &augmented,
     );
     assert_eq!(e.verdict, Verdict::NoMissingEffect, "{}", e.finding);

@@ -12,8 +12,10 @@ use crate::{RigFile, RigFileError};
 pub struct PlantSetup {
     /// The plant's switchable effects.
     pub effects: model::plant::PlantEffects,
-    /// Whether the drive regenerates (`PlantParams::regeneration`).
-    pub regeneration: bool,
+    /// Whether the drive regenerates (`PlantParams::regeneration`), when the model fits
+    /// `inertia-rectification`; `None` when it does not: the plant then keeps its own drive
+    /// (Eq. (10)'s kappa = 0 is neither drive the plant can run).
+    pub regeneration: Option<bool>,
     /// Effects of the model the plant cannot represent.
     pub not_in_plant: Vec<Effect>,
 }
@@ -141,7 +143,7 @@ impl RigFile {
             why,
         })?;
         let mut out = model::plant::PlantEffects::default();
-        let mut regeneration = true;
+        let mut regeneration = None;
         let mut missing = Vec::new();
         let time_driven = self
             .model
@@ -162,7 +164,9 @@ impl RigFile {
                     out.bush_hold_arm = p.bush_hold_torque / p.bush_force;
                     out.bush_omega = p.bush_corner_speed;
                 }
-                Effect::InertiaRectification => regeneration = p.rectification < -0.75,
+                Effect::InertiaRectification => {
+                    regeneration = Some(model::effects::kappa_returns_power(p.rectification));
+                }
                 other => missing.push(other),
             }
         }

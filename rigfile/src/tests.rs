@@ -136,7 +136,8 @@ fn plant_runs_the_augmented_model() {
     assert_eq!(plant.current_offset, 0.04);
     assert!((plant.bush_hold_torque(0.0) - 0.8).abs() < 1e-12);
     assert!((plant.bush_hold_torque(40.0) - 0.4).abs() < 1e-12);
-    assert!(setup.regeneration);
+    // No inertia-rectification fitted: the plant keeps its own drive.
+    assert_eq!(setup.regeneration, None);
     assert_eq!(setup.not_in_plant, [Effect::ToothCompliance]);
 }
 

@@ -290,8 +290,8 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
     plant.mu_ax = m.mu;
     plant.effects = effects;
     // The drive's regeneration is the board's unless the model fitted it.
-    if list.contains(&Effect::InertiaRectification) {
-        plant.regeneration = setup.regeneration;
+    if let Some(regeneration) = setup.regeneration {
+        plant.regeneration = regeneration;
     }
     Ok(())
 }

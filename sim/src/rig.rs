@@ -83,8 +83,8 @@ impl SimConfig {
     /// built around its C1-C4 (C5 and C6 follow from them, Eqs. 16-17) at the calibration
     /// temperature, and, when the file has a fitted `[model]`, its mu as the cam's axial
     /// friction and the effects the plant can represent (`RigFile::plant_effects`; the rest
-    /// are left out). Without `[model]` the plant keeps its own drive (no regeneration),
-    /// as [`SimConfig::paper`].
+    /// are left out). The plant keeps its own drive (no regeneration, as [`SimConfig::paper`])
+    /// unless the `[model]` fits `inertia-rectification`.
     pub fn from_rig_file(rig: &RigFile) -> Result<Self, SimError> {
         let bad = |e: rigfile::RigFileError| SimError::BadValue {
             what: "rig file".into(),
@@ -103,7 +103,9 @@ impl SimConfig {
             let setup = rig.plant_effects().map_err(bad)?;
             plant.mu_ax = m.mu;
             plant.effects = setup.effects;
-            plant.regeneration = setup.regeneration;
+            if let Some(regeneration) = setup.regeneration {
+                plant.regeneration = regeneration;
+            }
         }
         Ok(Self {
             plant,

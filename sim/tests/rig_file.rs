@@ -60,3 +60,18 @@ fn a_file_the_device_would_refuse_is_refused() {
     let e = SimConfig::from_rig_file(&rig).unwrap_err().to_string();
     assert!(e.contains("gremlins"), "{e}");
 }
+
+#[test]
+fn a_model_without_the_drive_term_runs_on_the_boards_drive() {
+    // `rig explain --write-model` on data without the `# drive:` provenance line, or a
+    // hand-written model, may not list inertia-rectification: the plant then keeps the
+    // board's drive, as the `--sim` device has it, so a model changes only its effects.
+    let text = "[model]\nmu = 0.22\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = 0.2 }\n";
+    let rig = RigFile::parse(text, "rig.toml").unwrap();
+    let c = SimConfig::from_rig_file(&rig).unwrap();
+    assert_eq!(c.plant.regeneration, SimConfig::paper().plant.regeneration);
+    assert_eq!(
+        c.plant.regeneration,
+        model::hardware::board::REGENERATIVE_DECAY
+    );
+}
