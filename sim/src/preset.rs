@@ -263,7 +263,7 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
         why,
     };
     let setup = rig.plant_effects().map_err(|e| bad(e.to_string()))?;
-    let (list, params) = rig.effects().map_err(bad)?;
+    let (_, params) = rig.effects().map_err(bad)?;
     let mut missing = Vec::new();
     let mut effects = setup.effects;
     for e in setup.not_in_plant {
