@@ -218,7 +218,11 @@ impl Lin {
         }
         let delta = bounded_step(&total.a, &total.u, p, &self.theta, &self.lo, &self.hi);
         let rss = total.rss(&delta);
-        let ll = -0.5 * (n * (2.0 * std::f64::consts::PI * rss / n).ln() + n + total.log_var)
+        // The same floor of the noise scale as the fit's likelihood ([`fit::SIGMA_FLOOR_A`]).
+        let s2 = rss / n;
+        let floored = s2.max(fit::SIGMA_FLOOR_A * fit::SIGMA_FLOOR_A);
+        let ll = -0.5
+            * (n * (2.0 * std::f64::consts::PI * floored).ln() + n * s2 / floored + total.log_var)
             + if tot > 0.0 {
                 fit::hold_loglik(tot, err)
             } else {

@@ -20,6 +20,15 @@ const MAX_ITERATIONS: usize = 60;
 const RIPPLE_ROUNDS: usize = 3;
 /// Forward-difference step of a coordinate, as a share of its bounds' width.
 const DIFF_STEP: f64 = 1e-7;
+/// Floor of the row noise scale in the likelihood, A: the resolution to which the model
+/// itself is known. Table 2 prints the no-load current C6 = 2.25 A to 10 mA, and the rig's
+/// 12-bit current reading it was taken through steps by 6.5 mA: the model's current is not
+/// known more finely than a uniform 10 mA step, rms 10 mA / sqrt 12 = 2.9 mA. Rows more
+/// precise than that (long whole-revolution averages on a virtual rig, many repeats at a
+/// few proposed points) would otherwise turn the model's own rounding, a milliampere or
+/// two, into a confident finding. Noisier data (a bench, the synthetic sweeps at 5 mA and
+/// more) never reach the floor.
+pub const SIGMA_FLOOR_A: f64 = 0.010 / 3.464_101_615_137_754_4;
 
 /// Which effects a model carries on top of the paper's.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
@@ -469,20 +478,22 @@ pub fn fit_capped(
     let sse: f64 = point_sse.iter().sum();
     let (sigma0, loglik_current) = if ripple {
         let (rho, s2) = ripple_profile(&point_sse, &counts, &fric);
+        let floored = s2.max(SIGMA_FLOOR_A * SIGMA_FLOOR_A);
         let ll = -0.5
-            * (n * (2.0 * std::f64::consts::PI * s2).ln()
+            * (n * (2.0 * std::f64::consts::PI * floored).ln()
                 + fric
                     .iter()
                     .zip(&counts)
                     .map(|(f, c)| c * (1.0 + rho * f * f).ln())
                     .sum::<f64>()
-                + n);
+                + n * s2 / floored);
         model.effects.mesh_ripple_rms = (rho * s2).sqrt();
-        (s2.sqrt(), ll)
+        (floored.sqrt(), ll)
     } else {
         let s2 = (sse / n).max(1e-300);
-        let ll = -0.5 * n * ((2.0 * std::f64::consts::PI * s2).ln() + 1.0);
-        (s2.sqrt(), ll)
+        let floored = s2.max(SIGMA_FLOOR_A * SIGMA_FLOOR_A);
+        let ll = -0.5 * n * ((2.0 * std::f64::consts::PI * floored).ln() + s2 / floored);
+        (floored.sqrt(), ll)
     };
 
     // The backdrive observations.

@@ -3,8 +3,10 @@
 //! propose ([`explain::design`]) through the same torque-sweep procedure as
 //! `rig experiment`, and repeats until the verdict is settled or the budget of test points
 //! (`--max-points`, a test point = one plan point x repeat) is spent. Every round's rows are
-//! appended to one CSV (provenance first). Ctrl-C or a lost link locks the gear (the
-//! procedure's path) and keeps the completed rounds' rows.
+//! appended to one CSV (provenance first). Every run averages over whole cam revolutions
+//! (`# window:` in the provenance), so the cam's torque ripple does not scatter the rows.
+//! Ctrl-C or a lost link locks the gear (the procedure's path) and keeps the completed
+//! rounds' rows.
 //!
 //! Settled: `explained` with a confidence of at least [`SETTLED_CONFIDENCE`] (or no
 //! bootstrap), or with its leading effect's inclusion probability at least that, or `no-missing-effect` with that confidence once at least
@@ -308,7 +310,11 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         loop {
             let setup = SweepSetup {
                 plan: plan.clone(),
-                window: Window::Start,
+                // Whole cam revolutions: the paper's fixed 0.5 s window ends at a random
+                // phase of the cam's torque ripple (2.5 turns at 3.6 V), a scatter of up to
+                // 5 mA at heavy load and low speed that `rig explain` reads as
+                // mesh-load-sharing-ripple once proposals repeat points there.
+                window: Window::Revolutions,
                 resume: false,
                 command: std::env::args().collect::<Vec<_>>().join(" "),
             };
