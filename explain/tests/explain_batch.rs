@@ -116,10 +116,14 @@ fn hit_rate_and_false_positive_rate() {
         for (effect, t) in &tallies {
             // Tooth compliance and a falling load-dependent friction both bend the friction
             // term down at high load: weak compliance is often reported as ambiguous with it.
-            let floor = if *effect == Effect::ToothCompliance {
-                0.5
-            } else {
-                0.8
+            // A current-sensor offset and the light-load family of load-dependent friction
+            // differ only below the lightest load tested (docs/explain-validation.md): without
+            // zero-load rows the verdict is often `ambiguous` between them, which the second
+            // check below still counts.
+            let floor = match effect {
+                Effect::ToothCompliance => 0.5,
+                Effect::CurrentSensorOffset => 0.65,
+                _ => 0.8,
             };
             assert!(
                 t.hits as f64 >= floor * t.total as f64,

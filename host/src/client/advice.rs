@@ -44,6 +44,26 @@ pub(super) fn refused(req: &Request, code: NackCode) -> RigError {
     }
 }
 
+/// The error for request `req` refused with `code` (`InFaultHold`) while the faults
+/// `latched` are latched (when the device said): the advice names them.
+pub(super) fn refused_in_fault_hold(
+    req: &Request,
+    code: NackCode,
+    latched: Option<protocol::FaultFlags>,
+) -> RigError {
+    let mut error = refused(req, code);
+    if let (RigError::Refused { advice, .. }, Some(latched)) = (&mut error, latched) {
+        let names: Vec<&str> = latched.names().collect();
+        if !names.is_empty() {
+            *advice = format!(
+                "latched: {} (it holds the motor off): `rig faults` says what each means, `rig clear` clears it once its cause is gone",
+                names.join(", ")
+            );
+        }
+    }
+    error
+}
+
 /// The error for request `req` answered with a reply of another kind.
 pub(super) fn unexpected(req: &Request, reply: &Reply, port: &str) -> RigError {
     RigError::Protocol(format!(

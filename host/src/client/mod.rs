@@ -121,6 +121,15 @@ impl<T: Read + Write> Client<T> {
     /// [`RigError::NoReply`].
     pub fn request(&mut self, req: &Request) -> Result<Reply, RigError> {
         match self.exchange(req)? {
+            Reply::Nack(code @ protocol::NackCode::InFaultHold) => {
+                // Name the faults that hold the motor off (one more exchange; without an
+                // answer the general advice stands).
+                let latched = match self.exchange(&Request::GetFaults) {
+                    Ok(Reply::Faults { latched, .. }) => Some(latched),
+                    _ => None,
+                };
+                Err(advice::refused_in_fault_hold(req, code, latched))
+            }
             Reply::Nack(code) => Err(advice::refused(req, code)),
             reply if req.is_answered_by(&reply) => Ok(reply),
             other => Err(advice::unexpected(req, &other, &self.opts.port_name)),

@@ -239,6 +239,26 @@ fn nack_names_the_request_and_the_fix() {
 }
 
 #[test]
+fn a_fault_hold_refusal_names_the_latched_faults() {
+    let mut c = fake_device(|seq, req| {
+        let reply = match req {
+            Request::GetFaults => Reply::Faults {
+                active: FaultFlags::empty(),
+                latched: FaultFlags::OVERCURRENT,
+            },
+            _ => return vec![(seq, DeviceMessage::nack(seq, NackCode::InFaultHold))],
+        };
+        vec![(seq, DeviceMessage::reply(seq, reply))]
+    });
+    let e = c.release(false, 0.0).unwrap_err().to_string();
+    assert!(
+        e.contains("Release(off)") && e.contains("OVERCURRENT"),
+        "{e}"
+    );
+    assert!(e.contains("rig clear"), "{e}");
+}
+
+#[test]
 fn stale_and_unsolicited_frames_do_not_answer_requests() {
     let mut c = fake_device(|seq, req| {
         let mut out = vec![
