@@ -137,7 +137,9 @@ impl LogStream<'_> {
                 Err(DecodeError::UnexpectedEof) => break,
                 Err(DecodeError::Malformed) => {
                     self.stats.malformed += 1;
-                    // rzcobs frames resynchronise at the next frame boundary; raw ones cannot.
+                    // rzcobs frames resynchronise at the next frame boundary; raw ones (the
+                    // firmware's) cannot, but its RTT writes whole frames or none
+                    // (defmt-rtt's drop-on-contention), so this means a corrupt stream.
                     if !self.table.table.encoding().can_recover() {
                         break;
                     }
