@@ -1017,20 +1017,7 @@ fn term_column(
 
 /// The [`Scores`] of `fit` with the `extra` columns.
 pub fn scores(points: &TestPoints, fit: &Fit, extra: &[Column]) -> Scores {
-    let state = State {
-        model: fit.model,
-        term_x: fit.term_x.clone(),
-    };
-    let bounds = bounds_of(points, &fit.free, &fit.spec.terms);
-    let own = bounds.len();
-    let (f, jac) = mean_jacobian(
-        points,
-        &points.all,
-        &state,
-        &fit.free,
-        &fit.spec.terms,
-        &bounds,
-    );
+    let (f, jac, own) = jacobian(points, fit);
     let mut grad = [0.0; PARAM_COUNT];
     let ev = fit.model.evaluator();
     let term_cols: Vec<Option<Vec<f64>>> = extra
