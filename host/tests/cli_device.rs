@@ -2,7 +2,6 @@
 //! (`--sim`: the firmware core and the simulated plant on a pseudo-terminal), faster than
 //! real time.
 
-use std::borrow::BorrowMut;
 use std::path::Path;
 use std::time::Duration;
 
@@ -24,21 +23,10 @@ fn sim(args: &[&str]) -> Command {
     c
 }
 
-fn stdout_of(mut c: impl BorrowMut<Command>) -> String {
-    let out = c
-        .borrow_mut()
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    String::from_utf8(out).expect("stdout is UTF-8")
+mod support {
+    pub mod cli;
 }
-
-fn json_of(c: impl BorrowMut<Command>) -> Value {
-    let text = stdout_of(c);
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("not JSON ({e}):\n{text}"))
-}
+use support::cli::{json_of, stdout_of};
 
 #[test]
 fn help_lists_every_verb() {

@@ -7,7 +7,6 @@ use std::path::Path;
 use std::time::Duration;
 
 use assert_cmd::Command;
-use serde_json::Value;
 
 fn rig() -> Command {
     let mut c = Command::cargo_bin("rig").expect("the rig binary is built");
@@ -15,11 +14,10 @@ fn rig() -> Command {
     c
 }
 
-fn json(c: &mut Command) -> Value {
-    let out = c.assert().success().get_output().stdout.clone();
-    let text = String::from_utf8(out).unwrap();
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("not JSON ({e}):\n{text}"))
+mod support {
+    pub mod cli;
 }
+use support::cli::json_of as json;
 
 /// A rig file whose [model] hides `effect` with `params` (the paper's rig otherwise).
 fn hidden(path: &Path, effect: &str, params: &str) {

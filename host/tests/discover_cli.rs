@@ -10,24 +10,16 @@ use std::time::{Duration, Instant};
 use assert_cmd::Command;
 use serde_json::Value;
 
+mod support {
+    pub mod cli;
+    pub mod served;
+}
+use support::cli::{data_rows, json_of as json};
+
 fn rig() -> Command {
     let mut c = Command::cargo_bin("rig").expect("the rig binary is built");
     c.env_remove("RIG_PORT").timeout(Duration::from_secs(900));
     c
-}
-
-fn json(c: &mut Command) -> Value {
-    let out = c.assert().success().get_output().stdout.clone();
-    let text = String::from_utf8(out).unwrap();
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("not JSON ({e}):\n{text}"))
-}
-
-fn data_rows(path: &Path) -> usize {
-    std::fs::read_to_string(path)
-        .unwrap_or_default()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("point,") && !l.is_empty())
-        .count()
 }
 
 /// The loop's JSON names `effect` first within the 60-point budget.
@@ -54,7 +46,7 @@ fn assert_named(v: &Value, effect: &str, csv: &Path) {
     ] {
         assert!(v.get(key).is_some(), "{key}");
     }
-    assert_eq!(data_rows(csv) as u64, used);
+    assert_eq!(data_rows(csv).len() as u64, used);
     let text = std::fs::read_to_string(csv).unwrap();
     assert!(
         text.starts_with("# rig experiment torque-sweep"),
@@ -96,7 +88,7 @@ fn assert_no_finding(v: &Value, csv: &Path) {
     );
     let used = v["points_used"].as_u64().unwrap();
     assert!(used <= 60, "{used} test points");
-    assert_eq!(data_rows(csv) as u64, used);
+    assert_eq!(data_rows(csv).len() as u64, used);
     let text = std::fs::read_to_string(csv).unwrap();
     assert!(
         text.contains("# window: whole cam revolutions"),
@@ -132,9 +124,6 @@ fn discover_gives_no_finding_on_an_effect_free_virtual_rig() {
     }
 }
 
-mod support {
-    pub mod served;
-}
 use support::served::Server;
 
 #[test]

@@ -2,7 +2,6 @@
 //! real time): the quick sweep read by `rig explain`, the operator's prompts with scripted
 //! stdin (`--operator` asks as on a real rig), Ctrl-C (SIGINT to the child) and `--resume`.
 
-use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
@@ -27,14 +26,10 @@ fn text(bytes: &[u8]) -> String {
 }
 
 /// The data rows of a sweep CSV (neither comments nor the header).
-fn data_rows(path: &Path) -> Vec<String> {
-    std::fs::read_to_string(path)
-        .unwrap_or_default()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("point,") && !l.is_empty())
-        .map(str::to_string)
-        .collect()
+mod support {
+    pub mod cli;
 }
+use support::cli::data_rows;
 
 #[test]
 fn quick_sweep_writes_explains_csv_with_provenance() {

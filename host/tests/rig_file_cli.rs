@@ -24,15 +24,10 @@ fn sim(args: &[&str]) -> Command {
     c
 }
 
-fn ok(mut c: Command) -> String {
-    let out = c.assert().success().get_output().stdout.clone();
-    String::from_utf8(out).expect("stdout is UTF-8")
+mod support {
+    pub mod cli;
 }
-
-fn json(c: Command) -> Value {
-    let text = ok(c);
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("not JSON ({e}):\n{text}"))
-}
+use support::cli::{json_of as json, stdout_of as ok};
 
 fn fails(mut c: Command) -> String {
     let out = c.assert().failure().get_output().clone();
