@@ -174,9 +174,8 @@ impl Core {
                 if !self.motor_idle() || self.persist != Persist::Idle {
                     return Answer::nack(NackCode::Busy);
                 }
-                let checked = Derived::new(&parameters, &self.config).and_then(|_| {
-                    check_board_caps(&parameters, &self.config, &self.config.motor.rules())
-                });
+                let checked = Derived::new(&parameters, &self.config)
+                    .and_then(|_| check_board_caps(&parameters, &self.config));
                 match checked {
                     Err(rejection) => Answer::nack(NackCode::ParametersRejected(rejection)),
                     Ok(()) => {

@@ -174,7 +174,6 @@ fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
 pub(crate) fn check_board_caps(
     p: &RigParameters,
     config: &CoreConfig,
-    motor: &MotorRules,
 ) -> Result<(), ParameterRejection> {
     let limits = model::check_limits(
         [p.max_release_load_nm, p.max_current_a, p.max_freq_hz],
@@ -184,7 +183,7 @@ pub(crate) fn check_board_caps(
             config.supervisor.max_freq_hz,
         ],
     );
-    rules(p, limits, motor)
+    rules(p, limits, &config.motor.rules())
 }
 
 /// The record's limits against `caps` and its constants against `motor`: the first field
@@ -461,7 +460,7 @@ mod tests {
         let mut refused = 0;
         for p in cases {
             let host = check_rules(&p, &config.board_limits(), config.motor.constants());
-            let core = check_board_caps(&p, &config, &motor);
+            let core = check_board_caps(&p, &config);
             assert_eq!(core, host, "{p:?}");
             refused += usize::from(core.is_err());
         }
