@@ -103,7 +103,7 @@ use embassy_stm32::peripherals::{
     ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, EXTI13, IWDG, PA0, PA1, PA2, PA3, PA8, PA9, PB0, PB5, PB6,
     PB7, PC6, PC7, PC13, TIM1, TIM3, TIM4, USART2,
 };
-use embassy_stm32::time::{Hertz, khz};
+use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::Ch1;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::qei::{self, Qei};
@@ -112,6 +112,7 @@ use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Config, Peri, Peripherals, bind_interrupts, dma, interrupt, pac, triggers};
 use firmware_core::CoreConfig;
+use model::hardware::board as hw;
 
 use crate::analog;
 use crate::safety::StallWatchdog;
@@ -126,14 +127,14 @@ bind_interrupts!(struct Irqs {
 });
 
 /// PWM carrier frequency of the cam motor's H-bridge: above hearing, within the driver's limit.
-pub const MOTOR_PWM_FREQUENCY: Hertz = khz(20);
+pub const MOTOR_PWM_FREQUENCY: Hertz = Hertz(hw::PWM_FREQUENCY_HZ as u32);
 /// Rate at which TIM1 triggers the motor-current conversions, Hz.
-pub const CURRENT_SAMPLE_RATE_HZ: u32 = 10_000;
+pub const CURRENT_SAMPLE_RATE_HZ: u32 = hw::CURRENT_SAMPLE_RATE_HZ as u32;
 /// TIM1 repetition counter: centre-aligned, the counter over- or underflows twice per PWM
 /// period, and an update (ADC trigger) comes every `RCR + 1` of them: 4, every second period.
 const PWM_REPETITION: u16 = (2 * MOTOR_PWM_FREQUENCY.0 / CURRENT_SAMPLE_RATE_HZ - 1) as u16;
 /// TIM1's counter clock, Hz: the APB2 timer clock, SYSCLK undivided ([`config`]).
-const TIM1_CLOCK_HZ: u32 = 170_000_000;
+const TIM1_CLOCK_HZ: u32 = hw::SYSCLK_HZ as u32;
 /// TIM1's auto-reload, prescaler 1: centre-aligned, the counter runs 0 → ARR → 0, and
 /// `ARR + 1` = clock / (2 × [`MOTOR_PWM_FREQUENCY`]) = 4250 (what embassy's `SimplePwm`
 /// chose for the same frequency; written directly, so the image has no run-time 64-bit

@@ -276,8 +276,8 @@ unsafe fn WWDG() {
     SCB::sys_reset()
 }
 
-/// APB1 clock that counts the WWDG (SYSCLK 170 MHz, APB1 undivided: `board::config`).
-const PCLK1_HZ: u32 = 170_000_000;
+/// APB1 clock that counts the WWDG (SYSCLK, APB1 undivided: `board::config`).
+const PCLK1_HZ: u32 = model::hardware::board::SYSCLK_HZ as u32;
 /// WWDG prescaler: 4096 x 2.
 const WWDG_DIVIDER: u32 = 4096 * 2;
 /// One WWDG count, ns (48.2 us).
