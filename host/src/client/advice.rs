@@ -51,17 +51,18 @@ pub(super) fn refused_in_fault_hold(
     code: NackCode,
     latched: Option<protocol::FaultFlags>,
 ) -> RigError {
-    let mut error = refused(req, code);
-    if let (RigError::Refused { advice, .. }, Some(latched)) = (&mut error, latched) {
-        let names: Vec<&str> = latched.names().collect();
-        if !names.is_empty() {
-            *advice = format!(
-                "latched: {} (it holds the motor off): `rig faults` says what each means, `rig clear` clears it once its cause is gone",
-                names.join(", ")
-            );
-        }
+    let names: Vec<&str> = latched.iter().flat_map(|l| l.names()).collect();
+    if names.is_empty() {
+        return refused(req, code);
     }
-    error
+    RigError::Refused {
+        request: req.name(),
+        code,
+        advice: format!(
+            "latched: {} (it holds the motor off): `rig faults` says what each means, `rig clear` clears it once its cause is gone",
+            names.join(", ")
+        ),
+    }
 }
 
 /// The error for request `req` answered with a reply of another kind.
