@@ -22,12 +22,19 @@ fn rig() -> Command {
     c
 }
 
+/// The points the loop used, within the 60-point budget, each a row of `csv`; the CSV's text.
+fn within_budget(v: &Value, csv: &Path) -> (u64, String) {
+    let used = v["points_used"].as_u64().unwrap();
+    assert!(used <= 60, "{used} test points");
+    assert_eq!(data_rows(csv).len() as u64, used);
+    (used, std::fs::read_to_string(csv).unwrap())
+}
+
 /// The loop's JSON names `effect` first within the 60-point budget.
 fn assert_named(v: &Value, effect: &str, csv: &Path) {
     assert_eq!(v["verdict"], "explained", "{}", v["rounds"]);
     assert_eq!(v["effects"][0]["name"], effect, "{}", v["rounds"]);
-    let used = v["points_used"].as_u64().unwrap();
-    assert!(used <= 60, "{used} test points");
+    let (used, text) = within_budget(v, csv);
     let rounds = v["rounds"].as_array().unwrap();
     assert_eq!(rounds[0]["points"], 30, "the initial quick sweep");
     assert_eq!(rounds[0]["plan"], "initial");
@@ -46,8 +53,6 @@ fn assert_named(v: &Value, effect: &str, csv: &Path) {
     ] {
         assert!(v.get(key).is_some(), "{key}");
     }
-    assert_eq!(data_rows(csv).len() as u64, used);
-    let text = std::fs::read_to_string(csv).unwrap();
     assert!(
         text.starts_with("# rig experiment torque-sweep"),
         "provenance first"
@@ -86,10 +91,7 @@ fn assert_no_finding(v: &Value, csv: &Path) {
         "{}",
         v["effects"]
     );
-    let used = v["points_used"].as_u64().unwrap();
-    assert!(used <= 60, "{used} test points");
-    assert_eq!(data_rows(csv).len() as u64, used);
-    let text = std::fs::read_to_string(csv).unwrap();
+    let (_, text) = within_budget(v, csv);
     assert!(
         text.contains("# window: whole cam revolutions"),
         "every run averages over whole cam revolutions"
