@@ -59,6 +59,26 @@ impl Server {
     }
 }
 
+/// `rig calibration set` with C1 = `c1` (N mm/A) through `server`, read back by `rig
+/// calibration get`; the file goes in `dir`.
+fn calibration_round_trip(server: &Server, dir: &std::path::Path, c1: f64) {
+    let file = dir.join("cal.toml");
+    std::fs::write(&file, format!("c1_nmm_per_a = {c1}\n")).unwrap();
+    let v = server.json(&[
+        "calibration",
+        "set",
+        file.to_str().unwrap(),
+        "--yes",
+        "--json",
+    ]);
+    assert_eq!(v["written"], true, "{v}");
+    let v = server.json(&["calibration", "get", "--json"]);
+    assert!(
+        (v["c1_nmm_per_a"].as_f64().unwrap() - c1).abs() < 1e-4,
+        "{v}"
+    );
+}
+
 #[test]
 
 fn served_rig_keeps_calibration_and_faults_between_clients_and_stops_on_sigint() {
@@ -81,21 +101,7 @@ fn served_rig_keeps_calibration_and_faults_between_clients_and_stops_on_sigint()
 
     // A calibration written by one command is read back by the next.
     let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("cal.toml");
-    std::fs::write(&file, "c1_nmm_per_a = 62.0\n").unwrap();
-    let v = server.json(&[
-        "calibration",
-        "set",
-        file.to_str().unwrap(),
-        "--yes",
-        "--json",
-    ]);
-    assert_eq!(v["written"], true, "{v}");
-    let v = server.json(&["calibration", "get", "--json"]);
-    assert!(
-        (v["c1_nmm_per_a"].as_f64().unwrap() - 62.0).abs() < 1e-4,
-        "{v}"
-    );
+    calibration_round_trip(&server, dir.path(), 62.0);
 
     // A client that vanishes during a release leaves a latched fault (the comms timeout, or
     // the spin-up's CANNOT_RELEASE when the link went while spinning up), which the next
@@ -155,21 +161,7 @@ fn issue_12_done_when_served_rig_sweep_through_line_noise_explained() {
     assert_eq!(info["board"], "virtual", "{info}");
 
     let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("cal.toml");
-    std::fs::write(&file, "c1_nmm_per_a = 62.3\n").unwrap();
-    let v = server.json(&[
-        "calibration",
-        "set",
-        file.to_str().unwrap(),
-        "--yes",
-        "--json",
-    ]);
-    assert_eq!(v["written"], true, "{v}");
-    let v = server.json(&["calibration", "get", "--json"]);
-    assert!(
-        (v["c1_nmm_per_a"].as_f64().unwrap() - 62.3).abs() < 1e-4,
-        "{v}"
-    );
+    calibration_round_trip(&server, dir.path(), 62.3);
 
     let csv = dir.path().join("sweep.csv");
     server
