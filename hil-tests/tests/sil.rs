@@ -128,6 +128,8 @@ fn every_fault_drill_ends_safe_and_latched() {
     assert!(oc.faults.iter().any(|f| f == "HW_OVERCURRENT"), "{oc:?}");
     assert_eq!(row("reversed-encoder").faults, ["REVERSED_ENCODER"]);
     assert_eq!(row("load-limit").faults, ["LOAD_LIMIT"]);
+    // The braking bridge pumped the bus past the bridge's limit: the drive stopped.
+    assert_eq!(row("overvoltage").faults, ["BUS_OVERVOLTAGE"]);
 }
 
 #[test]

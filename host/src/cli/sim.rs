@@ -28,8 +28,7 @@ pub enum Scenario {
     /// Figs. 8-9: current and cam torque over load (0.368-3.68 N m) at 3.6, 6.2, 8.8 V.
     TorqueSweep(SweepArgs),
     /// Fault drills: overcurrent (jammed cam), encoder-loss, comms-loss, bad-calibration,
-    /// reversed-encoder, load-limit, overvoltage (the bridge pumping a supply that cannot
-    /// sink).
+    /// reversed-encoder, load-limit, overvoltage (the bridge's bus above its limit).
     Faults(FaultArgs),
     /// Serve the virtual rig on a pseudo-terminal any serial client can open, until Ctrl-C.
     Serve(super::serve::ServeArgs),
