@@ -199,14 +199,17 @@ pub struct BridgeBoard {
     pub decay: Decay,
 }
 
-/// The recommended bridge: Pololu G2 High-Power Motor Driver 24v13 (#2992): 6.5–40 V, 13 A
-/// continuous, PWM to 100 kHz, 1.8–5 V logic. Sign-magnitude: PWM high drives in DIR's
+/// The bridge the image is built for (`model::hardware::board::DECAY`).
+///
+/// The recommended bridge is the Pololu G2 High-Power Motor Driver 24v13 (#2992): 6.5–40 V,
+/// 13 A continuous, PWM to 100 kHz, 1.8–5 V logic. Sign-magnitude: PWM high drives in DIR's
 /// direction, PWM low brakes low (both outputs to ground), SLP low puts the outputs in high
 /// impedance. So [`Decay::Brake`] while enabled, coast when the enable (SLP) is low, which is
-/// the safe state. Check the board's SLP default before wiring: where it is pulled up on the
-/// board, the 10 kΩ pull-down must be sized to win (¹). A bridge that coasts in the off-time
-/// (e.g. PWM on its enable) is [`Decay::Coast`]: build with `--features bridge-coast-decay`,
-/// which sets `model::hardware::board::DECAY` for the whole image.
+/// the safe state: build its image with `--features bridge-brake-decay`. Check the board's
+/// SLP default before wiring: where it is pulled up on the board, the 10 kΩ pull-down must be
+/// sized to win (¹). Without the feature the image is built for a bridge that coasts in the
+/// off-time ([`Decay::Coast`], e.g. PWM on its enable), the drive the virtual rig and the
+/// paper's bench supply have.
 ///
 /// Braking decay takes power back: when the cam overruns the drive (the carrier pushing
 /// back once a turn, a deceleration) the current reverses and flows into the supply in the
@@ -216,7 +219,7 @@ pub struct BridgeBoard {
 /// current; the software check (|I|, 1 ms means) does.
 pub const BRIDGE: BridgeBoard = BridgeBoard {
     name: match hw::DECAY {
-        Decay::Brake => "Pololu G2 24v13",
+        Decay::Brake => "Pololu G2 24v13 (braking decay)",
         Decay::Coast => "a bridge that coasts in the off-time",
     },
     decay: hw::DECAY,

@@ -219,15 +219,18 @@ pub mod board {
         }
     }
 
-    /// The decay mode of the board's bridge: the recommended Pololu G2 24v13 driven
-    /// sign-magnitude (PWM high drives, PWM low brakes both outputs to ground) is
-    /// [`Decay::Brake`]; a bridge that coasts in the off-time is [`Decay::Coast`], chosen
-    /// with this crate's `bridge-coast-decay` feature (the firmware's feature of the same
-    /// name turns it on).
-    pub const DECAY: Decay = if cfg!(feature = "bridge-coast-decay") {
-        Decay::Coast
-    } else {
+    /// The decay mode the rig is built for, the one setting: [`Decay::Coast`] by default,
+    /// a drive that takes no power back, like the paper's bench supply, which every
+    /// closed-loop test and `rig demo` validate; [`Decay::Brake`] with this crate's
+    /// `bridge-brake-decay` feature (the firmware's feature of the same name turns it on),
+    /// for a bridge driven sign-magnitude with braking in the off-time, as the recommended
+    /// Pololu G2 24v13 is (PWM low brakes both outputs to ground). A firmware for the G2
+    /// is built with that feature; with it the virtual rig returns the carrier's power
+    /// into its bus capacitor as the G2 would.
+    pub const DECAY: Decay = if cfg!(feature = "bridge-brake-decay") {
         Decay::Brake
+    } else {
+        Decay::Coast
     };
 
     /// Highest supply the H-bridge is rated for, V: the Pololu G2 24v13's operating range

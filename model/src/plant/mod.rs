@@ -111,8 +111,9 @@ impl PlantParams {
             supply: board::BRIDGE_SUPPLY_V,
             supply_resistance: board::SUPPLY_RESISTANCE_OHM,
             bus_capacitance: board::BUS_CAPACITANCE_F,
-            // The board's bridge decides (`board::DECAY`): the G2's braking decay returns
-            // power, into a bus whose supply cannot sink it (`bus_capacitance`).
+            // The board's decay decides (`board::DECAY`): coasting by default, as the
+            // paper's bench supply that cannot take power back; a braking bridge (the G2)
+            // returns it into a bus whose supply cannot sink it (`bus_capacitance`).
             regeneration: board::REGENERATIVE_DECAY,
             friction_split: false,
             cam: CamSetup::Coupled,
