@@ -337,7 +337,7 @@ mod tests {
         let full_scale_v = adc::VREF_V / bus_divider::RATIO;
         assert!((full_scale_v - 36.3).abs() < 1e-9, "{full_scale_v}");
         assert!(board::BUS_OVERVOLTAGE_V < full_scale_v);
-        assert!(board::BUS_OVERVOLTAGE_V > board::BRIDGE_SUPPLY_V);
+        const { assert!(board::BUS_OVERVOLTAGE_V > board::BRIDGE_SUPPLY_V) };
         assert_eq!(board::REGENERATIVE_DECAY, board::DECAY.returns_power());
     }
 
