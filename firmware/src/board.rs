@@ -12,10 +12,10 @@
 //! | Cam motor PWM           | PA8  | D7           | TIM1_CH1 (AF6), 20 kHz centre-aligned | H-bridge PWM input; 10 kΩ pull-down on the driver; idle (break, MOE off) = low |
 //! | Cam motor direction     | PB5  | D4           | GPIO out               | low = [`Direction::Forward`]                     |
 //! | Cam motor enable        | PA9  | D8           | GPIO out               | low = off; 10 kΩ pull-down on the driver (¹); the safe state's BSRR write |
-//! | Encoder A (AMT102-V)    | PB6  | D10          | TIM4_CH1 (AF2)         | quadrature, x4 decoding, digital filter (²)      |
+//! | Encoder A (AMT102-V)    | PB6  | D10          | TIM4_CH1 (AF2)         | quadrature, x4 decoding, digital filter; no internal pull (push-pull 5 V outputs) (²) |
 //! | Encoder B (AMT102-V)    | PB7  | CN7-21       | TIM4_CH2 (AF2)         | (²)                                              |
-//! | Output encoder A        | PC6  | CN10-4       | TIM3_CH1 (AF2)         | second AMT102-V on the output shaft, x4, same filter (⁸) |
-//! | Output encoder B        | PC7  | D9 (CN10-19) | TIM3_CH2 (AF2)         | (⁸)                                              |
+//! | Output encoder A        | PC6  | CN10-4       | TIM3_CH1 (AF2)         | second AMT102-V on the output shaft, x4, same filter; no internal pull, external 10 kΩ pull-up to 5 V (⁸) |
+//! | Output encoder B        | PC7  | D9 (CN10-19) | TIM3_CH2 (AF2)         | as A (⁸)                                          |
 //! | Motor current (ACS714)  | PA0  | A0           | ADC1_IN1 and COMP3_INP | through a divider to ≤ 3.3 V (³); the comparator trips TIM1's break (⁴) |
 //! | Bridge supply voltage   | PA1  | A1           | ADC1_IN2               | 100 kΩ over 10 kΩ, 100 nF at the pin: 12–24 V reads 1.09–2.18 V, 36 V full scale (⁵) |
 //! | Motor NTC (optional)    | PB0  | A3           | ADC1_IN15              | 10 kΩ NTC to GND, 10 kΩ pull-up to 3V3 (VDDA), 100 nF; open = not fitted (⁶) |
@@ -29,7 +29,7 @@
 //!
 //! | Resource            | Use                                                                 |
 //! |---------------------|---------------------------------------------------------------------|
-//! | TIM1                | PWM, centre-aligned 20 kHz; master: TRGO = update, repetition counter 3, so ADC1 is triggered every second PWM period (10 kHz) at the same counter extreme (⁷); break input = COMP3, filter 0.75 µs, locked (LOCK level 2) |
+//! | TIM1                | PWM, centre-aligned 20 kHz; master: TRGO = update, repetition counter 3, so ADC1 is triggered every second PWM period (10 kHz) at the same counter extreme (⁷); break input = COMP3 (and the core's LOCKUP, SYSCFG_CFGR2.CLL), filter 0.75 µs; LOCK level 2 (BDTR's break and off-state bits, OIS1, CC1P; not MOE, CCR1, CCMR1) |
 //! | COMP3, DAC3_CH1     | hardware overcurrent trip ([`crate::trip`]): PA0 against an internal DAC threshold, no pin |
 //! | ADC1 + DMA1_CH1     | scan of PA0, PA1, PB0, VREFINT per TIM1 trigger ([`crate::analog`]); VDDA from VREFINT and its factory calibration (`VREFINTCAL`, 0x1FFF_75AA) |
 //! | TIM4                | encoder, input filter fDTS/16 × 8 (0.75 µs)                          |
@@ -42,6 +42,7 @@
 //! | UART4 IRQ           | the control task's high-priority executor (the UART itself is unused) |
 //! | NMI                 | flash double-ECC in the STORAGE region counts as a corrupt slot; anything else resets in the safe state |
 //! | DWT CYCCNT          | cycles per control step (mean, max per second)                      |
+//! | MPU region 0        | stack guard: 1 KiB, no access, between the statics and the stack ([`crate::stack_guard`]) |
 //! | Flash 0x0807_C000..0x0808_0000 | bank 2: the calibration store (`memory.x`)               |
 //!
 //! (¹) From reset until [`Board::new`] runs every GPIO is a high-impedance analog input, so only
@@ -90,7 +91,14 @@
 //! TIM3 on PA6/PA7 was avoided as for the cam encoder (²). The output turns far slower
 //! than the cam (Fig. 5's load falls at about 1 rad/s, 1.3 kHz of x4 edges): the filter
 //! costs nothing. Confirm FT for PC6/PC7 and the CN10 positions (UM2505) before wiring.
+//! No internal pull on any encoder input (PB6/PB7, PC6/PC7): the AMT102-V drives them from
+//! 5 V, and an FT pin driven above VDD must not have its internal pull-up (or pull-down)
+//! enabled (AN4899, "5 V tolerant I/Os"). The AMT102-V's outputs are push-pull, so a fitted
+//! encoder needs no pull at all; for the output encoder, which may be left unplugged, fit
+//! 10 kΩ external pull-ups from PC6 and PC7 to the encoder's 5 V (an unplugged encoder then
+//! reads still instead of counting noise; 0.5 mA into a driven-low output is harmless).
 
+use core::sync::atomic::Ordering;
 use embassy_stm32::adc::{Adc, AdcChannel as _, AdcConfig, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::{Blocking, FLASH_BASE, Flash};
@@ -111,7 +119,9 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Config, Peri, Peripherals, bind_interrupts, dma, interrupt, pac, triggers};
+
 use firmware_core::CoreConfig;
+use firmware_core::bridge::{BridgeGate, BridgeHw, EnableResult};
 use model::hardware::board as hw;
 
 use crate::analog;
@@ -151,8 +161,20 @@ const PWM_FULL_DUTY: u16 = PWM_ARR + 1;
 const ADC_DMA_LEN: usize = 2 * analog::BLOCK_LEN;
 /// Baud rate of the host link over the ST-LINK virtual COM port.
 pub const HOST_BAUD_RATE: u32 = 921_600;
-/// UART receive DMA ring: ~5.5 ms of back-to-back bytes at [`HOST_BAUD_RATE`].
-const HOST_RX_DMA_LEN: usize = 512;
+/// UART receive DMA ring: 44 ms of back-to-back bytes at [`HOST_BAUD_RATE`] (10 bits a
+/// byte), more than thread mode stalls in a calibration save ([`SAVE_STALL_MAX_US`]), so a
+/// request sent during a save waits in the ring and is answered after it.
+const HOST_RX_DMA_LEN: usize = 4096;
+/// Longest stall of thread mode (`host_rx` included) by one calibration save, us: the
+/// store erases one 2 KiB page (DS12288: 22 ms typical, 24.5 ms at most) and programs a
+/// 112-byte record, 14 double words at 91 us at most, then reads it back.
+pub const SAVE_STALL_MAX_US: u32 = 24_500 + 14 * 91 + 300;
+/// The ring outlasts a save by half again: bytes the ring holds, in microseconds at
+/// [`HOST_BAUD_RATE`] (10 bits a byte).
+const _: () = assert!(
+    (HOST_RX_DMA_LEN as u64) * 10 * 1_000_000 / (HOST_BAUD_RATE as u64)
+        >= (SAVE_STALL_MAX_US as u64) * 3 / 2
+);
 /// Independent-watchdog timeout. LSI is 32 kHz ± ~7 %, so the real timeout is ~235–270 ms.
 pub const WATCHDOG_TIMEOUT_US: u32 = 250_000;
 /// The hardware trip sits this far above the core's software current limit: the software
@@ -164,25 +186,9 @@ pub const ENCODER_FILTER: FilterValue = FilterValue::FDTS_DIV16_N8;
 /// TIM1's break filter on COMP3's output: 8 samples at fDTS/16 (0.75 µs).
 const BREAK_FILTER: FilterValue = FilterValue::FDTS_DIV16_N8;
 
-/// What the bridge does with the motor during the PWM's off-time.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
-pub enum Decay {
-    /// Both low-side switches on (slow decay, synchronous rectification): the current keeps
-    /// flowing and may reverse, so the bridge takes the carrier's power back when the cam
-    /// overruns the drive (regenerating; it pumps a supply that cannot sink).
-    Brake,
-    /// All switches off (fast decay through the diodes into the supply): the current cannot
-    /// reverse, the bridge cannot take power back, like the paper's bench supply.
-    Coast,
-}
-
-impl Decay {
-    /// Whether the drive takes the carrier's power back (the estimator's
-    /// `carrier_power_returned`).
-    pub const fn returns_power(self) -> bool {
-        matches!(self, Decay::Brake)
-    }
-}
+/// What the bridge does with the motor during the PWM's off-time: the one setting
+/// `model::hardware::board::DECAY`, which the plant and the core's estimator read too.
+pub use model::hardware::board::Decay;
 
 /// The H-bridge board wired to PA8 / PB5 / PA9.
 #[derive(Clone, Copy, Debug)]
@@ -193,32 +199,39 @@ pub struct BridgeBoard {
     pub decay: Decay,
 }
 
-/// The recommended bridge: Pololu G2 High-Power Motor Driver 24v13 (#2992): 6.5–40 V, 13 A
-/// continuous, PWM to 100 kHz, 1.8–5 V logic. Sign-magnitude: PWM high drives in DIR's
+/// The bridge the image is built for (`model::hardware::board::DECAY`).
+///
+/// The recommended bridge is the Pololu G2 High-Power Motor Driver 24v13 (#2992): 6.5–40 V,
+/// 13 A continuous, PWM to 100 kHz, 1.8–5 V logic. Sign-magnitude: PWM high drives in DIR's
 /// direction, PWM low brakes low (both outputs to ground), SLP low puts the outputs in high
 /// impedance. So [`Decay::Brake`] while enabled, coast when the enable (SLP) is low, which is
-/// the safe state. Check the board's SLP default before wiring: where it is pulled up on the
-/// board, the 10 kΩ pull-down must be sized to win (¹). A bridge that coasts in the off-time
-/// (e.g. PWM on its enable) is [`Decay::Coast`]: build with `--features bridge-coast-decay`.
-pub const BRIDGE: BridgeBoard = if cfg!(feature = "bridge-coast-decay") {
-    BridgeBoard {
-        name: "a bridge that coasts in the off-time",
-        decay: Decay::Coast,
-    }
-} else {
-    BridgeBoard {
-        name: "Pololu G2 24v13",
-        decay: Decay::Brake,
-    }
+/// the safe state: build its image with `--features bridge-brake-decay`. Check the board's
+/// SLP default before wiring: where it is pulled up on the board, the 10 kΩ pull-down must be
+/// sized to win (¹). Without the feature the image is built for a bridge that coasts in the
+/// off-time ([`Decay::Coast`], e.g. PWM on its enable), the drive the virtual rig and the
+/// paper's bench supply have.
+///
+/// Braking decay takes power back: when the cam overruns the drive (the carrier pushing
+/// back once a turn, a deceleration) the current reverses and flows into the supply in the
+/// on-time. A bench supply cannot sink it, so the bus rises; the core stops the drive above
+/// `model::hardware::board::BUS_OVERVOLTAGE_V` (`BUS_OVERVOLTAGE`). The hardware trip
+/// (COMP3) watches the drive direction's side of zero only, so it does not see that reverse
+/// current; the software check (|I|, 1 ms means) does.
+pub const BRIDGE: BridgeBoard = BridgeBoard {
+    name: match hw::DECAY {
+        Decay::Brake => "Pololu G2 24v13 (braking decay)",
+        Decay::Coast => "a bridge that coasts in the off-time",
+    },
+    decay: hw::DECAY,
 };
 
-/// The core's configuration on this board: the defaults (read from `model::hardware`) with
-/// the bridge's decay mode.
+/// The core's configuration on this board: the defaults (read from `model::hardware`, the
+/// bridge's decay mode among them) with the output encoder.
 pub fn core_config() -> CoreConfig {
-    let mut config = CoreConfig::default();
-    config.estimator.carrier_power_returned = BRIDGE.decay.returns_power();
-    config.output_encoder = OUTPUT_ENCODER;
-    config
+    CoreConfig {
+        output_encoder: OUTPUT_ENCODER,
+        ..CoreConfig::default()
+    }
 }
 
 /// The output-shaft encoder on TIM3 (PC6/PC7, see (⁸)): an AMT102-V at 2048 pulses per
@@ -303,19 +316,79 @@ pub enum SamplingPoint {
     Unknown,
 }
 
+/// TIM1, COMP3 and the bridge enable pin as the bridge gate's registers
+/// ([`firmware_core::bridge`] has the switch-on order and its tests).
+struct BridgeRegs {
+    enable: Output<'static>,
+}
+
+impl BridgeHw for BridgeRegs {
+    fn break_seen(&mut self) -> bool {
+        pac::TIM1.sr().read().bif(0) || crate::safety::BREAK_LATCHED.load(Ordering::Acquire)
+    }
+
+    fn overcurrent_now(&mut self) -> bool {
+        crate::trip::over_threshold()
+    }
+
+    fn clear_break(&mut self) {
+        crate::safety::BREAK_LATCHED.store(false, Ordering::Release);
+        clear_tim1_flags(|w| w.set_bif(0, false));
+        pac::TIM1.dier().modify(|w| w.set_bie(true));
+    }
+
+    fn load_duty_now(&mut self, compare: u16) {
+        // With OC1PE clear, a CCR1 write reaches the active register at once (RM0440
+        // 28.6.27); the preload goes back on before MOE, so later writes wait for the
+        // update event as usual. (Why TIM1 is locked at level 2, not 3: level 3 would
+        // freeze OC1PE.)
+        let t = pac::TIM1;
+        t.ccmr_output(0).modify(|w| w.set_ocpe(0, false));
+        t.ccr(0).write(|w| w.set_ccr(compare));
+        t.ccmr_output(0).modify(|w| w.set_ocpe(0, true));
+    }
+
+    fn set_duty(&mut self, compare: u16) {
+        pac::TIM1.ccr(0).write(|w| w.set_ccr(compare));
+    }
+
+    fn set_main_output(&mut self, on: bool) {
+        pac::TIM1.bdtr().modify(|w| w.set_moe(on));
+    }
+
+    fn set_enable(&mut self, on: bool) {
+        if on {
+            self.enable.set_high();
+        } else {
+            self.enable.set_low();
+        }
+    }
+}
+
+/// Clears TIM1 status flags by one write: `clear` sets to 0 the flags to clear in an
+/// all-ones word. The flags are rc_w0 (writing 1 leaves a flag as it is), so a
+/// read-modify-write would clear a flag the timer set between the read and the write.
+fn clear_tim1_flags(clear: impl FnOnce(&mut pac::timer::regs::SrAdv)) {
+    pac::TIM1.sr().write(|w| {
+        w.0 = u32::MAX;
+        clear(w);
+    });
+}
+
 /// The cam motor's H-bridge: PWM magnitude, direction and enable, behind TIM1's break.
 ///
 /// Built in the safe state (enable low, MOE off, 0 % duty) and returns to it on
-/// [`CamMotor::stop`]. After a hardware trip it refuses to drive until [`CamMotor::rearm`].
+/// [`CamMotor::stop`]. After a hardware trip it refuses to drive until [`CamMotor::rearm`];
+/// the order of every switch-on around the break is [`BridgeGate`]'s.
 pub struct CamMotor {
     /// TIM1, clocked (dropping it would stop its clock).
     _timer: Timer<'static, TIM1>,
     /// PA8 in its TIM1_CH1 function (dropping it would disconnect the pin).
     _pwm_pin: PwmPin<'static, TIM1, Ch1>,
     direction_pin: Output<'static>,
-    enable: Output<'static>,
+    regs: BridgeRegs,
+    gate: BridgeGate,
     direction: Direction,
-    tripped: bool,
     sampling: SamplingPoint,
 }
 
@@ -356,8 +429,14 @@ impl CamMotor {
             w.set_urs(Urs::ANY_EVENT);
             w.set_cen(true);
         });
-        // A debugger halt stops TIM1, which then switches its outputs off. The IWDG is
-        // deliberately not frozen: a halt longer than ~250 ms resets the board.
+        // Debug freeze (DBG_TIM1_STOP set): a probe halting the core stops TIM1 and puts
+        // its outputs in their off state, PA8 at its idle level (low). The enable pin is a
+        // GPIO and stays as it was, so on the Pololu G2 a halt mid-drive brakes the motor
+        // (PWM low = both low sides on): the cam stops, it never keeps vibrating. Left
+        // running (the other choice), TIM1 would keep driving the last duty with no
+        // software behind it. The IWDG is deliberately not frozen: a halt longer than
+        // ~250 ms resets the board, the pins float and the pull-downs switch the bridge
+        // off. The WWDG is frozen (`StallWatchdog::new`), or every breakpoint would reset.
         pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
         // Break from COMP3 only (not the BKIN pins).
         t.af1().modify(|w| {
@@ -366,7 +445,12 @@ impl CamMotor {
             w.set_bkcmpp(2, Bkinp::NOT_INVERTED);
         });
         // Outputs off (MOE clear, by software or break) hold PWM at its idle level, low; no
-        // automatic re-enable; then lock all of it (and the channel polarity) until reset.
+        // automatic re-enable. LOCK level 2 then freezes until reset: BDTR's break and
+        // off-state bits (BKE, BKP, BKF, AOE, OSSI, OSSR, DTG), CR2's idle levels (OIS1)
+        // and CCER's polarity (CC1P). Not locked: MOE (software must clear and set it),
+        // CCR1, and CCMR1 (level 3 would freeze OC1PE, which a switch-on clears to load
+        // the duty at once: `BridgeRegs::load_duty_now`). COMP3's own CSR lock is not set
+        // either: the trip flips its polarity with the drive direction (`crate::trip`).
         t.bdtr().modify(|w| {
             w.set_ossi(Ossi::IDLE_LEVEL);
             w.set_bkf(0, BREAK_FILTER);
@@ -381,9 +465,9 @@ impl CamMotor {
             _timer: timer,
             _pwm_pin: pwm_pin,
             direction_pin,
-            enable,
+            regs: BridgeRegs { enable },
+            gate: BridgeGate::new(),
             direction: Direction::Forward,
-            tripped: false,
             sampling,
         };
         motor.stop();
@@ -398,21 +482,14 @@ impl CamMotor {
 
     /// Clears a break flag left by the comparator's start-up and unmasks the break interrupt.
     /// Call once the trip is configured.
-    pub fn arm_break(&mut self, trip: &OvercurrentTrip) {
-        self.tripped = false;
-        self.rearm(trip);
+    pub fn arm_break(&mut self) {
+        self.gate.rearm(&mut self.regs);
         crate::safety::enable_break_interrupt();
     }
 
     /// Compare value for 100 % duty (4250 at 170 MHz / 2 / 20 kHz).
     pub fn max_duty(&self) -> u32 {
         u32::from(PWM_FULL_DUTY)
-    }
-
-    /// Sets the PWM compare value, clamped to [`CamMotor::max_duty`].
-    pub fn set_duty(&mut self, duty: u32) {
-        let duty = u16::try_from(duty).map_or(PWM_FULL_DUTY, |d| d.min(PWM_FULL_DUTY));
-        pac::TIM1.ccr(0).write(|w| w.set_ccr(duty));
     }
 
     /// Sets the direction pin and points the trip at that direction's current. A change
@@ -430,51 +507,36 @@ impl CamMotor {
         }
         trip.set_direction(direction);
         self.direction = direction;
-        if !self.tripped {
-            self.rearm(trip);
+        if !self.gate.tripped() {
+            self.gate.rearm(&mut self.regs);
         }
     }
 
-    /// Enables the bridge: the motor then follows the duty and direction. Refused (false)
-    /// after a hardware trip until [`CamMotor::rearm`]; the hardware itself refuses MOE while
-    /// the comparator is still above its threshold.
-    pub fn enable(&mut self) -> bool {
-        if self.tripped {
-            return false;
-        }
-        pac::TIM1.bdtr().modify(|w| w.set_moe(true));
-        self.enable.set_high();
-        true
+    /// Drives the bridge at compare value `duty` (clamped to [`CamMotor::max_duty`]): from
+    /// off, the duty is loaded before the main output goes on, and a break is checked for
+    /// right before and after. Refused (false) after a hardware trip until
+    /// [`CamMotor::rearm`], and for a step while the comparator is over its threshold.
+    pub fn enable(&mut self, duty: u32) -> bool {
+        let duty = u16::try_from(duty).map_or(PWM_FULL_DUTY, |d| d.min(PWM_FULL_DUTY));
+        self.gate.enable(&mut self.regs, duty) == EnableResult::Driving
     }
 
     /// The safe state: bridge disabled, main output off, 0 % duty (vibration off).
     pub fn stop(&mut self) {
-        self.enable.set_low();
-        pac::TIM1.bdtr().modify(|w| w.set_moe(false));
-        pac::TIM1.ccr(0).write(|w| w.set_ccr(0));
+        self.gate.stop(&mut self.regs);
     }
 
-    /// Reads TIM1's break flag (call once per control step): true when the comparator has
-    /// tripped since the last re-arm. The bridge is then held off.
+    /// Reads TIM1's break flag and the break interrupt's latch (call once per control step):
+    /// true while a trip is latched. The bridge is then held off.
     pub fn poll_break(&mut self) -> bool {
-        if pac::TIM1.sr().read().bif(0) && !self.tripped {
-            self.tripped = true;
-            self.stop();
-        }
-        self.tripped
+        self.gate.poll(&mut self.regs)
     }
 
-    /// Clears the break once the current is back under the threshold: call when the core no
+    /// Clears the trip once the current is back under the threshold: call when the core no
     /// longer drives and has latched a fault for the trip. Returns whether the bridge may be
     /// enabled again.
-    pub fn rearm(&mut self, trip: &OvercurrentTrip) -> bool {
-        if trip.active() {
-            return false;
-        }
-        pac::TIM1.sr().modify(|w| w.set_bif(0, false));
-        pac::TIM1.dier().modify(|w| w.set_bie(true));
-        self.tripped = false;
-        true
+    pub fn rearm(&mut self) -> bool {
+        self.gate.rearm(&mut self.regs)
     }
 }
 
@@ -489,7 +551,7 @@ fn start_synchronous_trigger() -> SamplingPoint {
     t.cnt().write(|w| w.set_cnt(0));
     // Loads the repetition counter (ADC1 is not converting yet, so this trigger is lost).
     t.egr().write(|w| w.set_ug(true));
-    t.sr().modify(|w| w.set_uif(false));
+    clear_tim1_flags(|w| w.set_uif(false));
     t.cr1().modify(|w| w.set_cen(true));
     // Right after an update the counter turns: counting down means it was at the top.
     for _ in 0..100_000 {
@@ -498,7 +560,7 @@ fn start_synchronous_trigger() -> SamplingPoint {
                 Dir::DOWN => SamplingPoint::OffTimeCentre,
                 Dir::UP => SamplingPoint::OnTimeCentre,
             };
-            t.sr().modify(|w| w.set_uif(false));
+            clear_tim1_flags(|w| w.set_uif(false));
             return point;
         }
     }
@@ -542,11 +604,13 @@ pub struct OutputEncoder {
 
 impl OutputEncoder {
     /// Starts TIM3 counting both edges of A and B over the full 16-bit range, through the
-    /// input filter [`ENCODER_FILTER`]. Pulled up: an unplugged encoder reads still.
+    /// input filter [`ENCODER_FILTER`]. No internal pulls: the encoder drives 5 V into the
+    /// pins, and a pull-up to 3.3 V on a pin driven above VDD is outside the FT pin's rules
+    /// (AN4899); an unplugged encoder is kept still by the board's external pull-ups (⁸).
     pub fn new(tim: Peri<'static, TIM3>, a: Peri<'static, PC6>, b: Peri<'static, PC7>) -> Self {
         let config = qei::Config {
-            ch1_pull: Pull::Up,
-            ch2_pull: Pull::Up,
+            ch1_pull: Pull::None,
+            ch2_pull: Pull::None,
             mode: qei::QeiMode::Mode3,
             auto_reload: u16::MAX,
         };
@@ -734,7 +798,7 @@ impl Board {
             trip_limit_a,
             analog::nominal_zero_counts(model::hardware::adc::VREF_V as f32),
         );
-        motor.arm_break(&trip);
+        motor.arm_break();
 
         Self {
             motor,

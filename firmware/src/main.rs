@@ -83,6 +83,8 @@ mod board;
 #[cfg(target_os = "none")]
 #[allow(unsafe_code)] // fault handlers and the safe state write registers directly
 mod safety;
+#[cfg(any(target_os = "none", test))]
+mod stack_guard;
 #[cfg(target_os = "none")]
 mod trip;
 
@@ -204,6 +206,9 @@ mod app {
 
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
+        // The stack guard and the lockup-to-break link first: every later fault ends in
+        // the safe state.
+        safety::arm_last_resort();
         // Before anything else can reset or clear them.
         let reset = board::ResetCause::take();
         let crash = safety::take_crash();
@@ -275,7 +280,7 @@ mod app {
             "board up: motor off (max duty {}), {} ({}), encoder at {}; current sampled in step with the PWM at {} ({} Hz); overcurrent trip at {} A (DAC {}); host link @ {} Bd",
             motor.max_duty(),
             board::BRIDGE.name,
-            board::BRIDGE.decay,
+            board::BRIDGE.decay.name(),
             encoder.count(),
             motor.sampling_point(),
             board::CURRENT_SAMPLE_RATE_HZ,
@@ -430,7 +435,7 @@ mod app {
                 // the break may be cleared once the current is back under the threshold,
                 // after which ClearFaults can clear the fault (its condition is gone).
                 let faulted = core.lock(|c| !c.borrow().status().latched_faults.is_empty());
-                if faulted && io.motor.rearm(&io.trip) {
+                if faulted && io.motor.rearm() {
                     warn!("overcurrent trip cleared: the core holds a latched fault");
                 }
             }
@@ -466,9 +471,10 @@ mod app {
             Direction::Forward
         };
         io.motor.set_direction(direction, &mut io.trip);
+        // A refusal (a trip, or the comparator over its threshold) leaves the bridge off;
+        // the next step's `poll_break` tells the core.
         io.motor
-            .set_duty((out.duty.abs().min(1.0) * full_scale) as u32);
-        io.motor.enable();
+            .enable((out.duty.abs().min(1.0) * full_scale) as u32);
     }
 
     /// Host bytes into the core. Checks in at least every 10 ms, link idle or not.

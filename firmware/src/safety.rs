@@ -243,6 +243,55 @@ unsafe fn DefaultHandler(irqn: i16) {
     SCB::sys_reset()
 }
 
+// Declaring linker symbols takes an `unsafe extern` block; only its address is taken.
+unsafe extern "C" {
+    // cortex-m-rt's `link.x`: the end of the statics (`.data`, `.bss`, `.uninit`), where a
+    // heap would start (the firmware has none), and the initial stack pointer (the end of
+    // RAM in `memory.x`).
+    static __sheap: u8;
+    static _stack_start: u8;
+}
+
+/// MPU region used by the stack guard.
+const STACK_GUARD_REGION: u32 = 0;
+/// MPU_CTRL: ENABLE | PRIVDEFENA (the default memory map everywhere else); HFNMIENA clear,
+/// so the HardFault and NMI handlers run with the MPU off.
+const MPU_CTRL_ENABLE_PRIVDEFENA: u32 = 0b101;
+
+/// Arms the two last-resort layers against a run that cannot reach a handler (call first
+/// thing in `main`; both stay until reset):
+///
+/// - the stack guard (`crate::stack_guard`): an MPU region with no access between the
+///   statics and the stack, so an overflow faults instead of overwriting the core, the
+///   executor and the crash record;
+/// - SYSCFG_CFGR2.CLL: the Cortex-M4's LOCKUP output into TIM1's break, so a core lockup
+///   (a fault inside the HardFault handler or its stacking) clears MOE in hardware instead
+///   of leaving TIM1 switching until the window watchdog resets the chip (~2 ms later).
+///   The bit is write-once: only a reset clears it.
+pub fn arm_last_resort() {
+    // SYSCFG is clocked with RCC_APB2ENR.SYSCFGEN (the bit embassy's init sets too).
+    pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));
+    pac::SYSCFG.cfgr2().modify(|w| w.set_cll(true));
+    let statics_end = (&raw const __sheap) as u32;
+    let stack_top = (&raw const _stack_start) as u32;
+    let Some(region) = crate::stack_guard::region(STACK_GUARD_REGION, statics_end, stack_top)
+    else {
+        // No room (the statics fill RAM): the link-time budget check fails long before.
+        return;
+    };
+    // SAFETY: the MPU is programmed once at boot, before anything runs on the stack's
+    // floor; the region only denies accesses to otherwise unused RAM between the statics
+    // and the stack.
+    unsafe {
+        let mpu = &*cortex_m::peripheral::MPU::PTR;
+        mpu.rbar.write(region.rbar);
+        mpu.rasr.write(region.rasr);
+        mpu.ctrl.write(MPU_CTRL_ENABLE_PRIVDEFENA);
+    }
+    cortex_m::asm::dsb();
+    cortex_m::asm::isb();
+}
+
 /// Unmasks the break interrupt (TIM1_BRK_TIM15; TIM15 is unused) at the highest priority.
 pub fn enable_break_interrupt() {
     interrupt::TIM1_BRK_TIM15.unpend();
@@ -250,6 +299,11 @@ pub fn enable_break_interrupt() {
     // SAFETY: the handler below is bound to this vector.
     unsafe { interrupt::TIM1_BRK_TIM15.enable() };
 }
+
+/// Set by the break interrupt, cleared only by the bridge's re-arm
+/// (`firmware_core::bridge::BridgeHw::clear_break`): a trip software cannot undo by
+/// setting MOE again once the comparator has fallen back.
+pub static BREAK_LATCHED: AtomicBool = AtomicBool::new(false);
 
 /// Hardware overcurrent trips since boot (the break interrupt counts them).
 pub static HW_TRIPS: AtomicU32 = AtomicU32::new(0);
@@ -262,6 +316,9 @@ pub static HW_TRIPS: AtomicU32 = AtomicU32::new(0);
 unsafe fn TIM1_BRK_TIM15() {
     // SAFETY: a store to the enable pin's reset bit, as in `safe_state`.
     unsafe { gpioa_bsrr().write_volatile(BRIDGE_ENABLE_OFF) };
+    // Latched for the control task, which may be between its break check and MOE: it
+    // re-checks this after setting MOE and holds the bridge off until a deliberate re-arm.
+    BREAK_LATCHED.store(true, Ordering::Release);
     pac::TIM1.dier().modify(|w| w.set_bie(false));
     HW_TRIPS.fetch_add(1, Ordering::Relaxed);
 }

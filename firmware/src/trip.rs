@@ -103,11 +103,6 @@ impl OvercurrentTrip {
         }
     }
 
-    /// Whether the comparator sees an overcurrent now.
-    pub fn active(&self) -> bool {
-        pac::COMP3.csr().read().value()
-    }
-
     fn apply(&mut self) {
         let (sign, polarity) = match self.direction {
             Direction::Forward => (1.0, Polarity::NOT_INVERTED),
@@ -117,6 +112,12 @@ impl OvercurrentTrip {
         self.dac.set(Value::Bit12Right(code));
         pac::COMP3.csr().modify(|w| w.set_polarity(polarity));
     }
+}
+
+/// Whether COMP3 sees an overcurrent now (its output, after the polarity the drive
+/// direction set).
+pub fn over_threshold() -> bool {
+    pac::COMP3.csr().read().value()
 }
 
 /// Sense of rotation of the cam motor, as driven on the direction pin.

@@ -94,15 +94,32 @@ fn torque_sweep_current_and_torque_grow_with_load_and_speed() {
         s.current_grows_with_load && s.current_grows_with_speed,
         "{s:?}"
     );
-    assert!(
-        s.tau_cam_grows_with_load && s.tau_cam_grows_with_speed,
-        "{s:?}"
-    );
+    assert!(s.tau_cam_grows_with_load, "{s:?}");
+    // Eq. (10)'s speed dependence is its inertia term, which a drive that takes power back
+    // (the G2's braking decay, `model::hardware::board::DECAY`) returns over each turn: then
+    // the ideal plant's tau_cam is flat in speed, and only a drive that cannot take it back
+    // (the paper's bench supply) makes it grow.
+    let returned = model::hardware::board::REGENERATIVE_DECAY;
+    if !returned {
+        assert!(s.tau_cam_grows_with_speed, "{s:?}");
+    }
     for ((v, hz), want) in s.mean_hz_per_voltage.iter().zip([5.0, 10.0, 15.0]) {
         assert!((hz / want - 1.0).abs() < 0.15, "{v} V: {hz} Hz");
     }
-    // The plant follows Eq. (10) (mu_ax = mu_s) up to its rectified-free inertia term.
-    assert!(s.rmse_tau_cam_vs_eq10_nm < 0.005, "{s:?}");
+    // The plant follows Eq. (10) (mu_ax = mu_s) with the drive's share of its inertia
+    // term: kappa = -1 (all of it returned) or -1/2 (rectified).
+    let drive = model::CamDrive::paper(model::GearSet::paper(model::paper::RIG_Z).unwrap());
+    let kappa = model::effects::drive_kappa(returned);
+    let rms = (points
+        .iter()
+        .map(|p| {
+            let want = p.tau_cam_eq10_nm + kappa * drive.required_inertia_torque(p.omega_n_rad_s);
+            (p.tau_cam_meas_nm - want).powi(2)
+        })
+        .sum::<f64>()
+        / points.len() as f64)
+        .sqrt();
+    assert!(rms < 0.005, "{rms} N m: {s:?}");
     // The firmware's per-revolution estimate matches the logged current's torque.
     assert!(s.rmse_estimate_vs_measured_nm < 0.004, "{s:?}");
     // Temperature and time advance through the session.
@@ -128,6 +145,8 @@ fn every_fault_drill_ends_safe_and_latched() {
     assert!(oc.faults.iter().any(|f| f == "HW_OVERCURRENT"), "{oc:?}");
     assert_eq!(row("reversed-encoder").faults, ["REVERSED_ENCODER"]);
     assert_eq!(row("load-limit").faults, ["LOAD_LIMIT"]);
+    // The braking bridge pumped the bus past the bridge's limit: the drive stopped.
+    assert_eq!(row("overvoltage").faults, ["BUS_OVERVOLTAGE"]);
 }
 
 #[test]

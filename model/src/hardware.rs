@@ -184,13 +184,69 @@ pub mod board {
     pub const CURRENT_SAMPLE_RATE_HZ: f64 = 10_000.0;
     /// Highest vibration frequency the board's controller accepts, Hz.
     pub const MAX_FREQ_HZ: f64 = 20.0;
-    /// The H-bridge's decay mode: `true` for synchronous (regenerating) decay, where the
-    /// bridge takes the carrier's inertial power back into the supply; `false` for the
-    /// recommended board driven sign-magnitude with diode (non-regenerating) decay on a
-    /// supply that cannot sink current, as the paper's bench supply. The plant
-    /// ([`crate::plant::PlantParams::regeneration`]) and the firmware's estimator read this
-    /// one setting, so they agree.
-    pub const REGENERATIVE_DECAY: bool = false;
+    /// Whether the H-bridge's decay mode takes the carrier's inertial power back into the
+    /// supply: [`DECAY`]`.returns_power()`. The plant
+    /// ([`crate::plant::PlantParams::regeneration`]), the firmware's estimator
+    /// (`carrier_power_returned`) and the firmware's bridge driver read this one setting,
+    /// so they agree.
+    pub const REGENERATIVE_DECAY: bool = DECAY.returns_power();
+
+    /// What the H-bridge does with the motor in the PWM's off-time.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Decay {
+        /// Both low-side switches on (slow decay, synchronous rectification): the current
+        /// keeps flowing and may reverse, so the bridge takes the carrier's power back when
+        /// the cam overruns the drive, into a supply that may not be able to sink it (the
+        /// bus then rises: [`BUS_OVERVOLTAGE_V`]).
+        Brake,
+        /// All switches off (fast decay through the diodes): the current cannot reverse, the
+        /// bridge takes no power back, like the paper's bench supply.
+        Coast,
+    }
+
+    impl Decay {
+        /// Whether the drive takes the carrier's power back.
+        pub const fn returns_power(self) -> bool {
+            matches!(self, Decay::Brake)
+        }
+
+        /// The name used in logs and provenance lines.
+        pub const fn name(self) -> &'static str {
+            match self {
+                Decay::Brake => "brake",
+                Decay::Coast => "coast",
+            }
+        }
+    }
+
+    /// The decay mode the rig is built for, the one setting: [`Decay::Coast`] by default,
+    /// a drive that takes no power back, like the paper's bench supply, which every
+    /// closed-loop test and `rig demo` validate; [`Decay::Brake`] with this crate's
+    /// `bridge-brake-decay` feature (the firmware's feature of the same name turns it on),
+    /// for a bridge driven sign-magnitude with braking in the off-time, as the recommended
+    /// Pololu G2 24v13 is (PWM low brakes both outputs to ground). A firmware for the G2
+    /// is built with that feature; with it the virtual rig returns the carrier's power
+    /// into its bus capacitor as the G2 would.
+    pub const DECAY: Decay = if cfg!(feature = "bridge-brake-decay") {
+        Decay::Brake
+    } else {
+        Decay::Coast
+    };
+
+    /// Highest supply the H-bridge is rated for, V: the Pololu G2 24v13's operating range
+    /// ends at 40 V.
+    pub const BRIDGE_MAX_V: f64 = 40.0;
+
+    /// Bus voltage above which the firmware stops the drive and latches
+    /// `BUS_OVERVOLTAGE`, V: 85 % of [`BRIDGE_MAX_V`] (34 V), below the bus divider's
+    /// 36.3 V full scale at VDDA 3.3 V, so the ADC still reads it.
+    pub const BUS_OVERVOLTAGE_V: f64 = 0.85 * BRIDGE_MAX_V;
+
+    /// Capacitance on the bridge's supply bus, F: the bridge's bulk capacitor and the bench
+    /// supply's output capacitance together. Not from a data sheet: 470 uF is a typical
+    /// bulk electrolytic added at a motor bridge's supply terminals; measure the rig's (it
+    /// sets how far a regenerating bridge pumps the bus per joule returned).
+    pub const BUS_CAPACITANCE_F: f64 = 470.0e-6;
 }
 
 /// The hardware overcurrent trip: COMP3 on the current-sense pin (PA0) against an internal
@@ -272,6 +328,17 @@ mod tests {
         );
         // The paper: the vibrator does not turn below 1.0 V.
         const { assert!(rs735::BREAKAWAY_V > 0.9 && rs735::BREAKAWAY_V < 1.0) };
+    }
+
+    #[test]
+    fn bus_overvoltage_threshold_is_under_the_rating_and_readable() {
+        // 34 V: under the G2's 40 V, and under what the bus divider lets the ADC read.
+        assert!((board::BUS_OVERVOLTAGE_V - 34.0).abs() < 1e-12);
+        let full_scale_v = adc::VREF_V / bus_divider::RATIO;
+        assert!((full_scale_v - 36.3).abs() < 1e-9, "{full_scale_v}");
+        assert!(board::BUS_OVERVOLTAGE_V < full_scale_v);
+        const { assert!(board::BUS_OVERVOLTAGE_V > board::BRIDGE_SUPPLY_V) };
+        assert_eq!(board::REGENERATIVE_DECAY, board::DECAY.returns_power());
     }
 
     #[test]

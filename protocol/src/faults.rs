@@ -12,7 +12,7 @@
 use crate::flags::flag_set;
 
 flag_set! {
-    /// Set of supervisor faults, a `u32` varint on the wire (bits 16 and up are free for
+    /// Set of supervisor faults, a `u32` varint on the wire (bits 17 and up are free for
     /// later faults; a peer keeps bits it has no name for).
     pub struct FaultFlags(u32) {
         /// Measured motor current above `RigParameters::max_current_a` (the software layer).
@@ -51,6 +51,10 @@ flag_set! {
         /// The hardware overcurrent trip (comparator into the PWM timer's break input)
         /// switched the bridge off.
         const HW_OVERCURRENT = 15;
+        /// The bridge's supply bus rose above `model::hardware::board::BUS_OVERVOLTAGE_V`
+        /// (the bridge pumping a supply that cannot sink, or a supply set too high): the
+        /// drive stopped; clears once the bus is back under the threshold.
+        const BUS_OVERVOLTAGE = 16;
     }
 }
 
@@ -71,8 +75,8 @@ mod tests {
 
     #[test]
     fn display_lists_names_and_unknown_bits() {
-        let f = FaultFlags::OVERCURRENT | FaultFlags::JAM | FaultFlags::from_bits_retain(0x1_0000);
-        assert_eq!(f.to_string(), "OVERCURRENT | JAM | 0x10000");
+        let f = FaultFlags::OVERCURRENT | FaultFlags::JAM | FaultFlags::from_bits_retain(0x10_0000);
+        assert_eq!(f.to_string(), "OVERCURRENT | JAM | 0x100000");
         assert_eq!(FaultFlags::empty().to_string(), "none");
         assert_eq!(format!("{:?}", FaultFlags::STALL), "FaultFlags(STALL)");
         let new = FaultFlags::REVERSED_ENCODER

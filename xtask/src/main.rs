@@ -275,6 +275,13 @@ fn bench_run(options: target_bench::Options, firmware_elf: &Path, python: &Path)
             .collect();
         return Err(format!("over budget: {}", list.join(", ")));
     }
+    let failed = target_bench::failed_boot_checks(&result);
+    if options.check && !failed.is_empty() {
+        return Err(format!(
+            "the firmware's boot trace fails: {} (the register writes are in detail.boot of `cargo xtask target-bench --json`)",
+            failed.join("; ")
+        ));
+    }
     Ok(())
 }
 

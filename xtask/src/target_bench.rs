@@ -139,6 +139,13 @@ pub struct DriverOutput {
     /// each write happened).
     #[serde(default)]
     pub safe_state: Option<Value>,
+    /// Cycles of the firmware's boot from its reset vector to the thread executor's first
+    /// sleep; absent when the driver was not given the firmware.
+    #[serde(default)]
+    pub boot_cycles: Option<u64>,
+    /// The boot trace's register-sequence checks: `[{name, pass, gate}]`.
+    #[serde(default)]
+    pub boot_checks: Option<Value>,
     /// Everything else (markers' overhead, model, emulator, timing), passed through.
     #[serde(flatten)]
     pub rest: BTreeMap<String, Value>,
@@ -237,6 +244,19 @@ pub fn over_budget(figures: &Value) -> Vec<(&'static str, u64, u64)> {
             let v = figures.get(key)?.as_u64()?;
             (v > limit).then_some((key, v, limit))
         })
+        .collect()
+}
+
+/// The boot trace's checks that fail and gate `--check` (a check with `gate: false` is a
+/// known gap, reported but not failing), by name.
+pub fn failed_boot_checks(figures: &Value) -> Vec<String> {
+    figures
+        .get("boot_checks")
+        .and_then(Value::as_array)
+        .into_iter()
+        .flatten()
+        .filter(|c| c["pass"] != true && c["gate"] != false)
+        .map(|c| c["name"].as_str().unwrap_or("?").to_string())
         .collect()
 }
 
@@ -556,6 +576,8 @@ pub fn result(d: &DriverOutput, firmware: Usage, image: &Path) -> Result<Value, 
         "static_ram_bytes": firmware.ram,
         "stack_bytes_worst": d.stack_bytes_worst,
         "panic_to_safe_cycles": d.panic_to_safe_cycles,
+        "boot_cycles": d.boot_cycles,
+        "boot_checks": d.boot_checks,
     });
     let budgets: serde_json::Map<String, Value> = BUDGETS
         .iter()
@@ -630,6 +652,22 @@ pub fn table(r: &Value) -> String {
             s,
             "{key:<22} {value:>10} {budget:>10}{}",
             if over { "  OVER" } else { "" }
+        );
+    }
+    if let Some(b) = r.get("boot_cycles").and_then(Value::as_u64) {
+        let _ = writeln!(s, "{:<22} {b:>10}", "boot_cycles");
+    }
+    for c in r["boot_checks"].as_array().into_iter().flatten() {
+        let mark = match (c["pass"] == true, c["gate"] != false) {
+            (true, _) => "pass",
+            (false, true) => "FAIL",
+            (false, false) => "known gap",
+        };
+        let _ = writeln!(
+            s,
+            "  boot check {:<9} {}",
+            mark,
+            c["name"].as_str().unwrap_or("")
         );
     }
     let _ = writeln!(
@@ -774,6 +812,23 @@ mod tests {
                 ("flash_bytes", 62852, 49152),
             ]
         );
+    }
+
+    #[test]
+    fn boot_checks_gate_unless_a_known_gap() {
+        let r = json!({"boot_checks": [
+            {"name": "CLL", "pass": true, "gate": true},
+            {"name": "TIM1 ARR", "pass": false, "gate": true},
+            {"name": "AHB /2 across the switch", "pass": false, "gate": false},
+        ]});
+        assert_eq!(failed_boot_checks(&r), vec!["TIM1 ARR".to_string()]);
+        assert!(failed_boot_checks(&json!({"boot_checks": null})).is_empty());
+        let t = table(&json!({
+            "boot_cycles": 244921, "boot_checks": r["boot_checks"],
+            "budgets": {}, "over_budget": [], "detail": {"groups": [], "profiles": []},
+        }));
+        assert!(t.contains("boot_cycles") && t.contains("244921"), "{t}");
+        assert!(t.contains("FAIL") && t.contains("known gap"), "{t}");
     }
 
     #[test]

@@ -8,6 +8,10 @@ Run by `cargo xtask target-bench` (which builds the image and installs the pinne
     target/target-bench-venv/bin/python xtask/target_bench/driver.py \
         target/thumbv7em-none-eabihf/release/firmware-bench > result.json
 
+With `--safe-state`, the firmware ELF's failure handlers are run to the safe state
+(`safe_state_paths`) and the firmware is booted from reset with every peripheral write
+recorded and checked (`boot_trace`, `boot_checks`).
+
 Prints one JSON object (see `summarise`). Exit status 0 when the session ran to its end,
 1 with a message on stderr otherwise.
 
@@ -822,6 +826,221 @@ def safe_state_paths(elf_path, enable_bsrr, enable_bit):
     return results
 
 
+# --- Boot trace (the firmware ELF itself, from reset) ----------------------------------
+# Peripherals are plain memory (pages mapped on first touch); a read hook gives the status
+# bits the init code waits on the values the hardware would show once ready.
+RCC_BASE = 0x4002_1000
+FLASH_ACR = 0x4002_2000
+FLASH_OPTR = 0x4002_2020
+PWR_CR5 = 0x4000_7080
+RCC_CFGR = RCC_BASE + 0x08
+TIM1_BASE = 0x4001_2C00
+SYSCFG_CFGR2 = 0x4001_001C
+COMP3_CSR = 0x4001_0208
+ADC1_CFGR = 0x5000_000C
+GPIOB_PUPDR = 0x4800_040C
+GPIOC_PUPDR = 0x4800_080C
+MPU_CTRL, MPU_RBAR, MPU_RASR = 0xE000_ED94, 0xE000_ED9C, 0xE000_EDA0
+VREFINT_CAL = 0x1FFF_75AA
+STORAGE = (0x0807_C000, 0x4000)
+BOOT_INSN_LIMIT = 5_000_000
+SYSCLK_HZ = 170_000_000
+EXECUTOR_IDLE = "embassy_executor8platform6thread8Executor3run"
+FAILURE_SYMBOLS = ("rust_begin_unwind", "HardFault", "DefaultHandler", "NonMaskableInt",
+                   "rig_safe_state")
+
+
+def _ready_bits(uc, address):
+    """Before a read: the bits of the status registers the init code polls, as ready."""
+    a = address & ~3
+
+    def rd():
+        return struct.unpack("<I", bytes(uc.mem_read(a, 4)))[0]
+
+    def wr(v):
+        uc.mem_write(a, struct.pack("<I", v & 0xFFFF_FFFF))
+
+    if a == RCC_BASE:  # CR: HSIRDY, HSERDY, PLLRDY follow their ON bits
+        v = rd()
+        for on, rdy in ((8, 10), (16, 17), (24, 25)):
+            v = v | (1 << rdy) if v >> on & 1 else v & ~(1 << rdy)
+        wr(v)
+    elif a == RCC_CFGR:  # SWS = SW
+        v = rd()
+        wr((v & ~0xC) | ((v & 3) << 2))
+    elif a in (RCC_BASE + 0x90, RCC_BASE + 0x94, RCC_BASE + 0x98):  # LSE, LSI, HSI48 ready
+        v = rd()
+        wr(v | 2 if v & 1 else v)
+    elif 0x5000_0000 <= a < 0x5000_0400 and a & 0xFF == 0x08:  # ADCx_CR
+        v = rd() & ~(1 << 31)  # calibration done
+        if v & 1:  # ADEN: ADRDY
+            isr = a - 8
+            uc.mem_write(isr, struct.pack("<I", struct.unpack(
+                "<I", bytes(uc.mem_read(isr, 4)))[0] | 1))
+        if v & 2:  # ADDIS
+            v &= ~3
+        wr(v)
+    elif 0x4000_4400 <= a < 0x4000_5400 and a & 0xFF == 0x1C:  # USART ISR: TEACK, REACK, TXE, TC
+        wr(rd() | (1 << 21) | (1 << 22) | (1 << 7) | (1 << 6))
+    elif a == FLASH_OPTR:  # DBANK: the G474RE's factory option byte
+        wr(rd() | (1 << 22))
+    elif a == TIM1_BASE + 0x10:  # SR: an update has happened (the sampling-phase check)
+        wr(rd() | 1)
+
+
+def boot_checks(writes, symbols, final, enable_bsrr, enable_bit):
+    """The register sequences that matter, from the boot's peripheral writes
+    [(instruction, address, value)] and the final values {address: value}. Each check:
+    {name, pass, detail, gate} (gate false: a known gap, reported, not failing --check)."""
+    checks = []
+
+    def add(name, ok, detail, gate=True):
+        checks.append({"name": name, "pass": bool(ok), "detail": detail, "gate": gate})
+
+    def first(pred):
+        return next((k for k, (_, a, v) in enumerate(writes) if pred(a, v)), None)
+
+    switch = first(lambda a, v: a == RCC_CFGR and v & 3 == 3)
+    boost = first(lambda a, v: a == PWR_CR5 and not v >> 8 & 1)
+    latency = first(lambda a, v: a == FLASH_ACR and v & 0xF == 4)
+    add("clock: range-1 boost before the switch to the PLL",
+        switch is not None and boost is not None and boost < switch,
+        "PWR_CR5.R1MODE cleared before RCC_CFGR.SW = PLL")
+    add("clock: 4 flash wait states before the switch to the PLL",
+        switch is not None and latency is not None and latency < switch,
+        "FLASH_ACR.LATENCY = 4 before RCC_CFGR.SW = PLL")
+    div2_at_switch = switch is not None and writes[switch][2] >> 4 & 0xF == 0b1000
+    div1 = None if switch is None else next(
+        (k for k in range(switch + 1, len(writes))
+         if writes[k][1] == RCC_CFGR and writes[k][2] >> 4 & 0xF == 0), None)
+    add("clock: AHB /2 across the switch, /1 at least 1 us later",
+        div2_at_switch and div1 is not None
+        and writes[div1][0] - writes[switch][0] >= SYSCLK_HZ // 1_000_000,
+        "RM0440 7.2.7; embassy-stm32 0.6 writes SW = PLL with HPRE = /1 in one write "
+        "(README: known gap)", gate=False)
+    arr = final.get(TIM1_BASE + 0x2C)
+    cr1 = final.get(TIM1_BASE + 0x00, 0)
+    add("TIM1: centre-aligned, ARR 4249 (20 kHz at 170 MHz)",
+        arr == 4249 and cr1 >> 5 & 3 == 0b10, f"ARR {arr}, CR1 {cr1:#x}")
+    bdtr_writes = [(k, v) for k, (_, a, v) in enumerate(writes) if a == TIM1_BASE + 0x44]
+    locked = [k for k, v in bdtr_writes if v >> 8 & 3 == 2 and v >> 12 & 1 and v >> 13 & 1
+              and not v >> 14 & 1 and v >> 10 & 1]
+    moe_set = [k for k, v in bdtr_writes if v >> 15 & 1]
+    add("TIM1: BDTR break on (active high), OSSI, no AOE, LOCK level 2; MOE never set",
+        bool(locked) and not moe_set, f"{len(bdtr_writes)} BDTR writes")
+    af1 = final.get(TIM1_BASE + 0x60, 0)
+    add("TIM1: break from COMP3 only (AF1.BKCMP3E, not inverted, BKINE off)",
+        af1 >> 3 & 1 and not af1 & 1 and not af1 >> 12 & 1, f"AF1 {af1:#x}")
+    comp = final.get(COMP3_CSR, 0)
+    add("COMP3: on, PA0 against DAC3_CH1 (INMSEL 100)",
+        comp & 1 and (comp >> 4) & 7 == 0b100 and not comp >> 8 & 1, f"CSR {comp:#x}")
+    cfgr = final.get(ADC1_CFGR, 0)
+    add("ADC1: triggered by TIM1_TRGO on the rising edge (EXTSEL 9, EXTEN 01)",
+        cfgr >> 5 & 0x1F == 9 and cfgr >> 10 & 3 == 1, f"CFGR {cfgr:#x}")
+    pulls = [(GPIOB_PUPDR, (6, 7)), (GPIOC_PUPDR, (6, 7))]
+    add("encoder inputs PB6/PB7, PC6/PC7 without pulls",
+        all(final.get(reg, 0) >> (2 * pin) & 3 == 0 for reg, pins in pulls for pin in pins),
+        ", ".join(f"{reg:#x}={final.get(reg, 0):#x}" for reg, _ in pulls))
+    add("SYSCFG_CFGR2.CLL: a lockup breaks TIM1", final.get(SYSCFG_CFGR2, 0) & 1,
+        f"CFGR2 {final.get(SYSCFG_CFGR2, 0):#x}")
+    sheap = symbols.get("__sheap", (0, 0, 0))[0]
+    rbar, rasr = final.get(MPU_RBAR, 0), final.get(MPU_RASR, 0)
+    size = 1 << ((rasr >> 1 & 0x1F) + 1)
+    base = rbar & ~0x1F
+    add("stack guard: an MPU region with no access right above the statics",
+        final.get(MPU_CTRL, 0) & 1 and rasr & 1 and rasr >> 24 & 7 == 0
+        and sheap <= base < sheap + size, f"base {base:#x} size {size} statics end {sheap:#x}")
+    enable_low = first(lambda a, v: a == enable_bsrr and v >> enable_bit & 1)
+    pwm_af = first(lambda a, v: a == 0x4800_0000 and v >> 16 & 3 == 2)
+    add("bridge enable driven low before PA8 becomes TIM1's output",
+        enable_low is not None and pwm_af is not None and enable_low < pwm_af,
+        "GPIOA_BSRR reset bit before GPIOA_MODER8 = AF")
+    return checks
+
+
+def boot_trace(elf_path, enable_bsrr, enable_bit):
+    """Runs the firmware ELF from its reset vector until the thread executor idles, every
+    peripheral write recorded; returns {cycles, instructions, reached_executor, checks,
+    writes}."""
+    segments, symbols = read_elf(elf_path)
+    uc = unicorn.Uc(unicorn.UC_ARCH_ARM, unicorn.UC_MODE_THUMB | unicorn.UC_MODE_MCLASS)
+    uc.ctl_set_cpu_model(U.UC_CPU_ARM_CORTEX_M4)
+    for base, size in (FLASH, RAM, SCS):
+        uc.mem_map(base, size)
+    uc.mem_write(STORAGE[0], b"\xff" * STORAGE[1])  # an erased calibration store
+    for addr, data in segments:
+        uc.mem_write(addr, data)
+    uc.mem_map(VREFINT_CAL & ~0xFFFF, 0x1_0000)
+    uc.mem_write(VREFINT_CAL, struct.pack("<H", 1654))
+
+    def map_page(uc, _access, address, _size, _value, _user):
+        uc.mem_map(address & ~0xFFF, 0x1000)
+        return True
+
+    by_start = sorted(((v & ~1, v + max(sz, 1), n) for n, (v, sz, k) in symbols.items()
+                       if k == 2))
+    failure = {v & ~1 for n, (v, _, k) in symbols.items()
+               if k == 2 and any(n.endswith(f) or f in n for f in FAILURE_SYMBOLS)}
+    costing = Costing()
+    state = {"cycles": 0, "insns": 0, "pending": None, "failed": None}
+    writes = []
+
+    def on_block(uc, addr, size, _user):
+        if state["pending"] is not None:
+            if addr != state["pending"]:
+                state["cycles"] += P
+            state["pending"] = None
+        if addr in failure and state["failed"] is None:
+            state["failed"] = addr
+            uc.emu_stop()
+        b = costing.block(bytes(uc.mem_read(addr, size)), addr)
+        state["cycles"] += b.cycles
+        state["insns"] += b.insns
+        if b.cond_fallthrough is not None:
+            state["pending"] = b.cond_fallthrough
+        if state["insns"] > BOOT_INSN_LIMIT:
+            uc.emu_stop()
+
+    def on_read(uc, _access, address, _size, _value, _user):
+        try:
+            _ready_bits(uc, address)
+        except unicorn.UcError:
+            pass
+
+    def on_write(uc, _access, address, _size, value, _user):
+        if 0x4000_0000 <= address < 0x6000_0000 or 0xE000_E000 <= address < 0xE010_0000:
+            writes.append((state["cycles"], address, value & 0xFFFF_FFFF))
+
+    uc.hook_add(unicorn.UC_HOOK_MEM_UNMAPPED, map_page)
+    uc.hook_add(unicorn.UC_HOOK_BLOCK, on_block)
+    uc.hook_add(unicorn.UC_HOOK_MEM_READ, on_read, begin=0x4000_0000, end=0x5FFF_FFFF)
+    uc.hook_add(unicorn.UC_HOOK_MEM_WRITE, on_write)
+    sp, reset = struct.unpack("<II", bytes(uc.mem_read(FLASH[0], 8)))
+    uc.reg_write(U.UC_ARM_REG_SP, sp)
+    try:
+        uc.emu_start(reset | 1, 0, timeout=60_000_000)
+    except unicorn.UcError as e:
+        at = uc.reg_read(U.UC_ARM_REG_PC)
+        # Unicorn does not implement WFE/WFI: the executor going to sleep ends the run.
+        sleeps = (b"\x20\xbf", b"\x30\xbf")
+        if bytes(uc.mem_read(at, 2)) not in sleeps and bytes(uc.mem_read(at - 2, 2)) not in sleeps:
+            raise Failure(f"the boot trace stopped at {at:#010x}: {e}")
+    pc = uc.reg_read(U.UC_ARM_REG_PC)
+    where = next((n for lo, hi, n in reversed(by_start) if lo <= pc < hi), "unknown")
+    reached = state["failed"] is None and EXECUTOR_IDLE in where
+    final = {}
+    for _, a, v in writes:
+        final[a] = v
+    for a in (RCC_BASE, RCC_CFGR):
+        final[a] = struct.unpack("<I", bytes(uc.mem_read(a, 4)))[0]
+    checks = [{"name": "boot reaches the executor without a fault", "pass": reached,
+               "detail": f"stopped in {where}", "gate": True}]
+    checks += boot_checks(writes, symbols, final, enable_bsrr, enable_bit)
+    return {"cycles": state["cycles"], "instructions": state["insns"],
+            "reached_executor": reached, "stopped_in": where, "checks": checks,
+            "peripheral_writes": [[c, a, v] for c, a, v in writes]}
+
+
 def main(argv):
     usage = ("usage: driver.py FIRMWARE_BENCH_ELF "
              "[--safe-state FIRMWARE_ELF ENABLE_BSRR_ADDRESS ENABLE_BSRR_BIT]")
@@ -844,6 +1063,11 @@ def main(argv):
         if safe is not None:
             result["safe_state"] = safe
             result["panic_to_safe_cycles"] = safe["panic"]["cycles"]
+            boot = boot_trace(argv[3], int(argv[4], 0), int(argv[5], 0))
+            result["boot"] = boot
+            result["boot_cycles"] = boot["cycles"]
+            result["boot_checks"] = [{"name": c["name"], "pass": c["pass"], "gate": c["gate"]}
+                                     for c in boot["checks"]]
     except (Failure, OSError, ValueError) as e:
         print(f"target bench: {e}", file=sys.stderr)
         return 1

@@ -307,6 +307,9 @@ pub struct FaultConfig {
     /// How long the encoder's speed may run against the drive's sign (above the stop
     /// speed) before `REVERSED_ENCODER`, us.
     pub reversed_time_us: u64,
+    /// Measured bridge bus above which the drive stops (`BUS_OVERVOLTAGE`), V
+    /// (`model::hardware::board::BUS_OVERVOLTAGE_V`, from the bridge's rating).
+    pub bus_overvoltage_v: f32,
 }
 
 impl Default for FaultConfig {
@@ -319,6 +322,8 @@ impl Default for FaultConfig {
             stall_min_counts: 64,
             overrun_periods: 2,
             reversed_time_us: 100_000,
+            #[allow(clippy::cast_possible_truncation, reason = "34 V: exact in f32")]
+            bus_overvoltage_v: board::BUS_OVERVOLTAGE_V as f32,
         }
     }
 }

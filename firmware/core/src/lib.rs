@@ -65,6 +65,7 @@
     clippy::cast_possible_wrap
 )]
 
+pub mod bridge;
 mod capture;
 mod config;
 mod controller;

@@ -27,7 +27,8 @@ pub enum Scenario {
     Table1(Table1Args),
     /// Figs. 8-9: current and cam torque over load (0.368-3.68 N m) at 3.6, 6.2, 8.8 V.
     TorqueSweep(SweepArgs),
-    /// Fault drills: overcurrent (jammed cam), encoder-loss, comms-loss, bad-calibration.
+    /// Fault drills: overcurrent (jammed cam), encoder-loss, comms-loss, bad-calibration,
+    /// reversed-encoder, load-limit, overvoltage (the bridge's bus above its limit).
     Faults(FaultArgs),
     /// Serve the virtual rig on a pseudo-terminal any serial client can open, until Ctrl-C.
     Serve(super::serve::ServeArgs),

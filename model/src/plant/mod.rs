@@ -6,6 +6,7 @@
 //! mechanics with semi-implicit Euler and Coulomb sticking. At the default 10 kHz the cam
 //! turns at most 0.01 rad per step; an energy ledger checks the balance.
 
+pub mod bus;
 mod effects;
 mod motor;
 pub mod pwm;
@@ -73,6 +74,12 @@ pub struct PlantParams {
     /// ([`crate::hardware::board::SUPPLY_RESISTANCE_OHM`]).
     #[cfg_attr(feature = "serde", serde(default))]
     pub supply_resistance: f64,
+    /// Capacitance on the bridge's bus, F ([`crate::hardware::board::BUS_CAPACITANCE_F`]),
+    /// fed by a supply that cannot sink: power the bridge returns charges it and the bus
+    /// rises ([`bus`]). Zero: a supply that sinks as well as sources (the bus is the supply
+    /// less the resistive sag, whichever way the current flows).
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub bus_capacitance: f64,
     /// Whether the drive can take power back (synchronous H-bridge, backdrivable gearhead).
     /// Without it the current cannot reverse and the carrier's inertial power is lost, so the
     /// inertia term of Eq. (9) no longer averages out (`inertia-rectification`).
@@ -103,8 +110,10 @@ impl PlantParams {
             load,
             supply: board::BRIDGE_SUPPLY_V,
             supply_resistance: board::SUPPLY_RESISTANCE_OHM,
-            // The paper's bench supply cannot sink current, and actuators in general do not
-            // return negative power (the paper's ref. [18]).
+            bus_capacitance: board::BUS_CAPACITANCE_F,
+            // The board's decay decides (`board::DECAY`): coasting by default, as the
+            // paper's bench supply that cannot take power back; a braking bridge (the G2)
+            // returns it into a bus whose supply cannot sink it (`bus_capacitance`).
             regeneration: board::REGENERATIVE_DECAY,
             friction_split: false,
             cam: CamSetup::Coupled,
@@ -530,7 +539,10 @@ impl Plant {
         // the supply carries the winding current during the on-time only).
         let duty = drive.duty.clamp(-1.0, 1.0);
         let i0 = self.state.current;
-        let bus = if drive.enabled {
+        let bus = if p.bus_capacitance > 0.0 {
+            // The bus capacitor's voltage at the step's start ([`bus`]).
+            self.state.bus_voltage
+        } else if drive.enabled {
             p.supply - p.supply_resistance * duty * i0
         } else {
             p.supply
@@ -698,7 +710,25 @@ impl Plant {
         self.state.output_speed = new_wt;
         self.state.output_angle += wt_mean * dt;
         self.state.motor_voltage = v_motor;
-        self.state.bus_voltage = bus;
+        self.state.bus_voltage = if self.params.bus_capacitance > 0.0 {
+            // The bridge draws d i from the bus in the on-time (negative: returns it).
+            let i_bridge = if drive.enabled && v_motor == v_bridge {
+                duty * i_mean
+            } else {
+                0.0
+            };
+            let p = &self.params;
+            bus::step(
+                bus,
+                p.supply,
+                p.supply_resistance,
+                p.bus_capacitance,
+                i_bridge,
+                dt,
+            )
+        } else {
+            bus
+        };
         self.state.time += dt;
     }
 }

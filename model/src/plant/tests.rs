@@ -15,6 +15,14 @@ fn paper_plant(z: [u32; 4], load: Load) -> Plant {
     Plant::new(PlantParams::paper(GearSet::paper(z).unwrap(), load), 42)
 }
 
+/// The paper's own drive: a bench supply straight to the motor, which cannot take power
+/// back (no regeneration, so no bus to pump).
+fn bench_supply_plant(z: [u32; 4], load: Load) -> Plant {
+    let mut params = PlantParams::paper(GearSet::paper(z).unwrap(), load);
+    params.regeneration = false;
+    Plant::new(params, 42)
+}
+
 fn run(plant: &mut Plant, volts: f64, seconds: f64) {
     let drive = Drive {
         duty: volts / plant.params().supply,
@@ -207,7 +215,7 @@ fn runs_repeat_exactly_with_a_seed() {
 
 #[test]
 fn without_regeneration_the_inertia_term_costs_current() {
-    let mut without = paper_plant(paper::RIG_Z, Load::Torque(0.368));
+    let mut without = bench_supply_plant(paper::RIG_Z, Load::Torque(0.368));
     let mut params = *without.params();
     params.regeneration = true;
     let mut with = Plant::new(params, 42);
@@ -228,7 +236,7 @@ fn without_regeneration_the_inertia_term_costs_current() {
 fn measured_current_follows_eq10_and_the_calibration() {
     // Steady state at 10 Hz: mean current = (Eq. 10 friction part + rectified inertia part
     // M w^2 e^2 / (2 pi) + C3 w + C4 - C2) / C1: the drive does not take power back.
-    let mut p = paper_plant(paper::RIG_Z, Load::Torque(3.68));
+    let mut p = bench_supply_plant(paper::RIG_Z, Load::Torque(3.68));
     let (w, i) = mean_speed(&mut p, 6.2, 1.0, 1.0);
     let drive = p.params().drive;
     let tau_cam = drive.required_cam_torque(p.params().mu_ax, 3.68, w)
@@ -412,4 +420,34 @@ fn samples_within_a_step_are_those_of_shorter_steps() {
         let want = short.current_adc();
         assert!(code.abs_diff(want) <= 1, "sample {k}: {code} vs {want}");
     }
+}
+
+#[test]
+fn a_braking_bridge_pumps_the_bus_when_the_cam_overruns_the_drive() {
+    // At 15 Hz, the duty cut to a third: the cam's kinetic energy comes back through the
+    // braking decay into the bus capacitor, which the supply cannot drain.
+    let peak_bus = |regeneration: bool| {
+        let mut params =
+            PlantParams::paper(GearSet::paper(paper::RIG_Z).unwrap(), Load::Torque(0.368));
+        params.regeneration = regeneration;
+        let mut p = Plant::new(params, 42);
+        run(&mut p, 8.8, 1.0);
+        let supply = p.params().supply;
+        let mut peak = p.bus_voltage();
+        let drive = Drive {
+            duty: 2.9 / supply,
+            enabled: true,
+        };
+        for _ in 0..5_000 {
+            p.step(DT, drive);
+            peak = peak.max(p.bus_voltage());
+        }
+        peak
+    };
+    let braking = peak_bus(true);
+    let coasting = peak_bus(false);
+    // Coasting: the current cannot reverse, the bus never leaves the supply's sag.
+    assert!(coasting <= 12.0 + 1e-9, "{coasting}");
+    // Braking: the bus rises by volts (C = 470 uF), what BUS_OVERVOLTAGE watches.
+    assert!(braking > 13.0, "{braking}");
 }

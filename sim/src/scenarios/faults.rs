@@ -11,13 +11,14 @@ use crate::SimError;
 use crate::{Injections, SimConfig, SimLink, SimRig};
 
 /// The drills, in the order they run.
-pub const DRILLS: [&str; 6] = [
+pub const DRILLS: [&str; 7] = [
     "overcurrent",
     "encoder-loss",
     "comms-loss",
     "bad-calibration",
     "reversed-encoder",
     "load-limit",
+    "overvoltage",
 ];
 
 /// Longest a drill waits for the safe state, s.
@@ -102,6 +103,24 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
             release(&mut link, 10.0)?;
             link.wait(1.5);
             link.rig.plant_mut().set_load(Load::Torque(3.95));
+            (link, true)
+        }
+        "overvoltage" => {
+            // The bus passes the bridge's limit while vibrating: the bench supply turned up
+            // from 12 V at 10 V/s (a braking bridge pumping a supply that cannot sink ends
+            // the same way, [`model::plant::bus`]). The firmware reads the bus divider and
+            // stops the drive; the fault holds while the bus stays high. Timed from the
+            // millisecond the bus crosses the limit.
+            let mut link = rig(seed, |_| {})?;
+            release(&mut link, 10.0)?;
+            link.wait(1.5);
+            let limit = model::hardware::board::BUS_OVERVOLTAGE_V;
+            let mut supply = link.rig.plant().params().supply;
+            while link.rig.plant().bus_voltage() <= limit && supply < 40.0 {
+                supply += 0.01;
+                link.rig.plant_mut().set_supply(supply);
+                link.wait(0.001);
+            }
             (link, true)
         }
         "encoder-loss" => {

@@ -201,6 +201,7 @@ impl Core {
             FaultFlags::CURRENT_ZERO_RANGE,
             !self.current.zero_in_range(),
         );
+        a.set(FaultFlags::BUS_OVERVOLTAGE, self.bus_overvoltage());
         a.set(
             FaultFlags::CALIBRATION_INVALID,
             self.parameters_status == ParametersStatus::Invalid,

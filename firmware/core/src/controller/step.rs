@@ -167,6 +167,11 @@ impl Core {
             self.raise(FaultFlags::HW_OVERCURRENT);
         }
         let f = self.config.faults;
+        // A regenerating bridge pumping a supply that cannot sink (or a supply set too high):
+        // the bus divider's reading, already averaged over 0.9 ms by its filter.
+        if self.bus_overvoltage() {
+            self.raise(FaultFlags::BUS_OVERVOLTAGE);
+        }
         let i = self.current.step_mean_a();
         if self
             .faults
@@ -207,6 +212,12 @@ impl Core {
             };
             self.raise(flag);
         }
+    }
+
+    /// Whether the measured bridge bus is above its limit (false when not measured).
+    pub(crate) fn bus_overvoltage(&self) -> bool {
+        let v = self.board.bus_voltage_v;
+        v.is_finite() && v > self.config.faults.bus_overvoltage_v
     }
 
     /// The bridge supply: the measured bus voltage when the board measures one (and it is

@@ -383,3 +383,33 @@ fn hardware_break_latches_hw_overcurrent_until_cleared() {
     assert!(!latched.contains(FaultFlags::HW_OVERCURRENT), "{latched}");
     assert!(!rig.core.break_latched());
 }
+
+#[test]
+fn bus_overvoltage_stops_the_drive_and_holds_while_the_bus_is_high() {
+    let limit = model::hardware::board::BUS_OVERVOLTAGE_V as f32;
+    let bus = |v: f32| crate::BoardInputs {
+        bus_voltage_v: v,
+        ..Default::default()
+    };
+    let mut rig = Rig::new(1.0);
+    rig.vibrate(10.0);
+    // Just under the limit (the feed-forward follows the bus): still driving.
+    rig.core.set_board_inputs(bus(limit - 0.1));
+    assert!(rig.step().enable);
+    assert!(rig.latched().is_empty(), "{}", rig.latched());
+    // Over it: off at this step, latched.
+    rig.core.set_board_inputs(bus(limit + 0.5));
+    assert!(!rig.step().enable, "off at the first step over the limit");
+    assert_eq!(rig.latched(), FaultFlags::BUS_OVERVOLTAGE);
+    rig.run_ms(600);
+    // While the bus stays high the fault cannot be cleared.
+    let (active, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert!(active.contains(FaultFlags::BUS_OVERVOLTAGE), "{active}");
+    assert!(latched.contains(FaultFlags::BUS_OVERVOLTAGE), "{latched}");
+    assert!(!rig.step().enable);
+    // Back to the supply's 12 V: cleared on request.
+    rig.core.set_board_inputs(bus(12.0));
+    rig.step();
+    let (_, latched) = faults(&mut rig, &Request::ClearFaults);
+    assert!(latched.is_empty(), "{latched}");
+}

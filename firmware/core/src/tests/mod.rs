@@ -2,6 +2,7 @@
 //! protocol, as the binary and the host drive it.
 
 mod faults;
+mod persist;
 mod server;
 mod supervisor;
 
