@@ -26,8 +26,9 @@
 //! Lambda_W = pi (h12 (1/Z1 + 1/Z2) + h34 (1/Z3 + 1/Z4)) / (1 - min(u, 1/u))
 //! ([`GearSet::big_lambda_willis`]). Written in working pitch radii, Lambda_W is Lambda
 //! with its two terms multiplied by R'_4 / R'_1 and R'_2 / R'_3 (u < 1; R'_3 / R'_2 and
-//! R'_1 / R'_4 for u > 1): ratios 1 + O(n / Z), the terms the paper drops. The design
-//! checks use the smaller of the two ([`GearSet::big_lambda_conservative`]).
+//! R'_1 / R'_4 for u > 1): ratios 1 + O(n / Z), the terms the paper drops. For shifted
+//! gears [`GearSet::big_lambda`] is the smaller of the two, so no verdict rests on the
+//! approximation that favours it; for the paper's family Willis' form is never the smaller.
 
 use core::f64::consts::PI;
 use core::fmt;
@@ -395,11 +396,15 @@ impl GearSet {
         1.0 - ei - ej + ei * ei + ej * ej
     }
 
-    /// Lambda: Eq. (3), pi (2 - sum eps + sum eps^2) / n, for standard gears; the
-    /// generalised form of the module docs ([`GearSet::big_lambda_general`]) for shifted ones.
+    /// Lambda: Eq. (3), pi (2 - sum eps + sum eps^2) / n, for standard gears; for shifted
+    /// ones the smaller of the two generalisations of the module docs
+    /// ([`GearSet::big_lambda_general`], [`GearSet::big_lambda_willis`]). Over the paper's
+    /// family Willis' form is never the smaller (its radius ratios are both above 1), so
+    /// the two rules meet at zero shift.
     pub fn big_lambda(&self) -> f64 {
         if !self.is_standard() {
-            return self.big_lambda_general();
+            let [general, willis] = self.lambdas();
+            return general.min(willis);
         }
         let e = self.contact_ratios();
         let sum: f64 = e.iter().sum();

@@ -134,6 +134,10 @@ fn generalised_lambda_is_eq3_over_every_table1_like_family() {
                     PI * (h12 * z3f / z2f + h34 * z1f / z4f) / f64::from(n)
                 };
                 assert!((g.big_lambda_willis() / willis - 1.0).abs() < 1e-12);
+                // Both radius ratios exceed 1 in the family: Willis' Lambda is never the
+                // smaller, so the conservative Lambda is Eq. (3) too.
+                assert!(g.big_lambda_willis() >= eq3 - 1e-12);
+                assert_eq!(g.big_lambda_conservative(), eq3);
                 checked += 1;
             }
         }
