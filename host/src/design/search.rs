@@ -122,8 +122,9 @@ fn grid(space: &SearchSpace) -> Vec<f64> {
         reason = "small, >= 0"
     )]
     let count = steps as usize + 1;
+    // Rounded to 1e-9 so grid values print as typed (0.9, not 0.9000000000000001).
     (0..count)
-        .map(|k| lo + k as f64 * space.shift_step)
+        .map(|k| ((lo + k as f64 * space.shift_step) * 1e9).round() / 1e9)
         .collect()
 }
 
@@ -384,4 +385,81 @@ pub fn plot(path: &std::path::Path, r: &SearchResult) -> Result<(), crate::RigEr
         &panels,
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn small() -> SearchSpace {
+        SearchSpace {
+            teeth: (48, 52),
+            max_tooth_difference: 1,
+            max_sum_difference: 1,
+            ..SearchSpace::default()
+        }
+    }
+
+    #[test]
+    fn grid_includes_both_ends_exactly() {
+        let g = grid(&SearchSpace::default());
+        assert_eq!(g.len(), 16);
+        assert_eq!((g[0], g[15]), (-0.5, 1.0));
+        assert_eq!(g[14], 0.9);
+    }
+
+    #[test]
+    fn front_is_non_dominated_and_every_design_passes_its_constraints() {
+        let params = RigParams::default();
+        let r = search(&small(), &params, 2);
+        assert!(r.feasible >= r.designs.len() as u64 && !r.designs.is_empty());
+        for d in &r.designs {
+            assert!(d.checks.iter().all(|c| c.passed), "{:?}", d.checks);
+            assert!(d.mu_d_lambda_conservative >= 1.0 && d.mu_s_lambda_conservative >= 1.05);
+            assert!(d.rho.abs() >= 5.0 && d.rho.abs() <= 60.0);
+            assert!(d.centre_distance_mm >= 48.0 && d.centre_distance_mm <= 52.0);
+        }
+        for a in &r.designs {
+            for b in &r.designs {
+                let dominates = a.tau_cam_hat_nm <= b.tau_cam_hat_nm
+                    && a.rho.abs() <= b.rho.abs()
+                    && a.strength_margin >= b.strength_margin
+                    && (a.tau_cam_hat_nm < b.tau_cam_hat_nm
+                        || a.rho.abs() < b.rho.abs()
+                        || a.strength_margin > b.strength_margin);
+                assert!(!dominates, "{:?} dominates {:?}", a.z, b.z);
+            }
+        }
+    }
+
+    #[test]
+    fn threads_do_not_change_the_result() {
+        let params = RigParams::default();
+        let one = search(&small(), &params, 1);
+        let three = search(&small(), &params, 3);
+        assert_eq!(one.candidates, three.candidates);
+        assert_eq!(one.feasible, three.feasible);
+        let key = |r: &SearchResult| {
+            let mut k: Vec<_> = r
+                .designs
+                .iter()
+                .map(|d| (d.z, d.x.map(f64::to_bits)))
+                .collect();
+            k.sort();
+            k
+        };
+        assert_eq!(key(&one), key(&three));
+    }
+
+    #[test]
+    fn the_paper_s_gear_is_not_feasible_when_it_must_stop() {
+        // mu_d Lambda = 0.858: the standard (49, 51, 50, 50) never passes the stop margin.
+        let params = RigParams::default();
+        let r = search(&small(), &params, 2);
+        assert!(
+            !r.designs
+                .iter()
+                .any(|d| d.z == model::paper::RIG_Z && d.x == [0.0; 4])
+        );
+    }
 }
