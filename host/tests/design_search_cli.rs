@@ -229,3 +229,28 @@ fn a_designed_gear_stops_on_the_virtual_rig_and_the_paper_s_keeps_falling() {
     );
     assert_eq!(row["backdriven_with_vibration"], Value::Bool(true), "{row}");
 }
+
+#[test]
+fn a_design_the_firmware_cannot_store_is_refused_with_the_reason() {
+    // Z1 + Z2 = 100, Z3 + Z4 = 101: valid geometry (one working centre distance), but the
+    // calibration record carries no shift and the firmware refuses unequal sums.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("unequal.toml");
+    std::fs::write(
+        &file,
+        "[gear]\nz = [49, 51, 51, 50]\nprofile_shift = [0.2, 0.3, 0.0, -0.017]\n",
+    )
+    .unwrap();
+    let out = rig()
+        .args(["sim", "fig5", "--model", file.to_str().unwrap()])
+        .assert()
+        .failure()
+        .get_output()
+        .stderr
+        .clone();
+    let err = String::from_utf8_lossy(&out);
+    assert!(
+        err.contains("Z1 + Z2 = 100") && err.contains("--max-sum-difference 0"),
+        "{err}"
+    );
+}

@@ -96,7 +96,7 @@ struct RigArgs {
 #[derive(Debug, Subcommand)]
 enum DesignCommand {
     /// Search tooth numbers and profile shifts for gears that hold, release and stop.
-    Search(SearchArgs),
+    Search(Box<SearchArgs>),
 }
 
 /// Arguments of `rig design search`.
@@ -224,7 +224,7 @@ impl RigArgs {
 /// Runs `rig design`.
 pub fn run(a: DesignArgs) -> Result<ExitCode, RigError> {
     if let Some(DesignCommand::Search(s)) = a.command {
-        return run_search(s);
+        return run_search(*s);
     }
     let params = a.rig.params(match (a.i1, a.m23, a.i23, a.i4) {
         (Some(i1), Some(m23), Some(i23), Some(i4)) => Some(Inertias { i1, m23, i23, i4 }),

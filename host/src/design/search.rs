@@ -234,9 +234,8 @@ fn search_sets(
                 }
                 .summary();
                 let a_w = m12.centre_distance;
-                if !(a_w >= space.centre_distance.0 && a_w <= space.centre_distance.1)
-                    || !mesh_ok(&m12, params)
-                {
+                let in_range = a_w >= space.centre_distance.0 && a_w <= space.centre_distance.1;
+                if !(in_range && mesh_ok(&m12, params)) {
                     continue;
                 }
                 let x34 = involute::shift_sum_for_centre_distance(z[2] + z[3], m, alpha, a_w);
@@ -245,7 +244,8 @@ fn search_sets(
                 }
                 for &x3 in shifts {
                     candidates += 1;
-                    let x4 = x34 - x3;
+                    // Rounded like the grid (1e-9: far inside the 1e-3 module tolerance).
+                    let x4 = ((x34 - x3) * 1e9).round() / 1e9;
                     if !(x4 >= space.shift.0 && x4 <= space.shift.1) {
                         continue;
                     }

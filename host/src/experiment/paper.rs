@@ -251,6 +251,17 @@ fn designed_gear(fitted: Option<&rigfile::RigFile>) -> Result<Option<model::Gear
         return Ok(None);
     };
     let gear = rig.gear_set()?;
+    let [z1, z2, z3, z4] = gear.z();
+    if z1 + z2 != z3 + z4 {
+        return Err(RigError::BadValue {
+            what: format!("--model: the designed gear {z1},{z2},{z3},{z4}"),
+            why: format!(
+                "Z1 + Z2 = {} but Z3 + Z4 = {}: the calibration record the firmware stores carries no profile shift yet, and the firmware refuses unequal tooth sums; simulate a design with Z1 + Z2 = Z3 + Z4 (`rig design search --max-sum-difference 0`)",
+                z1 + z2,
+                z3 + z4
+            ),
+        });
+    }
     Ok((gear != model::paper::RIG_GEARS).then_some(gear))
 }
 
