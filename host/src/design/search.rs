@@ -124,7 +124,7 @@ fn grid(space: &SearchSpace) -> Vec<f64> {
     let count = steps as usize + 1;
     // Rounded to 1e-9 so grid values print as typed (0.9, not 0.9000000000000001).
     (0..count)
-        .map(|k| ((lo + k as f64 * space.shift_step) * 1e9).round() / 1e9)
+        .map(|k| ((lo + k as f64 * space.shift_step) * 1e9).round() / 1e9 + 0.0)
         .collect()
 }
 
@@ -245,7 +245,7 @@ fn search_sets(
                 for &x3 in shifts {
                     candidates += 1;
                     // Rounded like the grid (1e-9: far inside the 1e-3 module tolerance).
-                    let x4 = ((x34 - x3) * 1e9).round() / 1e9;
+                    let x4 = ((x34 - x3) * 1e9).round() / 1e9 + 0.0; // + 0.0: no -0
                     if !(x4 >= space.shift.0 && x4 <= space.shift.1) {
                         continue;
                     }
