@@ -84,6 +84,15 @@ fn undercut_and_an_impossible_cam_torque_are_warned() {
         .clone();
     let err = String::from_utf8_lossy(&out);
     assert!(err.contains("x3 + x4"), "{err}");
+    // A shift range the gear set would refuse is refused up front.
+    let out = rig()
+        .args(["design", "search", "--shift", "-2,1"])
+        .assert()
+        .failure()
+        .get_output()
+        .stderr
+        .clone();
+    assert!(String::from_utf8_lossy(&out).contains("--shift"));
 }
 
 fn f(v: &Value) -> f64 {
@@ -191,10 +200,27 @@ fn search_designs_pass_every_check_and_hold_under_independent_formulas() {
 fn a_designed_gear_stops_on_the_virtual_rig_and_the_paper_s_keeps_falling() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("designs");
+    let svg = dir.path().join("front.svg");
     rig()
-        .args([SEARCH, &["--write", out.to_str().unwrap()]].concat())
+        .args(
+            [
+                SEARCH,
+                &[
+                    "--write",
+                    out.to_str().unwrap(),
+                    "--svg",
+                    svg.to_str().unwrap(),
+                ],
+            ]
+            .concat(),
+        )
         .assert()
         .success();
+    let drawn = std::fs::read_to_string(&svg).unwrap();
+    assert!(
+        drawn.starts_with("<svg") && drawn.contains("mu_d Lambda"),
+        "{drawn:.200}"
+    );
     let file = out.join("design-01.toml");
     let designed = json(&["sim", "fig5", "--model", file.to_str().unwrap(), "--json"]);
     assert!(f(&designed["mu_d_lambda"]) > 1.0, "{designed}");

@@ -255,6 +255,23 @@ pub fn run(a: DesignArgs) -> Result<ExitCode, RigError> {
 
 fn run_search(a: SearchArgs) -> Result<ExitCode, RigError> {
     let params = a.rig.params(None)?;
+    if a.shift.0 < -1.0 || a.shift.1 > 2.0 {
+        return Err(RigError::BadValue {
+            what: format!("--shift {},{}", a.shift.0, a.shift.1),
+            why: "profile shifts must lie within -1,2 (the range a gear set accepts)".into(),
+        });
+    }
+    let points = ((a.shift.1 - a.shift.0) / a.shift_step).floor() + 1.0;
+    if points > 200.0 {
+        return Err(RigError::BadValue {
+            what: format!("--shift-step {}", a.shift_step),
+            why: format!(
+                "{points} grid points per shift ({} candidates per tooth set): use a step of at least {:.3}",
+                points.powi(3),
+                (a.shift.1 - a.shift.0) / 199.0
+            ),
+        });
+    }
     let space = SearchSpace {
         teeth: a.teeth,
         max_tooth_difference: a.max_n,

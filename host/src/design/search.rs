@@ -327,6 +327,12 @@ pub fn render_table(r: &SearchResult) -> String {
         "tau_cam N mm",
         "strength"
     );
+    if r.designs.is_empty() {
+        let _ = writeln!(
+            s,
+            "no design passed every constraint: widen --teeth or --shift, lower --stop-margin or --hold-margin, or allow --max-sum-difference"
+        );
+    }
     for d in &r.designs {
         let [z1, z2, z3, z4] = d.z;
         let [x1, x2, x3, x4] = d.x;
