@@ -128,8 +128,9 @@ struct SearchArgs {
     /// Hold margin m_s: require mu_s Lambda >= 1 + m_s.
     #[arg(long, value_parser = args::non_negative, default_value_t = 0.05)]
     hold_margin: f64,
-    /// Stop margin m_d: require mu_d Lambda >= 1 + m_d.
-    #[arg(long, value_parser = args::non_negative, default_value_t = 0.0)]
+    /// Stop margin m_d: require mu_d Lambda >= 1 + m_d (with 1.15 the paper's output
+    /// stops within seconds of the cam; just above 1 it coasts for minutes).
+    #[arg(long, value_parser = args::non_negative, default_value_t = 0.15)]
     stop_margin: f64,
     /// Worker threads (default: the machine's cores).
     #[arg(long)]

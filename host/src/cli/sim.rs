@@ -47,7 +47,7 @@ pub struct Fig5Args {
     #[arg(long, default_value_t = 5.0, value_parser = crate::args::positive)]
     pub freq: f64,
     /// How long the record runs after the cam has stopped, s. Default 0.5 s for the
-    /// paper's gear, 10 s with a designed gear from --model (with mu_d*Lambda just above 1
+    /// paper's gear, 20 s with a designed gear from --model (with mu_d*Lambda just above 1
     /// friction needs seconds to bring the 2.79 kg m^2 output to rest).
     #[arg(long, value_parser = crate::args::positive)]
     pub after_stop: Option<f64>,
@@ -360,7 +360,7 @@ fn fitted_model(path: Option<&std::path::Path>) -> Result<Option<rigfile::RigFil
 }
 
 /// `rig sim fig5`'s record after the cam stop with a designed gear, s.
-pub const DESIGN_AFTER_STOP_S: f64 = 10.0;
+pub const DESIGN_AFTER_STOP_S: f64 = 20.0;
 
 /// Whether the `--model` file designs a gear (its `[gear]` is not the paper's standard set).
 fn designs_a_gear(path: Option<&std::path::Path>) -> Result<bool, RigError> {

@@ -43,7 +43,9 @@ pub struct SearchSpace {
 
 impl Default for SearchSpace {
     /// Around the paper's gear: 45-55 teeth, n <= 2, sums within 2, shifts -0.5..1.0 in
-    /// steps of 0.1, |rho| 5-60, centre distance 48-52 mm, margins 0.05 (hold) and 0 (stop).
+    /// steps of 0.1, |rho| 5-60, centre distance 48-52 mm, margins 0.05 (hold) and 0.15
+    /// (stop: with mu_d Lambda = 1.15 the paper's 2.79 kg m^2 output stops within seconds;
+    /// just above 1 it coasts for minutes).
     fn default() -> Self {
         Self {
             teeth: (45, 55),
@@ -54,7 +56,7 @@ impl Default for SearchSpace {
             ratio: (5.0, 60.0),
             centre_distance: (48e-3, 52e-3),
             hold_margin: 0.05,
-            stop_margin: 0.0,
+            stop_margin: 0.15,
         }
     }
 }
