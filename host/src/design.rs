@@ -10,7 +10,7 @@ use crate::RigError;
 pub mod checks;
 pub mod search;
 
-pub use checks::{Check, CheckLimits};
+pub use checks::{Check, CheckLimits, Material};
 
 /// The rig values a design is evaluated at (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -329,6 +329,37 @@ mod tests {
         assert!(r.tau_cam_available_nm < r.tau_cam_hat_nm);
         assert!(
             r.warnings.iter().any(|w| w.contains("cam torque")),
+            "{:?}",
+            r.warnings
+        );
+    }
+
+    #[test]
+    fn root_stress_is_checked_against_the_material_when_given() {
+        // The paper's gear at 3.68 N m on a 10 mm face: F_t = 2 tau / (m Z4) = 147 N, times
+        // Y_Fa Y_Sa Y_eps ~ 2.32 * 1.70 * 0.68 over b m: about 39 MPa.
+        let with = |limit_mpa: f64| RigParams {
+            limits: CheckLimits {
+                material: Some(Material {
+                    face_width: 10e-3,
+                    root_stress_limit: limit_mpa * 1e6,
+                }),
+                ..CheckLimits::default()
+            },
+            ..RigParams::default()
+        };
+        let r = evaluate(paper::RIG_Z, &with(100.0), None).unwrap();
+        let c = r
+            .checks
+            .iter()
+            .find(|c| c.name == "root stress (material)")
+            .unwrap();
+        assert!(c.passed && (c.value * 1e-6 - 39.0).abs() < 3.0, "{c:?}");
+        let r = evaluate(paper::RIG_Z, &with(30.0), None).unwrap();
+        assert!(
+            r.warnings
+                .iter()
+                .any(|w| w.contains("exceeds the material")),
             "{:?}",
             r.warnings
         );

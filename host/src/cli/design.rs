@@ -90,6 +90,12 @@ struct RigArgs {
     /// Smallest root-stress margin against the paper's gear at 3.68 N m.
     #[arg(long, value_parser = args::positive, default_value_t = 1.0, allow_hyphen_values = true)]
     min_strength_margin: f64,
+    /// Face width, mm: with --root-stress-limit also checks the root stress absolutely.
+    #[arg(long, value_parser = args::positive, requires = "root_stress_limit", allow_hyphen_values = true)]
+    face_width: Option<f64>,
+    /// Permissible tooth-root stress of the material sigma_FP (ISO 6336-5), MPa.
+    #[arg(long, value_parser = args::positive, requires = "face_width", allow_hyphen_values = true)]
+    root_stress_limit: Option<f64>,
 }
 
 /// `rig design` subcommands.
@@ -216,6 +222,13 @@ impl RigArgs {
                 min_tip_thickness_modules: self.min_tip_thickness,
                 min_contact_ratio: self.min_contact_ratio,
                 min_strength_margin: self.min_strength_margin,
+                material: match (self.face_width, self.root_stress_limit) {
+                    (Some(b), Some(sigma)) => Some(design::Material {
+                        face_width: b * 1e-3,
+                        root_stress_limit: sigma * 1e6,
+                    }),
+                    _ => None,
+                },
             },
             ..RigParams::default()
         })

@@ -21,6 +21,28 @@ pub struct CheckLimits {
     pub min_contact_ratio: f64,
     /// Smallest root-stress margin against the paper's gear at its limit.
     pub min_strength_margin: f64,
+    /// Face width b (m) and permissible root stress sigma_FP (Pa) of the material, when
+    /// known: the root stress is then also checked absolutely, sigma_F0 <= sigma_FP.
+    pub material: Option<Material>,
+}
+
+/// Face width and permissible tooth-root stress (ISO 6336-5: sigma_FP = sigma_Flim Y_ST /
+/// S_Fmin, e.g. about 290 MPa for through-hardened S45C with S_F 1.4 and Y_ST 2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Material {
+    /// Face width b, m.
+    pub face_width: f64,
+    /// Permissible root stress sigma_FP, Pa.
+    pub root_stress_limit: f64,
+}
+
+/// Highest nominal root stress sigma_F0 of the four gears at `tau_out` (N m) for face width
+/// `face_width` (m), Pa (ISO 6336-3 with the load at the tip).
+pub fn root_stress(gear: &GearSet, tau_out: f64, face_width: f64) -> f64 {
+    gear.root_stress_times_face_width(tau_out)
+        .into_iter()
+        .fold(0.0f64, f64::max)
+        / face_width
 }
 
 impl Default for CheckLimits {
@@ -30,6 +52,7 @@ impl Default for CheckLimits {
             min_tip_thickness_modules: 0.25,
             min_contact_ratio: 1.1,
             min_strength_margin: 1.0,
+            material: None,
         }
     }
 }
@@ -90,6 +113,29 @@ pub fn buildability(gear: &GearSet, params: &RigParams) -> Vec<Check> {
             }
         ),
     });
+    if let Some(mat) = lim.material {
+        let sigma = root_stress(gear, params.tau_rot, mat.face_width);
+        let ok = sigma <= mat.root_stress_limit;
+        out.push(Check {
+            name: "root stress (material)".into(),
+            passed: ok,
+            value: sigma,
+            limit: mat.root_stress_limit,
+            reason: format!(
+                "root stress {:.1} MPa at {:.3} N m on a {:.1} mm face (ISO 6336-3, load at the tip) {} the material's {:.1} MPa{}",
+                sigma * 1e-6,
+                params.tau_rot,
+                mat.face_width * 1e3,
+                if ok { "within" } else { "exceeds" },
+                mat.root_stress_limit * 1e-6,
+                if ok {
+                    ""
+                } else {
+                    ": widen the face, raise the module or lower the rated load"
+                }
+            ),
+        });
+    }
     let omega_n = 2.0 * core::f64::consts::PI * params.vibration_hz;
     let drive = CamDrive {
         gear: *gear,

@@ -285,6 +285,12 @@ fn search_sets(
                     if strength < params.limits.min_strength_margin {
                         continue;
                     }
+                    if let Some(mat) = params.limits.material
+                        && checks::root_stress(&gear, params.tau_rot, mat.face_width)
+                            > mat.root_stress_limit
+                    {
+                        continue;
+                    }
                     feasible += 1;
                     insert(
                         &mut front,
