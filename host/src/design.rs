@@ -229,7 +229,7 @@ pub fn render_text(r: &DesignReport) -> String {
         let _ = writeln!(s, "  working pressure angles    {w12:.4} {w34:.4} deg");
         let _ = writeln!(
             s,
-            "  Lambda (Willis, Eq. 19)    {:>10.3}",
+            "  Lambda_W (Willis, Eq. 19)  {:>10.3}",
             r.big_lambda_willis
         );
     }
@@ -244,7 +244,11 @@ pub fn render_text(r: &DesignReport) -> String {
         "  contact ratios (Eq. 2)     {:.3} {:.3} {:.3} {:.3}",
         e[0], e[1], e[2], e[3]
     );
-    let _ = writeln!(s, "  Lambda (Eq. 3)             {:>10.3}", r.big_lambda);
+    if r.x == [0.0; 4] {
+        let _ = writeln!(s, "  Lambda (Eq. 3)             {:>10.3}", r.big_lambda);
+    } else {
+        let _ = writeln!(s, "  Lambda (Eq. 3 generalised) {:>10.3}", r.big_lambda);
+    }
     let _ = writeln!(s, "  lambda (Eq. 41)            {:>10.4}", r.small_lambda);
     let _ = writeln!(s, "  mu_s*Lambda                {:>10.3}", r.mu_s_lambda);
     let _ = writeln!(s, "  mu_d*Lambda                {:>10.3}", r.mu_d_lambda);
