@@ -33,10 +33,12 @@ pub mod excitation;
 pub mod friction;
 pub mod gear;
 pub mod hardware;
+pub mod involute;
 pub mod load;
 mod math;
 pub mod paper;
 pub mod plant;
+pub mod tooth_strength;
 
 pub use calibration::{
     BoardLimits, Calibration, CalibrationConsistency, CalibrationField, CalibrationIssue,

@@ -15,3 +15,11 @@ pub(crate) fn sin(x: f64) -> f64 {
 pub(crate) fn tan(x: f64) -> f64 {
     libm::tan(x)
 }
+
+pub(crate) fn acos(x: f64) -> f64 {
+    libm::acos(x)
+}
+
+pub(crate) fn atan(x: f64) -> f64 {
+    libm::atan(x)
+}

@@ -206,11 +206,16 @@ impl RigFile {
         Ok(())
     }
 
-    /// The gear set, module and pressure angle in SI.
+    /// The gear set, module, pressure angle and profile shifts in SI.
     pub fn gear_set(&self) -> Result<GearSet, RigFileError> {
         let g = &self.gear;
-        GearSet::new(g.z, g.module_mm * 1e-3, g.pressure_angle_deg.to_radians())
-            .map_err(|source| RigFileError::Gear { z: g.z, source })
+        GearSet::shifted(
+            g.z,
+            g.profile_shift,
+            g.module_mm * 1e-3,
+            g.pressure_angle_deg.to_radians(),
+        )
+        .map_err(|source| RigFileError::Gear { z: g.z, source })
     }
 
     /// The cam drive (gear set, e and M_hat in SI).

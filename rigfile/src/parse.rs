@@ -303,6 +303,13 @@ fn check(loaded: &Loaded, name: &str) -> Result<(), RigFileError> {
                 source: model::GearError::BadPressureAngle,
                 ..
             } => "pressure_angle_deg",
+            RigFileError::Gear {
+                source:
+                    model::GearError::BadShift { .. }
+                    | model::GearError::UnequalWorkingCentreDistance { .. }
+                    | model::GearError::NoWorkingPressureAngle { .. },
+                ..
+            } => "profile_shift",
             _ => "z",
         };
         let why = match e {

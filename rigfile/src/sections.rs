@@ -9,7 +9,7 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::paper_units;
 
-/// `[gear]`: tooth counts, module and pressure angle.
+/// `[gear]`: tooth counts, module, pressure angle and profile shifts.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GearSection {
@@ -19,6 +19,14 @@ pub struct GearSection {
     pub module_mm: f64,
     /// Pressure angle, degrees.
     pub pressure_angle_deg: f64,
+    /// Profile shift coefficients x1..x4 (written only when a gear is shifted, so files of
+    /// standard gears stay as they were).
+    #[serde(skip_serializing_if = "is_standard")]
+    pub profile_shift: [f64; 4],
+}
+
+fn is_standard(x: &[f64; 4]) -> bool {
+    *x == [0.0; 4]
 }
 
 impl Default for GearSection {
@@ -29,6 +37,7 @@ impl Default for GearSection {
             pressure_angle_deg: paper_units::tidy(
                 model::GearSet::PRESSURE_ANGLE_STANDARD.to_degrees(),
             ),
+            profile_shift: [0.0; 4],
         }
     }
 }

@@ -364,3 +364,29 @@ fn the_drive_decay_is_a_known_inertia_term_unless_the_model_fits_it() {
         assert_eq!(rig.with_drive_decay(!regenerative), rig);
     }
 }
+
+#[test]
+fn profile_shift_round_trips_and_a_mismatch_names_the_key_and_the_fix() {
+    let mut rig = RigFile::paper();
+    rig.gear.profile_shift = [0.1, -0.1, 0.2, -0.2];
+    let text = rig.to_toml().unwrap();
+    assert!(text.contains("profile_shift"), "{text}");
+    let back = RigFile::parse_detailed(&text, "shifted.toml").unwrap().rig;
+    assert_eq!(back.gear.profile_shift, rig.gear.profile_shift);
+    assert_eq!(back.gear_set().unwrap().shift(), rig.gear.profile_shift);
+    // Standard gears do not write the key: existing files stay as they were.
+    assert!(
+        !RigFile::paper()
+            .to_toml()
+            .unwrap()
+            .contains("profile_shift")
+    );
+    let bad = text.replace("0.2, -0.2", "0.3, 0.0");
+    let err = RigFile::parse_detailed(&bad, "bad.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("profile_shift") && err.contains("x3 + x4"),
+        "{err}"
+    );
+}

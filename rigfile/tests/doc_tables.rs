@@ -205,6 +205,8 @@ fn the_code_reads_and_writes_exactly_the_documented_keys() {
             params: BTreeMap::from([("offset_a".to_string(), 0.01)]),
         }],
     );
+    // Shifted gears write profile_shift (files of standard gears leave it out).
+    rig.gear.profile_shift = [0.1, -0.1, 0.2, -0.2];
     rig.calibration.fit = Some(rigfile::FitSection {
         torque_points: 9,
         torque_r_squared: 1.0,

@@ -47,6 +47,11 @@ pub struct Fig5Args {
     /// Vibration frequency of the release, Hz (3.6 V gave about 5 Hz; 1 to 15).
     #[arg(long, default_value_t = 5.0, value_parser = crate::args::positive)]
     pub freq: f64,
+    /// How long the record runs after the cam has stopped, s. Default 0.5 s for the
+    /// paper's gear, 20 s with a designed gear from --model (with mu_d*Lambda just above 1
+    /// friction needs seconds to bring the 2.79 kg m^2 output to rest).
+    #[arg(long, value_parser = crate::args::positive)]
+    pub after_stop: Option<f64>,
     /// Sensor-noise seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -167,17 +172,28 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
             let opts = fig5::Fig5Options {
                 hold_s: a.hold,
                 vibration_hz: check_freq(a.freq)?,
+                after_stop_s: a
+                    .after_stop
+                    .unwrap_or(if designs_a_gear(a.model.as_deref())? {
+                        DESIGN_AFTER_STOP_S
+                    } else {
+                        fig5::Fig5Options::default().after_stop_s
+                    }),
                 seed: a.seed,
                 sensor_supply_v: a.sensor_supply_v,
                 effects: sim::Preset::by_name(&a.preset)?.effects,
                 ..Default::default()
             };
-            let fitted = fitted_model(a.model.as_deref())?;
+            let fitted = model_or_design(a.model.as_deref())?;
             let r = crate::experiment::paper::fig5_fitted(&opts, fitted.as_ref())?;
             if a.json {
                 super::print_json(&mut out, &r)?;
             } else {
-                writeln!(out, "fig5, (Z1, Z4) = (50, 49), 1.0 kg on 75 mm:")?;
+                let [z1, z2, z3, z4] = r.z;
+                writeln!(
+                    out,
+                    "fig5, Z1..Z4 = {z1}, {z2}, {z3}, {z4}, 1.0 kg on 75 mm:"
+                )?;
                 writeln!(
                     out,
                     "  held without vibration for {:.1} s: {}",
@@ -192,11 +208,21 @@ pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
                     "  output speed after the cam stopped: {:.3} rad/s (mu_d*Lambda = {:.3})",
                     r.output_speed_after_stop_rad_s, r.mu_d_lambda
                 )?;
+                writeln!(
+                    out,
+                    "  after the cam stopped: {} ({:.4} rad of travel)",
+                    if r.stops_after_vibration {
+                        "the output came to rest"
+                    } else {
+                        "the output kept moving"
+                    },
+                    r.after_stop_travel_rad
+                )?;
             }
             Ok(ExitCode::SUCCESS)
         }
         Scenario::Table1(a) => {
-            let fitted = fitted_model(a.model.as_deref())?;
+            let fitted = model_or_design(a.model.as_deref())?;
             let rows = crate::experiment::paper::table1_fitted(
                 &model::TABLE1,
                 f64::from(check_freq(a.freq)?),
@@ -329,6 +355,34 @@ fn fitted_model(path: Option<&std::path::Path>) -> Result<Option<rigfile::RigFil
         return Err(RigError::BadValue {
             what: format!("--model {}", path.display()),
             why: "the rig file has no fitted [model]: write one with `rig explain --measured X --write-model FILE`".into(),
+        });
+    }
+    Ok(Some(rig))
+}
+
+/// `rig sim fig5`'s record after the cam stop with a designed gear, s.
+pub const DESIGN_AFTER_STOP_S: f64 = 20.0;
+
+/// Whether the `--model` file designs a gear (its `[gear]` is not the paper's standard set).
+fn designs_a_gear(path: Option<&std::path::Path>) -> Result<bool, RigError> {
+    match path {
+        Some(p) => Ok(rigfile::RigFile::load(p)?.gear_set()? != model::paper::RIG_GEARS),
+        None => Ok(false),
+    }
+}
+
+/// The rig file of `rig sim fig5|table1 --model`: a fitted `[model]` (its mu and effects
+/// run in the plant), a designed `[gear]` (`rig design search --write`: the scenario runs
+/// that gear), or both.
+fn model_or_design(path: Option<&std::path::Path>) -> Result<Option<rigfile::RigFile>, RigError> {
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    let rig = rigfile::RigFile::load(path)?;
+    if rig.model.is_none() && rig.gear_set()? == model::paper::RIG_GEARS {
+        return Err(RigError::BadValue {
+            what: format!("--model {}", path.display()),
+            why: "the rig file has neither a fitted [model] nor a designed [gear]: write one with `rig explain --measured X --write-model FILE` or `rig design search --write DIR`".into(),
         });
     }
     Ok(Some(rig))

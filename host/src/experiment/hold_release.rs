@@ -216,7 +216,20 @@ pub struct Fig5Numbers {
     pub output_speed_after_stop_rad_s: f64,
     /// Rope paid out, m.
     pub load_drop_m: f64,
+    /// The output stood still (within 0.1 mm of rope) over the last
+    /// [`STILL_WINDOW_S`] of the record after the cam stopped: mu_d Lambda > 1 brought it
+    /// to rest.
+    pub stops_after_vibration: bool,
+    /// Output travel from the cam's stop to the end of the record, rad.
+    pub after_stop_travel_rad: f64,
 }
+
+/// Cam speed below which the cam counts as stopped, rad/s.
+pub const CAM_STOPPED_RAD_S: f64 = 0.5;
+
+/// The output is at rest after the vibration when it did not move (0.1 mm of rope) over
+/// this last stretch of the record, s.
+pub const STILL_WINDOW_S: f64 = 0.2;
 
 /// Reads [`Fig5Numbers`] from `samples`.
 pub fn fig5_numbers(samples: &[Sample], radius_m: f64) -> Fig5Numbers {
@@ -241,7 +254,24 @@ pub fn fig5_numbers(samples: &[Sample], radius_m: f64) -> Fig5Numbers {
         _ => 0.0,
     };
     let all: Vec<&Sample> = samples.iter().collect();
+    let after: Vec<&Sample> = samples.iter().filter(|s| s.phase == "after").collect();
+    let stop = after
+        .iter()
+        .position(|s| s.cam_speed_rad_s.abs() < CAM_STOPPED_RAD_S);
+    let (stops_after_vibration, after_stop_travel_rad) = match (stop, after.last()) {
+        (Some(k), Some(last)) => {
+            // At rest: no motion over the record's last STILL_WINDOW_S after the cam stop.
+            let from = (last.t_s - STILL_WINDOW_S).max(after[k].t_s);
+            let window_start = after[k..].iter().find(|s| s.t_s >= from).unwrap_or(last);
+            let still = last.t_s - after[k].t_s >= STILL_WINDOW_S
+                && super::bench::moved(Some(angle(window_start)), Some(angle(last))) == Some(false);
+            (still, angle(last) - angle(after[k]))
+        }
+        _ => (false, 0.0),
+    };
     Fig5Numbers {
+        stops_after_vibration,
+        after_stop_travel_rad,
         held_without_vibration: held,
         release_to_motion_s,
         output_speed_at_stop_rad_s: speed(&release),

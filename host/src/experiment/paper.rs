@@ -144,13 +144,24 @@ pub fn table1_fitted(
         ..Default::default()
     };
     let mut rows = Vec::new();
+    // A designed gear (`--model DESIGN.toml`) is the one row.
+    let design = designed_gear(fitted)?;
+    let design_z = design.map(|g| [g.z()]);
+    let sets = design_z.as_ref().map_or(sets, |z| z.as_slice());
     for &z in sets {
         let mut config = config(
-            z,
+            if design.is_some() {
+                model::paper::RIG_Z
+            } else {
+                z
+            },
             Load::Torque(0.0),
             seed,
             model::hardware::acs714::SUPPLY_NOMINAL_V,
         )?;
+        if let Some(gear) = design {
+            use_gear(&mut config, gear);
+        }
         config.plant.effects = effects;
         if let Some(rig) = fitted {
             sim::preset::apply_model(rig, &mut config.plant)?;
@@ -161,7 +172,8 @@ pub fn table1_fitted(
         let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, Some(z))? else {
             continue;
         };
-        let paper_non_backdriven_point = gear.n() == 1;
+        // Eq. (4) with the paper's mu_s: n = 1 for the Table 1 rows, as the paper found.
+        let paper_non_backdriven_point = gear.holds(model::paper::MU_S);
         rows.push(table1::Table1Row {
             z,
             n: gear.n(),
@@ -188,12 +200,21 @@ pub fn fig5_fitted(
     opts: &fig5::Fig5Options,
     fitted: Option<&rigfile::RigFile>,
 ) -> Result<fig5::Fig5Result, RigError> {
-    let z = model::paper::FIG5_Z;
-    let mut config = config(z, model::paper::FIG5_LOAD, opts.seed, opts.sensor_supply_v)?;
+    let mut config = config(
+        model::paper::FIG5_Z,
+        model::paper::FIG5_LOAD,
+        opts.seed,
+        opts.sensor_supply_v,
+    )?;
     config.plant.effects = opts.effects;
+    if let Some(gear) = designed_gear(fitted)? {
+        use_gear(&mut config, gear);
+    }
     if let Some(rig) = fitted {
         sim::preset::apply_model(rig, &mut config.plant)?;
     }
+    let z = config.plant.drive.gear.z();
+    let x = config.plant.drive.gear.shift();
     let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
     let mut bench = SimBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
@@ -216,5 +237,43 @@ pub fn fig5_fitted(
         output_speed_at_stop_rad_s: n.output_speed_at_stop_rad_s,
         load_drop_m: n.load_drop_m,
         mu_d_lambda,
+        stops_after_vibration: n.stops_after_vibration,
+        after_stop_travel_rad: n.after_stop_travel_rad,
+        x,
     })
+}
+
+/// The gear set a rig file designs: its `[gear]` when that is not the paper's standard
+/// (49, 51, 50, 50) set every rig file carries by default (a `rig design search --write`
+/// file); `None` otherwise, and the scenario keeps its own gear.
+fn designed_gear(fitted: Option<&rigfile::RigFile>) -> Result<Option<model::GearSet>, RigError> {
+    let Some(rig) = fitted else {
+        return Ok(None);
+    };
+    let gear = rig.gear_set()?;
+    let [z1, z2, z3, z4] = gear.z();
+    if z1 + z2 != z3 + z4 {
+        return Err(RigError::BadValue {
+            what: format!("--model: the designed gear {z1},{z2},{z3},{z4}"),
+            why: format!(
+                "Z1 + Z2 = {} but Z3 + Z4 = {}: the calibration record the firmware stores carries no profile shift yet, and the firmware refuses unequal tooth sums; simulate a design with Z1 + Z2 = Z3 + Z4 (`rig design search --max-sum-difference 0`)",
+                z1 + z2,
+                z3 + z4
+            ),
+        });
+    }
+    Ok((gear != model::paper::RIG_GEARS).then_some(gear))
+}
+
+/// Builds the virtual rig around `gear`: the plant's gear and the stored record's tooth
+/// counts, module and pressure angle. The record carries no profile shift (the firmware's
+/// Lambda is that of standard gears with these tooth counts; docs/rig-file.md).
+fn use_gear(config: &mut sim::SimConfig, gear: model::GearSet) {
+    config.plant.drive.gear = gear;
+    config.calibration.z = gear.z().map(|v| u16::try_from(v).unwrap_or(u16::MAX));
+    #[allow(clippy::cast_possible_truncation, reason = "mm and degrees fit f32")]
+    {
+        config.calibration.module_mm = (gear.module() * 1e3) as f32;
+        config.calibration.pressure_angle_deg = gear.pressure_angle().to_degrees() as f32;
+    }
 }

@@ -2,7 +2,8 @@
 //! still without vibration (14.5 s in the paper) and falls once vibration starts (3.6 V,
 //! about 5 Hz); with mu_d Lambda < 1 it keeps falling after the vibration stops. The
 //! settings and the result `rig sim fig5` prints; `rig experiment hold-release` runs it
-//! (`host::experiment::paper::fig5`).
+//! (`host::experiment::paper::fig5`). With `--model DESIGN.toml` whose `[gear]` is not the
+//! paper's standard set, the scenario runs that gear (a `rig design search` design).
 
 use model::paper;
 use serde::Serialize;
@@ -61,4 +62,11 @@ pub struct Fig5Result {
     pub load_drop_m: f64,
     /// mu_d Lambda of the gear set (below 1: motion continues after vibration stops).
     pub mu_d_lambda: f64,
+    /// The output came to rest after the cam stopped (stood still over the last 0.2 s of
+    /// the record).
+    pub stops_after_vibration: bool,
+    /// Output travel from the cam's stop to the end of the record, rad.
+    pub after_stop_travel_rad: f64,
+    /// Profile shift coefficients x1..x4 of the gear set.
+    pub x: [f64; 4],
 }

@@ -1,6 +1,7 @@
 //! Table 1 of the paper: the six gear sets at tau_rot = 3.68 N m. Without vibration only
 //! n = 1 holds; with vibration every set backdrives. The rows `rig sim table1` prints;
-//! `rig experiment backdrive` runs it (`host::experiment::paper::table1`).
+//! `rig experiment backdrive` runs it (`host::experiment::paper::table1`). With `--model
+//! DESIGN.toml` whose `[gear]` is not the paper's standard set, the one row is that gear.
 
 use serde::Serialize;
 
@@ -20,7 +21,8 @@ pub struct Table1Row {
     pub backdriven_without_vibration: bool,
     /// The output turned once the vibrator ran.
     pub backdriven_with_vibration: bool,
-    /// The paper's verdict: a non-backdriven point exists (n = 1).
+    /// The paper's verdict: a non-backdriven point exists (Eq. 4, mu_s Lambda > 1 with
+    /// mu_s = 0.271; n = 1 for the Table 1 rows).
     pub paper_non_backdriven_point: bool,
     /// Simulation and paper agree.
     pub agrees_with_paper: bool,
