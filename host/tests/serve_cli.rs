@@ -41,6 +41,15 @@ impl Server {
         serde_json::from_str(&text).unwrap_or_else(|e| panic!("not JSON ({e}):\n{text}"))
     }
 
+    /// `rig faults --json`: exit 0 with nothing latched, 3 while a fault is latched.
+    fn faults(&self) -> Value {
+        let out = self.client(&["faults", "--json"]).output().unwrap();
+        let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let latched = !v["latched"].as_array().unwrap().is_empty();
+        assert_eq!(out.status.code(), Some(if latched { 3 } else { 0 }), "{v}");
+        v
+    }
+
     /// SIGINT, then the exit status.
     fn interrupt(mut self) -> std::process::ExitStatus {
         let sent = std::process::Command::new("kill")
@@ -118,7 +127,7 @@ fn served_rig_keeps_calibration_and_faults_between_clients_and_stops_on_sigint()
     release.wait().unwrap();
     let t0 = Instant::now();
     loop {
-        let f = server.json(&["faults", "--json"]);
+        let f = server.faults();
         if !f["latched"].as_array().unwrap().is_empty() {
             break;
         }
@@ -128,12 +137,12 @@ fn served_rig_keeps_calibration_and_faults_between_clients_and_stops_on_sigint()
         );
         std::thread::sleep(Duration::from_millis(300));
     }
-    let latched = server.json(&["faults", "--json"])["latched"].clone();
-    let again = server.json(&["faults", "--json"]);
+    let latched = server.faults()["latched"].clone();
+    let again = server.faults();
     assert!(!latched.as_array().unwrap().is_empty());
     assert_eq!(again["latched"], latched, "still latched in a new command");
     server.client(&["clear"]).assert().success();
-    let f = server.json(&["faults", "--json"]);
+    let f = server.faults();
     assert!(f["latched"].as_array().unwrap().is_empty(), "{f}");
 
     let status = server.interrupt();

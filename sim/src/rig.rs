@@ -155,6 +155,9 @@ pub struct SimRig {
     frozen_count: u16,
     flash: Option<RigParameters>,
     bench: SimBench,
+    /// The core has latched the break the plant's comparator tripped (so a later clear of
+    /// `HW_OVERCURRENT` re-arms it).
+    break_reported: bool,
 }
 
 impl SimRig {
@@ -190,6 +193,7 @@ impl SimRig {
                 sensor_supply_v: None,
                 commands: 0,
             },
+            break_reported: false,
         }
     }
 
@@ -239,6 +243,13 @@ impl SimRig {
     }
 
     fn control_step(&mut self) {
+        if self.break_reported && !self.core.break_latched() {
+            // ClearFaults cleared HW_OVERCURRENT: the binary clears the break flag and sets
+            // MOE again before it reads this step's inputs. A cause still present trips the
+            // comparator again; one that is gone leaves the fault cleared.
+            self.plant.rearm_break();
+            self.break_reported = false;
+        }
         let encoder_count = if self.injections.encoder_frozen {
             self.frozen_count
         } else {
@@ -274,9 +285,8 @@ impl SimRig {
             release_button: self.button,
         };
         let out = self.core.step(&inputs);
-        if self.plant.break_tripped() && !self.core.break_latched() {
-            // ClearFaults cleared HW_OVERCURRENT: the binary sets MOE again.
-            self.plant.rearm_break();
+        if self.plant.break_tripped() && self.core.break_latched() {
+            self.break_reported = true;
         }
         self.adc.clear();
         self.drive = Drive {

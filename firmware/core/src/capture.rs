@@ -43,9 +43,9 @@ pub enum CapturePhase {
 pub struct CapturePlan {
     /// Capture id.
     pub id: u16,
-    /// Samples it will record (clamped to the buffer).
+    /// Samples it will record (as asked).
     pub samples: u32,
-    /// Actual sample rate, Hz.
+    /// Sample rate, Hz (as asked).
     pub sample_rate_hz: u16,
 }
 
@@ -88,7 +88,10 @@ impl Capture {
         self.phase
     }
 
-    /// Starts recording `samples` at about `sample_rate_hz`, from an ADC running at `adc_hz`.
+    /// Starts recording `samples` at `sample_rate_hz`, from an ADC running at `adc_hz`.
+    /// Refused with `BadArgument` (never rounded or capped) unless the rate is `adc_hz`
+    /// divided by a whole number and at least [`MIN_SAMPLE_RATE_HZ`], and `samples` is
+    /// 1..=[`CAPTURE_CAPACITY`]; with `Busy` while a capture records or uploads.
     pub fn start(
         &mut self,
         sample_rate_hz: u16,
@@ -98,14 +101,20 @@ impl Capture {
         if self.phase != CapturePhase::Idle {
             return Err(NackCode::Busy);
         }
-        if samples == 0 || sample_rate_hz < MIN_SAMPLE_RATE_HZ {
+        let rate = u32::from(sample_rate_hz);
+        let capacity = u32::try_from(CAPTURE_CAPACITY).unwrap_or(u32::MAX);
+        if samples == 0
+            || samples > capacity
+            || sample_rate_hz < MIN_SAMPLE_RATE_HZ
+            || rate > adc_hz
+            || adc_hz % rate != 0
+        {
             return Err(NackCode::BadArgument);
         }
-        let rate = u32::from(sample_rate_hz).min(adc_hz).max(1);
-        self.decimation = ((adc_hz + rate / 2) / rate).max(1);
-        self.sample_rate_hz = u16::try_from(adc_hz / self.decimation).unwrap_or(u16::MAX);
+        self.decimation = adc_hz / rate;
+        self.sample_rate_hz = sample_rate_hz;
         self.id = self.id.wrapping_add(1);
-        self.total = samples.min(u32::try_from(CAPTURE_CAPACITY).unwrap_or(u32::MAX));
+        self.total = samples;
         self.recorded = 0;
         self.sent = 0;
         self.countdown = 0;

@@ -75,7 +75,7 @@ fn spin_up(s: &mut Session, hz: f32) -> Result<(), RigError> {
             Some(t) if t.state == SupervisorState::Fault || !t.faults.is_empty() => {
                 break Err(RigError::DeviceFault {
                     what: "capture: the release failed".into(),
-                    faults: t.faults.to_string(),
+                    faults: t.faults,
                 });
             }
             _ => {}

@@ -80,8 +80,11 @@ pub struct Comparison {
     pub model: Option<String>,
     /// Effects of the fitted model.
     pub model_effects: Vec<String>,
-    /// Test points replayed (rows with a current).
+    /// Test points replayed (rows with a current that the virtual rig could run).
     pub points: usize,
+    /// Data rows (1-based) the virtual rig could not run (a load above the rig file's
+    /// `max_release_load_nm`, a point its protections skipped): left out of every gap.
+    pub skipped_rows: Vec<usize>,
     /// RMS of measured minus base-model current, A.
     pub gap_rmse_base_a: f64,
     /// RMS of measured minus fitted-model current, A (null without --model).
@@ -168,8 +171,10 @@ fn header_plan(path: &Path) -> HeaderPlan {
     }
 }
 
-/// Mean currents of `plan` run on the in-process virtual rig of `config`, in plan order.
-pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<f64>, RigError> {
+/// Mean currents of `plan` run on the in-process virtual rig of `config`, one per plan
+/// point in plan order: `None` for a point the virtual rig did not measure (a load above
+/// the rig's `max_release_load_nm`, a point its protections skipped).
+pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>, RigError> {
     let mut bench = SimBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
     let setup = SweepSetup {
@@ -179,7 +184,13 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<f64>, RigErro
         command: "rig compare".into(),
     };
     let outcome = sweep::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
-    Ok(outcome.rows.iter().map(|r| r.i_in_a).collect())
+    let mut currents = vec![None; plan.points.len()];
+    for r in &outcome.rows {
+        if let Some(slot) = currents.get_mut(r.point) {
+            *slot = Some(r.i_in_a);
+        }
+    }
+    Ok(currents)
 }
 
 /// The virtual rig of `rig` with its fitted `[model]` running in the plant (or none).
@@ -230,27 +241,44 @@ pub fn compare(
         Some(m) => Some(simulate(virtual_rig(m, true, seed)?, &plan)?),
         None => None,
     };
+    // A point either virtual rig could not run is left out of both gaps (and listed).
+    let mut skipped_rows = Vec::new();
     let rows: Vec<GapRow> = order
         .iter()
         .enumerate()
-        .map(|(j, &k)| {
+        .filter_map(|(j, &k)| {
             let measured_a = data.i_in()[k];
-            let model_a = fitted.as_ref().map(|f| f[j]);
+            let base_a = base.get(j).copied().flatten();
+            let model_a = fitted.as_ref().map(|f| f.get(j).copied().flatten());
+            let (Some(base_a), None | Some(Some(_))) = (base_a, model_a) else {
+                skipped_rows.push(k + 1);
+                return None;
+            };
+            let model_a = model_a.flatten();
             let p = &plan.points[j];
-            GapRow {
+            Some(GapRow {
                 row: k + 1,
                 tau_rot_nm: data.tau_rot()[k],
                 v_in_v: p.volts,
                 hz: p.hz,
                 temp_c: p.temp_c,
                 measured_a,
-                base_a: base[j],
+                base_a,
                 model_a,
-                gap_base_a: measured_a - base[j],
+                gap_base_a: measured_a - base_a,
                 gap_model_a: model_a.map(|m| measured_a - m),
-            }
+            })
         })
         .collect();
+    if rows.is_empty() {
+        return Err(RigError::BadValue {
+            what: format!("--measured {}", measured.display()),
+            why: format!(
+                "the virtual rig could run none of its {} test points (every load above the rig file's max_release_load_nm, or beyond the board's limits): compare with a rig file whose limits cover the measured loads (--rig)",
+                order.len()
+            ),
+        });
+    }
     let gap_rmse_base_a = rms(rows.iter().map(|r| r.gap_base_a));
     let gap_rmse_model_a = fitted
         .as_ref()
@@ -263,6 +291,7 @@ pub fn compare(
             .map(|m| m.effects.iter().map(|e| e.name.clone()).collect())
             .unwrap_or_default(),
         points: rows.len(),
+        skipped_rows,
         gap_rmse_base_a,
         gap_rmse_model_a,
         gap_ratio: gap_rmse_model_a.map(|m| m / gap_rmse_base_a.max(1e-12)),
@@ -386,6 +415,18 @@ pub fn run(a: CompareArgs) -> Result<ExitCode, RigError> {
                 m * 1e3,
                 mm * 1e3,
                 100.0 * c.gap_ratio.unwrap_or(f64::NAN)
+            )?;
+        }
+        if !c.skipped_rows.is_empty() {
+            writeln!(
+                out,
+                "  {} rows not replayed (the virtual rig could not run them: load above max_release_load_nm or a protection tripped), left out of the gaps: {}",
+                c.skipped_rows.len(),
+                c.skipped_rows
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )?;
         }
         if let Some(s) = &c.svg {
