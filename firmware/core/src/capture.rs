@@ -251,13 +251,19 @@ mod tests {
     }
 
     #[test]
-    fn decimates_clamps_and_refuses_bad_arguments() {
+    fn decimates_and_refuses_what_it_cannot_do_exactly() {
         let mut c = Capture::new();
         assert_eq!(c.start(50, 10, 10_000), Err(NackCode::BadArgument));
         assert_eq!(c.start(1000, 0, 10_000), Err(NackCode::BadArgument));
-        let plan = c.start(3000, 1_000_000, 10_000).unwrap();
+        // Never rounded to a divisor nor capped to the buffer: refused.
+        assert_eq!(c.start(3000, 100, 10_000), Err(NackCode::BadArgument));
+        assert_eq!(c.start(20_000, 100, 10_000), Err(NackCode::BadArgument));
+        let over = CAPTURE_CAPACITY as u32 + 1;
+        assert_eq!(c.start(10_000, over, 10_000), Err(NackCode::BadArgument));
+        assert_eq!(c.phase(), CapturePhase::Idle, "a refusal has no effect");
+        let plan = c.start(2500, CAPTURE_CAPACITY as u32, 10_000).unwrap();
         assert_eq!(plan.samples, CAPTURE_CAPACITY as u32);
-        assert_eq!(plan.sample_rate_hz, 3333);
+        assert_eq!(plan.sample_rate_hz, 2500);
         let mut c = Capture::new();
         c.start(1000, 5, 10_000).unwrap();
         for k in 0..5u16 {
