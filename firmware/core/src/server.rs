@@ -167,10 +167,15 @@ impl Core {
     }
 
     fn handle(&mut self, now: u64, seq: u16, msg: Request) -> Answer {
+        // Status, clearing and locking (the safe direction) are never held off.
         let status_or_clear = matches!(
             msg,
-            Request::Hello { .. } | Request::GetInfo | Request::GetFaults | Request::ClearFaults
-        );
+            Request::Hello { .. }
+                | Request::GetInfo
+                | Request::GetFaults
+                | Request::ClearFaults
+                | Request::Release { on: false, .. }
+        ) || matches!(msg, Request::OpenLoop { volts } if volts == 0.0);
         if !status_or_clear && self.faults.in_hold(now) {
             return Answer::nack(NackCode::InFaultHold);
         }

@@ -83,3 +83,38 @@ pub fn run(a: FaultsArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         ExitCode::from(EXIT_LATCHED)
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The host explains every bit the firmware can raise: both read the protocol's table,
+    /// so a bit without help fails here and in `protocol`.
+    #[test]
+    fn every_fault_the_firmware_raises_is_explained() {
+        for row in FaultFlags::TABLE {
+            assert_eq!(fault_help(row.name), row.help);
+            assert!(!fault_help(row.name).contains("no name"), "{}", row.name);
+        }
+        let all = FaultStatus {
+            active: FaultFlags::empty(),
+            latched: FaultFlags::all(),
+        };
+        let mut text = Vec::new();
+        print_text(&mut text, all).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        for row in FaultFlags::TABLE {
+            assert!(text.contains(&format!("  {}: {}", row.name, row.help)), "{text}");
+        }
+        assert!(!text.contains("update the host tool"), "{text}");
+        // A bit from a newer firmware is named as such, with what to do.
+        let newer = FaultStatus {
+            active: FaultFlags::empty(),
+            latched: FaultFlags::from_bits_retain(1 << 20),
+        };
+        let mut text = Vec::new();
+        print_text(&mut text, newer).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        assert!(text.contains("0x100000") && text.contains("update the host tool"), "{text}");
+    }
+}
