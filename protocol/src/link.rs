@@ -19,9 +19,10 @@ pub const HEARTBEAT_INTERVAL_MS: u32 = 150;
 /// sent is answered `Nack(Busy)` and has no effect. A host's heartbeats count.
 pub const REQUEST_WINDOW: usize = 4;
 
-/// After a fault rises, and after `ClearFaults`, requests other than `Hello`, `GetInfo`,
-/// `GetFaults` and `ClearFaults` are refused with `Nack(InFaultHold)` for this long, ms
-/// (device time): a host cannot restart the motor into a fault that is still settling.
+/// After a fault rises, requests other than `Hello`, `GetInfo`, `GetFaults`, `ClearFaults`
+/// and the locks (`Release { on: false }`, `OpenLoop { volts: 0 }`) are refused with
+/// `Nack(InFaultHold)` for this long, ms (device time), whether or not the fault is cleared
+/// meanwhile: a host cannot restart the motor into a fault that is still settling.
 pub const FAULT_HOLD_MS: u32 = 500;
 
 // Two heartbeats may be lost in a row without dropping the load.
