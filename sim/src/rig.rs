@@ -176,6 +176,9 @@ impl SimRig {
         };
         let mut core_config = config.core;
         core_config.capabilities.insert(Capabilities::SIMULATION);
+        // The virtual rig measures its bridge supply (`BoardInputs::bus_voltage_v` below),
+        // so it says so; health reports it.
+        core_config.capabilities.insert(Capabilities::BUS_VOLTAGE);
         Self {
             plant: Plant::new(config.plant, config.seed),
             core: Core::new(core_config, boot),
@@ -385,15 +388,26 @@ fn serve(command: SimCommand, plant: &mut Plant, bench: &mut SimBench) -> Result
             Err(NackCode::BadArgument)
         }
     };
+    // Physical bounds, so a typo is refused rather than simulated: twice the teeth's
+    // strength (the protections above it can still be exercised), twice the bridge supply.
+    let max_load = 2.0 * model::paper::TAU_ROT_MAX;
+    let max_supply = 2.0 * model::hardware::board::BRIDGE_SUPPLY_V;
+    let within = |v: f64, max: f64| {
+        if v.abs() <= max {
+            Ok(v)
+        } else {
+            Err(NackCode::BadArgument)
+        }
+    };
     match command {
         // The operator hangs the load still (a load still falling from the last run is
         // caught and hung again), where the output is: the encoder sees no jump.
         SimCommand::SetLoad { tau_rot_nm } => {
-            plant.set_load(Load::Torque(finite(tau_rot_nm)?));
+            plant.set_load(Load::Torque(within(finite(tau_rot_nm)?, max_load)?));
             plant.stop_output();
         }
         SimCommand::SetSupplyVoltage { volts } => {
-            plant.set_supply(positive(volts)?);
+            plant.set_supply(within(positive(volts)?, max_supply)?);
             bench.supply_v = Some(volts);
         }
         SimCommand::SetSensorSupply { volts } => {

@@ -7,11 +7,18 @@
 //! calibration's force gauge, uncoupling the cam) reach into the plant through
 //! [`VirtualDevice::with_plant`].
 //!
-//! The device keeps the board's time: virtual time runs at `speed` times the wall clock
-//! and never waits for a host, so a host whose heartbeats stop sees vibration stop after
-//! the comms timeout of device time (0.5 s of wall time at speed 1), as on the board. The
-//! device says its speed in `Info` (`DeviceInfo::time_scale`), and a client scales its
-//! heartbeats by it. A host that closed the port (quit or died, as when a served rig's
+//! Served (`rig sim serve`, [`Pacing::BoardTime`]) the device keeps the board's time:
+//! virtual time runs at `speed` times the wall clock and never waits for a host, so a host
+//! whose heartbeats stop sees vibration stop after the comms timeout of device time (0.5 s
+//! of wall time at speed 1), as on the board. The device says its speed in `Info`
+//! (`DeviceInfo::time_scale`), and a client scales its heartbeats by it.
+//!
+//! In process (`--sim`, [`Pacing::HostWall`]) the device belongs to this process's own
+//! client, whose heartbeats are compressed by `speed`: there, while a release is live and
+//! the host has been quiet for more than [`HOST_QUIET_S`] of virtual time, the host's
+//! silence in virtual time never runs ahead of its silence in wall time. So a stalled host
+//! gets the same wall-clock slack as on a board, never more: one that stops for good
+//! loses its release 0.5 s of wall time after its last byte, at any speed. A host that closed the port (quit or died, as when a served rig's
 //! client is killed) trips the timeout at once, so the next client finds the fault. When
 //! the machine cannot keep up (one turn of the loop may cover at most [`MAX_TURN_WALL`]
 //! of wall time) virtual time falls behind: [`VirtualDevice::achieved_speed`] says how
@@ -38,6 +45,22 @@ const MAX_TURN_WALL: f64 = 0.02;
 /// Device output held while the host is not reading, bytes (a UART's queue would also
 /// overflow): beyond it new output is dropped, as frames lost on the line.
 const MAX_PENDING: usize = 1 << 20;
+
+/// Virtual time without a byte from the host after which an in-process device with a
+/// live release waits for its host ([`Pacing::HostWall`]), s (a heartbeat is due every
+/// 0.15 s).
+pub const HOST_QUIET_S: f64 = 0.2;
+
+/// How the device's virtual time relates to its host.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pacing {
+    /// The board's time: `speed` times the wall clock, whatever the host does (served).
+    BoardTime,
+    /// As `BoardTime`, but a live release waits for a quiet host until the comms timeout
+    /// has passed in wall time since its last byte (in process: the host's heartbeats are
+    /// compressed by `speed`, its stalls are not).
+    HostWall,
+}
 
 /// How long one turn waits for host bytes.
 const POLL: Duration = Duration::from_millis(1);
@@ -79,17 +102,29 @@ impl std::fmt::Debug for VirtualDevice {
 }
 
 impl VirtualDevice {
-    /// Boots a simulated rig from `config` on a new pseudo-terminal, running `speed` times
-    /// faster than real time (1 = real time).
+    /// Boots a simulated rig from `config` on a new pseudo-terminal for this process's own
+    /// client, running `speed` times faster than real time (1 = real time), paced by
+    /// [`Pacing::HostWall`].
     pub fn start(config: SimConfig, speed: f64) -> Result<Self, RigError> {
-        Self::start_with_noise(config, speed, None)
+        Self::start_paced(config, speed, None, Pacing::HostWall)
     }
 
-    /// As [`VirtualDevice::start`], with `noise` random bytes mixed into the line both ways.
+    /// A rig served to any client (`rig sim serve`): [`Pacing::BoardTime`], with `noise`
+    /// random bytes mixed into the line both ways.
     pub fn start_with_noise(
         config: SimConfig,
         speed: f64,
         noise: Option<WallNoise>,
+    ) -> Result<Self, RigError> {
+        Self::start_paced(config, speed, noise, Pacing::BoardTime)
+    }
+
+    /// Boots a simulated rig with `pacing`.
+    pub fn start_paced(
+        config: SimConfig,
+        speed: f64,
+        noise: Option<WallNoise>,
+        pacing: Pacing,
     ) -> Result<Self, RigError> {
         if !(speed.is_finite() && speed > 0.0) {
             return Err(RigError::BadValue {
@@ -117,7 +152,7 @@ impl VirtualDevice {
         let worker = Arc::clone(&shared);
         let thread = std::thread::Builder::new()
             .name("virtual-device".into())
-            .spawn(move || run(master, &worker, speed, noise))
+            .spawn(move || run(master, &worker, speed, noise, pacing))
             .map_err(|e| fail("cannot start the simulation thread", &e))?;
         Ok(Self {
             port,
@@ -242,7 +277,13 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 /// The device loop: host bytes in, time advanced, device bytes out.
-fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoise>) {
+fn run(
+    mut master: PtyMaster,
+    shared: &Shared,
+    speed: f64,
+    noise: Option<WallNoise>,
+    pacing: Pacing,
+) {
     let mut rng = model::plant::NoiseSource::new(noise.map_or(0, |n| n.seed));
     let mut noise_owed = [0.0f64; 2];
     let mut noise_bytes = |dt: f64, owed: &mut f64, out: &mut Vec<u8>| {
@@ -259,6 +300,9 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
     let mut pending: Vec<u8> = Vec::new();
     let mut owed = 0.0f64;
     let mut last = Instant::now();
+    // The host's last byte, in virtual and in wall time; whether time waits for it.
+    let mut last_rx = (0.0f64, Instant::now());
+    let mut waiting = false;
     let tick = 1.0 / f64::from(PLANT_HZ);
     while !shared.stop.load(Ordering::SeqCst) {
         let received = if master.wait_readable(POLL) {
@@ -280,7 +324,9 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
         if wall_dt > turn_wall {
             *lock(&shared.behind_s) += (wall_dt - turn_wall) * speed;
         }
-        owed += turn_wall * speed;
+        if !waiting {
+            owed += turn_wall * speed;
+        }
         last = now;
         let ticks = (owed / tick).floor();
         owed -= ticks * tick;
@@ -291,6 +337,7 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
             }
             if received > 0 {
                 rig.to_device(&buf[..received]);
+                last_rx = (rig.time(), now);
             }
             if ticks > 0.0 {
                 rig.advance(ticks * tick);
@@ -303,6 +350,14 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
                 // The comms timeout runs out now, before another client's bytes are read.
                 rig.advance(f64::from(protocol::COMMS_TIMEOUT_MS) / 1000.0 + tick);
             }
+            // The host's silence in virtual time never runs ahead of its silence in
+            // wall time once past a heartbeat's slack.
+            let quiet_virtual = rig.time() - last_rx.0;
+            waiting = pacing == Pacing::HostWall
+                && driving
+                && !master.hung_up()
+                && quiet_virtual > HOST_QUIET_S
+                && quiet_virtual > (now - last_rx.1).as_secs_f64();
             let before = pending.len();
             rig.from_device(&mut pending);
             if pending.len() > MAX_PENDING {

@@ -5,7 +5,9 @@
 //! CRC, COBS) when the link asks for bytes, so framing stays out of the 1 kHz step. A
 //! sample the link did not take before the next one is superseded and counted as dropped.
 
-use protocol::{DeviceMessage, HealthSample, ParametersStatus, StatusFlags, TelemetrySample};
+use protocol::{
+    Capabilities, DeviceMessage, HealthSample, ParametersStatus, StatusFlags, TelemetrySample,
+};
 
 use super::Core;
 use crate::capture::CapturePhase;
@@ -177,9 +179,18 @@ impl Core {
         let (step_cycles_mean, step_cycles_max) = self.step_timing.last;
         HealthSample {
             device_time_us: now,
-            // What the binary measures (BoardInputs); NaN where not fitted.
-            bus_voltage_v: self.board.bus_voltage_v,
-            motor_temp_c: self.board.motor_temp_c,
+            // What the binary measures (BoardInputs); NaN where the board does not
+            // declare the hardware in `Info`'s capabilities, whatever the input says.
+            bus_voltage_v: if self.config.capabilities.contains(Capabilities::BUS_VOLTAGE) {
+                self.board.bus_voltage_v
+            } else {
+                f32::NAN
+            },
+            motor_temp_c: if self.config.capabilities.contains(Capabilities::MOTOR_TEMP) {
+                self.board.motor_temp_c
+            } else {
+                f32::NAN
+            },
             step_cycles_mean,
             step_cycles_max,
             rx_frame_errors: self.deframer.stats().errors(),

@@ -838,7 +838,11 @@ fn health_comes_once_a_second_while_telemetry_runs() {
 
 #[test]
 fn measured_bus_voltage_sets_the_open_loop_duty_and_is_reported() {
-    let mut rig = Rig::new(0.0);
+    let config = crate::CoreConfig {
+        capabilities: protocol::Capabilities::BUS_VOLTAGE | protocol::Capabilities::MOTOR_TEMP,
+        ..crate::CoreConfig::default()
+    };
+    let mut rig = Rig::with_config(config, crate::BootInfo::default(), 0.0, |_| {});
     rig.core.set_board_inputs(crate::BoardInputs {
         bus_voltage_v: 10.0,
         motor_temp_c: 31.5,
@@ -1010,4 +1014,27 @@ fn info_reports_the_time_scale() {
         panic!("no Info");
     };
     assert_eq!(info.time_scale, 20.0);
+}
+
+#[test]
+fn health_reports_nan_for_hardware_the_board_does_not_declare() {
+    let mut rig = Rig::new(0.0);
+    assert!(rig.core.config().capabilities.is_empty());
+    rig.core.set_board_inputs(crate::BoardInputs {
+        bus_voltage_v: 12.0,
+        motor_temp_c: 30.0,
+        ..Default::default()
+    });
+    rig.run_ms(10);
+    assert_eq!(rig.ack(&Request::StartTelemetry { rate_hz: 10 }), Ok(()));
+    rig.run_ms(20);
+    let health = rig
+        .received
+        .iter()
+        .find_map(|m| match m {
+            DeviceMessage::Health(h) => Some(*h),
+            _ => None,
+        })
+        .expect("a health sample");
+    assert!(health.bus_voltage_v.is_nan() && health.motor_temp_c.is_nan());
 }
