@@ -122,7 +122,10 @@ impl<T: Read + Write> RawLink<T> {
     /// The frame of `req` under a new seq (not written).
     pub fn frame(&mut self, req: &Request) -> (u16, Vec<u8>) {
         let seq = self.take_seq();
-        (seq, protocol::encode_frame_vec(seq, req).unwrap_or_default())
+        (
+            seq,
+            protocol::encode_frame_vec(seq, req).unwrap_or_default(),
+        )
     }
 
     /// Sends `req`; returns its seq.
@@ -264,8 +267,15 @@ impl<T: Read + Write> Suite<T> {
         for (req, code) in cases {
             let got = self.request(req)?;
             if got != Some(Reply::Nack(*code)) {
-                bad.push(format!("{req:?}: {} (want Nack({}))", describe(&got), code.name()));
-                if matches!(req, Request::Release { on: true, .. } | Request::OpenLoop { .. }) {
+                bad.push(format!(
+                    "{req:?}: {} (want Nack({}))",
+                    describe(&got),
+                    code.name()
+                ));
+                if matches!(
+                    req,
+                    Request::Release { on: true, .. } | Request::OpenLoop { .. }
+                ) {
                     self.request(&Request::Release {
                         on: false,
                         target_hz: 0.0,
@@ -373,7 +383,11 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
         return Ok(report(opts, None, s.checks, false));
     };
     let scale_ok = info.time_scale.is_finite() && info.time_scale > 0.0;
-    s.scale = if scale_ok { f64::from(info.time_scale) } else { 1.0 };
+    s.scale = if scale_ok {
+        f64::from(info.time_scale)
+    } else {
+        1.0
+    };
     s.record(
         "handshake",
         info.protocol_version == PROTOCOL_VERSION && info.schema_hash == SCHEMA_HASH && scale_ok,
@@ -382,7 +396,9 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
             info.protocol_version, info.schema_hash, info.board, info.time_scale
         ),
     );
-    let simulation = info.capabilities.contains(protocol::Capabilities::SIMULATION);
+    let simulation = info
+        .capabilities
+        .contains(protocol::Capabilities::SIMULATION);
     let motion = simulation || opts.allow_motion;
 
     // Version refusal: a host of another version is told the device's.
@@ -397,7 +413,11 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
     s.record(
         "version-refusal",
         got.as_ref() == Some(&want),
-        format!("Hello of protocol {} got {}", PROTOCOL_VERSION + 100, describe(&got)),
+        format!(
+            "Hello of protocol {} got {}",
+            PROTOCOL_VERSION + 100,
+            describe(&got)
+        ),
     );
 
     // Start from no faults (a previous client may have left one).
@@ -410,10 +430,22 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
 
     // Out-of-range values: refused, never replaced.
     let mut cases = vec![
-        (Request::StartTelemetry { rate_hz: 0 }, NackCode::BadArgument),
-        (Request::StartTelemetry { rate_hz: 300 }, NackCode::BadArgument),
-        (Request::StartTelemetry { rate_hz: 1001 }, NackCode::BadArgument),
-        (Request::StartTelemetry { rate_hz: u16::MAX }, NackCode::BadArgument),
+        (
+            Request::StartTelemetry { rate_hz: 0 },
+            NackCode::BadArgument,
+        ),
+        (
+            Request::StartTelemetry { rate_hz: 300 },
+            NackCode::BadArgument,
+        ),
+        (
+            Request::StartTelemetry { rate_hz: 1001 },
+            NackCode::BadArgument,
+        ),
+        (
+            Request::StartTelemetry { rate_hz: u16::MAX },
+            NackCode::BadArgument,
+        ),
         (
             Request::StartCapture {
                 sample_rate_hz: 3000,
@@ -469,15 +501,31 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
     let mut bad = Vec::new();
     let malformed: [(&[u8], NackCode, &str); 4] = [
         (&[200], NackCode::UnknownMessage, "unknown request tag 200"),
-        (&[13, 9], NackCode::UnknownMessage, "unknown simulation command 9"),
-        (&[2, 2, 0, 0, 0x20, 0x41], NackCode::BadArgument, "Release with a bool of 2"),
-        (&[3, 0x55], NackCode::BadArgument, "Heartbeat with a trailing byte"),
+        (
+            &[13, 9],
+            NackCode::UnknownMessage,
+            "unknown simulation command 9",
+        ),
+        (
+            &[2, 2, 0, 0, 0x20, 0x41],
+            NackCode::BadArgument,
+            "Release with a bool of 2",
+        ),
+        (
+            &[3, 0x55],
+            NackCode::BadArgument,
+            "Heartbeat with a trailing byte",
+        ),
     ];
     for (body, code, what) in malformed {
         let seq = s.link.send_body(body)?;
         let got = s.link.reply(seq, s.reply_wait)?;
         if got != Some(Reply::Nack(code)) {
-            bad.push(format!("{what}: {} (want Nack({}))", describe(&got), code.name()));
+            bad.push(format!(
+                "{what}: {} (want Nack({}))",
+                describe(&got),
+                code.name()
+            ));
         }
     }
     let ok = bad.is_empty();
@@ -738,7 +786,11 @@ fn busy_beyond_window<T: Read + Write>(s: &mut Suite<T>) -> Result<(), RigError>
         format!(
             "{} requests at once: {answered} answered, {busy} Busy, other replies: {}",
             seqs.len(),
-            if other.is_empty() { "none".into() } else { other.join(", ") }
+            if other.is_empty() {
+                "none".into()
+            } else {
+                other.join(", ")
+            }
         ),
     );
     Ok(())
@@ -798,7 +850,10 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
             match m {
                 DeviceMessage::Telemetry(t)
                     if stopped_wall.is_none()
-                        && !matches!(t.state, SupervisorState::SpinUp | SupervisorState::Vibrating) =>
+                        && !matches!(
+                            t.state,
+                            SupervisorState::SpinUp | SupervisorState::Vibrating
+                        ) =>
                 {
                     stopped_wall = Some(at.duration_since(silent_from));
                 }
@@ -856,10 +911,14 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
         bad.push(format!("Release(off) in the hold: {}", describe(&got)));
     }
     // Wait out the fault hold: a latched fault still refuses a release.
-    s.link.pump(s.wall(f64::from(protocol::FAULT_HOLD_MS) / 1000.0 + 0.1))?;
+    s.link
+        .pump(s.wall(f64::from(protocol::FAULT_HOLD_MS) / 1000.0 + 0.1))?;
     let got = s.request(&release)?;
     if got != Some(Reply::Nack(NackCode::InFaultHold)) {
-        bad.push(format!("Release after the hold, fault latched: {}", describe(&got)));
+        bad.push(format!(
+            "Release after the hold, fault latched: {}",
+            describe(&got)
+        ));
     }
     match s.request(&Request::ClearFaults)? {
         Some(Reply::Faults { latched, .. }) if latched.is_empty() => {}

@@ -45,7 +45,11 @@ fn conformance(server: &Server) -> Value {
             String::from_utf8_lossy(&out.stderr)
         )
     });
-    assert_eq!(out.status.code(), Some(if v["passed"] == true { 0 } else { 1 }), "{v:#}");
+    assert_eq!(
+        out.status.code(),
+        Some(if v["passed"] == true { 0 } else { 1 }),
+        "{v:#}"
+    );
     v
 }
 

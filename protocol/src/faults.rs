@@ -100,7 +100,11 @@ mod tests {
             }
             assert_eq!(covered, all, "a named bit is missing from the table");
         }
-        check(FaultFlags::TABLE, |f| u64::from(f.bits()), u64::from(FaultFlags::all().bits()));
+        check(
+            FaultFlags::TABLE,
+            |f| u64::from(f.bits()),
+            u64::from(FaultFlags::all().bits()),
+        );
         check(
             crate::StatusFlags::TABLE,
             |f| u64::from(f.bits()),
@@ -121,7 +125,10 @@ mod tests {
         );
         assert_eq!(FaultFlags::help_of("NO_SUCH_FAULT"), None);
         let f = FaultFlags::JAM | FaultFlags::from_bits_retain(1 << 20);
-        assert_eq!(f.explained().map(|r| r.name).collect::<std::vec::Vec<_>>(), ["JAM"]);
+        assert_eq!(
+            f.explained().map(|r| r.name).collect::<std::vec::Vec<_>>(),
+            ["JAM"]
+        );
         assert_eq!(f.unknown().bits(), 1 << 20);
     }
 

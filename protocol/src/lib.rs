@@ -142,8 +142,8 @@ pub use info::{
     ParametersStatus, ResetCause,
 };
 pub use link::{
-    COMMS_TIMEOUT_MS, DEFAULT_BAUD_RATE, FAULT_HOLD_MS, HEARTBEAT_INTERVAL_MS, MAX_TELEMETRY_RATE_HZ,
-    REQUEST_WINDOW,
+    COMMS_TIMEOUT_MS, DEFAULT_BAUD_RATE, FAULT_HOLD_MS, HEARTBEAT_INTERVAL_MS,
+    MAX_TELEMETRY_RATE_HZ, REQUEST_WINDOW,
 };
 pub use parameters::{ParameterField, ParameterRejection, RejectReason, RigParameters};
 pub use request::{ReplyKind, Request, SimCommand};
@@ -151,8 +151,7 @@ pub use schema::SCHEMA_HASH;
 pub use sequence::SeqTracker;
 pub use sizes::{
     MAX_DEVICE_FRAME_SIZE, MAX_FRAME_SIZE, MAX_MESSAGE_SIZE, MAX_REPLY_FRAME_SIZE,
-    MAX_REQUEST_FRAME_SIZE,
-    cobs_max_encoded_len, varint_len,
+    MAX_REQUEST_FRAME_SIZE, cobs_max_encoded_len, varint_len,
 };
 pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 

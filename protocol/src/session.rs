@@ -63,8 +63,7 @@ use crate::compat::{PeerIdentity, check_peer, identify_peer};
 use crate::{
     CaptureChunk, DeviceDeframer, DeviceInfo, DeviceMessage, Error, FRAME_DELIMITER, FaultFlags,
     HealthSample, NackCode, PROTOCOL_VERSION, REQUEST_WINDOW, Reply, Request, SCHEMA_HASH,
-    SeqTracker,
-    TelemetrySample, encode_frame_vec,
+    SeqTracker, TelemetrySample, encode_frame_vec,
 };
 
 /// Events kept while the driver does not poll; beyond this the oldest are dropped.

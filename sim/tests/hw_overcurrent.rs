@@ -27,7 +27,11 @@ fn hw_overcurrent_clears_once_its_cause_is_gone() {
     assert!(latched.contains(FaultFlags::HW_OVERCURRENT), "{latched}");
     link.keep_alive(None);
     assert_eq!(
-        link.request(&Request::Release { on: false, target_hz: 0.0 }).ok(),
+        link.request(&Request::Release {
+            on: false,
+            target_hz: 0.0
+        })
+        .ok(),
         Some(Reply::Ack)
     );
     // The cause goes: the cam turns freely again.

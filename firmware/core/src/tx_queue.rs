@@ -17,7 +17,8 @@ const SHORT_FRAME: usize = 24;
 
 /// Bytes kept free for replies, `Busy` answers and fault events when queueing telemetry
 /// or capture data: a full window of the largest replies, then as many short frames.
-pub const REPLY_RESERVE: usize = REQUEST_WINDOW * (MAX_REPLY_FRAME_SIZE + SHORT_FRAME) + SHORT_FRAME;
+pub const REPLY_RESERVE: usize =
+    REQUEST_WINDOW * (MAX_REPLY_FRAME_SIZE + SHORT_FRAME) + SHORT_FRAME;
 /// Most capture bytes queued at once (about 2.8 ms at 921 600 Bd).
 pub const CAPTURE_IN_FLIGHT: usize = 256;
 /// Queue size, bytes: the reply reserve, a capture chunk in flight and a telemetry and a
@@ -176,7 +177,9 @@ impl TxQueue {
         // Replies whose last byte has gone out no longer count.
         while self.reply_count > 0 {
             let end = self.reply_ends[self.reply_first];
-            if self.pushed_total.wrapping_sub(end) >= self.pushed_total.wrapping_sub(self.drained_total) {
+            if self.pushed_total.wrapping_sub(end)
+                >= self.pushed_total.wrapping_sub(self.drained_total)
+            {
                 self.reply_first = (self.reply_first + 1) % REPLY_SLOTS;
                 self.reply_count -= 1;
             } else {

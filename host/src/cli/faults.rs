@@ -104,7 +104,10 @@ mod tests {
         print_text(&mut text, all).unwrap();
         let text = String::from_utf8(text).unwrap();
         for row in FaultFlags::TABLE {
-            assert!(text.contains(&format!("  {}: {}", row.name, row.help)), "{text}");
+            assert!(
+                text.contains(&format!("  {}: {}", row.name, row.help)),
+                "{text}"
+            );
         }
         assert!(!text.contains("update the host tool"), "{text}");
         // A bit from a newer firmware is named as such, with what to do.
@@ -115,6 +118,9 @@ mod tests {
         let mut text = Vec::new();
         print_text(&mut text, newer).unwrap();
         let text = String::from_utf8(text).unwrap();
-        assert!(text.contains("0x100000") && text.contains("update the host tool"), "{text}");
+        assert!(
+            text.contains("0x100000") && text.contains("update the host tool"),
+            "{text}"
+        );
     }
 }

@@ -390,7 +390,9 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         let mut out = std::io::stdout().lock();
         writeln!(out, "status flags:")?;
         for protocol::FlagInfo {
-            name, help: meaning, ..
+            name,
+            help: meaning,
+            ..
         } in StatusFlags::TABLE
         {
             writeln!(out, "  {name:<21} {meaning}")?;

@@ -194,7 +194,12 @@ fn release_arguments_are_checked_never_clamped() {
         Err(NackCode::BadArgument)
     );
     rig.step();
-    assert!(!rig.core.status().flags.contains(protocol::StatusFlags::HOST_RELEASE));
+    assert!(
+        !rig.core
+            .status()
+            .flags
+            .contains(protocol::StatusFlags::HOST_RELEASE)
+    );
     // The limit itself is used as asked.
     assert_eq!(
         rig.ack(&Request::Release {
@@ -890,7 +895,11 @@ fn a_thousand_requests_in_windows_get_a_thousand_replies_under_telemetry_and_cap
     while right < 1000 {
         while sent < 1000 && outstanding.len() < protocol::REQUEST_WINDOW {
             let info = sent % 2 == 1;
-            let req = if info { Request::GetInfo } else { Request::GetFaults };
+            let req = if info {
+                Request::GetInfo
+            } else {
+                Request::GetFaults
+            };
             outstanding.push_back((rig.send(&req), info));
             sent += 1;
         }
