@@ -218,6 +218,11 @@ pub fn core_config() -> CoreConfig {
     let mut config = CoreConfig::default();
     config.estimator.carrier_power_returned = BRIDGE.decay.returns_power();
     config.output_encoder = OUTPUT_ENCODER;
+    // The bus divider is fitted (main.rs reads it every step): `Info` says so, and health
+    // reports the voltage only then.
+    config
+        .capabilities
+        .insert(protocol::Capabilities::BUS_VOLTAGE);
     config
 }
 

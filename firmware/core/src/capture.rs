@@ -107,7 +107,7 @@ impl Capture {
             || samples > capacity
             || sample_rate_hz < MIN_SAMPLE_RATE_HZ
             || rate > adc_hz
-            || adc_hz % rate != 0
+            || !adc_hz.is_multiple_of(rate)
         {
             return Err(NackCode::BadArgument);
         }

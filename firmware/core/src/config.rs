@@ -363,8 +363,9 @@ pub struct CoreConfig {
     /// Board name reported in `Info` (at most 16 bytes are sent).
     pub board_name: &'static str,
     /// Optional hardware fitted, reported in `Info`; telemetry and health report NaN for
-    /// what is missing. The real board has none of them yet; the virtual rig adds
-    /// `SIMULATION`.
+    /// what is missing (health's bus voltage unless `BUS_VOLTAGE` is set). The default
+    /// has none; the Nucleo's `board::core_config` sets `BUS_VOLTAGE` and the output
+    /// encoder, the virtual rig adds `BUS_VOLTAGE` and `SIMULATION`.
     pub capabilities: protocol::Capabilities,
     /// Device seconds per wall-clock second, reported in `Info` (`DeviceInfo::time_scale`):
     /// 1 on a board; the virtual rig served at `--speed N` reports N.

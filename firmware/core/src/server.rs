@@ -219,7 +219,7 @@ impl Core {
                 if rate == 0
                     || rate_hz > MAX_TELEMETRY_RATE_HZ
                     || rate > control_hz
-                    || control_hz % rate != 0
+                    || !control_hz.is_multiple_of(rate)
                 {
                     return Answer::nack(NackCode::BadArgument);
                 }

@@ -179,18 +179,16 @@ impl Core {
         let (step_cycles_mean, step_cycles_max) = self.step_timing.last;
         HealthSample {
             device_time_us: now,
-            // What the binary measures (BoardInputs); NaN where the board does not
-            // declare the hardware in `Info`'s capabilities, whatever the input says.
+            // What the binary measures (BoardInputs); NaN where not fitted. The bus
+            // voltage only where `Info` declares the divider (`BUS_VOLTAGE`), so a host
+            // never reads a value the device says it cannot measure; the thermistor is
+            // detected at run time (an open input reads NaN).
             bus_voltage_v: if self.config.capabilities.contains(Capabilities::BUS_VOLTAGE) {
                 self.board.bus_voltage_v
             } else {
                 f32::NAN
             },
-            motor_temp_c: if self.config.capabilities.contains(Capabilities::MOTOR_TEMP) {
-                self.board.motor_temp_c
-            } else {
-                f32::NAN
-            },
+            motor_temp_c: self.board.motor_temp_c,
             step_cycles_mean,
             step_cycles_max,
             rx_frame_errors: self.deframer.stats().errors(),
