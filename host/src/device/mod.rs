@@ -20,9 +20,9 @@
 //! gets the same wall-clock slack as on a board, never more: one that stops for good
 //! loses its release 0.5 s of wall time after its last byte, at any speed. A host that closed the port (quit or died, as when a served rig's
 //! client is killed) trips the timeout at once, so the next client finds the fault. When
-//! the machine cannot keep up (one turn of the loop may cover at most [`MAX_TURN_WALL`]
-//! of wall time) virtual time falls behind: [`VirtualDevice::achieved_speed`] says how
-//! fast it really runs, and `rig sim serve` warns.
+//! the machine cannot keep up (one turn of the loop covers at most 20 ms of wall time)
+//! virtual time falls behind: [`VirtualDevice::behind_s`] says by how much, and `rig sim
+//! serve` warns.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -198,8 +198,10 @@ impl VirtualDevice {
         Ok(config)
     }
 
-    /// [`VirtualDevice::rig_file_config`] of the rig file at `path`, which must have a fitted
-    /// `[model]` (the device option `--model`): errors name the file and what to do.
+    /// [`VirtualDevice::rig_file_config`] of the rig file at `path` (the device option
+    /// `--model`): a fitted `[model]` runs its effects; a plain rig file (gear, cam,
+    /// friction, calibration) puts that rig on the virtual device with the `paper` preset.
+    /// Errors name the file and what to do.
     pub fn fitted_config(path: &std::path::Path) -> Result<SimConfig, RigError> {
         let what = || format!("--model {}", path.display());
         let rig = rigfile::RigFile::load(path).map_err(|e| RigError::BadValue {
@@ -208,12 +210,6 @@ impl VirtualDevice {
                 "{e}; give a rig file with a fitted [model] (written by `rig explain --measured X --write-model FILE`, format in docs/rig-file.md)"
             ),
         })?;
-        if rig.model.is_none() {
-            return Err(RigError::BadValue {
-                what: what(),
-                why: "the rig file has no fitted [model]: write one with `rig explain --measured X --write-model FILE` (or add a [model] table, docs/rig-file.md)".into(),
-            });
-        }
         Self::rig_file_config(&rig, &sim::Preset::paper()).map_err(|e| RigError::BadValue {
             what: what(),
             why: e.to_string(),
