@@ -125,6 +125,22 @@ fn faults_and_clear() {
 }
 
 #[test]
+fn release_off_reports_what_the_output_does() {
+    let v = json_of(sim(&["release", "off", "--json"]));
+    assert_eq!(v["released"], false, "{v}");
+    assert_eq!(v["state"], "locked", "{v}");
+    // The virtual rig has an output encoder: measured at rest, nothing hanging.
+    assert_eq!(v["output_moving"], false, "{v}");
+    // The paper's gear coasts once moving (mu_d Lambda = 0.858 < 1): said, not hidden.
+    assert_eq!(v["coasts_after_stop"], true, "{v}");
+    let text = stdout_of(sim(&["release", "off"]));
+    assert!(
+        text.contains("the gear holds its load (output at rest)"),
+        "{text}"
+    );
+}
+
+#[test]
 fn release_vibrates_for_a_bounded_time_then_locks() {
     let v = json_of(sim(&[
         "release", "on", "--freq", "10", "--for", "2", "--json",

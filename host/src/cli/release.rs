@@ -283,3 +283,42 @@ pub fn after_lock<T: std::io::Read + std::io::Write>(
         coasts: t.status.contains(StatusFlags::COASTS_AFTER_STOP),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// "The gear holds" only with the output measured at rest and the gear locked.
+    #[test]
+    fn the_verdict_never_says_holds_while_the_output_moves_or_is_unmeasured() {
+        let states = [
+            SupervisorState::Locked,
+            SupervisorState::Stopping,
+            SupervisorState::Fault,
+        ];
+        for state in states {
+            for output_moving in [Some(true), Some(false), None] {
+                for coasts in [true, false] {
+                    let v = AfterLock {
+                        state,
+                        output_moving,
+                        coasts,
+                    }
+                    .verdict();
+                    let holds = v.contains("holds");
+                    assert_eq!(
+                        holds,
+                        output_moving == Some(false) && state == SupervisorState::Locked,
+                        "{v}"
+                    );
+                    if output_moving == Some(true) {
+                        assert!(v.contains("still moving"), "{v}");
+                    }
+                    if output_moving.is_none() && coasts {
+                        assert!(v.contains("coasts"), "{v}");
+                    }
+                }
+            }
+        }
+    }
+}
