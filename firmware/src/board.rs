@@ -228,10 +228,16 @@ pub const BRIDGE: BridgeBoard = BridgeBoard {
 /// The core's configuration on this board: the defaults (read from `model::hardware`, the
 /// bridge's decay mode among them) with the output encoder.
 pub fn core_config() -> CoreConfig {
-    CoreConfig {
+    let mut config = CoreConfig {
         output_encoder: OUTPUT_ENCODER,
         ..CoreConfig::default()
-    }
+    };
+    // The bus divider is fitted (main.rs reads it every step): `Info` says so, and health
+    // reports the voltage only then.
+    config
+        .capabilities
+        .insert(protocol::Capabilities::BUS_VOLTAGE);
+    config
 }
 
 /// The output-shaft encoder on TIM3 (PC6/PC7, see (⁸)): an AMT102-V at 2048 pulses per

@@ -286,7 +286,7 @@ fn wait_until_locked<T: Read + Write>(client: &mut Client<T>) -> Result<(), RigE
             SupervisorState::Fault => {
                 return Err(RigError::DeviceFault {
                     what: "calibration stopped between torque steps".into(),
-                    faults: t.faults.to_string(),
+                    faults: t.faults,
                 });
             }
             _ => {}
@@ -323,7 +323,7 @@ fn average<T: Read + Write>(
         if !t.faults.is_empty() || t.state == SupervisorState::Fault {
             return Err(RigError::DeviceFault {
                 what: format!("calibration stopped at {volts:.2} V"),
-                faults: t.faults.to_string(),
+                faults: t.faults,
             });
         }
         Ok(t)

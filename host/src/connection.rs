@@ -22,8 +22,8 @@ pub struct DeviceOpts {
     pub sim: bool,
     /// With `sim`: virtual seconds per wall-clock second.
     pub speed: f64,
-    /// With `sim`: a rig file with a fitted `[model]`; the virtual device is built from it
-    /// and its plant runs the model's effects ([`VirtualDevice::fitted_config`]).
+    /// With `sim`: a rig file (a fitted `[model]`, or a plain rig); the virtual device is
+    /// built from it and its plant runs the model's effects ([`VirtualDevice::fitted_config`]).
     pub model: Option<PathBuf>,
 }
 

@@ -178,8 +178,8 @@ pub enum RigError {
     DeviceFault {
         /// What was running.
         what: String,
-        /// The fault names.
-        faults: String,
+        /// The faults (their names and help: `protocol::FaultFlags::TABLE`).
+        faults: protocol::FaultFlags,
     },
     /// A calibration file that cannot be used; nothing was sent to the device.
     #[error("calibration file {file}: {why}; nothing was written to the device")]

@@ -5,6 +5,7 @@ pub mod args;
 pub mod calibrate;
 pub mod cli;
 pub mod client;
+pub mod conformance;
 pub mod connection;
 pub mod demo;
 pub mod design;

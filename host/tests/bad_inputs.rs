@@ -120,6 +120,7 @@ impl FakeDevice {
                                     reset_cause: ResetCause::PowerOn,
                                     uptime_s: 1,
                                     capabilities: Capabilities::empty(),
+                                    time_scale: 1.0,
                                 };
                                 seq = seq.wrapping_add(1);
                                 let reply = DeviceMessage::reply(request_seq, Reply::Info(info));

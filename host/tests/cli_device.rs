@@ -92,12 +92,15 @@ fn info_json_has_the_contract_keys() {
     assert_eq!(v["firmware_build"], "virtual", "{v}");
     assert_eq!(v["reset_cause"], "power-on", "{v}");
     assert!(v["uptime_s"].as_u64().is_some(), "{v}");
-    // The virtual rig has the optional output-shaft encoder fitted.
+    // The virtual rig has the optional output-shaft encoder fitted and measures its bus.
     assert_eq!(
         v["capabilities"],
-        serde_json::json!(["OUTPUT_ENCODER", "SIMULATION"]),
+        serde_json::json!(["OUTPUT_ENCODER", "BUS_VOLTAGE", "SIMULATION"]),
         "{v}"
     );
+    assert_eq!(v["time_scale"], 1.0, "{v}");
+    let v = json_of(rig().args(["--sim", "--speed", "4", "info", "--json"]));
+    assert_eq!(v["time_scale"], 4.0, "{v}");
     let text = stdout_of(sim(&["info"]));
     assert!(
         text.contains("firmware")
@@ -114,7 +117,27 @@ fn faults_and_clear() {
     assert!(stdout_of(sim(&["faults"])).contains("no faults"));
     let v = json_of(sim(&["clear", "--json"]));
     assert_eq!(v["latched"], serde_json::json!([]));
-    assert!(stdout_of(sim(&["clear"])).contains("faults cleared"));
+    let v = json_of(sim(&["clear", "--json"]));
+    assert_eq!(v["cleared"], serde_json::json!([]));
+    // Nothing was latched, and the message says so rather than claiming a clear.
+    let text = stdout_of(sim(&["clear"]));
+    assert!(text.contains("no faults were latched"), "{text}");
+}
+
+#[test]
+fn release_off_reports_what_the_output_does() {
+    let v = json_of(sim(&["release", "off", "--json"]));
+    assert_eq!(v["released"], false, "{v}");
+    assert_eq!(v["state"], "locked", "{v}");
+    // The virtual rig has an output encoder: measured at rest, nothing hanging.
+    assert_eq!(v["output_moving"], false, "{v}");
+    // The paper's gear coasts once moving (mu_d Lambda = 0.858 < 1): said, not hidden.
+    assert_eq!(v["coasts_after_stop"], true, "{v}");
+    let text = stdout_of(sim(&["release", "off"]));
+    assert!(
+        text.contains("the gear holds its load (output at rest)"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -249,10 +272,13 @@ fn capture_burst_is_complete_and_converted() {
     assert!((w / std::f64::consts::TAU - 10.0).abs() < 0.5, "{w}");
     assert!(v["mean_current_a"].as_f64().unwrap() > 1.0, "{v}");
     assert_eq!(v["dropped"], 0);
-    // Longer than the buffer: clamped, and said so.
-    let text = stdout_of(sim(&["capture", "--seconds", "1.5"]));
-    assert!(text.contains("recorded 10000 of the 15000"), "{text}");
-    assert!(text.contains("no samples dropped"), "{text}");
+    // Longer than the buffer: refused before the device records, naming the longest.
+    let out = sim(&["capture", "--seconds", "1.5"]).assert().failure();
+    let e = String::from_utf8_lossy(&out.get_output().stderr).into_owned();
+    assert!(
+        e.contains("--seconds 1.5") && e.contains("10000 samples (1 s at 10000 Hz)"),
+        "{e}"
+    );
 }
 
 #[test]

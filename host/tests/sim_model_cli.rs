@@ -148,17 +148,23 @@ fn model_needs_sim_and_a_fitted_rig_file() {
     let e = said(rig().arg("--model").arg(&good).args(["info", "--json"]));
     assert!(e.contains("--model") && e.contains("--sim"), "{e}");
     assert!(!e.contains("panicked"), "{e}");
-    // A missing file, a file that is not a rig file, one without [model]: each named.
+    // A missing file or a file that is not a rig file: each named.
     let missing = dir.path().join("missing.toml");
     let junk = dir.path().join("junk.toml");
     std::fs::write(&junk, "this is not TOML = = =\n").unwrap();
     let plain = dir.path().join("plain.toml");
     std::fs::write(&plain, "[friction]\nmu_s = 0.271\n").unwrap();
-    for (file, fix) in [
-        (&missing, "--write-model"),
-        (&junk, "--write-model"),
-        (&plain, "no fitted [model]"),
-    ] {
+    // A plain rig file (no [model]) puts its own rig on the virtual device.
+    let out = rig()
+        .args(["--sim", "--speed", SPEED, "info", "--json", "--model"])
+        .arg(&plain)
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    assert!(String::from_utf8_lossy(&out).contains("\"board\": \"virtual\""));
+    for (file, fix) in [(&missing, "--write-model"), (&junk, "--write-model")] {
         let e = said(
             rig()
                 .args(["--sim", "--speed", SPEED, "info", "--model"])

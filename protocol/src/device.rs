@@ -38,7 +38,7 @@ pub enum DeviceMessage {
         capture_id: u16,
         /// Samples sent in all chunks.
         total_samples: u32,
-        /// Actual sample rate, Hz (may differ from the request after clamping).
+        /// Sample rate, Hz (the rate `StartCapture` asked: the device never changes it).
         sample_rate_hz: u16,
     },
     /// New faults became active (sent once, when they rise).
@@ -180,7 +180,8 @@ pub enum NackCode {
     InFaultHold,
     /// `SetParameters` failed validation: the field and the reason.
     ParametersRejected(ParameterRejection),
-    /// Not now (e.g. a capture is running, or the motor is on).
+    /// Not now: a capture is running, the motor is on, a flash write is pending, or
+    /// [`crate::REQUEST_WINDOW`] replies still wait to be sent. The request had no effect.
     Busy,
     /// Writing the parameters to flash failed.
     StorageFailed,

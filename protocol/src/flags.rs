@@ -9,7 +9,7 @@ macro_rules! flag_set {
     (
         $(#[$meta:meta])*
         pub struct $name:ident($repr:ty) {
-            $( $(#[$flag_meta:meta])* const $flag:ident = $bit:expr; )*
+            $( $(#[$flag_meta:meta])* const $flag:ident = $bit:expr => $help:expr; )*
         }
     ) => {
         $(#[$meta])*
@@ -22,6 +22,27 @@ macro_rules! flag_set {
             /// Every named flag with its name, in bit order.
             pub const NAMED: &'static [(&'static str, Self)] =
                 &[$( (stringify!($flag), Self::$flag) ),*];
+
+            /// Every named flag with its name and its one-line help for users (what it
+            /// means and what to do), in bit order: the one table host and device share.
+            pub const TABLE: &'static [$crate::flags::FlagInfo<Self>] = &[$(
+                $crate::flags::FlagInfo { name: stringify!($flag), flag: Self::$flag, help: $help }
+            ),*];
+
+            /// The help of the flag called `name`; `None` for a name this version lacks.
+            pub fn help_of(name: &str) -> Option<&'static str> {
+                Self::TABLE.iter().find(|i| i.name == name).map(|i| i.help)
+            }
+
+            /// The named flags set in `self`, with their help, in bit order.
+            pub fn explained(self) -> impl Iterator<Item = &'static $crate::flags::FlagInfo<Self>> {
+                Self::TABLE.iter().filter(move |i| self.contains(i.flag))
+            }
+
+            /// The bits set in `self` that this version has no name (and no help) for.
+            pub const fn unknown(self) -> Self {
+                self.difference(Self::all())
+            }
 
             /// No flag set.
             pub const fn empty() -> Self {
@@ -145,3 +166,14 @@ macro_rules! flag_set {
 }
 
 pub(crate) use flag_set;
+
+/// One row of a flag set's table: the flag, its name and its help for users.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FlagInfo<F: 'static> {
+    /// The flag's name as shown to users and in JSON (never renamed).
+    pub name: &'static str,
+    /// The flag.
+    pub flag: F,
+    /// What the flag means and what to do, one line.
+    pub help: &'static str,
+}

@@ -6,7 +6,7 @@ use heapless::String;
 use serde::{Deserialize, Serialize};
 
 use crate::flags::flag_set;
-use crate::sizes::{TAG, U8, U16, U32};
+use crate::sizes::{F32, TAG, U8, U16, U32};
 
 /// Longest board name [`DeviceInfo::board`] can carry, bytes.
 pub const BOARD_NAME_LEN: usize = 16;
@@ -19,7 +19,7 @@ pub const FIRMWARE_BUILD_LEN: usize = 20;
 ///
 /// `protocol_version` and `schema_hash` come first and stay first in every later protocol
 /// version, so any host can read them (see [`crate::identify_peer`]).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DeviceInfo {
     /// The firmware's [`crate::PROTOCOL_VERSION`].
     pub protocol_version: u16,
@@ -40,6 +40,11 @@ pub struct DeviceInfo {
     pub uptime_s: u32,
     /// Optional hardware this board has fitted.
     pub capabilities: Capabilities,
+    /// Device seconds per wall-clock second: 1 on a board; a virtual rig served faster (or
+    /// slower) than real time says how much (`rig sim serve --speed`). Every time in the
+    /// protocol (the comms timeout, the fault hold, `device_time_us`) is device time, so a
+    /// host divides its heartbeat interval by this.
+    pub time_scale: f32,
 }
 
 impl DeviceInfo {
@@ -52,7 +57,8 @@ impl DeviceInfo {
         + TAG
         + TAG
         + U32
-        + U16;
+        + U16
+        + F32;
 }
 
 /// Firmware version, semantic-versioning style.
@@ -137,15 +143,19 @@ flag_set! {
     pub struct Capabilities(u16) {
         /// A quadrature encoder on the output shaft: output angle and speed, backdrive
         /// detection and the output-overspeed fault.
-        const OUTPUT_ENCODER = 0;
+        const OUTPUT_ENCODER = 0
+            => "an encoder on the output shaft: output angle and speed, backdrive detection, output overspeed";
         /// A divider measuring the motor supply: bus voltage in telemetry, used by the
         /// speed loop's feed-forward and by open-loop volts.
-        const BUS_VOLTAGE = 1;
+        const BUS_VOLTAGE = 1
+            => "the motor supply is measured: bus voltage in health, feed-forward and open-loop volts use it";
         /// A thermistor on the motor: motor temperature in telemetry.
-        const MOTOR_TEMP = 2;
+        const MOTOR_TEMP = 2
+            => "a thermistor on the motor: motor temperature in health";
         /// The device is the virtual rig (a simulation), which accepts
         /// `Request::Simulation` commands.
-        const SIMULATION = 3;
+        const SIMULATION = 3
+            => "the device is the virtual rig: it accepts simulation commands";
     }
 }
 

@@ -129,6 +129,7 @@ pub use deframer::{Deframer, DeframerStats, DeviceDeframer, RequestDeframer};
 pub use device::{DeviceMessage, NackCode, Reply};
 pub use error::Error;
 pub use faults::FaultFlags;
+pub use flags::FlagInfo;
 #[cfg(any(test, feature = "std"))]
 pub use framing::encode_frame_vec;
 pub use framing::{
@@ -140,19 +141,24 @@ pub use info::{
     BOARD_NAME_LEN, Capabilities, DeviceInfo, FIRMWARE_BUILD_LEN, FirmwareVersion,
     ParametersStatus, ResetCause,
 };
-pub use link::{COMMS_TIMEOUT_MS, DEFAULT_BAUD_RATE, HEARTBEAT_INTERVAL_MS, MAX_TELEMETRY_RATE_HZ};
+pub use link::{
+    COMMS_TIMEOUT_MS, DEFAULT_BAUD_RATE, FAULT_HOLD_MS, HEARTBEAT_INTERVAL_MS,
+    MAX_TELEMETRY_RATE_HZ, REQUEST_WINDOW,
+};
 pub use parameters::{ParameterField, ParameterRejection, RejectReason, RigParameters};
 pub use request::{ReplyKind, Request, SimCommand};
 pub use schema::SCHEMA_HASH;
 pub use sequence::SeqTracker;
 pub use sizes::{
-    MAX_DEVICE_FRAME_SIZE, MAX_FRAME_SIZE, MAX_MESSAGE_SIZE, MAX_REQUEST_FRAME_SIZE,
-    cobs_max_encoded_len, varint_len,
+    MAX_DEVICE_FRAME_SIZE, MAX_FRAME_SIZE, MAX_MESSAGE_SIZE, MAX_REPLY_FRAME_SIZE,
+    MAX_REQUEST_FRAME_SIZE, cobs_max_encoded_len, varint_len,
 };
 pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 
 /// Version of this wire format; bump it with every released layout change (every change
 /// of [`SCHEMA_HASH`] that reaches a user). v2: replies carry the request's `seq`, frames
 /// open with a delimiter, rig parameters name a refused field, and identity, output-shaft,
-/// supply, temperature and timing fields.
-pub const PROTOCOL_VERSION: u16 = 2;
+/// supply, temperature and timing fields. v3: `DeviceInfo::time_scale`, the request window
+/// ([`REQUEST_WINDOW`]), and a device that refuses
+/// (never silently replaces) a value it cannot use.
+pub const PROTOCOL_VERSION: u16 = 3;

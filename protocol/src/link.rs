@@ -12,5 +12,18 @@ pub const COMMS_TIMEOUT_MS: u32 = 500;
 /// How often the host sends `Heartbeat` while a release is live, ms.
 pub const HEARTBEAT_INTERVAL_MS: u32 = 150;
 
+/// Requests a host may have outstanding (sent, reply not yet received) at once. The
+/// device keeps room in its transmit queue for this many replies of the largest size, so
+/// within the window every request is answered even while telemetry at 1 kHz and a capture
+/// upload share the link; a request that arrives while this many replies still wait to be
+/// sent is answered `Nack(Busy)` and has no effect. A host's heartbeats count.
+pub const REQUEST_WINDOW: usize = 4;
+
+/// After a fault rises, requests other than `Hello`, `GetInfo`, `GetFaults`, `ClearFaults`
+/// and the locks (`Release { on: false }`, `OpenLoop { volts: 0 }`) are refused with
+/// `Nack(InFaultHold)` for this long, ms (device time), whether or not the fault is cleared
+/// meanwhile: a host cannot restart the motor into a fault that is still settling.
+pub const FAULT_HOLD_MS: u32 = 500;
+
 // Two heartbeats may be lost in a row without dropping the load.
 const _: () = assert!(3 * HEARTBEAT_INTERVAL_MS < COMMS_TIMEOUT_MS);

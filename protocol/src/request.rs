@@ -30,7 +30,9 @@ pub enum Request {
     Release {
         /// True to vibrate (make the gear backdrivable), false to lock.
         on: bool,
-        /// Vibration (cam) frequency, Hz; ignored when `on` is false.
+        /// Vibration (cam) frequency, Hz: from the board's minimum up to the active
+        /// parameters' `max_freq_hz` (at most the board's cap); outside it `BadArgument`,
+        /// never clamped. Ignored when `on` is false.
         target_hz: f32,
     },
     /// Keeps a release alive; answered by `Ack`.
@@ -40,7 +42,9 @@ pub enum Request {
     /// Validates, stores and activates a parameter record; `Ack` once stored, or
     /// `Nack(ParametersRejected)` naming the field, or `Nack(Busy)` while the motor runs.
     SetParameters(RigParameters),
-    /// Streams `Telemetry` at `rate_hz` (at most [`crate::MAX_TELEMETRY_RATE_HZ`]).
+    /// Streams `Telemetry` at `rate_hz`: the control rate (1 kHz) divided by a whole
+    /// number, at most [`crate::MAX_TELEMETRY_RATE_HZ`]; any other rate is refused with
+    /// `BadArgument`, never rounded.
     StartTelemetry {
         /// Samples per second.
         rate_hz: u16,
@@ -49,9 +53,11 @@ pub enum Request {
     StopTelemetry,
     /// Records a raw capture, then sends it as `CaptureChunk`s and a `CaptureDone`.
     StartCapture {
-        /// Sample rate, Hz (the paper logged at 10 kHz).
+        /// Sample rate, Hz: the ADC rate (10 kHz, as the paper logged) divided by a whole
+        /// number, at least 100 Hz; any other rate is refused with `BadArgument`.
         sample_rate_hz: u16,
-        /// Number of samples to record (the device may clamp to its buffer).
+        /// Number of samples to record, 1 up to the device's buffer (10 000 on the
+        /// Nucleo firmware); more is refused with `BadArgument`, never capped.
         samples: u32,
     },
     /// Asks for `Faults`.
@@ -133,9 +139,33 @@ impl ReplyKind {
     }
 }
 
+/// Variants of [`Request`] in this version (tags `0..REQUEST_VARIANTS`).
+const REQUEST_VARIANTS: u32 = 14;
+/// Tag of [`Request::Simulation`], and the commands of [`SimCommand`] it carries.
+const SIMULATION_TAG: u32 = 13;
+const SIM_COMMANDS: u32 = 3;
+
 impl Request {
     /// Largest serialised size, bytes.
     pub const MAX_WIRE_SIZE: usize = TAG + RigParameters::MAX_WIRE_SIZE;
+
+    /// Whether the CRC-checked body (`seq` and message, as [`crate::Deframer::last_body`]
+    /// gives it) of a request that did not decode names a request this version knows.
+    /// Then one of its fields is out of its type's range (a bool of 2, an enum tag past
+    /// the last, a truncated field, trailing bytes) and the device answers
+    /// `Nack(BadArgument)`; otherwise the request is unknown (`Nack(UnknownMessage)`).
+    pub fn names_known_request(body: &[u8]) -> bool {
+        let Ok((_seq, rest)) = postcard::take_from_bytes::<u16>(body) else {
+            return false;
+        };
+        match postcard::take_from_bytes::<u32>(rest) {
+            Ok((SIMULATION_TAG, rest)) => {
+                matches!(postcard::take_from_bytes::<u32>(rest), Ok((c, _)) if c < SIM_COMMANDS)
+            }
+            Ok((tag, _)) => tag < REQUEST_VARIANTS,
+            Err(_) => false,
+        }
+    }
 
     /// The request's name for messages: the variant, with `Release(on)` / `Release(off)`
     /// and `Simulation(SetLoad)` etc. spelled out.
@@ -212,5 +242,36 @@ impl Request {
             self,
             Self::SetParameters(_) | Self::StartCapture { .. } | Self::RezeroCurrent
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn body(seq: u16, request: &Request) -> std::vec::Vec<u8> {
+        let mut buf = crate::encode_frame_vec(seq, request).unwrap();
+        crate::frame_body(&mut buf).unwrap().to_vec()
+    }
+
+    #[test]
+    fn known_requests_are_told_from_unknown_ones() {
+        let examples = crate::golden::examples::requests();
+        let mut tags = std::collections::BTreeSet::new();
+        for (name, request) in &examples {
+            let b = body(7, request);
+            assert!(Request::names_known_request(&b), "{name}");
+            tags.insert(b[1]);
+        }
+        // Every variant has an example, so the constant cannot fall behind the enum.
+        assert_eq!(u32::try_from(tags.len()).unwrap(), REQUEST_VARIANTS, "{tags:?}");
+        // `Release { on: 2 }`: a known request with a bad field.
+        assert!(Request::names_known_request(&[7, 2, 2, 0, 0, 0x20, 0x41]));
+        // Tags past the last request, and a simulation command past the last.
+        assert!(!Request::names_known_request(&[7, 14]));
+        assert!(!Request::names_known_request(&[7, 0x80, 0x01]));
+        assert!(!Request::names_known_request(&[7, 13, 3]));
+        assert!(Request::names_known_request(&[7, 13, 2]));
+        assert!(!Request::names_known_request(&[]));
     }
 }

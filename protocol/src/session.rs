@@ -41,6 +41,11 @@
 //!   [`Request::retry_safe`] is sent again with the same `seq` (up to
 //!   [`SessionConfig::retries`] times; the bytes come out of [`Session::poll_transmit`]);
 //!   then, or at once for the others, [`Event::Timeout`].
+//! * At most [`REQUEST_WINDOW`] requests are outstanding at once (heartbeats included), the
+//!   device's window: [`Session::send`] of a request beyond it returns empty bytes and
+//!   keeps the frame until a reply (or a timeout) frees a place; it then comes out of
+//!   [`Session::poll_transmit`]. A heartbeat due while the window is full waits too (the
+//!   outstanding requests refresh the release when the device accepts them).
 //! * [`Session::keep_alive`] sends a `Heartbeat` every interval (through
 //!   [`Session::poll_transmit`]) while a release or an open-loop drive is live. Their
 //!   replies are consumed here; refusals are counted.
@@ -57,8 +62,8 @@ use std::time::Duration;
 use crate::compat::{PeerIdentity, check_peer, identify_peer};
 use crate::{
     CaptureChunk, DeviceDeframer, DeviceInfo, DeviceMessage, Error, FRAME_DELIMITER, FaultFlags,
-    HealthSample, NackCode, PROTOCOL_VERSION, Reply, Request, SCHEMA_HASH, SeqTracker,
-    TelemetrySample, encode_frame_vec,
+    HealthSample, NackCode, PROTOCOL_VERSION, REQUEST_WINDOW, Reply, Request, SCHEMA_HASH,
+    SeqTracker, TelemetrySample, encode_frame_vec,
 };
 
 /// Events kept while the driver does not poll; beyond this the oldest are dropped.
@@ -188,6 +193,8 @@ pub struct Session {
     next_seq: u16,
     deframer: DeviceDeframer,
     pending: BTreeMap<u16, Pending>,
+    /// Requests numbered but not yet sent: the window was full.
+    waiting: VecDeque<(u16, Request)>,
     events: VecDeque<Event>,
     transmit: VecDeque<Vec<u8>>,
     /// Heartbeat interval and when the last one went out.
@@ -211,6 +218,7 @@ impl Session {
             next_seq: 0,
             deframer: DeviceDeframer::new(),
             pending: BTreeMap::new(),
+            waiting: VecDeque::new(),
             events: VecDeque::new(),
             transmit: VecDeque::new(),
             keep_alive: None,
@@ -243,9 +251,25 @@ impl Session {
     }
 
     /// Numbers `request`, remembers it until its reply, and returns its sequence number
-    /// and frame (write the bytes to the port).
+    /// and frame (write the bytes to the port). With [`REQUEST_WINDOW`] requests already
+    /// outstanding the bytes are empty: the frame waits for a free place and then comes
+    /// out of [`Session::poll_transmit`].
     pub fn send(&mut self, request: Request, now: Duration) -> (u16, Vec<u8>) {
         let seq = self.take_seq();
+        if self.pending.len() >= REQUEST_WINDOW || !self.waiting.is_empty() {
+            self.waiting.push_back((seq, request));
+            return (seq, Vec::new());
+        }
+        (seq, self.start(seq, request, now))
+    }
+
+    /// Requests sent and not yet answered (at most [`REQUEST_WINDOW`]).
+    pub fn outstanding(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Sends `request` as `seq` now: remembered until its reply.
+    fn start(&mut self, seq: u16, request: Request, now: Duration) -> Vec<u8> {
         let bytes = frame(seq, &request);
         self.pending.insert(
             seq,
@@ -256,7 +280,18 @@ impl Session {
                 heartbeat: false,
             },
         );
-        (seq, bytes)
+        bytes
+    }
+
+    /// Sends waiting requests while the window has room.
+    fn release_waiting(&mut self, now: Duration) {
+        while self.pending.len() < REQUEST_WINDOW {
+            let Some((seq, request)) = self.waiting.pop_front() else {
+                break;
+            };
+            let bytes = self.start(seq, request, now);
+            self.transmit.push_back(bytes);
+        }
     }
 
     /// Feeds bytes from the device, in chunks of any size.
@@ -327,14 +362,16 @@ impl Session {
         self.keep_alive.is_some()
     }
 
-    /// Whether request `seq` still waits for its reply.
+    /// Whether request `seq` still waits for its reply (or for its place in the window).
     pub fn is_pending(&self, seq: u16) -> bool {
-        self.pending.contains_key(&seq)
+        self.pending.contains_key(&seq) || self.waiting.iter().any(|(s, _)| *s == seq)
     }
 
-    /// Stops waiting for request `seq` (a late reply then counts as stale).
+    /// Stops waiting for request `seq` (a late reply then counts as stale; one not sent
+    /// yet is never sent).
     pub fn forget(&mut self, seq: u16) {
         self.pending.remove(&seq);
+        self.waiting.retain(|(s, _)| *s != seq);
     }
 
     /// Counters so far.
@@ -463,8 +500,10 @@ impl Session {
                 });
             }
         }
+        self.release_waiting(now);
         if let Some((every, last)) = self.keep_alive
             && now.saturating_sub(last) >= every
+            && self.pending.len() < REQUEST_WINDOW
         {
             self.keep_alive = Some((every, now));
             let seq = self.take_seq();
@@ -569,6 +608,56 @@ mod tests {
             output_angle_rad: f32::NAN,
             output_speed_rad_s: f32::NAN,
         })
+    }
+
+    #[test]
+    fn no_more_than_the_window_is_ever_outstanding() {
+        let mut s = Session::default();
+        let mut dev = Device::default();
+        let mut on_wire = Vec::new();
+        let mut seqs = Vec::new();
+        for _ in 0..3 * REQUEST_WINDOW {
+            let (seq, bytes) = s.send(Request::GetFaults, ms(0));
+            seqs.push(seq);
+            on_wire.extend(dev.requests(&bytes));
+        }
+        assert_eq!(on_wire.len(), REQUEST_WINDOW);
+        assert_eq!(s.outstanding(), REQUEST_WINDOW);
+        assert!(seqs.iter().all(|&q| s.is_pending(q)));
+        // A heartbeat due while the window is full waits.
+        s.keep_alive(Some(ms(10)), ms(0));
+        assert!(s.poll_transmit(ms(20)).is_none());
+        let mut answered = 0;
+        let mut t = 20;
+        while answered < seqs.len() {
+            // The device answers everything it has; the session sends as places free.
+            let mut wire = Vec::new();
+            for f in on_wire.drain(..) {
+                wire.extend(dev.say(&DeviceMessage::ack(f.seq)));
+            }
+            t += 1;
+            s.receive(&wire, ms(t));
+            assert!(s.outstanding() <= REQUEST_WINDOW);
+            answered += events(&mut s, ms(t))
+                .iter()
+                .filter(|e| matches!(e, Event::Reply { .. }))
+                .count();
+            while let Some(bytes) = s.poll_transmit(ms(t)) {
+                on_wire.extend(dev.requests(&bytes));
+            }
+            assert!(on_wire.len() <= REQUEST_WINDOW, "{}", on_wire.len());
+            assert!(t < 100, "stuck after {answered} replies");
+        }
+        // In order, each exactly once.
+        assert_eq!(answered, seqs.len());
+        // A forgotten waiting request is never sent.
+        for _ in 0..REQUEST_WINDOW {
+            s.send(Request::GetInfo, ms(t));
+        }
+        let (late, bytes) = s.send(Request::GetInfo, ms(t));
+        assert!(bytes.is_empty());
+        s.forget(late);
+        assert!(!s.is_pending(late));
     }
 
     #[test]

@@ -60,6 +60,10 @@ pub const MAX_REQUEST_FRAME_SIZE: usize = frame_size(Request::MAX_WIRE_SIZE);
 /// Largest device-to-host frame on the wire, COBS overhead and both delimiters included.
 pub const MAX_DEVICE_FRAME_SIZE: usize = frame_size(DeviceMessage::MAX_WIRE_SIZE);
 
+/// Largest reply frame on the wire (a `DeviceMessage::Reply` with the largest reply, a
+/// parameter record), COBS overhead and both delimiters included.
+pub const MAX_REPLY_FRAME_SIZE: usize = frame_size(TAG + U16 + Reply::MAX_WIRE_SIZE);
+
 /// Largest frame in either direction: size encode and receive buffers with it.
 pub const MAX_FRAME_SIZE: usize =
     cobs_max_encoded_len(MAX_MESSAGE_SIZE + CRC_LEN) + FRAME_DELIMITERS;

@@ -40,22 +40,30 @@ flag_set! {
     /// Status bits of a telemetry sample, a `u16` varint on the wire.
     pub struct StatusFlags(u16) {
         /// mu_d * Lambda < 1: once moving, the output keeps moving after vibration stops.
-        const COASTS_AFTER_STOP = 0;
+        const COASTS_AFTER_STOP = 0
+            => "mu_d Lambda < 1: once moving, the load keeps moving after vibration stops";
         /// mu_s * Lambda <= 1: the gear does not hold its load even without vibration.
-        const NOT_SELF_LOCKING = 1;
+        const NOT_SELF_LOCKING = 1
+            => "mu_s Lambda <= 1: this gear set does not hold its load even locked";
         /// A release request (host, refreshed by heartbeat) is live.
-        const HOST_RELEASE = 2;
+        const HOST_RELEASE = 2
+            => "a host's release is live (kept by heartbeats)";
         /// The physical release input is held.
-        const BUTTON_RELEASE = 3;
+        const BUTTON_RELEASE = 3
+            => "the release button is held";
         /// A capture is recording.
-        const CAPTURE_RUNNING = 4;
+        const CAPTURE_RUNNING = 4
+            => "a capture is recording";
         /// The paper's default calibration is in use (none stored, or stored one invalid).
-        const CALIBRATION_DEFAULTS = 5;
+        const CALIBRATION_DEFAULTS = 5
+            => "the paper's calibration is in use (none stored, or it failed its check)";
         /// The output shaft turns (output encoder fitted); while the gear is locked this is
         /// backdrive.
-        const OUTPUT_MOVING = 6;
+        const OUTPUT_MOVING = 6
+            => "the output shaft turns; while locked, that is backdrive";
         /// An open-loop drive (`Request::OpenLoop`) is running.
-        const OPEN_LOOP = 7;
+        const OPEN_LOOP = 7
+            => "an open-loop drive is running";
     }
 }
 

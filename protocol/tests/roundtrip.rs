@@ -243,17 +243,19 @@ fn wrong_message_type_is_a_decode_error_with_seq() {
 
 /// A hand-built `Reply { Info }` frame whose build and board names have the given lengths.
 fn forged_info(build_len: u8, board_len: u8) -> Vec<u8> {
-    // seq 7, tag Reply, request_seq 1, tag Info, protocol 2, schema hash 0xDEADBEEF
+    // seq 7, tag Reply, request_seq 1, tag Info, protocol 3, schema hash 0xDEADBEEF
     // (varint), version 0.1.2.
     let mut body = vec![
-        0x07, 0x00, 0x01, 0x00, 0x02, 0xef, 0xfd, 0xb6, 0xf5, 0x0d, 0x00, 0x01, 0x02,
+        0x07, 0x00, 0x01, 0x00, 0x03, 0xef, 0xfd, 0xb6, 0xf5, 0x0d, 0x00, 0x01, 0x02,
     ];
     body.push(build_len);
     body.extend((0..build_len).map(|i| b'0' + i % 10));
     body.push(board_len);
     body.extend((0..board_len).map(|i| b'a' + i));
-    // parameters_status Valid, reset_cause PowerOn, uptime 300 s, capabilities SIMULATION.
+    // parameters_status Valid, reset_cause PowerOn, uptime 300 s, capabilities SIMULATION,
+    // time scale 1.0 (f32 little-endian).
     body.extend([0x00, 0x00, 0xac, 0x02, 0x08]);
+    body.extend(1.0f32.to_le_bytes());
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&body);
     body.extend_from_slice(&crc.to_le_bytes());
     let mut encoded = vec![0; cobs_max_encoded_len(body.len())];
@@ -271,6 +273,7 @@ fn oversized_names_are_rejected_not_truncated() {
     assert_eq!((info.firmware_build.len(), info.board.len()), (20, 16));
     assert_eq!(info.uptime_s, 300);
     assert_eq!(info.capabilities, Capabilities::SIMULATION);
+    assert_eq!(info.time_scale, 1.0);
     assert_eq!(ok.msg.reply_to(), Some(1));
     for (build, board) in [(21, 16), (20, 17)] {
         assert_eq!(

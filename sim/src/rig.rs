@@ -155,6 +155,9 @@ pub struct SimRig {
     frozen_count: u16,
     flash: Option<RigParameters>,
     bench: SimBench,
+    /// The core has latched the break the plant's comparator tripped (so a later clear of
+    /// `HW_OVERCURRENT` re-arms it).
+    break_reported: bool,
 }
 
 impl SimRig {
@@ -173,6 +176,9 @@ impl SimRig {
         };
         let mut core_config = config.core;
         core_config.capabilities.insert(Capabilities::SIMULATION);
+        // The virtual rig measures its bridge supply (`BoardInputs::bus_voltage_v` below),
+        // so it says so; health reports it.
+        core_config.capabilities.insert(Capabilities::BUS_VOLTAGE);
         Self {
             plant: Plant::new(config.plant, config.seed),
             core: Core::new(core_config, boot),
@@ -190,6 +196,7 @@ impl SimRig {
                 sensor_supply_v: None,
                 commands: 0,
             },
+            break_reported: false,
         }
     }
 
@@ -239,6 +246,13 @@ impl SimRig {
     }
 
     fn control_step(&mut self) {
+        if self.break_reported && !self.core.break_latched() {
+            // ClearFaults cleared HW_OVERCURRENT: the binary clears the break flag and sets
+            // MOE again before it reads this step's inputs. A cause still present trips the
+            // comparator again; one that is gone leaves the fault cleared.
+            self.plant.rearm_break();
+            self.break_reported = false;
+        }
         let encoder_count = if self.injections.encoder_frozen {
             self.frozen_count
         } else {
@@ -274,9 +288,8 @@ impl SimRig {
             release_button: self.button,
         };
         let out = self.core.step(&inputs);
-        if self.plant.break_tripped() && !self.core.break_latched() {
-            // ClearFaults cleared HW_OVERCURRENT: the binary sets MOE again.
-            self.plant.rearm_break();
+        if self.plant.break_tripped() && self.core.break_latched() {
+            self.break_reported = true;
         }
         self.adc.clear();
         self.drive = Drive {
@@ -375,15 +388,26 @@ fn serve(command: SimCommand, plant: &mut Plant, bench: &mut SimBench) -> Result
             Err(NackCode::BadArgument)
         }
     };
+    // Physical bounds, so a typo is refused rather than simulated: twice the teeth's
+    // strength (the protections above it can still be exercised), twice the bridge supply.
+    let max_load = 2.0 * model::paper::TAU_ROT_MAX;
+    let max_supply = 2.0 * model::hardware::board::BRIDGE_SUPPLY_V;
+    let within = |v: f64, max: f64| {
+        if v.abs() <= max {
+            Ok(v)
+        } else {
+            Err(NackCode::BadArgument)
+        }
+    };
     match command {
         // The operator hangs the load still (a load still falling from the last run is
         // caught and hung again), where the output is: the encoder sees no jump.
         SimCommand::SetLoad { tau_rot_nm } => {
-            plant.set_load(Load::Torque(finite(tau_rot_nm)?));
+            plant.set_load(Load::Torque(within(finite(tau_rot_nm)?, max_load)?));
             plant.stop_output();
         }
         SimCommand::SetSupplyVoltage { volts } => {
-            plant.set_supply(positive(volts)?);
+            plant.set_supply(within(positive(volts)?, max_supply)?);
             bench.supply_v = Some(volts);
         }
         SimCommand::SetSensorSupply { volts } => {

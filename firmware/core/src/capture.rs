@@ -43,9 +43,9 @@ pub enum CapturePhase {
 pub struct CapturePlan {
     /// Capture id.
     pub id: u16,
-    /// Samples it will record (clamped to the buffer).
+    /// Samples it will record (as asked).
     pub samples: u32,
-    /// Actual sample rate, Hz.
+    /// Sample rate, Hz (as asked).
     pub sample_rate_hz: u16,
 }
 
@@ -88,7 +88,10 @@ impl Capture {
         self.phase
     }
 
-    /// Starts recording `samples` at about `sample_rate_hz`, from an ADC running at `adc_hz`.
+    /// Starts recording `samples` at `sample_rate_hz`, from an ADC running at `adc_hz`.
+    /// Refused with `BadArgument` (never rounded or capped) unless the rate is `adc_hz`
+    /// divided by a whole number and at least [`MIN_SAMPLE_RATE_HZ`], and `samples` is
+    /// 1..=[`CAPTURE_CAPACITY`]; with `Busy` while a capture records or uploads.
     pub fn start(
         &mut self,
         sample_rate_hz: u16,
@@ -98,14 +101,20 @@ impl Capture {
         if self.phase != CapturePhase::Idle {
             return Err(NackCode::Busy);
         }
-        if samples == 0 || sample_rate_hz < MIN_SAMPLE_RATE_HZ {
+        let rate = u32::from(sample_rate_hz);
+        let capacity = u32::try_from(CAPTURE_CAPACITY).unwrap_or(u32::MAX);
+        if samples == 0
+            || samples > capacity
+            || sample_rate_hz < MIN_SAMPLE_RATE_HZ
+            || rate > adc_hz
+            || !adc_hz.is_multiple_of(rate)
+        {
             return Err(NackCode::BadArgument);
         }
-        let rate = u32::from(sample_rate_hz).min(adc_hz).max(1);
-        self.decimation = ((adc_hz + rate / 2) / rate).max(1);
-        self.sample_rate_hz = u16::try_from(adc_hz / self.decimation).unwrap_or(u16::MAX);
+        self.decimation = adc_hz / rate;
+        self.sample_rate_hz = sample_rate_hz;
         self.id = self.id.wrapping_add(1);
-        self.total = samples.min(u32::try_from(CAPTURE_CAPACITY).unwrap_or(u32::MAX));
+        self.total = samples;
         self.recorded = 0;
         self.sent = 0;
         self.countdown = 0;
@@ -242,13 +251,19 @@ mod tests {
     }
 
     #[test]
-    fn decimates_clamps_and_refuses_bad_arguments() {
+    fn decimates_and_refuses_what_it_cannot_do_exactly() {
         let mut c = Capture::new();
         assert_eq!(c.start(50, 10, 10_000), Err(NackCode::BadArgument));
         assert_eq!(c.start(1000, 0, 10_000), Err(NackCode::BadArgument));
-        let plan = c.start(3000, 1_000_000, 10_000).unwrap();
+        // Never rounded to a divisor nor capped to the buffer: refused.
+        assert_eq!(c.start(3000, 100, 10_000), Err(NackCode::BadArgument));
+        assert_eq!(c.start(20_000, 100, 10_000), Err(NackCode::BadArgument));
+        let over = CAPTURE_CAPACITY as u32 + 1;
+        assert_eq!(c.start(10_000, over, 10_000), Err(NackCode::BadArgument));
+        assert_eq!(c.phase(), CapturePhase::Idle, "a refusal has no effect");
+        let plan = c.start(2500, CAPTURE_CAPACITY as u32, 10_000).unwrap();
         assert_eq!(plan.samples, CAPTURE_CAPACITY as u32);
-        assert_eq!(plan.sample_rate_hz, 3333);
+        assert_eq!(plan.sample_rate_hz, 2500);
         let mut c = Capture::new();
         c.start(1000, 5, 10_000).unwrap();
         for k in 0..5u16 {

@@ -283,7 +283,7 @@ impl Default for SupervisorConfig {
             overload_revolutions: 1,
             load_limit_revolutions: 3,
             jam_ratio: 2.0,
-            fault_hold_us: 500_000,
+            fault_hold_us: protocol::FAULT_HOLD_MS as u64 * 1000,
         }
     }
 }
@@ -368,9 +368,13 @@ pub struct CoreConfig {
     /// Board name reported in `Info` (at most 16 bytes are sent).
     pub board_name: &'static str,
     /// Optional hardware fitted, reported in `Info`; telemetry and health report NaN for
-    /// what is missing. The real board has none of them yet; the virtual rig adds
-    /// `SIMULATION`.
+    /// what is missing (health's bus voltage unless `BUS_VOLTAGE` is set). The default
+    /// has none; the Nucleo's `board::core_config` sets `BUS_VOLTAGE` and the output
+    /// encoder, the virtual rig adds `BUS_VOLTAGE` and `SIMULATION`.
     pub capabilities: protocol::Capabilities,
+    /// Device seconds per wall-clock second, reported in `Info` (`DeviceInfo::time_scale`):
+    /// 1 on a board; the virtual rig served at `--speed N` reports N.
+    pub time_scale: f32,
     /// Current sensor.
     pub current: CurrentSensorConfig,
     /// Motor model and drive limits.
@@ -437,6 +441,7 @@ impl Default for CoreConfig {
             comms_timeout_us: protocol::COMMS_TIMEOUT_MS as u64 * 1000,
             board_name: "nucleo-g474re",
             capabilities: protocol::Capabilities::empty(),
+            time_scale: 1.0,
             current: CurrentSensorConfig::default(),
             motor: MotorConfig::default(),
             speed_loop: SpeedLoopConfig::default(),

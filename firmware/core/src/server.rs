@@ -2,7 +2,11 @@
 //! frame `seq` (`SetParameters`' comes after the flash write).
 //!
 //! Garbled frames are counted by the deframer and otherwise ignored; an intact frame of an
-//! unknown message is refused with `UnknownMessage`. Only accepted requests (anything
+//! unknown message is refused with `UnknownMessage`, one of a known request with a field
+//! out of its type's range (a bool of 2) with `BadArgument`. A request that arrives while
+//! [`protocol::REQUEST_WINDOW`] replies still wait in the transmit queue is refused with
+//! `Busy` and has no effect. A value the device cannot use exactly is refused with
+//! `BadArgument`, never replaced by a nearby one. Only accepted requests (anything
 //! answered but a `Nack`) refresh the release heartbeat: a stream of refused requests or
 //! undecodable frames must not keep the motor vibrating. `Simulation` commands are for the
 //! virtual rig: [`Core::receive`] refuses them with `SimulationOnly`, and the simulator
@@ -10,8 +14,8 @@
 
 use protocol::{
     DeviceInfo, DeviceMessage, Error, FirmwareVersion, Frame, HelloAnswer, LegacyV1Nack,
-    MAX_TELEMETRY_RATE_HZ, NackCode, PROTOCOL_VERSION, ParametersStatus, Reply, Request,
-    SCHEMA_HASH, SimCommand, SupervisorState, hello_answer,
+    MAX_TELEMETRY_RATE_HZ, NackCode, PROTOCOL_VERSION, ParametersStatus, REQUEST_WINDOW, Reply,
+    Request, SCHEMA_HASH, SimCommand, SupervisorState, hello_answer,
 };
 
 use crate::controller::{Core, Derived, Persist, check_board_caps};
@@ -79,6 +83,11 @@ impl Core {
         for &byte in bytes {
             match self.deframer.push_byte(byte) {
                 Some(Ok(Frame { seq, msg })) => {
+                    if self.tx.queued_replies() >= REQUEST_WINDOW {
+                        // Beyond the window: refused before it acts.
+                        self.answer(now_us, seq, Answer::nack(NackCode::Busy));
+                        continue;
+                    }
                     let answer = match msg {
                         // An operator's action on the virtual rig, allowed in a fault hold.
                         Request::Simulation(command) => match simulation(command) {
@@ -90,7 +99,18 @@ impl Core {
                     self.answer(now_us, seq, answer);
                 }
                 Some(Err(Error::Decode { seq: Some(seq) })) => {
-                    self.answer(now_us, seq, Answer::nack(NackCode::UnknownMessage));
+                    let known = self
+                        .deframer
+                        .last_body()
+                        .is_some_and(Request::names_known_request);
+                    let code = if self.tx.queued_replies() >= REQUEST_WINDOW {
+                        NackCode::Busy
+                    } else if known {
+                        NackCode::BadArgument
+                    } else {
+                        NackCode::UnknownMessage
+                    };
+                    self.answer(now_us, seq, Answer::nack(code));
                 }
                 // Counted in the deframer's stats; nothing to answer.
                 Some(Err(_)) | None => {}
@@ -107,14 +127,14 @@ impl Core {
             Answer::Now(reply) => self.send_reply(seq, reply),
             Answer::Later => {}
             Answer::LegacyV1Nack => {
-                self.tx.push(&LegacyV1Nack { hello_seq: seq }, 0);
+                self.tx.push_reply(&LegacyV1Nack { hello_seq: seq });
             }
         }
     }
 
     /// Queues `reply` to the request with frame sequence number `seq`.
     pub(crate) fn send_reply(&mut self, seq: u16, reply: Reply) {
-        self.tx.push(&DeviceMessage::reply(seq, reply), 0);
+        self.tx.push_reply(&DeviceMessage::reply(seq, reply));
     }
 
     fn info(&self, now_us: u64) -> DeviceInfo {
@@ -128,6 +148,7 @@ impl Core {
             reset_cause: self.reset_cause,
             uptime_s: whole_seconds(now_us),
             capabilities: self.config.capabilities,
+            time_scale: self.config.time_scale,
         }
     }
 
@@ -146,10 +167,15 @@ impl Core {
     }
 
     fn handle(&mut self, now: u64, seq: u16, msg: Request) -> Answer {
+        // Status, clearing and locking (the safe direction) are never held off.
         let status_or_clear = matches!(
             msg,
-            Request::Hello { .. } | Request::GetInfo | Request::GetFaults | Request::ClearFaults
-        );
+            Request::Hello { .. }
+                | Request::GetInfo
+                | Request::GetFaults
+                | Request::ClearFaults
+                | Request::Release { on: false, .. }
+        ) || matches!(msg, Request::OpenLoop { volts } if volts == 0.0);
         if !status_or_clear && self.faults.in_hold(now) {
             return Answer::nack(NackCode::InFaultHold);
         }
@@ -186,12 +212,18 @@ impl Core {
                 }
             }
             Request::StartTelemetry { rate_hz } => {
-                if rate_hz == 0 {
+                // Exactly the rate asked: the control rate divided by a whole number, at
+                // most MAX_TELEMETRY_RATE_HZ.
+                let control_hz = self.config.control_hz;
+                let rate = u32::from(rate_hz);
+                if rate == 0
+                    || rate_hz > MAX_TELEMETRY_RATE_HZ
+                    || rate > control_hz
+                    || !control_hz.is_multiple_of(rate)
+                {
                     return Answer::nack(NackCode::BadArgument);
                 }
-                let control_hz = u16::try_from(self.config.control_hz).unwrap_or(u16::MAX);
-                let rate = u32::from(rate_hz.min(MAX_TELEMETRY_RATE_HZ.min(control_hz)));
-                self.streams.start(self.config.control_hz / rate);
+                self.streams.start(control_hz / rate);
                 ack
             }
             Request::StopTelemetry => {
@@ -258,7 +290,9 @@ impl Core {
             return Answer::Now(Reply::Ack);
         }
         let s = self.config.supervisor;
-        if !(target_hz.is_finite() && (s.min_freq_hz..=s.max_freq_hz).contains(&target_hz)) {
+        // Up to the parameters' own limit (at most the board's): never clamped to it.
+        let max_hz = s.max_freq_hz.min(self.derived.max_hz);
+        if !(target_hz.is_finite() && (s.min_freq_hz..=max_hz).contains(&target_hz)) {
             Answer::nack(NackCode::BadArgument)
         } else if !self.faults.latched().is_empty()
             || self.parameters_status == ParametersStatus::Invalid
@@ -268,8 +302,7 @@ impl Core {
             Answer::nack(NackCode::Busy)
         } else {
             self.host_release = true;
-            // Within the allowed range but above the parameters' limit: clamped.
-            self.host_target_hz = target_hz.min(self.derived.max_hz);
+            self.host_target_hz = target_hz;
             Answer::Now(Reply::Ack)
         }
     }

@@ -1,19 +1,35 @@
 //! Outgoing frames: a byte ring of encoded COBS frames with the device's frame counter.
 //!
-//! Frames enter whole or not at all, so the host never sees a torn frame. Callers keep
-//! room free for the frames that matter most: a reply needs only its own size, telemetry
-//! leaves [`REPLY_RESERVE`] free, capture chunks also stop at [`CAPTURE_IN_FLIGHT`] bytes
-//! queued so telemetry and replies wait behind at most that much.
+//! Frames enter whole or not at all, so the host never sees a torn frame. Replies take
+//! precedence over the streams by room: telemetry, health and capture data leave
+//! [`REPLY_RESERVE`] free, enough for [`protocol::REQUEST_WINDOW`] replies of the largest
+//! size plus the `Busy` answers and fault events that may come with them, so a host that
+//! keeps within the window gets every reply whatever the streams do. Capture chunks also
+//! stop at [`CAPTURE_IN_FLIGHT`] bytes queued so telemetry and replies wait behind at most
+//! that much. The queue counts the replies still waiting ([`TxQueue::queued_replies`]):
+//! the server answers `Busy` to a request beyond the window.
 
-use protocol::{MAX_DEVICE_FRAME_SIZE, encode_frame};
+use protocol::{MAX_DEVICE_FRAME_SIZE, MAX_REPLY_FRAME_SIZE, REQUEST_WINDOW, encode_frame};
 use serde::Serialize;
 
-/// Queue size, bytes.
-pub const TX_QUEUE_LEN: usize = 1024;
-/// Bytes kept free for replies and fault events when queueing telemetry or capture data.
-pub const REPLY_RESERVE: usize = 128;
+/// Bytes of a `Nack(Busy)` or `FaultEvent` frame at most (a short reply or event).
+const SHORT_FRAME: usize = 24;
+
+/// Bytes kept free for replies, `Busy` answers and fault events when queueing telemetry
+/// or capture data: a full window of the largest replies, then as many short frames.
+pub const REPLY_RESERVE: usize =
+    REQUEST_WINDOW * (MAX_REPLY_FRAME_SIZE + SHORT_FRAME) + SHORT_FRAME;
 /// Most capture bytes queued at once (about 2.8 ms at 921 600 Bd).
 pub const CAPTURE_IN_FLIGHT: usize = 256;
+/// Queue size, bytes: the reply reserve, a capture chunk in flight and a telemetry and a
+/// health frame beside it.
+pub const TX_QUEUE_LEN: usize = REPLY_RESERVE + CAPTURE_IN_FLIGHT + 2 * MAX_DEVICE_FRAME_SIZE;
+
+/// Replies whose end the queue remembers (the window, and as many `Busy` answers).
+const REPLY_SLOTS: usize = 2 * REQUEST_WINDOW;
+
+// A stream frame never takes the reply reserve, and a capture chunk still fits beside it.
+const _: () = assert!(TX_QUEUE_LEN >= REPLY_RESERVE + MAX_DEVICE_FRAME_SIZE + CAPTURE_IN_FLIGHT);
 
 /// The byte ring.
 #[derive(Debug, Clone)]
@@ -26,6 +42,13 @@ pub struct TxQueue {
     len: usize,
     next_seq: u16,
     dropped: u32,
+    /// Bytes queued since boot and bytes drained since boot (both wrapping).
+    pushed_total: u32,
+    drained_total: u32,
+    /// Where each reply still queued ends, in `pushed_total` units, oldest first.
+    reply_ends: [u32; REPLY_SLOTS],
+    reply_first: usize,
+    reply_count: usize,
 }
 
 impl TxQueue {
@@ -38,6 +61,11 @@ impl TxQueue {
             len: 0,
             next_seq: 0,
             dropped: 0,
+            pushed_total: 0,
+            drained_total: 0,
+            reply_ends: [0; REPLY_SLOTS],
+            reply_first: 0,
+            reply_count: 0,
         }
     }
 
@@ -61,6 +89,24 @@ impl TxQueue {
     /// counts them as lost).
     pub fn dropped(&self) -> u32 {
         self.dropped
+    }
+
+    /// Replies queued and not yet handed to the link (the server answers `Busy` to a
+    /// request that finds [`protocol::REQUEST_WINDOW`] of them).
+    pub fn queued_replies(&self) -> usize {
+        self.reply_count
+    }
+
+    /// Queues a reply (`msg` answers a request) with no reserve, remembering where it ends
+    /// so [`TxQueue::queued_replies`] counts it until it is drained.
+    pub fn push_reply<M: Serialize + ?Sized>(&mut self, msg: &M) -> bool {
+        let queued = self.push(msg, 0);
+        if queued && self.reply_count < REPLY_SLOTS {
+            let slot = (self.reply_first + self.reply_count) % REPLY_SLOTS;
+            self.reply_ends[slot] = self.pushed_total;
+            self.reply_count += 1;
+        }
+        queued
     }
 
     /// Counts a frame that was never offered (a stream sample superseded before framing).
@@ -95,6 +141,13 @@ impl TxQueue {
                     self.buf[..b.len()].copy_from_slice(b);
                 }
                 self.len += n;
+                #[allow(
+                    clippy::cast_possible_truncation,
+                    reason = "a frame is at most MAX_DEVICE_FRAME_SIZE bytes"
+                )]
+                {
+                    self.pushed_total = self.pushed_total.wrapping_add(n as u32);
+                }
                 true
             }
             // A frame written straight into the free space and refused stays unqueued.
@@ -114,6 +167,25 @@ impl TxQueue {
         out[first..n].copy_from_slice(&self.buf[..n - first]);
         self.head = (self.head + n) % TX_QUEUE_LEN;
         self.len -= n;
+        #[allow(
+            clippy::cast_possible_truncation,
+            reason = "at most TX_QUEUE_LEN bytes"
+        )]
+        {
+            self.drained_total = self.drained_total.wrapping_add(n as u32);
+        }
+        // Replies whose last byte has gone out no longer count.
+        while self.reply_count > 0 {
+            let end = self.reply_ends[self.reply_first];
+            if self.pushed_total.wrapping_sub(end)
+                >= self.pushed_total.wrapping_sub(self.drained_total)
+            {
+                self.reply_first = (self.reply_first + 1) % REPLY_SLOTS;
+                self.reply_count -= 1;
+            } else {
+                break;
+            }
+        }
         n
     }
 }
@@ -157,6 +229,67 @@ mod tests {
             assert_eq!(seq, k as u16);
             assert_eq!(msg, DeviceMessage::ack(k as u16));
         }
+    }
+
+    #[test]
+    fn replies_count_until_their_last_byte_is_drained() {
+        let mut q = TxQueue::new();
+        let mut out = [0u8; 3];
+        assert!(q.push_reply(&DeviceMessage::ack(1)));
+        assert!(q.push(&DeviceMessage::ack(9), REPLY_RESERVE));
+        assert!(q.push_reply(&DeviceMessage::ack(2)));
+        assert_eq!(q.queued_replies(), 2);
+        let first = encode_frame_len(&DeviceMessage::ack(1));
+        let mut drained = 0;
+        while drained + out.len() < first {
+            drained += q.drain(&mut out);
+            assert_eq!(q.queued_replies(), 2, "the first reply is not out yet");
+        }
+        let mut last = [0u8; 1];
+        while drained < first {
+            drained += q.drain(&mut last);
+        }
+        assert_eq!(q.queued_replies(), 1);
+        let mut rest = [0u8; TX_QUEUE_LEN];
+        q.drain(&mut rest);
+        assert_eq!(q.queued_replies(), 0);
+    }
+
+    #[test]
+    fn streams_never_take_the_room_of_a_full_window_of_replies() {
+        let mut q = TxQueue::new();
+        let big = protocol::DeviceMessage::CaptureChunk(protocol::CaptureChunk {
+            capture_id: u16::MAX,
+            first_sample: u32::MAX,
+            total_samples: u32::MAX,
+            samples: heapless::Vec::from_slice(
+                &[protocol::CaptureSample {
+                    current_adc: u16::MAX,
+                    encoder_count: i32::MIN,
+                }; protocol::CAPTURE_CHUNK_SAMPLES],
+            )
+            .unwrap(),
+        });
+        while q.push(&big, REPLY_RESERVE) {}
+        let small = DeviceMessage::ack(0);
+        while q.push(&small, REPLY_RESERVE) {}
+        let params = DeviceMessage::reply(
+            3,
+            protocol::Reply::Parameters(protocol::RigParameters::paper()),
+        );
+        for _ in 0..REQUEST_WINDOW {
+            assert!(q.push_reply(&params));
+        }
+        assert_eq!(q.queued_replies(), REQUEST_WINDOW);
+        // And a `Busy` for each request beyond the window.
+        for _ in 0..REQUEST_WINDOW {
+            assert!(q.push_reply(&DeviceMessage::nack(7, protocol::NackCode::Busy)));
+        }
+    }
+
+    fn encode_frame_len(msg: &DeviceMessage) -> usize {
+        let mut buf = [0u8; MAX_DEVICE_FRAME_SIZE];
+        encode_frame(0, msg, &mut buf).unwrap().len()
     }
 
     #[test]

@@ -282,7 +282,7 @@ fn measure(
     if !latched.is_empty() {
         return Err(RigError::DeviceFault {
             what: "calibrate needs a device without faults".into(),
-            faults: latched.to_string(),
+            faults: latched,
         });
     }
     let bar = progress_bar(plan, a.json);

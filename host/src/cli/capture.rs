@@ -18,8 +18,8 @@ use crate::{RigError, args, limits};
 /// Arguments of `rig capture`.
 #[derive(Debug, Args)]
 pub struct CaptureArgs {
-    /// Length of the burst, seconds (the device's buffer holds 1 s at 10 kHz: a longer
-    /// burst records what fits, with a warning).
+    /// Length of the burst, seconds (the device's buffer holds 10 000 samples, 1 s at
+    /// 10 kHz: a longer burst is refused, naming the longest).
     #[arg(long, value_name = "S", default_value_t = 0.5, value_parser = args::positive, allow_hyphen_values = true)]
     seconds: f64,
     /// Write the samples to this CSV file.
@@ -75,7 +75,7 @@ fn spin_up(s: &mut Session, hz: f32) -> Result<(), RigError> {
             Some(t) if t.state == SupervisorState::Fault || !t.faults.is_empty() => {
                 break Err(RigError::DeviceFault {
                     what: "capture: the release failed".into(),
-                    faults: t.faults.to_string(),
+                    faults: t.faults,
                 });
             }
             _ => {}
@@ -127,11 +127,11 @@ fn samples_asked(a: &CaptureArgs) -> Result<u32, RigError> {
             ),
         });
     }
-    if samples > f64::from(u32::MAX) {
+    if samples > f64::from(limits::capture_capacity()) {
         return Err(RigError::BadValue {
             what: format!("--seconds {}", a.seconds),
             why: format!(
-                "too long for one capture: the device's buffer holds {} samples ({} s at {} Hz)",
+                "too long for one capture: the device's buffer holds {} samples ({} s at {} Hz); give at most that, or a lower --rate",
                 limits::capture_capacity(),
                 f64::from(limits::capture_capacity()) / rate,
                 a.rate

@@ -46,6 +46,9 @@ pub struct CompareArgs {
     pub json: bool,
 }
 
+/// What `rig compare` calls the gap.
+pub const GAP_DEFINITION: &str = "measured minus simulated mean current per test point, the measured plan replayed on the virtual rig (base: the rig file's own mu and calibration, nothing fitted); rig explain's rmse_before_a is the residual of the paper's model with mu fitted to the same data, so it is smaller";
+
 /// One test point of the comparison.
 #[derive(Debug, Clone, Serialize)]
 pub struct GapRow {
@@ -80,8 +83,14 @@ pub struct Comparison {
     pub model: Option<String>,
     /// Effects of the fitted model.
     pub model_effects: Vec<String>,
-    /// Test points replayed (rows with a current).
+    /// Test points replayed (rows with a current that the virtual rig could run).
     pub points: usize,
+    /// Data rows (1-based) the virtual rig could not run (a load above the rig file's
+    /// `max_release_load_nm`, a point its protections skipped): left out of every gap.
+    pub skipped_rows: Vec<usize>,
+    /// Which gap this is, in words: `rig explain`'s `rmse_before_a` is another one (the
+    /// residual of the paper's model with mu fitted to the data, not replayed).
+    pub gap_definition: &'static str,
     /// RMS of measured minus base-model current, A.
     pub gap_rmse_base_a: f64,
     /// RMS of measured minus fitted-model current, A (null without --model).
@@ -168,8 +177,10 @@ fn header_plan(path: &Path) -> HeaderPlan {
     }
 }
 
-/// Mean currents of `plan` run on the in-process virtual rig of `config`, in plan order.
-pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<f64>, RigError> {
+/// Mean currents of `plan` run on the in-process virtual rig of `config`, one per plan
+/// point in plan order: `None` for a point the virtual rig did not measure (a load above
+/// the rig's `max_release_load_nm`, a point its protections skipped).
+pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>, RigError> {
     let mut bench = SimBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
     let setup = SweepSetup {
@@ -179,7 +190,13 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<f64>, RigErro
         command: "rig compare".into(),
     };
     let outcome = sweep::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
-    Ok(outcome.rows.iter().map(|r| r.i_in_a).collect())
+    let mut currents = vec![None; plan.points.len()];
+    for r in &outcome.rows {
+        if let Some(slot) = currents.get_mut(r.point) {
+            *slot = Some(r.i_in_a);
+        }
+    }
+    Ok(currents)
 }
 
 /// The virtual rig of `rig` with its fitted `[model]` running in the plant (or none).
@@ -230,27 +247,16 @@ pub fn compare(
         Some(m) => Some(simulate(virtual_rig(m, true, seed)?, &plan)?),
         None => None,
     };
-    let rows: Vec<GapRow> = order
-        .iter()
-        .enumerate()
-        .map(|(j, &k)| {
-            let measured_a = data.i_in()[k];
-            let model_a = fitted.as_ref().map(|f| f[j]);
-            let p = &plan.points[j];
-            GapRow {
-                row: k + 1,
-                tau_rot_nm: data.tau_rot()[k],
-                v_in_v: p.volts,
-                hz: p.hz,
-                temp_c: p.temp_c,
-                measured_a,
-                base_a: base[j],
-                model_a,
-                gap_base_a: measured_a - base[j],
-                gap_model_a: model_a.map(|m| measured_a - m),
-            }
-        })
-        .collect();
+    let (rows, skipped_rows) = gap_rows(&data, &order, &plan, &base, fitted.as_deref());
+    if rows.is_empty() {
+        return Err(RigError::BadValue {
+            what: format!("--measured {}", measured.display()),
+            why: format!(
+                "the virtual rig could run none of its {} test points (every load above the rig file's max_release_load_nm, or beyond the board's limits): compare with a rig file whose limits cover the measured loads (--rig)",
+                order.len()
+            ),
+        });
+    }
     let gap_rmse_base_a = rms(rows.iter().map(|r| r.gap_base_a));
     let gap_rmse_model_a = fitted
         .as_ref()
@@ -263,6 +269,8 @@ pub fn compare(
             .map(|m| m.effects.iter().map(|e| e.name.clone()).collect())
             .unwrap_or_default(),
         points: rows.len(),
+        skipped_rows,
+        gap_definition: GAP_DEFINITION,
         gap_rmse_base_a,
         gap_rmse_model_a,
         gap_ratio: gap_rmse_model_a.map(|m| m / gap_rmse_base_a.max(1e-12)),
@@ -273,6 +281,47 @@ pub fn compare(
         svg: None,
         rows,
     })
+}
+
+/// The gap per replayed point (`base`, `fitted`: the simulated currents per plan point,
+/// `None` where the virtual rig did not run it) and the data rows (1-based) left out
+/// because either virtual rig could not run them.
+fn gap_rows(
+    data: &Dataset,
+    order: &[usize],
+    plan: &Plan,
+    base: &[Option<f64>],
+    fitted: Option<&[Option<f64>]>,
+) -> (Vec<GapRow>, Vec<usize>) {
+    let mut skipped_rows = Vec::new();
+    let rows = order
+        .iter()
+        .enumerate()
+        .filter_map(|(j, &k)| {
+            let measured_a = data.i_in()[k];
+            let base_a = base.get(j).copied().flatten();
+            let model_a = fitted.map(|f| f.get(j).copied().flatten());
+            let (Some(base_a), None | Some(Some(_))) = (base_a, model_a) else {
+                skipped_rows.push(k + 1);
+                return None;
+            };
+            let model_a = model_a.flatten();
+            let p = &plan.points[j];
+            Some(GapRow {
+                row: k + 1,
+                tau_rot_nm: data.tau_rot()[k],
+                v_in_v: p.volts,
+                hz: p.hz,
+                temp_c: p.temp_c,
+                measured_a,
+                base_a,
+                model_a,
+                gap_base_a: measured_a - base_a,
+                gap_model_a: model_a.map(|m| measured_a - m),
+            })
+        })
+        .collect();
+    (rows, skipped_rows)
 }
 
 /// Plots both gaps per test point (in run order) to `path`.
@@ -388,9 +437,62 @@ pub fn run(a: CompareArgs) -> Result<ExitCode, RigError> {
                 100.0 * c.gap_ratio.unwrap_or(f64::NAN)
             )?;
         }
+        writeln!(out, "  (gap: {})", c.gap_definition)?;
+        if !c.skipped_rows.is_empty() {
+            writeln!(
+                out,
+                "  {} rows not replayed (the virtual rig could not run them: load above max_release_load_nm or a protection tripped), left out of the gaps: {}",
+                c.skipped_rows.len(),
+                c.skipped_rows
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )?;
+        }
         if let Some(s) = &c.svg {
             writeln!(out, "  plot: {s}")?;
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod gap_tests {
+    use super::*;
+
+    /// A point the virtual rig skipped (a load above its `max_release_load_nm`: the sweep
+    /// writes no row for it) is left out of both gaps and listed, where the replay used to
+    /// index past the simulated rows and panic.
+    #[test]
+    fn a_point_the_virtual_rig_skipped_is_listed_not_indexed() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.csv");
+        let mut text = String::from("omega_n_rad_s,tau_rot_nm,i_in_a\n");
+        for (k, load) in [0.4, 0.8, 5.0, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6]
+            .iter()
+            .enumerate()
+        {
+            text.push_str(&format!("62.8,{load},{}\n", 2.6 + 0.01 * k as f64));
+        }
+        std::fs::write(&path, text).unwrap();
+        let data = Dataset::read_csv(&path).unwrap();
+        let (plan, order) = replay_plan(&data, &HeaderPlan::default()).unwrap();
+        // The sweep ran every point but the third.
+        let base: Vec<Option<f64>> = (0..plan.points.len())
+            .map(|j| (j != 2).then_some(2.5))
+            .collect();
+        let (rows, skipped) = gap_rows(&data, &order, &plan, &base, None);
+        assert_eq!(skipped, [3]);
+        assert_eq!(rows.len(), 9);
+        assert!(rows.iter().all(|r| r.row != 3));
+        // The fitted model's skips count too.
+        let fitted: Vec<Option<f64>> = (0..plan.points.len())
+            .map(|j| (j != 5).then_some(2.55))
+            .collect();
+        let (rows, skipped) = gap_rows(&data, &order, &plan, &base, Some(&fitted));
+        assert_eq!(skipped, [3, 6]);
+        assert_eq!(rows.len(), 8);
+        assert!(rows.iter().all(|r| r.gap_model_a.is_some()));
+    }
 }

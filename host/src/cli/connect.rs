@@ -41,8 +41,9 @@ macro_rules! device_args {
             #[arg(long, global = $global, value_name = "FACTOR", value_parser = parse_speed)]
             pub speed: Option<f64>,
             $(
-            /// With --sim: build the virtual device from this rig file, its plant running the
-            /// fitted [model]'s effects (`rig explain --write-model`), as `rig sim serve --model`.
+            /// With --sim: build the virtual device from this rig file (gear, friction,
+            /// calibration), its plant running a fitted [model]'s effects when it has one
+            /// (`rig explain --write-model`), as `rig sim serve --model`.
             #[arg(long, global = $global, value_name = "FILE")]
             pub $model: Option<PathBuf>,
             )?

@@ -11,7 +11,7 @@ use super::connect::DeviceOpts;
 use crate::RigError;
 use crate::client::FaultStatus;
 
-/// Arguments of `rig faults`.
+/// Arguments of `rig faults`. Exit status: 0 with no fault latched, 3 while one is.
 #[derive(Debug, Args)]
 pub struct FaultsArgs {
     /// Print JSON instead of text.
@@ -37,33 +37,12 @@ impl From<FaultStatus> for FaultsReport {
     }
 }
 
-/// What a fault means and what to do, one line.
+/// What a fault means and what to do, one line: the protocol's table
+/// ([`FaultFlags::TABLE`]), which the firmware raises from too.
 pub fn fault_help(name: &str) -> &'static str {
-    match name {
-        "OVERCURRENT" => {
-            "motor current above the calibration's max_current_a: check for a jammed cam"
-        }
-        "STALL" => "the cam did not turn although driven: check the cam and the motor wiring",
-        "ENCODER_LOSS" => "encoder signal lost or implausible: check the AMT102 cable",
-        "CURRENT_ZERO_RANGE" => {
-            "current-sensor zero out of range: check the ACS714 supply, then clear"
-        }
-        "CONTROL_OVERRUN" => "the control loop missed its deadline",
-        "CALIBRATION_INVALID" => {
-            "the stored calibration failed its check: `rig calibration set FILE` or `rig calibrate`"
-        }
-        "WATCHDOG_RESET" => "the firmware was reset by its watchdog",
-        "COMMS_TIMEOUT" => {
-            "no heartbeat while released: the host went away (clear it to release again)"
-        }
-        "CANNOT_RELEASE" => {
-            "the required cam torque (Eq. 10) exceeds what the vibrator delivers: lower the load"
-        }
-        "JAM" => "the cam or the output is blocked",
-        "OVERLOAD" => "load estimate above max_release_load_nm",
-        "ESTIMATE_IMPLAUSIBLE" => "a torque or speed estimate is out of physical bounds",
-        _ => "unknown fault bit: update the host tool",
-    }
+    FaultFlags::help_of(name).unwrap_or(
+        "a fault bit this host tool has no name for: the firmware is newer; update the host tool (`cargo install` from the firmware's source)",
+    )
 }
 
 /// Prints faults with a line of help per fault.
@@ -73,16 +52,22 @@ pub fn print_text(out: &mut impl Write, f: FaultStatus) -> std::io::Result<()> {
     }
     writeln!(out, "active:  {}", f.active)?;
     writeln!(out, "latched: {}", f.latched)?;
-    for (name, _) in FaultFlags::NAMED
-        .iter()
-        .filter(|(_, flag)| (f.active | f.latched).contains(*flag))
-    {
-        writeln!(out, "  {name}: {}", fault_help(name))?;
+    let all = f.active | f.latched;
+    for row in all.explained() {
+        writeln!(out, "  {}: {}", row.name, row.help)?;
+    }
+    if !all.unknown().is_empty() {
+        writeln!(out, "  {:#x}: {}", all.unknown().bits(), fault_help(""))?;
     }
     Ok(())
 }
 
-/// Runs `rig faults`.
+/// Exit status of `rig faults` (and of `rig clear`) when faults stay latched: the motor
+/// is held off until they are cleared.
+pub const EXIT_LATCHED: u8 = 3;
+
+/// Runs `rig faults`: exits 0 with nothing latched, [`EXIT_LATCHED`] while a fault is
+/// latched (the motor stays off), so scripts can test it.
 pub fn run(a: FaultsArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let mut s = dev.connect()?;
     let f = s.client.faults()?;
@@ -92,5 +77,50 @@ pub fn run(a: FaultsArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     } else {
         print_text(&mut out, f)?;
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(if f.latched.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(EXIT_LATCHED)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The host explains every bit the firmware can raise: both read the protocol's table,
+    /// so a bit without help fails here and in `protocol`.
+    #[test]
+    fn every_fault_the_firmware_raises_is_explained() {
+        for row in FaultFlags::TABLE {
+            assert_eq!(fault_help(row.name), row.help);
+            assert!(!fault_help(row.name).contains("no name"), "{}", row.name);
+        }
+        let all = FaultStatus {
+            active: FaultFlags::empty(),
+            latched: FaultFlags::all(),
+        };
+        let mut text = Vec::new();
+        print_text(&mut text, all).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        for row in FaultFlags::TABLE {
+            assert!(
+                text.contains(&format!("  {}: {}", row.name, row.help)),
+                "{text}"
+            );
+        }
+        assert!(!text.contains("update the host tool"), "{text}");
+        // A bit from a newer firmware is named as such, with what to do.
+        let newer = FaultStatus {
+            active: FaultFlags::empty(),
+            latched: FaultFlags::from_bits_retain(1 << 20),
+        };
+        let mut text = Vec::new();
+        print_text(&mut text, newer).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        assert!(
+            text.contains("0x100000") && text.contains("update the host tool"),
+            "{text}"
+        );
+    }
 }

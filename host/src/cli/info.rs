@@ -48,6 +48,8 @@ pub struct InfoReport {
     /// Optional hardware the device reports (`OUTPUT_ENCODER`, `BUS_VOLTAGE`, `MOTOR_TEMP`,
     /// `SIMULATION`: the virtual rig).
     pub capabilities: Vec<&'static str>,
+    /// Device seconds per wall-clock second: 1 on a board, the `--speed` of a virtual rig.
+    pub time_scale: f64,
 }
 
 /// Lower-case name of a calibration status.
@@ -80,6 +82,7 @@ impl InfoReport {
                 .filter(|(_, flag)| info.capabilities.contains(*flag))
                 .map(|(name, _)| *name)
                 .collect(),
+            time_scale: f64::from(info.time_scale),
         }
     }
 }
@@ -106,6 +109,13 @@ pub fn run(a: InfoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         )?;
         if !report.capabilities.is_empty() {
             writeln!(out, "fitted     {}", report.capabilities.join(", "))?;
+        }
+        if report.time_scale != 1.0 {
+            writeln!(
+                out,
+                "time       {}x real time (a virtual rig: every timeout in the protocol is device time)",
+                report.time_scale
+            )?;
         }
         writeln!(
             out,

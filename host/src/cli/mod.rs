@@ -14,6 +14,7 @@ pub mod calibration;
 pub mod capture;
 pub mod clear;
 pub mod compare;
+pub mod conformance;
 pub mod connect;
 pub mod demo;
 pub mod design;
@@ -98,6 +99,15 @@ pub enum Command {
         /// The verb's arguments.
         #[command(flatten)]
         args: faults::FaultsArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
+    /// Check a device against the protocol's contract (LAYOUT.md): every check, pass or fail.
+    Conformance {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: conformance::ConformanceArgs,
         /// Device options after the verb.
         #[command(flatten)]
         device: VerbDeviceArgs,
@@ -220,6 +230,9 @@ impl Cli {
             Command::Info { args, device } => info::run(args, &before.resolve(&device)?),
             Command::Faults { args, device } => faults::run(args, &before.resolve(&device)?),
             Command::Clear { args, device } => clear::run(args, &before.resolve(&device)?),
+            Command::Conformance { args, device } => {
+                conformance::run(args, &before.resolve(&device)?)
+            }
             Command::Release { args, device } => release::run(args, &before.resolve(&device)?),
             Command::Monitor { args, device } => monitor::run(args, &before.resolve(&device)?),
             Command::Capture { args, device } => capture::run(args, &before.resolve(&device)?),

@@ -12,7 +12,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use protocol::{SupervisorState, TelemetrySample};
+use protocol::{StatusFlags, SupervisorState, TelemetrySample};
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Style, Stylize};
@@ -53,42 +53,13 @@ pub struct MonitorArgs {
     explain: bool,
 }
 
-/// What each status flag of telemetry means, for the view's legend and `--explain`.
-pub const STATUS_LEGEND: [(&str, &str); 8] = [
-    (
-        "COASTS_AFTER_STOP",
-        "mu_d Lambda < 1: once moving, the load keeps moving after vibration stops",
-    ),
-    (
-        "NOT_SELF_LOCKING",
-        "mu_s Lambda <= 1: this gear set does not hold its load even locked",
-    ),
-    (
-        "HOST_RELEASE",
-        "a host's release is live (kept by heartbeats)",
-    ),
-    ("BUTTON_RELEASE", "the release button is held"),
-    ("CAPTURE_RUNNING", "a capture is recording"),
-    (
-        "CALIBRATION_DEFAULTS",
-        "the paper's calibration is in use (none stored, or it failed its check)",
-    ),
-    (
-        "OUTPUT_MOVING",
-        "the output shaft turns; while locked, that is backdrive",
-    ),
-    ("OPEN_LOOP", "an open-loop drive is running"),
-];
-
 /// When the view shows the firmware's estimates (tau_cam, tau_rot) as `-`.
 pub const STALE_RULE: &str = "tau_cam and tau_rot show `-` when stale: gear locked, a fault, or no cam revolution for more than 1 s (the estimator updates once a revolution)";
 
 /// The meaning of status flag `name`.
 pub fn status_meaning(name: &str) -> Option<&'static str> {
-    STATUS_LEGEND
-        .iter()
-        .find(|(n, _)| *n == name)
-        .map(|(_, m)| *m)
+    // The protocol's one table of flags and their help.
+    StatusFlags::help_of(name)
 }
 
 /// Whether the firmware's per-revolution estimates are current: not when the gear is
@@ -418,7 +389,12 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     if a.explain {
         let mut out = std::io::stdout().lock();
         writeln!(out, "status flags:")?;
-        for (name, meaning) in STATUS_LEGEND {
+        for protocol::FlagInfo {
+            name,
+            help: meaning,
+            ..
+        } in StatusFlags::TABLE
+        {
             writeln!(out, "  {name:<21} {meaning}")?;
         }
         writeln!(out, "{STALE_RULE}")?;
@@ -623,7 +599,7 @@ fn key_action() -> Result<KeyAction, RigError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::{FaultFlags, StatusFlags};
+    use protocol::FaultFlags;
     use ratatui::Terminal;
     use ratatui::backend::TestBackend;
 

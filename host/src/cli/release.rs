@@ -69,10 +69,20 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let mut out = std::io::stdout().lock();
     if a.state == OnOff::Off {
         s.client.release(false, 0.0)?;
+        let scale = s.time_scale();
+        let after = after_lock(&mut s.client, scale)?;
         if a.json {
-            super::print_json_line(&mut out, &serde_json::json!({ "released": false }))?;
+            super::print_json_line(
+                &mut out,
+                &serde_json::json!({
+                    "released": false,
+                    "state": after.state.name(),
+                    "output_moving": after.output_moving,
+                    "coasts_after_stop": after.coasts,
+                }),
+            )?;
         } else {
-            writeln!(out, "vibration off: the gear holds its load")?;
+            writeln!(out, "vibration off: {}", after.verdict())?;
         }
         return Ok(ExitCode::SUCCESS);
     }
@@ -179,8 +189,136 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     if report.ended_by == "fault" {
         return Err(RigError::DeviceFault {
             what: "release ended".into(),
-            faults: report.faults.join(" | "),
+            faults: report
+                .faults
+                .iter()
+                .filter_map(|name| {
+                    protocol::FaultFlags::NAMED
+                        .iter()
+                        .find(|(n, _)| n == name)
+                        .map(|(_, f)| *f)
+                })
+                .fold(protocol::FaultFlags::empty(), |a, f| a | f),
         });
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// What the device reports once a release ends: whether the gear holds what hangs on it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AfterLock {
+    /// The supervisor state at the end of the watch.
+    pub state: SupervisorState,
+    /// Whether the output shaft turned in the last samples (`None`: no output encoder).
+    pub output_moving: Option<bool>,
+    /// The gear set keeps moving once moving (mu_d Lambda < 1, `COASTS_AFTER_STOP`).
+    pub coasts: bool,
+}
+
+impl AfterLock {
+    /// One clause for the user; never "holds" while the output moves or is not measured
+    /// on a gear set that coasts.
+    pub fn verdict(&self) -> String {
+        let state = self.state.name();
+        match (self.output_moving, self.coasts) {
+            (Some(true), _) => format!(
+                "the output is still moving (state {state}){}: the gear does not hold it yet; keep clear of the load",
+                if self.coasts {
+                    ", as this gear set coasts after a stop (mu_d Lambda < 1)"
+                } else {
+                    ""
+                }
+            ),
+            (Some(false), _) if self.state == SupervisorState::Locked => {
+                "the gear holds its load (output at rest)".into()
+            }
+            (Some(false), _) => format!("the output is at rest (state {state})"),
+            (None, true) => format!(
+                "state {state}; this gear set coasts after a stop (mu_d Lambda < 1), so a moving load may keep moving (the board measures no output shaft)"
+            ),
+            (None, false) => format!("state {state} (the board measures no output shaft)"),
+        }
+    }
+}
+
+/// Watches telemetry after a lock: waits (up to 3 device seconds) for the cam to stop,
+/// then reads the output's motion over 0.2 device seconds.
+pub fn after_lock<T: std::io::Read + std::io::Write>(
+    client: &mut crate::client::Client<T>,
+    scale: f64,
+) -> Result<AfterLock, RigError> {
+    use protocol::StatusFlags;
+    client.start_telemetry(TELEMETRY_HZ)?;
+    let mut last = None;
+    let mut locked_at = None;
+    let mut moving = false;
+    let deadline = Instant::now() + Duration::from_secs_f64(3.2 / scale.max(1e-3) + 1.0);
+    while Instant::now() < deadline {
+        let Some(t) = client.next_telemetry(Duration::from_millis(100))? else {
+            continue;
+        };
+        last = Some(t);
+        if !matches!(t.state, SupervisorState::Locked | SupervisorState::Fault) {
+            locked_at = None;
+            moving = false;
+            continue;
+        }
+        let start = *locked_at.get_or_insert(t.device_time_us);
+        moving |= t.status.contains(StatusFlags::OUTPUT_MOVING);
+        if t.device_time_us.saturating_sub(start) >= 200_000 {
+            break;
+        }
+    }
+    let _ = client.stop_telemetry();
+    let Some(t) = last else {
+        return Err(RigError::Protocol(format!(
+            "{} sent no telemetry after the lock: check the link (`rig info`), then `rig faults`",
+            client.options().port_name
+        )));
+    };
+    let encoder = t.output_speed_rad_s.is_finite();
+    Ok(AfterLock {
+        state: t.state,
+        output_moving: encoder.then_some(moving || t.status.contains(StatusFlags::OUTPUT_MOVING)),
+        coasts: t.status.contains(StatusFlags::COASTS_AFTER_STOP),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// "The gear holds" only with the output measured at rest and the gear locked.
+    #[test]
+    fn the_verdict_never_says_holds_while_the_output_moves_or_is_unmeasured() {
+        let states = [
+            SupervisorState::Locked,
+            SupervisorState::Stopping,
+            SupervisorState::Fault,
+        ];
+        for state in states {
+            for output_moving in [Some(true), Some(false), None] {
+                for coasts in [true, false] {
+                    let v = AfterLock {
+                        state,
+                        output_moving,
+                        coasts,
+                    }
+                    .verdict();
+                    let holds = v.contains("holds");
+                    assert_eq!(
+                        holds,
+                        output_moving == Some(false) && state == SupervisorState::Locked,
+                        "{v}"
+                    );
+                    if output_moving == Some(true) {
+                        assert!(v.contains("still moving"), "{v}");
+                    }
+                    if output_moving.is_none() && coasts {
+                        assert!(v.contains("coasts"), "{v}");
+                    }
+                }
+            }
+        }
+    }
 }

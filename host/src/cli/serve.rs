@@ -113,8 +113,21 @@ pub fn run(a: ServeArgs) -> Result<ExitCode, RigError> {
     }
     out.flush()?;
     drop(out);
+    // Say so when this machine cannot run the rig as fast as asked (clients scale their
+    // heartbeats by the speed the rig reports; a rig that falls behind is slower still).
+    let started = std::time::Instant::now();
+    let mut warned = false;
     while !stop.load(Ordering::SeqCst) {
         std::thread::sleep(Duration::from_millis(20));
+        let wall = started.elapsed().as_secs_f64();
+        let achieved = (dev.time() / wall.max(1e-9)).min(a.speed);
+        if !warned && wall > 2.0 && achieved < 0.9 * a.speed {
+            warned = true;
+            eprintln!(
+                "warning: the virtual rig runs at only {achieved:.1}x real time, not the {}x asked (this machine cannot keep up): use a lower --speed",
+                a.speed
+            );
+        }
     }
     drop(dev);
     Ok(ExitCode::SUCCESS)

@@ -13,13 +13,20 @@ use super::{Client, FaultStatus, advice};
 use crate::RigError;
 
 impl<T: Read + Write> Client<T> {
-    /// Says `Hello` and checks the versions: a device of another protocol version or
+    /// Says `Hello` and checks the versions (the device's `time_scale` then sets
+    /// [`ClientOptions::time_scale`](super::ClientOptions::time_scale), so heartbeats keep
+    /// pace with a virtual rig served faster than real time): a device of another protocol version or
     /// schema is refused with what to update.
     pub fn hello(&mut self) -> Result<DeviceInfo, RigError> {
         let hello = Session::hello();
         let reply = self.exchange(&hello)?;
         match hello_outcome(&reply) {
-            Some(Ok(info)) => Ok(info.clone()),
+            Some(Ok(info)) => {
+                if info.time_scale.is_finite() && info.time_scale > 0.0 {
+                    self.opts.time_scale = f64::from(info.time_scale);
+                }
+                Ok(info.clone())
+            }
             Some(Err(e)) => Err(advice::version_error(e)),
             None => match reply {
                 Reply::Nack(code) => Err(advice::refused(&hello, code)),

@@ -29,6 +29,7 @@ fn device_info(protocol_version: u16, schema_hash: u32) -> DeviceInfo {
         reset_cause: ResetCause::PowerOn,
         uptime_s: 12,
         capabilities: Capabilities::empty(),
+        time_scale: 1.0,
     }
 }
 

@@ -7,13 +7,22 @@
 //! calibration's force gauge, uncoupling the cam) reach into the plant through
 //! [`VirtualDevice::with_plant`].
 //!
-//! The device shares the machine with its host, and pseudo-terminal bytes are moved by a
-//! kernel worker: on a busy machine a heartbeat can arrive hundreds of milliseconds late,
-//! which at `speed` 20 is many virtual seconds. So while a release (or open-loop drive) is
-//! live and the host has been quiet for 0.2 virtual seconds, virtual time stands still for
-//! up to 1.5 s of wall time, waiting for the host. A host that really stopped still trips
-//! the comms timeout, after that grace; one that closed the port (quit or died, as when a
-//! served rig's client is killed) trips it at once, so the next client finds the fault.
+//! Served (`rig sim serve`, [`Pacing::BoardTime`]) the device keeps the board's time:
+//! virtual time runs at `speed` times the wall clock and never waits for a host, so a host
+//! whose heartbeats stop sees vibration stop after the comms timeout of device time (0.5 s
+//! of wall time at speed 1), as on the board. The device says its speed in `Info`
+//! (`DeviceInfo::time_scale`), and a client scales its heartbeats by it.
+//!
+//! In process (`--sim`, [`Pacing::HostWall`]) the device belongs to this process's own
+//! client, whose heartbeats are compressed by `speed`: there, while a release is live and
+//! the host has been quiet for more than [`HOST_QUIET_S`] of virtual time, the host's
+//! silence in virtual time never runs ahead of its silence in wall time. So a stalled host
+//! gets the same wall-clock slack as on a board, never more: one that stops for good
+//! loses its release 0.5 s of wall time after its last byte, at any speed. A host that closed the port (quit or died, as when a served rig's
+//! client is killed) trips the timeout at once, so the next client finds the fault. When
+//! the machine cannot keep up (one turn of the loop covers at most 20 ms of wall time)
+//! virtual time falls behind: [`VirtualDevice::behind_s`] says by how much, and `rig sim
+//! serve` warns.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -29,20 +38,29 @@ mod pty;
 
 pub use pty::PtyMaster;
 
-/// Longest virtual time one loop turn may cover, s: if this process is starved of CPU the
-/// simulation slows down instead of jumping past the host's heartbeats.
-const MAX_TURN_S: f64 = 0.02;
+/// Longest wall time one loop turn may cover, s: if this process is starved of CPU the
+/// simulation slows down (and says so) instead of jumping past the host's bytes.
+const MAX_TURN_WALL: f64 = 0.02;
 
 /// Device output held while the host is not reading, bytes (a UART's queue would also
 /// overflow): beyond it new output is dropped, as frames lost on the line.
 const MAX_PENDING: usize = 1 << 20;
 
-/// Virtual time without a byte from the host after which a live release waits for the host,
-/// s (a heartbeat is due every 0.15 s).
-const HOST_QUIET_S: f64 = 0.2;
+/// Virtual time without a byte from the host after which an in-process device with a
+/// live release waits for its host ([`Pacing::HostWall`]), s (a heartbeat is due every
+/// 0.15 s).
+pub const HOST_QUIET_S: f64 = 0.2;
 
-/// Longest wall time virtual time waits for a quiet host before the comms timeout may trip.
-const HOST_GRACE: Duration = Duration::from_millis(1500);
+/// How the device's virtual time relates to its host.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pacing {
+    /// The board's time: `speed` times the wall clock, whatever the host does (served).
+    BoardTime,
+    /// As `BoardTime`, but a live release waits for a quiet host until the comms timeout
+    /// has passed in wall time since its last byte (in process: the host's heartbeats are
+    /// compressed by `speed`, its stalls are not).
+    HostWall,
+}
 
 /// How long one turn waits for host bytes.
 const POLL: Duration = Duration::from_millis(1);
@@ -62,6 +80,8 @@ struct Shared {
     noise_bytes: Mutex<u64>,
     stop: AtomicBool,
     dropped_bytes: Mutex<u64>,
+    /// Virtual seconds lost because the loop could not keep up.
+    behind_s: Mutex<f64>,
 }
 
 /// A simulated rig on a pseudo-terminal, running until dropped.
@@ -82,17 +102,29 @@ impl std::fmt::Debug for VirtualDevice {
 }
 
 impl VirtualDevice {
-    /// Boots a simulated rig from `config` on a new pseudo-terminal, running `speed` times
-    /// faster than real time (1 = real time).
+    /// Boots a simulated rig from `config` on a new pseudo-terminal for this process's own
+    /// client, running `speed` times faster than real time (1 = real time), paced by
+    /// [`Pacing::HostWall`].
     pub fn start(config: SimConfig, speed: f64) -> Result<Self, RigError> {
-        Self::start_with_noise(config, speed, None)
+        Self::start_paced(config, speed, None, Pacing::HostWall)
     }
 
-    /// As [`VirtualDevice::start`], with `noise` random bytes mixed into the line both ways.
+    /// A rig served to any client (`rig sim serve`): [`Pacing::BoardTime`], with `noise`
+    /// random bytes mixed into the line both ways.
     pub fn start_with_noise(
         config: SimConfig,
         speed: f64,
         noise: Option<WallNoise>,
+    ) -> Result<Self, RigError> {
+        Self::start_paced(config, speed, noise, Pacing::BoardTime)
+    }
+
+    /// Boots a simulated rig with `pacing`.
+    pub fn start_paced(
+        config: SimConfig,
+        speed: f64,
+        noise: Option<WallNoise>,
+        pacing: Pacing,
     ) -> Result<Self, RigError> {
         if !(speed.is_finite() && speed > 0.0) {
             return Err(RigError::BadValue {
@@ -107,16 +139,20 @@ impl VirtualDevice {
         };
         let (master, port) =
             PtyMaster::open().map_err(|e| fail("cannot open a pseudo-terminal pair", &e))?;
+        // The device says its time scale in `Info`, so any client scales its heartbeats.
+        let mut config = config;
+        config.core.time_scale = speed as f32;
         let shared = Arc::new(Shared {
             rig: Mutex::new(SimRig::new(config)),
             noise_bytes: Mutex::new(0),
             stop: AtomicBool::new(false),
             dropped_bytes: Mutex::new(0),
+            behind_s: Mutex::new(0.0),
         });
         let worker = Arc::clone(&shared);
         let thread = std::thread::Builder::new()
             .name("virtual-device".into())
-            .spawn(move || run(master, &worker, speed, noise))
+            .spawn(move || run(master, &worker, speed, noise, pacing))
             .map_err(|e| fail("cannot start the simulation thread", &e))?;
         Ok(Self {
             port,
@@ -162,8 +198,10 @@ impl VirtualDevice {
         Ok(config)
     }
 
-    /// [`VirtualDevice::rig_file_config`] of the rig file at `path`, which must have a fitted
-    /// `[model]` (the device option `--model`): errors name the file and what to do.
+    /// [`VirtualDevice::rig_file_config`] of the rig file at `path` (the device option
+    /// `--model`): a fitted `[model]` runs its effects; a plain rig file (gear, cam,
+    /// friction, calibration) puts that rig on the virtual device with the `paper` preset.
+    /// Errors name the file and what to do.
     pub fn fitted_config(path: &std::path::Path) -> Result<SimConfig, RigError> {
         let what = || format!("--model {}", path.display());
         let rig = rigfile::RigFile::load(path).map_err(|e| RigError::BadValue {
@@ -172,12 +210,6 @@ impl VirtualDevice {
                 "{e}; give a rig file with a fitted [model] (written by `rig explain --measured X --write-model FILE`, format in docs/rig-file.md)"
             ),
         })?;
-        if rig.model.is_none() {
-            return Err(RigError::BadValue {
-                what: what(),
-                why: "the rig file has no fitted [model]: write one with `rig explain --measured X --write-model FILE` (or add a [model] table, docs/rig-file.md)".into(),
-            });
-        }
         Self::rig_file_config(&rig, &sim::Preset::paper()).map_err(|e| RigError::BadValue {
             what: what(),
             why: e.to_string(),
@@ -189,9 +221,15 @@ impl VirtualDevice {
         &self.port
     }
 
-    /// Virtual seconds per wall-clock second.
+    /// Virtual seconds per wall-clock second, as asked (and as `Info` reports it).
     pub fn speed(&self) -> f64 {
         self.speed
+    }
+
+    /// Virtual seconds the device fell behind `speed` times the wall clock because this
+    /// machine could not run it that fast.
+    pub fn behind_s(&self) -> f64 {
+        *lock(&self.shared.behind_s)
     }
 
     /// Runs `f` on the simulated rig (the simulation pauses meanwhile).
@@ -235,7 +273,13 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 /// The device loop: host bytes in, time advanced, device bytes out.
-fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoise>) {
+fn run(
+    mut master: PtyMaster,
+    shared: &Shared,
+    speed: f64,
+    noise: Option<WallNoise>,
+    pacing: Pacing,
+) {
     let mut rng = model::plant::NoiseSource::new(noise.map_or(0, |n| n.seed));
     let mut noise_owed = [0.0f64; 2];
     let mut noise_bytes = |dt: f64, owed: &mut f64, out: &mut Vec<u8>| {
@@ -252,9 +296,9 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
     let mut pending: Vec<u8> = Vec::new();
     let mut owed = 0.0f64;
     let mut last = Instant::now();
-    let mut last_rx = 0.0f64;
-    let mut pace = speed;
-    let mut quiet_since: Option<Instant> = None;
+    // The host's last byte, in virtual and in wall time; whether time waits for it.
+    let mut last_rx = (0.0f64, Instant::now());
+    let mut waiting = false;
     let tick = 1.0 / f64::from(PLANT_HZ);
     while !shared.stop.load(Ordering::SeqCst) {
         let received = if master.wait_readable(POLL) {
@@ -272,7 +316,13 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
         if noise_sent > 0 {
             *lock(&shared.noise_bytes) += noise_sent as u64;
         }
-        owed = (owed + wall_dt * pace).min(MAX_TURN_S);
+        let turn_wall = wall_dt.min(MAX_TURN_WALL);
+        if wall_dt > turn_wall {
+            *lock(&shared.behind_s) += (wall_dt - turn_wall) * speed;
+        }
+        if !waiting {
+            owed += turn_wall * speed;
+        }
         last = now;
         let ticks = (owed / tick).floor();
         owed -= ticks * tick;
@@ -283,28 +333,27 @@ fn run(mut master: PtyMaster, shared: &Shared, speed: f64, noise: Option<WallNoi
             }
             if received > 0 {
                 rig.to_device(&buf[..received]);
-                last_rx = rig.time();
+                last_rx = (rig.time(), now);
             }
             if ticks > 0.0 {
                 rig.advance(ticks * tick);
             }
             let status = rig.core().status();
-            let mut awaiting_host = status.host_release || status.open_loop_volts.is_some();
-            if awaiting_host && master.hung_up() {
+            let driving = status.host_release || status.open_loop_volts.is_some();
+            if driving && master.hung_up() {
                 // The port was closed (the client quit or died) with a release live: that
                 // host is gone for good, and no other client may keep its release alive.
                 // The comms timeout runs out now, before another client's bytes are read.
                 rig.advance(f64::from(protocol::COMMS_TIMEOUT_MS) / 1000.0 + tick);
-                let status = rig.core().status();
-                awaiting_host = status.host_release || status.open_loop_volts.is_some();
             }
-            pace = if awaiting_host && rig.time() - last_rx > HOST_QUIET_S {
-                let since = *quiet_since.get_or_insert(now);
-                if now - since < HOST_GRACE { 0.0 } else { speed }
-            } else {
-                quiet_since = None;
-                speed
-            };
+            // The host's silence in virtual time never runs ahead of its silence in
+            // wall time once past a heartbeat's slack.
+            let quiet_virtual = rig.time() - last_rx.0;
+            waiting = pacing == Pacing::HostWall
+                && driving
+                && !master.hung_up()
+                && quiet_virtual > HOST_QUIET_S
+                && quiet_virtual > (now - last_rx.1).as_secs_f64();
             let before = pending.len();
             rig.from_device(&mut pending);
             if pending.len() > MAX_PENDING {
@@ -361,23 +410,49 @@ mod tests {
     }
 
     #[test]
-    fn a_late_host_keeps_its_release_and_a_gone_host_loses_it() {
-        let dev = VirtualDevice::paper(20.0).unwrap();
+    fn a_silent_host_loses_its_release_after_the_comms_timeout_of_board_time() {
+        let dev = VirtualDevice::paper(1.0).unwrap();
         let mut client = connect(&dev);
+        assert_eq!(client.options().time_scale, 1.0);
         client.release(true, 10.0).unwrap();
-        client.recv(Duration::from_millis(50)).unwrap();
-        // 300 ms without heartbeats is 6 virtual seconds at 20x, far more than the comms
-        // timeout: the device waits for the host instead.
-        std::thread::sleep(Duration::from_millis(300));
-        client.recv(Duration::from_millis(50)).unwrap();
-        assert!(client.faults().unwrap().latched.is_empty());
-        // A host that stops for good still loses the release, after the grace.
-        std::thread::sleep(HOST_GRACE + Duration::from_millis(500));
+        // The release was accepted at or before this device time.
+        let accepted_by = dev.time();
+        // The host goes silent: no heartbeats, nothing read.
+        std::thread::sleep(Duration::from_millis(800));
         let latched = client.faults().unwrap().latched;
         assert!(
             latched.contains(protocol::FaultFlags::COMMS_TIMEOUT),
             "{latched}"
         );
+        let timeout_s = f64::from(protocol::COMMS_TIMEOUT_MS) / 1000.0;
+        let period_s = 1e-3;
+        let (_, risen_us) = client
+            .take_fault_events()
+            .into_iter()
+            .find(|(f, _)| f.contains(protocol::FaultFlags::COMMS_TIMEOUT))
+            .expect("a FaultEvent announced the timeout");
+        let after_s = risen_us as f64 * 1e-6 - accepted_by;
+        // Device time never waits for the host: the timeout rises at the comms timeout
+        // after the last accepted request, within one control period.
+        assert!(after_s <= timeout_s + period_s, "{after_s} s");
+        // And device time kept the wall clock's pace (1x), unless this machine starved it.
+        assert!(dev.behind_s() < 0.3, "behind {} s", dev.behind_s());
+        dev.with_rig(|rig| assert!(!rig.drive().enabled, "vibration stopped"));
+    }
+
+    #[test]
+    fn a_served_rig_says_its_speed_and_the_client_keeps_pace() {
+        let dev = VirtualDevice::paper(5.0).unwrap();
+        let io = open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).unwrap();
+        // A client that does not know the speed learns it from `Info`.
+        let (mut client, info) = Client::connect(io, ClientOptions::new(dev.port_name())).unwrap();
+        assert_eq!(info.time_scale, 5.0);
+        assert_eq!(client.options().time_scale, 5.0);
+        client.release(true, 10.0).unwrap();
+        // Waiting inside the client sends heartbeats at 5x: the release stays live.
+        client.recv(Duration::from_millis(200)).unwrap();
+        assert!(client.faults().unwrap().latched.is_empty());
+        client.release(false, 0.0).unwrap();
     }
 
     #[test]

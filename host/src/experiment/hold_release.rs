@@ -137,7 +137,7 @@ fn record<B: Bench + ?Sized>(
             if !t.faults.is_empty() || t.state == SupervisorState::Fault {
                 return Err(RigError::DeviceFault {
                     what: format!("hold-release ({phase})"),
-                    faults: t.faults.to_string(),
+                    faults: t.faults,
                 });
             }
             if t_s >= end {

@@ -441,7 +441,7 @@ fn beyond_the_rig(e: &RigError) -> Option<(String, bool)> {
         RigError::Unmeasurable { what, why } => {
             Some((format!("{what}: {why}; point skipped"), false))
         }
-        RigError::DeviceFault { what, faults } if load_protection_only(faults) => Some((
+        RigError::DeviceFault { what, faults } if load_protection_only(*faults) => Some((
             format!("{what}: the device latched {faults}; point skipped, fault cleared"),
             true,
         )),
@@ -449,16 +449,13 @@ fn beyond_the_rig(e: &RigError) -> Option<(String, bool)> {
     }
 }
 
-/// Whether `faults` (as [`fault_error`] names them) are only the protections a heavy
+/// Whether `faults` are only the protections a heavy
 /// point trips (`LOAD_LIMIT`, `OVERLOAD`: the load judged too heavy for a release;
 /// `OVERCURRENT`: the drive's current trip): the point is beyond what this rig can
 /// measure, nothing else is wrong.
-fn load_protection_only(faults: &str) -> bool {
-    let mut names = faults
-        .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-        .filter(|n| !n.is_empty())
-        .peekable();
-    names.peek().is_some() && names.all(|n| matches!(n, "LOAD_LIMIT" | "OVERLOAD" | "OVERCURRENT"))
+fn load_protection_only(faults: protocol::FaultFlags) -> bool {
+    use protocol::FaultFlags as F;
+    !faults.is_empty() && (F::LOAD_LIMIT | F::OVERLOAD | F::OVERCURRENT).contains(faults)
 }
 
 fn fault_error(t: &TelemetrySample, run: &Run) -> RigError {
@@ -468,7 +465,7 @@ fn fault_error(t: &TelemetrySample, run: &Run) -> RigError {
             reporting::human(run.load_nm),
             drive_text(run)
         ),
-        faults: t.faults.to_string(),
+        faults: t.faults,
     }
 }
 
@@ -663,19 +660,19 @@ mod tests {
     #[test]
     fn only_the_load_protections_skip_a_point() {
         use protocol::FaultFlags;
-        let name = |f: FaultFlags| f.to_string();
-        assert!(load_protection_only(&name(FaultFlags::LOAD_LIMIT)));
-        assert!(load_protection_only(&name(
+        let name = |f: FaultFlags| f;
+        assert!(load_protection_only(name(FaultFlags::LOAD_LIMIT)));
+        assert!(load_protection_only(name(
             FaultFlags::LOAD_LIMIT | FaultFlags::OVERLOAD
         )));
-        assert!(load_protection_only(&name(
+        assert!(load_protection_only(name(
             FaultFlags::OVERLOAD | FaultFlags::OVERCURRENT
         )));
-        assert!(!load_protection_only(&name(
+        assert!(!load_protection_only(name(
             FaultFlags::OVERCURRENT | FaultFlags::ENCODER_LOSS
         )));
-        assert!(!load_protection_only(&name(FaultFlags::JAM)));
-        assert!(!load_protection_only(""));
+        assert!(!load_protection_only(name(FaultFlags::JAM)));
+        assert!(!load_protection_only(FaultFlags::empty()));
     }
 
     #[test]

@@ -55,7 +55,7 @@ pub(crate) fn worst_case_chunk() -> CaptureChunk {
 
 pub(crate) fn device_info() -> DeviceInfo {
     DeviceInfo {
-        protocol_version: 2,
+        protocol_version: 3,
         schema_hash: 0xDEAD_BEEF,
         firmware_version: FirmwareVersion {
             major: 0,
@@ -68,6 +68,7 @@ pub(crate) fn device_info() -> DeviceInfo {
         reset_cause: ResetCause::Watchdog,
         uptime_s: 3_600,
         capabilities: Capabilities::OUTPUT_ENCODER | Capabilities::BUS_VOLTAGE,
+        time_scale: 1.0,
     }
 }
 

@@ -416,6 +416,7 @@ fn worst_case_sizes_are_exact() {
         reset_cause: ResetCause::Other,
         uptime_s: u32::MAX,
         capabilities: Capabilities::from_bits_retain(u16::MAX),
+        time_scale: f32::MAX,
     };
     assert_eq!(wire_len(&info), DeviceInfo::MAX_WIRE_SIZE);
     let chunk = worst_case_chunk();

@@ -161,12 +161,14 @@ fn device_info() -> impl Strategy<Value = DeviceInfo> {
         (any::<[u8; 3]>(), any::<u16>(), any::<u32>()),
         ("[0-9a-f]{0,12}(-dirty)?", "[a-z0-9µ-]{0,8}"),
         (status, reset, any::<u32>(), any::<u16>()),
+        0.001f32..1.0e6,
     )
         .prop_map(
             |(
                 (v, protocol_version, schema_hash),
                 (build, board),
                 (parameters_status, reset_cause, uptime_s, capabilities),
+                time_scale,
             )| DeviceInfo {
                 protocol_version,
                 schema_hash,
@@ -181,6 +183,7 @@ fn device_info() -> impl Strategy<Value = DeviceInfo> {
                 reset_cause,
                 uptime_s,
                 capabilities: Capabilities::from_bits_retain(capabilities),
+                time_scale,
             },
         )
 }

@@ -5,7 +5,9 @@
 //! CRC, COBS) when the link asks for bytes, so framing stays out of the 1 kHz step. A
 //! sample the link did not take before the next one is superseded and counted as dropped.
 
-use protocol::{DeviceMessage, HealthSample, ParametersStatus, StatusFlags, TelemetrySample};
+use protocol::{
+    Capabilities, DeviceMessage, HealthSample, ParametersStatus, StatusFlags, TelemetrySample,
+};
 
 use super::Core;
 use crate::capture::CapturePhase;
@@ -177,8 +179,15 @@ impl Core {
         let (step_cycles_mean, step_cycles_max) = self.step_timing.last;
         HealthSample {
             device_time_us: now,
-            // What the binary measures (BoardInputs); NaN where not fitted.
-            bus_voltage_v: self.board.bus_voltage_v,
+            // What the binary measures (BoardInputs); NaN where not fitted. The bus
+            // voltage only where `Info` declares the divider (`BUS_VOLTAGE`), so a host
+            // never reads a value the device says it cannot measure; the thermistor is
+            // detected at run time (an open input reads NaN).
+            bus_voltage_v: if self.config.capabilities.contains(Capabilities::BUS_VOLTAGE) {
+                self.board.bus_voltage_v
+            } else {
+                f32::NAN
+            },
             motor_temp_c: self.board.motor_temp_c,
             step_cycles_mean,
             step_cycles_max,

@@ -262,12 +262,21 @@ fn fault_hold_refuses_commands_for_500_ms() {
         Request::StartTelemetry { rate_hz: 10 },
         Request::RezeroCurrent,
         Request::Release {
-            on: false,
-            target_hz: 0.0,
+            on: true,
+            target_hz: 10.0,
         },
     ] {
         assert_eq!(rig.ack(&request), Err(NackCode::InFaultHold), "{request:?}");
     }
+    // A lock (the safe direction) is never held off.
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: false,
+            target_hz: 0.0
+        }),
+        Ok(())
+    );
+    assert_eq!(rig.ack(&Request::OpenLoop { volts: 0.0 }), Ok(()));
     // Status and clear are always answered.
     assert!(matches!(
         rig.request(&Request::GetInfo)[..],

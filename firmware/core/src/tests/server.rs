@@ -171,7 +171,7 @@ fn hello_with_another_version_is_refused() {
 }
 
 #[test]
-fn release_arguments_are_checked_and_clamped() {
+fn release_arguments_are_checked_never_clamped() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(150);
     for hz in [0.5, 20.5, f32::NAN, f32::INFINITY, -10.0] {
@@ -184,11 +184,27 @@ fn release_arguments_are_checked_and_clamped() {
             "{hz}"
         );
     }
-    // 18 Hz is allowed, but above the calibration's 15 Hz limit: clamped.
+    // 18 Hz is within the board's cap but above the calibration's 15 Hz limit: refused,
+    // never run at 15 Hz instead.
     assert_eq!(
         rig.ack(&Request::Release {
             on: true,
             target_hz: 18.0
+        }),
+        Err(NackCode::BadArgument)
+    );
+    rig.step();
+    assert!(
+        !rig.core
+            .status()
+            .flags
+            .contains(protocol::StatusFlags::HOST_RELEASE)
+    );
+    // The limit itself is used as asked.
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: true,
+            target_hz: 15.0
         }),
         Ok(())
     );
@@ -381,7 +397,7 @@ fn calibration_and_rezero_are_busy_while_the_motor_runs() {
 }
 
 #[test]
-fn telemetry_streams_at_the_clamped_rate() {
+fn telemetry_streams_at_the_rate_asked_or_refuses() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(150);
     let telemetry = |rig: &Rig| rig.count(|m| matches!(m, DeviceMessage::Telemetry(_)));
@@ -392,8 +408,18 @@ fn telemetry_streams_at_the_clamped_rate() {
     rig.ack(&Request::StartTelemetry { rate_hz: 100 }).unwrap();
     rig.run_ms(1000);
     assert_eq!(telemetry(&rig), 100);
-    rig.ack(&Request::StartTelemetry { rate_hz: 60_000 })
-        .unwrap();
+    // Rates it cannot keep exactly are refused (the stream goes on at 100 Hz).
+    for rate_hz in [300, 1001, 60_000, u16::MAX] {
+        assert_eq!(
+            rig.ack(&Request::StartTelemetry { rate_hz }),
+            Err(NackCode::BadArgument),
+            "{rate_hz}"
+        );
+    }
+    let before = telemetry(&rig);
+    rig.run_ms(500);
+    assert_eq!(telemetry(&rig) - before, 50);
+    rig.ack(&Request::StartTelemetry { rate_hz: 1000 }).unwrap();
     let before = telemetry(&rig);
     rig.run_ms(500);
     assert_eq!(telemetry(&rig) - before, 500);
@@ -418,9 +444,17 @@ fn capture_uploads_while_telemetry_and_replies_continue() {
     let mut rig = Rig::new(1.0);
     rig.vibrate(10.0);
     rig.ack(&Request::StartTelemetry { rate_hz: 1000 }).unwrap();
+    assert_eq!(
+        rig.ack(&Request::StartCapture {
+            sample_rate_hz: 10_000,
+            samples: 50_000,
+        }),
+        Err(NackCode::BadArgument),
+        "more than the buffer: refused, not capped"
+    );
     rig.ack(&Request::StartCapture {
         sample_rate_hz: 10_000,
-        samples: 50_000,
+        samples: 10_000,
     })
     .unwrap();
     assert_eq!(
@@ -809,7 +843,11 @@ fn health_comes_once_a_second_while_telemetry_runs() {
 
 #[test]
 fn measured_bus_voltage_sets_the_open_loop_duty_and_is_reported() {
-    let mut rig = Rig::new(0.0);
+    let config = crate::CoreConfig {
+        capabilities: protocol::Capabilities::BUS_VOLTAGE | protocol::Capabilities::MOTOR_TEMP,
+        ..crate::CoreConfig::default()
+    };
+    let mut rig = Rig::with_config(config, crate::BootInfo::default(), 0.0, |_| {});
     rig.core.set_board_inputs(crate::BoardInputs {
         bus_voltage_v: 10.0,
         motor_temp_c: 31.5,
@@ -832,4 +870,180 @@ fn measured_bus_voltage_sets_the_open_loop_duty_and_is_reported() {
         })
         .expect("a health sample");
     assert_eq!((health.bus_voltage_v, health.motor_temp_c), (10.0, 31.5));
+}
+
+#[test]
+fn a_thousand_requests_in_windows_get_a_thousand_replies_under_telemetry_and_capture() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    rig.ack(&Request::StartTelemetry { rate_hz: 1000 }).unwrap();
+    // A 921 600 Bd link: ~92 bytes per ms leave the device.
+    rig.link_budget = Some(92);
+    // 0.2 s of recording, then its upload shares the link with the requests.
+    let capture = rig.send(&Request::StartCapture {
+        sample_rate_hz: 10_000,
+        samples: 2_000,
+    });
+    // Its reply counts in the window until it arrives.
+    while !rig.received.iter().any(|m| m.reply_to() == Some(capture)) {
+        rig.step();
+    }
+    let mut outstanding: std::collections::VecDeque<(u16, bool)> = Default::default();
+    let (mut sent, mut right, mut seen) = (0, 0, rig.received.len());
+    let mut chunks = 0;
+    let mut ms = 0;
+    while right < 1000 {
+        while sent < 1000 && outstanding.len() < protocol::REQUEST_WINDOW {
+            let info = sent % 2 == 1;
+            let req = if info {
+                Request::GetInfo
+            } else {
+                Request::GetFaults
+            };
+            outstanding.push_back((rig.send(&req), info));
+            sent += 1;
+        }
+        rig.step();
+        ms += 1;
+        for m in &rig.received[seen..] {
+            if matches!(m, DeviceMessage::CaptureChunk(_)) {
+                chunks += 1;
+            }
+            if let Some((seq, reply)) = m.clone().into_reply()
+                && let Some(k) = outstanding.iter().position(|(s, _)| *s == seq)
+            {
+                let (_, info) = outstanding.remove(k).unwrap();
+                match (reply, info) {
+                    (Reply::Info(_), true) | (Reply::Faults { .. }, false) => right += 1,
+                    (other, _) => panic!("request {seq}: {other:?}"),
+                }
+            }
+        }
+        seen = rig.received.len();
+        assert!(ms < 20_000, "{right} of 1000 answered after {ms} ms");
+    }
+    assert_eq!(right, 1000);
+    assert!(chunks > 0, "the capture uploaded meanwhile");
+    let telemetry = rig.count(|m| matches!(m, DeviceMessage::Telemetry(_)));
+    assert!(telemetry > 100, "{telemetry}");
+}
+
+#[test]
+fn requests_beyond_the_window_are_refused_busy_and_have_no_effect() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    // Nothing drains until the next step: requests pile up.
+    rig.link_budget = Some(92);
+    let w = protocol::REQUEST_WINDOW;
+    let first: Vec<u16> = (0..w).map(|_| rig.send(&Request::GetFaults)).collect();
+    let beyond = rig.send(&Request::StartTelemetry { rate_hz: 100 });
+    rig.run_ms(20);
+    let reply_to = |rig: &Rig, seq: u16| {
+        rig.received
+            .iter()
+            .filter(|m| m.reply_to() == Some(seq))
+            .filter_map(DeviceMessage::as_reply)
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    for seq in first {
+        assert!(matches!(reply_to(&rig, seq)[..], [Reply::Faults { .. }]));
+    }
+    assert_eq!(reply_to(&rig, beyond), [Reply::Nack(NackCode::Busy)]);
+    // Refused: no telemetry started.
+    assert_eq!(rig.count(|m| matches!(m, DeviceMessage::Telemetry(_))), 0);
+    // With the replies sent, the window is open again.
+    rig.link_budget = None;
+    assert_eq!(rig.ack(&Request::Heartbeat), Ok(()));
+}
+
+#[test]
+fn a_known_request_with_a_bad_field_is_a_bad_argument() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    /// A message written as raw postcard bytes (a tuple of `u8`s has no length prefix).
+    struct RawBody<'a>(&'a [u8]);
+    impl serde::Serialize for RawBody<'_> {
+        fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+            use serde::ser::SerializeTuple;
+            let mut t = s.serialize_tuple(self.0.len())?;
+            for b in self.0 {
+                t.serialize_element(b)?;
+            }
+            t.end()
+        }
+    }
+    let send_body = |rig: &mut Rig, seq: u16, body: &[u8]| {
+        let mut buf = [0u8; MAX_FRAME_SIZE];
+        let frame = protocol::encode_frame(seq, &RawBody(body), &mut buf).unwrap();
+        let before = rig.received.len();
+        rig.core.receive(rig.now_us, frame);
+        rig.pump();
+        rig.received[before..]
+            .iter()
+            .filter(|m| m.reply_to() == Some(seq))
+            .filter_map(DeviceMessage::as_reply)
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    // `Release { on: 2, .. }`: the request is known, its bool is not.
+    assert_eq!(
+        send_body(&mut rig, 40, &[2, 2, 0, 0, 0x20, 0x41]),
+        [Reply::Nack(NackCode::BadArgument)]
+    );
+    // A trailing byte after a `Heartbeat`.
+    assert_eq!(
+        send_body(&mut rig, 41, &[3, 0x55]),
+        [Reply::Nack(NackCode::BadArgument)]
+    );
+    // An unknown request and an unknown simulation command.
+    assert_eq!(
+        send_body(&mut rig, 42, &[200, 1]),
+        [Reply::Nack(NackCode::UnknownMessage)]
+    );
+    assert_eq!(
+        send_body(&mut rig, 43, &[13, 9]),
+        [Reply::Nack(NackCode::UnknownMessage)]
+    );
+}
+
+#[test]
+fn info_reports_the_time_scale() {
+    let mut rig = Rig::new(0.0);
+    let Reply::Info(info) = rig.reply(&Request::GetInfo) else {
+        panic!("no Info");
+    };
+    assert_eq!(info.time_scale, 1.0, "a board runs in real time");
+    let config = crate::CoreConfig {
+        time_scale: 20.0,
+        ..crate::CoreConfig::default()
+    };
+    let mut rig = Rig::with_config(config, crate::BootInfo::default(), 0.0, |_| {});
+    let Reply::Info(info) = rig.reply(&Request::GetInfo) else {
+        panic!("no Info");
+    };
+    assert_eq!(info.time_scale, 20.0);
+}
+
+#[test]
+fn health_reports_nan_for_a_bus_voltage_the_board_does_not_declare() {
+    let mut rig = Rig::new(0.0);
+    assert!(rig.core.config().capabilities.is_empty());
+    rig.core.set_board_inputs(crate::BoardInputs {
+        bus_voltage_v: 12.0,
+        motor_temp_c: 30.0,
+        ..Default::default()
+    });
+    rig.run_ms(10);
+    assert_eq!(rig.ack(&Request::StartTelemetry { rate_hz: 10 }), Ok(()));
+    rig.run_ms(20);
+    let health = rig
+        .received
+        .iter()
+        .find_map(|m| match m {
+            DeviceMessage::Health(h) => Some(*h),
+            _ => None,
+        })
+        .expect("a health sample");
+    assert!(health.bus_voltage_v.is_nan());
 }
