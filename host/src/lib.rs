@@ -2,6 +2,7 @@
 //! modules) the device client, the simulator and the reports.
 
 pub mod args;
+pub mod bringup;
 pub mod calibrate;
 pub mod cli;
 pub mod client;
@@ -15,6 +16,7 @@ pub mod flash;
 pub mod limits;
 pub mod ports;
 pub mod scenario;
+pub mod signals;
 pub mod sweep_report;
 
 pub use error::RigError;

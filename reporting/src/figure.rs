@@ -229,7 +229,12 @@ mod tests {
     #[test]
     fn formats_and_widths_are_parsed_with_the_fix_in_the_message() {
         assert_eq!("PNG".parse::<Format>(), Ok(Format::Png));
-        assert!("gif".parse::<Format>().unwrap_err().contains("svg, png or pdf"));
+        assert!(
+            "gif"
+                .parse::<Format>()
+                .unwrap_err()
+                .contains("svg, png or pdf")
+        );
         assert_eq!(parse_width("1200"), Ok(1200));
         assert!(parse_width("0").unwrap_err().contains("100 to"));
         assert!(parse_width("wide").is_err());

@@ -176,6 +176,7 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<f64>, RigErro
         plan: plan.clone(),
         window: Window::Start,
         resume: false,
+        force: false,
         command: "rig compare".into(),
     };
     let outcome = sweep::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;

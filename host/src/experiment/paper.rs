@@ -68,6 +68,7 @@ pub fn torque_sweep_with_error(
         plan,
         window: procedure::Window::Start,
         resume: false,
+        force: false,
         command: "rig sim torque-sweep".into(),
     };
     let outcome = procedure::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
@@ -188,6 +189,14 @@ pub fn fig5_fitted(
     opts: &fig5::Fig5Options,
     fitted: Option<&rigfile::RigFile>,
 ) -> Result<fig5::Fig5Result, RigError> {
+    fig5_history(opts, fitted).map(|(result, _)| result)
+}
+
+/// [`fig5_fitted`] with its time history (for the Fig. 5 plot).
+pub fn fig5_history(
+    opts: &fig5::Fig5Options,
+    fitted: Option<&rigfile::RigFile>,
+) -> Result<(fig5::Fig5Result, Vec<hold_release::Sample>), RigError> {
     let z = model::paper::FIG5_Z;
     let mut config = config(z, model::paper::FIG5_LOAD, opts.seed, opts.sensor_supply_v)?;
     config.plant.effects = opts.effects;
@@ -207,7 +216,7 @@ pub fn fig5_fitted(
     };
     let samples = hold_release::run(&mut bench, &mut operator, &procedure, &mut |_| {})?;
     let n = hold_release::fig5_numbers(&samples, model::paper::R_OUT);
-    Ok(fig5::Fig5Result {
+    let result = fig5::Fig5Result {
         z,
         held_without_vibration: n.held_without_vibration,
         hold_s: opts.hold_s,
@@ -216,5 +225,6 @@ pub fn fig5_fitted(
         output_speed_at_stop_rad_s: n.output_speed_at_stop_rad_s,
         load_drop_m: n.load_drop_m,
         mu_d_lambda,
-    })
+    };
+    Ok((result, samples))
 }
