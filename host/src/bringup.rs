@@ -45,13 +45,22 @@ pub const BUS_TOLERANCE: f64 = 0.10;
 pub const ZERO_TOLERANCE_A: f64 = 0.1;
 /// Open-loop drive of the encoder check, V: the cam turns slowly (about 2 Hz no-load).
 pub const ENCODER_CHECK_V: f64 = 2.0;
-/// Open-loop drive of the overcurrent trip test with the cam blocked, V: a stall current
-/// of about 8 A, above the comparator's 6 A (`model::hardware::comparator::TRIP_A`).
-pub const TRIP_TEST_V: f64 = 3.5;
+/// Open-loop drive of the virtual rig's overcurrent trip test, V: the cam spins at about
+/// 10 Hz, then jams, and the current jumps to about 14 A (V / R) within the winding's
+/// 0.45 ms, past the comparator's 6 A (`model::hardware::comparator::TRIP_A`) before the
+/// firmware's 1 ms software limit (4.8 A) acts. A stalled start cannot show the trip: the
+/// firmware slews the duty, so the current rises slowly and the software limit comes first.
+pub const TRIP_TEST_V: f64 = 6.2;
+/// How long a real rig's trip test watches for the operator's test current, s.
+pub const TRIP_WATCH_S: f64 = 10.0;
 /// Release frequency of the first release, Hz (the paper's lowest).
 pub const FIRST_RELEASE_HZ: f64 = 5.0;
-/// Load hung for the output-encoder check, N m (0.408 kg on the 75 mm pulley).
-pub const OUTPUT_CHECK_LOAD_NM: f64 = 0.3;
+/// Load hung for the output-encoder check, N m: Fig. 5's 1.0 kg on the 75 mm pulley,
+/// which the paper saw fall once released at 3.6 V (about 5 Hz); a lighter one can stay put
+/// on the linear bush's friction (the paper's 0.368 N m at 3.6 and 6.2 V).
+pub const OUTPUT_CHECK_LOAD_NM: f64 = 0.735_498_75;
+/// How long the output-encoder check releases, s.
+pub const OUTPUT_CHECK_RELEASE_S: f64 = 2.5;
 
 /// A step's outcome.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -97,7 +106,8 @@ pub enum Injection {
     ReversedEncoder,
     /// The encoder cable cut: the count never changes.
     FrozenEncoder,
-    /// The current sensor's output stuck near its top (a tripped or shorted sensor).
+    /// The current sensor's output stuck (a tripped or dead sensor): the reading never
+    /// changes, about 1.5 A off its zero.
     StuckCurrentSensor,
 }
 
@@ -114,7 +124,8 @@ impl Injection {
                 ..Default::default()
             },
             Injection::StuckCurrentSensor => sim::Injections {
-                current_adc_stuck: Some(4000),
+                // The zero (2.5 V through the 2/3 divider) is about 2070 counts; 153 per A.
+                current_adc_stuck: Some(2300),
                 ..Default::default()
             },
         };
@@ -126,6 +137,8 @@ impl Injection {
 pub trait Hands {
     /// Asks for `action` (or does it on a virtual rig); false when the person skips it.
     fn set_up(&mut self, action: Action) -> Result<bool, RigError>;
+    /// Whether the rig is the virtual one (its cam can be jammed at speed safely).
+    fn virtual_rig(&self) -> bool;
 }
 
 /// What the person does between checks.
@@ -135,10 +148,12 @@ pub enum Action {
     NoLoad,
     /// Hang a small load (N m) on the output pulley.
     HangLoad(f64),
-    /// Block the cam shaft (the calibration's gauge arm on its stop).
-    BlockCam,
+    /// Jam the spinning cam (the virtual rig only: at a real rig that is no job for hands).
+    JamCam,
     /// Free the cam shaft again.
     FreeCam,
+    /// Pass a test current through the current sensor (a real rig's trip test).
+    TestCurrent,
 }
 
 impl Action {
@@ -149,11 +164,18 @@ impl Action {
                 "Remove every load from the output and couple the cam to the carrier".into()
             }
             Action::HangLoad(nm) => format!(
-                "Hang {} (the gear will be released for 1.5 s: keep clear)",
-                crate::experiment::load_text(nm)
+                "Hang {} (the gear will be released for {} s and the load falls: keep clear)",
+                crate::experiment::load_text(nm),
+                reporting::human(OUTPUT_CHECK_RELEASE_S)
             ),
-            Action::BlockCam => "Block the cam shaft: fix the calibration arm against its stop so the shaft cannot turn (the drive will push about 8 A for a moment)".into(),
-            Action::FreeCam => "Remove the arm: the cam shaft turns freely again".into(),
+            Action::JamCam => {
+                "Jam the spinning cam (rehearsal on the virtual rig: a real rig's trip test uses a test current)".into()
+            }
+            Action::FreeCam => "Free the cam shaft: it turns freely again".into(),
+            Action::TestCurrent => format!(
+                "Trip test: disconnect the motor from the bridge; after Enter, within {} s, pass a test current of 7-8 A through the ACS714 (IP+ to IP-) from a second, current-limited supply for under a second",
+                reporting::human(TRIP_WATCH_S)
+            ),
         }
     }
 }
@@ -169,10 +191,16 @@ impl Hands for VirtualHands<'_> {
                 p.set_cam(CamSetup::Coupled);
             }
             Action::HangLoad(nm) => p.set_load(model::plant::Load::Torque(nm)),
-            Action::BlockCam => p.set_cam(CamSetup::Blocked),
+            Action::JamCam => p.set_cam(CamSetup::Blocked),
             Action::FreeCam => p.set_cam(CamSetup::Coupled),
+            // The virtual rig has no second supply: its trip test jams the cam instead.
+            Action::TestCurrent => {}
         });
         Ok(true)
+    }
+
+    fn virtual_rig(&self) -> bool {
+        true
     }
 }
 
@@ -194,6 +222,10 @@ impl Hands for OperatorHands<'_> {
             VirtualHands(d).set_up(action)?;
         }
         Ok(go == Go::Run)
+    }
+
+    fn virtual_rig(&self) -> bool {
+        self.device.is_some()
     }
 }
 
@@ -405,8 +437,8 @@ fn bus_voltage(session: &mut Session) -> Result<Step, RigError> {
             reporting::human((v * 100.0).round() / 100.0),
             reporting::human(nominal),
             reporting::human(BUS_TOLERANCE * 100.0),
-            reporting::human(lo),
-            reporting::human(hi)
+            reporting::human(reporting::significant(lo, 4)),
+            reporting::human(reporting::significant(hi, 4))
         ),
         "set the bench supply to 12 V and check its current limit (at least 10 A), the bridge's supply leads and the bus divider (docs/bench.md, wiring)",
     ))
@@ -455,9 +487,18 @@ fn encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, RigErro
         return Ok(skip("encoder", "skipped by the operator".into()));
     }
     session.client.discard_telemetry();
-    session.client.open_loop(ENCODER_CHECK_V as f32)?;
+    if let Err(e) = session.client.open_loop(ENCODER_CHECK_V as f32) {
+        // A fault latched since the last step holds the motor off: name it.
+        let latched = session.client.faults()?.latched;
+        return Ok(step(
+            "encoder",
+            false,
+            format!("the drive was refused ({e})"),
+            encoder_advice(latched, 0.0),
+        ));
+    }
     let w = watch(session, 1.5, |w| !w.faults().is_empty());
-    session.client.open_loop(0.0)?;
+    stop_drive(session)?;
     let w = w?;
     let faults = w.faults();
     // The last half second, once the cam runs.
@@ -485,14 +526,19 @@ fn encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, RigErro
                 format!("; faults {faults}")
             }
         ),
-        if faults.contains(FaultFlags::REVERSED_ENCODER) || speed < -1.0 {
-            "the encoder counts against the drive: swap its A and B wires (or the motor's two leads), then `rig clear`"
-        } else if faults.contains(FaultFlags::ENCODER_LOSS) || speed.abs() <= 1.0 {
-            "no count while the motor turns: the AMT102-V's 5 V, ground and A/B wires to the timer pins (docs/bench.md), its DIP switches at 2048 PPR; then `rig clear`"
-        } else {
-            "`rig faults` names the fault; check the wiring in docs/bench.md, then `rig clear`"
-        },
+        encoder_advice(faults, speed),
     ))
+}
+
+/// What to check when the encoder step fails with `faults` and cam `speed`, rad/s.
+fn encoder_advice(faults: FaultFlags, speed: f64) -> &'static str {
+    if faults.contains(FaultFlags::REVERSED_ENCODER) || speed < -1.0 {
+        "the encoder counts against the drive: swap its A and B wires (or the motor's two leads), then `rig clear`"
+    } else if faults.contains(FaultFlags::ENCODER_LOSS) || speed.abs() <= 1.0 {
+        "no count while the motor turns: the AMT102-V's 5 V, ground and A/B wires to the timer pins (docs/bench.md), its DIP switches at 2048 PPR; then `rig clear`"
+    } else {
+        "`rig faults` names the fault; check the wiring in docs/bench.md, then `rig clear`"
+    }
 }
 
 fn output_encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, RigError> {
@@ -509,8 +555,8 @@ fn output_encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, 
     let before = watch(session, 0.2, |_| false)?;
     let from = before.samples.last().map(|t| f64::from(t.output_angle_rad));
     session.client.release(true, FIRST_RELEASE_HZ as f32)?;
-    let w = watch(session, 1.5, |w| !w.faults().is_empty());
-    session.client.release(false, 0.0)?;
+    let w = watch(session, OUTPUT_CHECK_RELEASE_S, |w| !w.faults().is_empty());
+    stop_drive(session)?;
     let w = w?;
     let _ = wait_locked(session);
     hands.set_up(Action::NoLoad)?;
@@ -525,8 +571,9 @@ fn output_encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, 
         ok,
         match moved {
             Some(m) => format!(
-                "{} released 1.5 s at {} Hz: the output turned {:+.4} rad",
+                "{} released {} s at {} Hz: the output turned {:+.4} rad",
                 crate::experiment::load_text(OUTPUT_CHECK_LOAD_NM),
+                reporting::human(OUTPUT_CHECK_RELEASE_S),
                 reporting::human(FIRST_RELEASE_HZ),
                 m
             ),
@@ -537,23 +584,44 @@ fn output_encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, 
 }
 
 fn overcurrent_trip(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, RigError> {
-    if !hands.set_up(Action::BlockCam)? {
-        return Ok(skip(
-            "overcurrent_trip",
-            "skipped by the operator: the hardware trip is untested".into(),
-        ));
-    }
-    session.client.discard_telemetry();
-    session.client.open_loop(TRIP_TEST_V as f32)?;
-    let w = watch(session, 0.5, |w| !w.faults().is_empty());
-    let stopped = session.client.open_loop(0.0);
-    let w = w?;
+    let virtual_rig = hands.virtual_rig();
+    let action = if virtual_rig {
+        Action::JamCam
+    } else {
+        Action::TestCurrent
+    };
+    let w = if virtual_rig {
+        // Spin the cam up (no load), then jam it.
+        session.client.discard_telemetry();
+        session.client.open_loop(TRIP_TEST_V as f32)?;
+        let spun = watch(session, 2.5, |w| !w.faults().is_empty());
+        let jammed = spun.and_then(|spun| {
+            if !spun.faults().is_empty() || !hands.set_up(action)? {
+                return Ok(spun);
+            }
+            watch(session, 0.5, |w| !w.faults().is_empty())
+        });
+        let stopped = session.client.open_loop(0.0);
+        let w = jammed?;
+        stopped.or_else(|e| match e {
+            // A latched fault may refuse the drive's stop: the bridge is off anyway.
+            RigError::Refused { .. } => Ok(()),
+            e => Err(e),
+        })?;
+        w
+    } else {
+        if !hands.set_up(action)? {
+            return Ok(skip(
+                "overcurrent_trip",
+                "skipped by the operator: the hardware trip is untested".into(),
+            ));
+        }
+        session.client.discard_telemetry();
+        watch(session, TRIP_WATCH_S, |w| {
+            w.faults().contains(FaultFlags::HW_OVERCURRENT)
+        })?
+    };
     let latched = session.client.faults()?.latched | w.faults();
-    stopped.or_else(|e| match e {
-        // A latched fault may refuse the drive's stop: the bridge is off anyway.
-        RigError::Refused { .. } => Ok(()),
-        e => Err(e),
-    })?;
     let peak = w
         .samples
         .iter()
@@ -562,15 +630,25 @@ fn overcurrent_trip(session: &mut Session, hands: &mut dyn Hands) -> Result<Step
     let _ = wait_locked(session);
     hands.set_up(Action::FreeCam)?;
     let tripped = latched.contains(FaultFlags::HW_OVERCURRENT);
-    let cleared = session.client.clear_faults()?;
-    let left = cleared.latched | cleared.active;
+    let _ = session.client.clear_faults()?;
+    // The trip cleared and stays cleared with the bridge armed again.
+    let after = watch(session, 0.5, |_| false)?;
+    let cleared = session.client.faults()?;
+    let left = cleared.latched | cleared.active | after.faults();
     let ok = tripped && left.is_empty();
     Ok(step(
         "overcurrent_trip",
         ok,
         format!(
-            "cam blocked, open loop {} V: {}, peak mean current {:.2} A; faults after clearing: {}",
-            reporting::human(TRIP_TEST_V),
+            "{}: {}, peak mean current {:.2} A; faults after clearing: {}",
+            if virtual_rig {
+                format!(
+                    "cam jammed at speed, open loop {} V",
+                    reporting::human(TRIP_TEST_V)
+                )
+            } else {
+                "test current through the sensor".to_string()
+            },
             if tripped {
                 "the hardware break tripped (HW_OVERCURRENT)".to_string()
             } else if latched.is_empty() {
@@ -588,7 +666,7 @@ fn overcurrent_trip(session: &mut Session, hands: &mut dyn Hands) -> Result<Step
         if tripped {
             "the trip did not clear: `rig faults`; is the cam free again?"
         } else {
-            "the comparator path: ACS714 output on PA0 (COMP3 input), the DAC threshold (2.41 V for 6 A), COMP3 into TIM1's break input (docs/bench.md); and that the cam was really blocked"
+            "the comparator path: ACS714 output on PA0 (COMP3 input), the DAC threshold (2.41 V for 6 A), COMP3 into TIM1's break input (docs/bench.md); and that the test current really passed the sensor"
         },
     ))
 }
@@ -600,7 +678,7 @@ fn first_release(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, R
     session.client.discard_telemetry();
     session.client.release(true, FIRST_RELEASE_HZ as f32)?;
     let w = watch(session, 2.5, |w| !w.faults().is_empty());
-    session.client.release(false, 0.0)?;
+    stop_drive(session)?;
     let w = w?;
     let locked = wait_locked(session)?;
     let vibrating: Vec<f64> = w
@@ -638,6 +716,15 @@ fn first_release(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, R
         ),
         "the speed loop's gains and the cam's coupling; `rig monitor --release 5` shows the spin-up; `rig faults` names a fault",
     ))
+}
+
+/// Stops the drive (release off stops an open-loop drive too). A latched fault already
+/// holds the motor off, and the device then refuses the request: that is not an error.
+fn stop_drive(session: &mut Session) -> Result<(), RigError> {
+    match session.client.release(false, 0.0) {
+        Ok(()) | Err(RigError::Refused { .. }) => Ok(()),
+        Err(e) => Err(e),
+    }
 }
 
 /// Waits up to 3 device seconds for `Locked`.

@@ -274,8 +274,14 @@ impl SimRig {
             release_button: self.button,
         };
         let out = self.core.step(&inputs);
-        if self.plant.break_tripped() && !self.core.break_latched() {
-            // ClearFaults cleared HW_OVERCURRENT: the binary sets MOE again.
+        if self.plant.break_tripped()
+            && !out.enable
+            && self.core.break_latched()
+            && self.plant.state().current.abs() < model::hardware::comparator::TRIP_A
+        {
+            // As the binary (`CamMotor::rearm`): once the core stopped driving and latched
+            // HW_OVERCURRENT, and the current is back under the threshold, the break flag is
+            // cleared; ClearFaults can then clear the fault (its condition is gone).
             self.plant.rearm_break();
         }
         self.adc.clear();
