@@ -73,9 +73,13 @@ pub trait Bench {
     /// Puts the rig into `setup` (asks the operator, or changes the simulated rig). The
     /// drive is off and the telemetry stopped meanwhile: a person may take minutes.
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError>;
+    /// A telemetry sample inside torque step `step`'s averaging window, while the drive
+    /// presses the arm on the gauge: the virtual gauge is read at each, so its reading is
+    /// the mean over the same window as the current's (a real gauge and arm average the
+    /// PWM's ripple mechanically).
+    fn window_sample(&mut self, _step: usize) {}
     /// The end of torque step `step`'s averaging window, while the drive still presses the
-    /// arm on the gauge: the moment the gauge's peak hold keeps (the virtual gauge is read
-    /// here).
+    /// arm on the gauge: the moment the gauge's peak hold keeps.
     fn pressed(&mut self, _step: usize) {}
     /// The gauge's held torque reading of torque step `step` (0-based), taken after the
     /// drive stopped (`measured` is what the drive drew), or a request to measure the step
@@ -201,7 +205,7 @@ pub fn measure<T: Read + Write>(
 /// The error of a calibration ended by Ctrl-C.
 pub fn interrupted_error() -> RigError {
     RigError::Operator(format!(
-        "calibration interrupted ({}): the drive is off and the gear locked; the points measured so far are kept (points.csv): `rig calibrate --resume --out DIR` continues the run",
+        "calibration interrupted ({}): the drive is off and the gear locked; the points measured so far are kept (points.csv): `rig calibrate --resume --out DIR` continues the run, `rig calibrate --from-points FILE` fits them",
         crate::signals::interrupt_name()
     ))
 }
@@ -248,6 +252,7 @@ fn measure_inner<T: Read + Write>(
                 plan.settle_s + extra,
                 plan,
                 interrupted,
+                &mut || {},
             )?);
             progress(Progress::Done, taken);
         }
@@ -272,7 +277,9 @@ fn measure_inner<T: Read + Write>(
         client.start_telemetry(plan.telemetry_hz)?;
         client.open_loop(volts as f32)?;
         client.discard_telemetry();
-        let step = average(client, volts, plan.settle_s, plan, interrupted)?;
+        let step = average(client, volts, plan.settle_s, plan, interrupted, &mut || {
+            bench.window_sample(k)
+        })?;
         bench.pressed(k);
         // The blocked motor draws its stall current: off before the operator reads the
         // held gauge value, so the winding does not heat up, the firmware's spin-up limit
@@ -335,6 +342,7 @@ fn average<T: Read + Write>(
     settle_s: f64,
     plan: &Plan,
     interrupted: &dyn Fn() -> bool,
+    in_window: &mut dyn FnMut(),
 ) -> Result<StepMeasurement, RigError> {
     let wait = Duration::from_secs(2) + client.options().reply_timeout;
     let next = |client: &mut Client<T>| -> Result<TelemetrySample, RigError> {
@@ -372,6 +380,7 @@ fn average<T: Read + Write>(
         sum_i += i;
         sum_i2 += i * i;
         sum_w += f64::from(t.cam_speed_rad_s).abs();
+        in_window();
     }
     if n == 0 {
         return Err(RigError::CalibrationFit(format!(

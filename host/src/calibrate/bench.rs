@@ -29,6 +29,28 @@ pub struct SimBench<'a> {
     device: &'a VirtualDevice,
     gauge: Option<Vec<f64>>,
     held_nmm: Option<f64>,
+    window: WindowMean,
+}
+
+/// The virtual gauge's mean over an averaging window, N mm.
+#[derive(Debug, Default)]
+struct WindowMean {
+    sum: f64,
+    n: usize,
+}
+
+impl WindowMean {
+    fn add(&mut self, v: f64) {
+        self.sum += v;
+        self.n += 1;
+    }
+
+    /// The mean so far (`None` without a sample), and a fresh start.
+    fn take(&mut self) -> Option<f64> {
+        let mean = (self.n > 0).then(|| self.sum / self.n as f64);
+        *self = Self::default();
+        mean
+    }
 }
 
 impl<'a> SimBench<'a> {
@@ -39,6 +61,7 @@ impl<'a> SimBench<'a> {
             device,
             gauge,
             held_nmm: None,
+            window: WindowMean::default(),
         }
     }
 }
@@ -54,9 +77,16 @@ impl Bench for SimBench<'_> {
         Ok(())
     }
 
+    fn window_sample(&mut self, _step: usize) {
+        self.window.add(virtual_gauge_nmm(self.device));
+    }
+
     fn pressed(&mut self, _step: usize) {
-        // The gauge's peak hold: the reading while the drive pressed.
-        self.held_nmm = Some(virtual_gauge_nmm(self.device));
+        // What the gauge showed over the window the current was averaged on.
+        self.held_nmm = self
+            .window
+            .take()
+            .or_else(|| Some(virtual_gauge_nmm(self.device)));
     }
 
     fn gauge_nmm(
@@ -98,6 +128,7 @@ pub struct OperatorBench<'a> {
     interrupted: Arc<AtomicBool>,
     device: Option<&'a VirtualDevice>,
     held_nmm: Option<f64>,
+    window: WindowMean,
 }
 
 impl<'a> OperatorBench<'a> {
@@ -117,6 +148,7 @@ impl<'a> OperatorBench<'a> {
             interrupted,
             device: None,
             held_nmm: None,
+            window: WindowMean::default(),
         }
     }
 
@@ -197,8 +229,14 @@ impl Bench for OperatorBench<'_> {
         .map(|_| ())
     }
 
+    fn window_sample(&mut self, _step: usize) {
+        if let Some(d) = self.device {
+            self.window.add(virtual_gauge_nmm(d));
+        }
+    }
+
     fn pressed(&mut self, _step: usize) {
-        self.held_nmm = self.device.map(virtual_gauge_nmm);
+        self.held_nmm = self.window.take();
     }
 
     fn gauge_nmm(

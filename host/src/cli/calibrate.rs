@@ -164,17 +164,6 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         })?;
         reporting::check_writable_dir(&out)?;
         let points = out.join("points.csv");
-        if let Some(input) = &a.from_points
-            && same_file(input, &points)
-        {
-            return Err(RigError::BadValue {
-                what: format!("--from-points {}", input.display()),
-                why: format!(
-                    "is the points.csv this run writes in {}: the refit would replace its own input; give another --out",
-                    out.display()
-                ),
-            });
-        }
         if a.resume {
             if points.exists() {
                 resumed = Some(calibrate::read_points_csv(&points)?);
@@ -358,15 +347,6 @@ fn partial_refit(
         plan.torque_volts.len(),
         dir.display()
     ))
-}
-
-/// Whether `a` and `b` name the same file (both exist and are one inode, or are equal
-/// paths).
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => a == b,
-    }
 }
 
 /// Measures on the device of `session`, writing the points to `out`/points.csv (atomically)
