@@ -133,12 +133,15 @@ fn write_json<T: Serialize>(
     Ok(())
 }
 
+/// Creates the report folder and checks it takes files before anything runs (removing the
+/// temporaries a killed run left there).
 fn create_dir(dir: &Path) -> Result<(), RigError> {
     std::fs::create_dir_all(dir).map_err(|source| RigError::File {
         action: "create folder",
         path: dir.display().to_string(),
         source,
-    })
+    })?;
+    Ok(reporting::check_writable_dir(dir)?)
 }
 
 /// The whole simulated rig, with a report folder; `write_calibration` writes the

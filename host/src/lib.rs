@@ -14,6 +14,7 @@ pub mod error;
 pub mod experiment;
 pub mod flash;
 pub mod limits;
+pub mod output_paths;
 pub mod ports;
 pub mod scenario;
 pub mod signals;

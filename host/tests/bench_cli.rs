@@ -597,3 +597,28 @@ fn a_reader_that_goes_away_ends_design_normally() {
     assert!(out.status.success(), "{err}");
     assert!(!err.contains("error"), "{err}");
 }
+
+#[test]
+fn an_output_over_an_input_is_refused_and_the_input_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("s.csv");
+    let body = "omega_n_rad_s,tau_rot_nm,i_in_a\n31.4,0.368,2.5\n";
+    std::fs::write(&data, body).unwrap();
+    for args in [
+        vec!["explain", "--measured", "S", "--write-model", "S"],
+        vec!["explain", "--measured", "S", "--propose", "S"],
+        vec!["compare", "--measured", "S", "--svg", "S"],
+    ] {
+        let args: Vec<&str> = args
+            .iter()
+            .map(|a| if *a == "S" { data.to_str().unwrap() } else { a })
+            .collect();
+        let e = rig().args(&args).assert().failure().get_output().clone();
+        let err = text(&e.stderr);
+        assert!(
+            err.contains("--measured") && err.contains("destroy"),
+            "{args:?}: {err}"
+        );
+        assert_eq!(std::fs::read_to_string(&data).unwrap(), body);
+    }
+}

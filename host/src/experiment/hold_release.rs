@@ -179,7 +179,7 @@ pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
         .filter_map(|(k, &phase)| {
             let mut t = samples.iter().filter(|s| s.phase == phase).map(|s| s.t_s);
             let from = t.next()?;
-            let to = t.last().unwrap_or(from);
+            let to = t.next_back().unwrap_or(from);
             Some(Band {
                 from,
                 to,
