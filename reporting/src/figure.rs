@@ -131,11 +131,47 @@ pub fn convert(svg: &str, options: &FigureOptions) -> Result<Vec<u8>, String> {
     }
 }
 
+/// The system's fonts, with `sans-serif` (the figures' font) mapped to a sans face that is
+/// there: fontdb's default (Arial) is missing on most Linux systems, and text in a face
+/// that is not there is not drawn at all.
+#[cfg(any(feature = "png", feature = "pdf"))]
+fn load_fonts(db: &mut usvg_fonts::Database) {
+    db.load_system_fonts();
+    const SANS: [&str; 6] = [
+        "DejaVu Sans",
+        "Liberation Sans",
+        "Noto Sans",
+        "Arial",
+        "Helvetica",
+        "FreeSans",
+    ];
+    let has = |name: &str| {
+        db.faces()
+            .any(|f| f.families.iter().any(|(family, _)| family == name))
+    };
+    let family = SANS
+        .iter()
+        .find(|n| has(n))
+        .map(|n| n.to_string())
+        .or_else(|| {
+            db.faces()
+                .find_map(|f| f.families.first().map(|(family, _)| family.clone()))
+        });
+    if let Some(family) = family {
+        db.set_sans_serif_family(family);
+    }
+}
+
+#[cfg(feature = "png")]
+use resvg::usvg::fontdb as usvg_fonts;
+#[cfg(all(feature = "pdf", not(feature = "png")))]
+use svg2pdf::usvg::fontdb as usvg_fonts;
+
 #[cfg(feature = "png")]
 fn png(svg: &str, width: Option<u32>) -> Result<Vec<u8>, String> {
     use resvg::{tiny_skia, usvg};
     let mut opt = usvg::Options::default();
-    opt.fontdb_mut().load_system_fonts();
+    load_fonts(opt.fontdb_mut());
     let tree = usvg::Tree::from_str(svg, &opt).map_err(|e| e.to_string())?;
     let size = tree.size();
     let scale = width.map_or(1.0, |w| w as f32 / size.width());
@@ -163,7 +199,7 @@ fn png(_svg: &str, _width: Option<u32>) -> Result<Vec<u8>, String> {
 fn pdf(svg: &str, width: Option<u32>) -> Result<Vec<u8>, String> {
     use svg2pdf::usvg;
     let mut opt = usvg::Options::default();
-    opt.fontdb_mut().load_system_fonts();
+    load_fonts(opt.fontdb_mut());
     let mut svg = svg.to_string();
     if let Some(w) = width {
         svg = with_width(&svg, w);

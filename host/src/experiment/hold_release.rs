@@ -159,6 +159,14 @@ pub fn write_csv(samples: &[Sample], path: &Path) -> Result<(), RigError> {
             why: format!("cannot write the CSV: {e}"),
         })?;
         for s in samples {
+            // As a person writes them: the f32 readings as read, the angle (a difference
+            // of two f32 readings) to the 7 digits they carry.
+            let s = Sample {
+                output_angle_rad: s.output_angle_rad.map(|a| reporting::significant(a, 7)),
+                cam_speed_rad_s: reporting::human_f64(s.cam_speed_rad_s),
+                current_a: reporting::human_f64(s.current_a),
+                ..*s
+            };
             w.serialize(s).map_err(|e| RigError::BadValue {
                 what: path.display().to_string(),
                 why: format!("cannot write the CSV: {e}"),
@@ -225,7 +233,7 @@ pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
             .labelled(format!("paper: held {} s", reporting::human(paper_hold))),
         );
         angle.series[0].label = Some("output angle".into());
-        angle.legend = Some(Legend::LowerLeft);
+        angle.legend = Some(Legend::Outside);
     }
     let panels = [
         angle,
@@ -234,7 +242,7 @@ pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
     ];
     Ok(plot::columns_figure(
         path,
-        (420, 360),
+        (470, 360),
         Some("Fig. 5: hold, release, after"),
         &panels,
     )?)
