@@ -50,7 +50,7 @@ impl Setup {
                 "No-load test: uncouple the cam from the carrier so the vibrator turns freely."
             }
             Setup::Gauge => {
-                "Torque test: fix the arm on the vibrator shaft so it presses on the force gauge (the shaft must not turn)."
+                "Torque test: fix the arm on the vibrator shaft so it presses on the force gauge (the shaft must not turn), and set the gauge to peak hold: the drive presses for about a second per step and is off while you read the held value."
             }
             Setup::Done => {
                 "Calibration measured: remove the arm and couple the cam to the carrier again."
@@ -70,11 +70,21 @@ pub enum Reading {
 
 /// The operator's side of the procedure.
 pub trait Bench {
-    /// Puts the rig into `setup` (asks the operator, or changes the simulated rig).
+    /// Puts the rig into `setup` (asks the operator, or changes the simulated rig). The
+    /// drive is off and the telemetry stopped meanwhile: a person may take minutes.
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError>;
-    /// The gauge's torque reading at torque step `step` (0-based) while the drive holds
-    /// `measured`, or a request to measure the step again; `keep_alive` keeps the drive's
-    /// heartbeat while waiting (and fails once Ctrl-C was pressed).
+    /// A telemetry sample inside torque step `step`'s averaging window, while the drive
+    /// presses the arm on the gauge: the virtual gauge is read at each, so its reading is
+    /// the mean over the same window as the current's (a real gauge and arm average the
+    /// PWM's ripple mechanically).
+    fn window_sample(&mut self, _step: usize) {}
+    /// The end of torque step `step`'s averaging window, while the drive still presses the
+    /// arm on the gauge: the moment the gauge's peak hold keeps.
+    fn pressed(&mut self, _step: usize) {}
+    /// The gauge's held torque reading of torque step `step` (0-based), taken after the
+    /// drive stopped (`measured` is what the drive drew), or a request to measure the step
+    /// again; `keep_alive` services the link while waiting (and fails once Ctrl-C was
+    /// pressed). The drive is off and the gear locked while the operator reads.
     fn gauge_nmm(
         &mut self,
         step: usize,
@@ -169,8 +179,10 @@ pub enum Progress {
 }
 
 /// Runs the procedure: sweep, then torque steps, into `taken` (every point as it is
-/// measured, so an interrupted run keeps them); `progress` sees each step and the points
-/// so far. The drive is stopped at the end and on any error; `interrupted` (Ctrl-C) ends
+/// measured, so an interrupted run keeps them; the steps already in `taken`, from an
+/// interrupted run, are not measured again); `progress` sees each step and the points
+/// so far. The telemetry runs only while a step is measured: while the operator sets up
+/// the rig or reads the gauge the drive is off, the gear locked and nothing piles up. The drive is stopped at the end and on any error; `interrupted` (Ctrl-C) ends
 /// the procedure between samples with [`interrupted_error`].
 pub fn measure<T: Read + Write>(
     client: &mut Client<T>,
@@ -180,7 +192,6 @@ pub fn measure<T: Read + Write>(
     progress: &mut dyn FnMut(Progress, &Measurements),
     interrupted: &dyn Fn() -> bool,
 ) -> Result<(), RigError> {
-    client.start_telemetry(plan.telemetry_hz)?;
     let result = measure_inner(client, bench, plan, taken, progress, interrupted);
     // Stop the motor whatever happened; the first error is the one to report.
     let stopped = client.open_loop(0.0);
@@ -193,9 +204,10 @@ pub fn measure<T: Read + Write>(
 
 /// The error of a calibration ended by Ctrl-C.
 pub fn interrupted_error() -> RigError {
-    RigError::Operator(
-        "calibration interrupted (Ctrl-C): the drive is off and the gear locked; the points measured so far are kept (points.csv): `rig calibrate --from-points FILE` fits them".into(),
-    )
+    RigError::Operator(format!(
+        "calibration interrupted ({}): the drive is off and the gear locked; the points measured so far are kept (points.csv): `rig calibrate --resume --out DIR` continues the run, `rig calibrate --from-points FILE` fits them",
+        crate::signals::interrupt_name()
+    ))
 }
 
 fn measure_inner<T: Read + Write>(
@@ -213,32 +225,46 @@ fn measure_inner<T: Read + Write>(
             Ok(())
         }
     };
-    bench.prepare(Setup::NoLoad)?;
-    check()?;
-    for (k, &volts) in plan.sweep_volts.iter().enumerate() {
-        progress(
-            Progress::Step {
-                setup: Setup::NoLoad,
+    let no_load_done = taken.no_load.len().min(plan.sweep_volts.len());
+    if no_load_done < plan.sweep_volts.len() {
+        bench.prepare(Setup::NoLoad)?;
+        check()?;
+        client.start_telemetry(plan.telemetry_hz)?;
+        for (k, &volts) in plan.sweep_volts.iter().enumerate().skip(no_load_done) {
+            progress(
+                Progress::Step {
+                    setup: Setup::NoLoad,
+                    volts,
+                },
+                taken,
+            );
+            client.open_loop(volts as f32)?;
+            client.discard_telemetry();
+            // From rest (the first step, or the first of a resumed run) the cam spins up.
+            let extra = if k == no_load_done {
+                plan.spin_up_s
+            } else {
+                0.0
+            };
+            taken.no_load.push(average(
+                client,
                 volts,
-            },
-            taken,
-        );
-        client.open_loop(volts as f32)?;
-        client.discard_telemetry();
-        let extra = if k == 0 { plan.spin_up_s } else { 0.0 };
-        taken.no_load.push(average(
-            client,
-            volts,
-            plan.settle_s + extra,
-            plan,
-            interrupted,
-        )?);
-        progress(Progress::Done, taken);
+                plan.settle_s + extra,
+                plan,
+                interrupted,
+                &mut || {},
+            )?);
+            progress(Progress::Done, taken);
+        }
+        client.open_loop(0.0)?;
+        wait_until_locked(client)?;
+        client.stop_telemetry()?;
     }
-    client.open_loop(0.0)?;
-    bench.prepare(Setup::Gauge)?;
-    check()?;
-    let mut k = 0;
+    let mut k = taken.torque.len();
+    if k < plan.torque_volts.len() {
+        bench.prepare(Setup::Gauge)?;
+        check()?;
+    }
     while k < plan.torque_volts.len() {
         let volts = plan.torque_volts[k];
         progress(
@@ -248,18 +274,24 @@ fn measure_inner<T: Read + Write>(
             },
             taken,
         );
+        client.start_telemetry(plan.telemetry_hz)?;
         client.open_loop(volts as f32)?;
         client.discard_telemetry();
-        let step = average(client, volts, plan.settle_s, plan, interrupted)?;
+        let step = average(client, volts, plan.settle_s, plan, interrupted, &mut || {
+            bench.window_sample(k)
+        })?;
+        bench.pressed(k);
+        // The blocked motor draws its stall current: off before the operator reads the
+        // held gauge value, so the winding does not heat up, the firmware's spin-up limit
+        // (3 s, also for a shaft that cannot turn) never runs out however long the person
+        // takes, and each step starts from rest.
+        client.open_loop(0.0)?;
+        wait_until_locked(client)?;
+        client.stop_telemetry()?;
         let reading = bench.gauge_nmm(k, &step, &mut || {
             check()?;
             client.tick()
         })?;
-        // The blocked motor draws its stall current: off between steps, so the winding
-        // does not heat up and each step starts from rest (the firmware's spin-up limit
-        // of 3 s also applies to a shaft that cannot turn).
-        client.open_loop(0.0)?;
-        wait_until_locked(client)?;
         if let Reading::Nmm(gauge_nmm) = reading {
             taken.torque.push(TorquePoint { step, gauge_nmm });
             progress(Progress::Done, taken);
@@ -272,6 +304,8 @@ fn measure_inner<T: Read + Write>(
 
 /// Waits until the supervisor reports the motor off and at rest.
 fn wait_until_locked<T: Read + Write>(client: &mut Client<T>) -> Result<(), RigError> {
+    // Only what follows the stop counts.
+    client.discard_telemetry();
     let wait = Duration::from_secs(2) + client.options().reply_timeout;
     let mut first = None;
     loop {
@@ -308,6 +342,7 @@ fn average<T: Read + Write>(
     settle_s: f64,
     plan: &Plan,
     interrupted: &dyn Fn() -> bool,
+    in_window: &mut dyn FnMut(),
 ) -> Result<StepMeasurement, RigError> {
     let wait = Duration::from_secs(2) + client.options().reply_timeout;
     let next = |client: &mut Client<T>| -> Result<TelemetrySample, RigError> {
@@ -345,6 +380,7 @@ fn average<T: Read + Write>(
         sum_i += i;
         sum_i2 += i * i;
         sum_w += f64::from(t.cam_speed_rad_s).abs();
+        in_window();
     }
     if n == 0 {
         return Err(RigError::CalibrationFit(format!(

@@ -52,6 +52,8 @@ pub struct DemoOptions {
     pub quick: bool,
     /// Seed of the noise and the test order.
     pub seed: u64,
+    /// The figures' format and width (every figure is also kept as SVG).
+    pub figures: reporting::figure::FigureOptions,
 }
 
 /// The calibration step's outcome, paper units.
@@ -86,6 +88,8 @@ pub struct DemoSummary {
     pub device_state: Option<DeviceState>,
     /// Files written.
     pub files: Vec<String>,
+    /// The report page (Markdown) linking every figure and table with its verdict.
+    pub report_page: Option<String>,
     /// Every check agrees with the paper (or, on a real rig, the device is healthy).
     pub all_ok: bool,
 }
@@ -129,12 +133,15 @@ fn write_json<T: Serialize>(
     Ok(())
 }
 
+/// Creates the report folder and checks it takes files before anything runs (removing the
+/// temporaries a killed run left there).
 fn create_dir(dir: &Path) -> Result<(), RigError> {
     std::fs::create_dir_all(dir).map_err(|source| RigError::File {
         action: "create folder",
         path: dir.display().to_string(),
         source,
-    })
+    })?;
+    Ok(reporting::check_writable_dir(dir)?)
 }
 
 /// The whole simulated rig, with a report folder; `write_calibration` writes the
@@ -152,13 +159,31 @@ pub fn run_simulated(
 
     progress("calibration on the virtual device (the paper's procedure)");
     let calibration = calibrate_virtual(&opts.out, write_calibration, &mut files)?;
+    let calibration_figures: Vec<PathBuf> = files
+        .iter()
+        .filter(|f| f.ends_with(".svg"))
+        .map(PathBuf::from)
+        .collect();
+    let mut calibration_figures_out = Vec::new();
+    for svg in &calibration_figures {
+        calibration_figures_out.push(figure(svg, &opts.figures, &mut files)?);
+    }
 
     progress("fig5: 1 kg on 75 mm, held 14.5 s, then released");
-    let fig5 = crate::experiment::paper::fig5(&fig5::Fig5Options {
-        seed: opts.seed,
-        ..Default::default()
-    })?;
+    let (fig5, history) = crate::experiment::paper::fig5_history(
+        &fig5::Fig5Options {
+            seed: opts.seed,
+            ..Default::default()
+        },
+        None,
+    )?;
     write_json(&opts.out, "fig5.json", &fig5, &mut files)?;
+    let fig5_csv = opts.out.join("fig5.csv");
+    crate::experiment::hold_release::write_csv(&history, &fig5_csv)?;
+    files.push(fig5_csv.display().to_string());
+    let fig5_svg = opts.out.join("fig5.svg");
+    crate::experiment::hold_release::write_svg(&history, &fig5_svg)?;
+    let fig5_figure = figure(&fig5_svg, &opts.figures, &mut files)?;
 
     progress("table1: six gear sets at 3.68 N m");
     let table1 = crate::experiment::paper::table1(
@@ -191,7 +216,7 @@ pub fn run_simulated(
     files.push(csv_path.display().to_string());
     let svg_path = opts.out.join("torque_sweep.svg");
     crate::sweep_report::sweep_figure(&svg_path, &points)?;
-    files.push(svg_path.display().to_string());
+    let sweep_figure = figure(&svg_path, &opts.figures, &mut files)?;
     let torque_sweep = sweep::summarise(&points, &sweep_opts);
     write_json(&opts.out, "torque_sweep.json", &torque_sweep, &mut files)?;
 
@@ -209,9 +234,11 @@ pub fn run_simulated(
         && torque_sweep.tau_cam_grows_with_load
         && torque_sweep.tau_cam_grows_with_speed
         && faults.iter().all(|f| f.motor_off && f.fault_latched);
+    let page_path = opts.out.join("report.md");
+    files.push(page_path.display().to_string());
     let summary_path = opts.out.join("summary.json");
     files.push(summary_path.display().to_string());
-    let summary = DemoSummary {
+    let mut summary = DemoSummary {
         device: "virtual device".into(),
         design,
         calibration: Some(calibration),
@@ -221,8 +248,17 @@ pub fn run_simulated(
         faults: Some(faults),
         device_state: None,
         files,
+        report_page: Some(page_path.display().to_string()),
         all_ok,
     };
+    let figures = PageFigures {
+        calibration: calibration_figures_out,
+        fig5: fig5_figure,
+        sweep: sweep_figure,
+    };
+    let page = report_page(&summary, &opts.out, &figures);
+    reporting::write_atomic(&page_path, page.as_bytes())?;
+    summary.report_page = Some(page_path.display().to_string());
     write_json(&opts.out, "summary.json", &summary, &mut Vec::new())?;
     Ok(summary)
 }
@@ -305,10 +341,166 @@ pub fn run_on_device(dev: &DeviceOpts, out: &Path) -> Result<DemoSummary, RigErr
         faults: None,
         device_state: Some(device_state),
         files,
+        report_page: None,
         all_ok,
     };
     write_json(out, "summary.json", &summary, &mut Vec::new())?;
     Ok(summary)
+}
+
+/// Writes the SVG figure `svg` also in the asked format (when not SVG) and records the
+/// files; returns the figure the report page shows.
+fn figure(
+    svg: &Path,
+    options: &reporting::figure::FigureOptions,
+    files: &mut Vec<String>,
+) -> Result<PathBuf, RigError> {
+    let svg_name = svg.display().to_string();
+    if !files.contains(&svg_name) {
+        files.push(svg_name);
+    }
+    let out = reporting::figure::export(svg, options)?;
+    if out != svg {
+        files.push(out.display().to_string());
+    }
+    Ok(out)
+}
+
+/// The figures the report page shows, in the asked format.
+struct PageFigures {
+    calibration: Vec<PathBuf>,
+    fig5: PathBuf,
+    sweep: PathBuf,
+}
+
+/// The report page: every table and figure of the demo with its verdict against the
+/// paper, links relative to the report folder `dir`.
+fn report_page(s: &DemoSummary, dir: &Path, figures: &PageFigures) -> String {
+    use std::fmt::Write;
+    let rel = |p: &Path| {
+        p.strip_prefix(dir)
+            .unwrap_or(p)
+            .display()
+            .to_string()
+            .replace('\\', "/")
+    };
+    let verdict = |ok: bool| if ok { "**pass**" } else { "**FAIL**" };
+    let mut out = format!(
+        "# rig demo: the paper on the {}\n\nNoda et al., *Switching backdrivability of a planetary gear by vibration*, reproduced on the simulated rig (firmware control core + plant). Overall: {}.\n\n",
+        s.device,
+        if s.all_ok {
+            "**every check agrees with the paper**"
+        } else {
+            "**SOME CHECKS FAILED**"
+        }
+    );
+    let _ = writeln!(
+        out,
+        "| check | against the paper | verdict | files |\n|---|---|---|---|"
+    );
+    let _ = writeln!(
+        out,
+        "| design check, Table 1 | hold verdicts (mu_s Lambda > 1) of the six gear sets | {} | [design.json](design.json) |",
+        verdict(s.design.agrees_with_paper)
+    );
+    if let Some(c) = &s.calibration {
+        let figs: Vec<String> = figures
+            .calibration
+            .iter()
+            .map(|f| format!("[{}]({})", rel(f), rel(f)))
+            .collect();
+        let _ = writeln!(
+            out,
+            "| vibrator calibration, Table 2 | C1-C6 within 5 % (C4 within 50 %) | {} | [calibration.toml](calibration/calibration.toml), {} |",
+            verdict(c.within_tolerance),
+            figs.join(", ")
+        );
+    }
+    if let Some(f) = &s.fig5 {
+        let _ = writeln!(
+            out,
+            "| Fig. 5 | 1 kg on 75 mm held {} s without vibration, falls once released | {} | [fig5.json](fig5.json), [fig5.csv](fig5.csv), [{}]({}) |",
+            reporting::human(f.hold_s),
+            verdict(f.held_without_vibration && f.release_to_motion_s.is_some()),
+            rel(&figures.fig5),
+            rel(&figures.fig5)
+        );
+    }
+    if let Some(rows) = &s.table1 {
+        let _ = writeln!(
+            out,
+            "| Table 1 backdrive | n = 1 holds without vibration; all backdrive with it | {} | [table1.json](table1.json) |",
+            verdict(rows.iter().all(|r| r.agrees_with_paper))
+        );
+    }
+    if let Some(t) = &s.torque_sweep {
+        let ok = t.current_grows_with_load
+            && t.current_grows_with_speed
+            && t.tau_cam_grows_with_load
+            && t.tau_cam_grows_with_speed;
+        let _ = writeln!(
+            out,
+            "| torque sweep, Figs. 8-9 | current and tau_cam grow with load and speed (Eq. 10 drawn) | {} | [torque_sweep.csv](torque_sweep.csv), [torque_sweep.json](torque_sweep.json), [{}]({}) |",
+            verdict(ok),
+            rel(&figures.sweep),
+            rel(&figures.sweep)
+        );
+    }
+    if let Some(f) = &s.faults {
+        let _ = writeln!(
+            out,
+            "| fault drills | every drill ends with the motor off and the fault latched | {} | [faults.json](faults.json) |",
+            verdict(f.iter().all(|o| o.motor_off && o.fault_latched))
+        );
+    }
+    if let Some(c) = &s.calibration {
+        let _ = writeln!(
+            out,
+            "\n## Vibrator calibration against Table 2\n\n| constant | measured | Table 2 | difference |\n|---|---|---|---|"
+        );
+        for (k, (m, p)) in c.measured.iter().zip(c.paper).enumerate() {
+            let _ = writeln!(
+                out,
+                "| C{} | {} | {} | {:+.1} % |",
+                k + 1,
+                reporting::human(reporting::significant(*m, 4)),
+                reporting::human(p),
+                (m / p - 1.0) * 100.0
+            );
+        }
+    }
+    if let Some(rows) = &s.table1 {
+        let _ = writeln!(
+            out,
+            "\n## Table 1 on the simulated rig\n\n| Z1, Z2, Z3, Z4 | n | mu_s Lambda | without vibration | with vibration | as in the paper |\n|---|---|---|---|---|---|"
+        );
+        let word = |b: bool| if b { "backdriven" } else { "held" };
+        for r in rows {
+            let _ = writeln!(
+                out,
+                "| {} | {} | {:.3} | {} | {} | {} |",
+                r.z.map(|v| v.to_string()).join(", "),
+                r.n,
+                r.mu_s_lambda,
+                word(r.backdriven_without_vibration),
+                word(r.backdriven_with_vibration),
+                if r.agrees_with_paper { "yes" } else { "NO" }
+            );
+        }
+    }
+    let _ = writeln!(out, "\n## Figures\n");
+    let mut all: Vec<&PathBuf> = figures.calibration.iter().collect();
+    all.push(&figures.fig5);
+    all.push(&figures.sweep);
+    for f in all {
+        let name = rel(f);
+        if name.ends_with(".pdf") {
+            let _ = writeln!(out, "- [{name}]({name})");
+        } else {
+            let _ = writeln!(out, "![{name}]({name})\n");
+        }
+    }
+    out
 }
 
 /// Short human-readable summary.

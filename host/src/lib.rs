@@ -2,6 +2,7 @@
 //! modules) the device client, the simulator and the reports.
 
 pub mod args;
+pub mod bringup;
 pub mod calibrate;
 pub mod cli;
 pub mod client;
@@ -14,8 +15,10 @@ pub mod error;
 pub mod experiment;
 pub mod flash;
 pub mod limits;
+pub mod output_paths;
 pub mod ports;
 pub mod scenario;
+pub mod signals;
 pub mod sweep_report;
 
 pub use error::RigError;

@@ -44,40 +44,60 @@ pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 3] {
     };
     let current = XyPanel {
         caption: Some("current (Fig. 8): mean, bars +-1 sd over repeats".into()),
-        x_label: "tau_rot, N m".into(),
-        y_label: "i_in, A".into(),
+        x_label: "tau_rot [N m]".into(),
+        y_label: "i_in [A]".into(),
         series: per_voltage(&|p| p.i_in_a, true),
         x_range: Some(x),
-        legend: Some(Legend::MiddleRight),
+        legend: Some(Legend::Outside),
         fine_grid: true,
         ..XyPanel::default()
     };
     let speed = XyPanel {
         caption: Some("cam speed (Fig. 8)".into()),
-        x_label: "tau_rot, N m".into(),
-        y_label: "w_n, rad/s".into(),
+        x_label: "tau_rot [N m]".into(),
+        y_label: "w_n [rad/s]".into(),
         series: per_voltage(&|p| p.omega_n_rad_s, false),
         x_range: Some(x),
         fine_grid: true,
         ..XyPanel::default()
     };
-    let mut torque = per_voltage(&|p| p.tau_cam_meas_nm * 1e3, false);
+    let mut torque = per_voltage(&|p| p.tau_cam_meas_nm * 1e3, true);
     for (k, &v) in volts.iter().enumerate() {
         let eq10: Vec<(f64, f64)> = at(v)
             .map(|p| (p.tau_rot_nm, p.tau_cam_eq10_nm * 1e3))
             .collect();
-        // Eq. (10) at the mean cam speed of the repeats.
+        // Eq. (10) at the mean cam speed of the repeats: the paper's model, as reference.
         let mean = plot::mean_with_spread(color(k), 0, "", &eq10)
             .pop()
             .map_or_else(Vec::new, |s| s.points);
-        torque.push(Series::line(color(k), 2, mean));
+        let line = Series::line(color(k), 2, mean);
+        torque.push(if k == 0 {
+            line.labelled("Eq. (10)")
+        } else {
+            line
+        });
+    }
+    // The runs whose output did not move (the paper's non-backdriven points, marked as
+    // in its Figs. 8-9).
+    let held: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|p| p.backdriven == 0)
+        .map(|p| (p.tau_rot_nm, p.tau_cam_meas_nm * 1e3))
+        .collect();
+    if !held.is_empty() {
+        // Drawn first: the means stay visible on top.
+        torque.insert(
+            0,
+            Series::points(PALETTE[5], 6, held).labelled("not backdriven"),
+        );
     }
     let torque = XyPanel {
         caption: Some("cam torque (Fig. 9): points measured, lines Eq. (10)".into()),
-        x_label: "tau_rot, N m".into(),
-        y_label: "tau_cam, N mm".into(),
+        x_label: "tau_rot [N m]".into(),
+        y_label: "tau_cam [N mm]".into(),
         series: torque,
         x_range: Some(x),
+        legend: Some(Legend::Outside),
         fine_grid: true,
         ..XyPanel::default()
     };
@@ -89,7 +109,7 @@ pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 3] {
 pub fn sweep_figure(path: &Path, points: &[SweepPoint]) -> Result<(), RigError> {
     Ok(plot::columns_figure(
         path,
-        (420, 400),
+        (460, 400),
         None,
         &sweep_panels(points),
     )?)
@@ -127,11 +147,11 @@ pub fn experiment_panels(rows: &[crate::experiment::sweep::Row]) -> [XyPanel; 2]
         }
         XyPanel {
             caption: Some(caption.into()),
-            x_label: "tau_rot, N m".into(),
+            x_label: "tau_rot [N m]".into(),
             y_label: y.into(),
             series,
             x_range: Some(x),
-            legend: Some(Legend::MiddleRight),
+            legend: Some(Legend::Outside),
             fine_grid: true,
             ..XyPanel::default()
         }
@@ -139,10 +159,10 @@ pub fn experiment_panels(rows: &[crate::experiment::sweep::Row]) -> [XyPanel; 2]
     [
         panel(
             "current (Fig. 8): mean, bars +-1 sd over repeats",
-            "i_in, A",
+            "i_in [A]",
             &|r| r.i_in_a,
         ),
-        panel("cam speed (Fig. 8)", "w_n, rad/s", &|r| r.omega_n_rad_s),
+        panel("cam speed (Fig. 8)", "w_n [rad/s]", &|r| r.omega_n_rad_s),
     ]
 }
 
@@ -246,8 +266,12 @@ mod tests {
             "Fig. 9",
             "3.6 V",
             "8.8 V",
-            "tau_cam, N mm",
+            "tau_cam [N mm]",
+            "i_in [A]",
             "cam speed",
+            "Eq. (10)",
+            "(a)",
+            "(c)",
         ] {
             assert!(svg.contains(want), "missing {want}");
         }

@@ -98,11 +98,17 @@ fn operator_prompts_redo_and_skip() {
         .get_output()
         .clone();
     let err = text(&out.stderr);
+    // Asked as the mass a person hangs, with its torque.
     assert!(
-        err.contains("hang 0.368 N m on the pulley, then Enter (s: skip this point)"),
+        err.contains(
+            "hang 0.500 kg on the 75 mm pulley (0.368 N m), then Enter (s: skip this point)"
+        ),
         "{err}"
     );
-    assert!(err.contains("hang 1 N m on the pulley"), "{err}");
+    assert!(
+        err.contains("hang 1.360 kg on the 75 mm pulley (1 N m)"),
+        "{err}"
+    );
     assert_eq!(err.matches("r: redo the point").count(), 2, "{err}");
     assert!(text(&out.stdout).contains("1 of 2 runs written"));
     assert_eq!(data_rows(&csv).len(), 1);
@@ -176,7 +182,28 @@ fn hold_release_writes_the_time_history() {
     .success()
     .get_output()
     .clone();
-    assert!(text(&out.stderr).contains("N m on the pulley (Fig. 5: 1.0 kg on 75 mm), then Enter"));
+    assert!(
+        text(&out.stderr).contains(
+            "hang 1.000 kg on the 75 mm pulley (0.7355 N m) (Fig. 5: 1.0 kg on 75 mm), then Enter"
+        ),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(text(&out.stdout).contains("verdict: held during the 0.5 s hold"));
+    // The same ranges as `rig release`: nothing silently changed.
+    for (args, want) in [
+        (vec!["--freq", "20"], "--freq"),
+        (vec!["--load", "5"], "3.68"),
+    ] {
+        let e = sim(&["experiment", "hold-release", "--csv"])
+            .arg(dir.path().join("r.csv"))
+            .args(&args)
+            .assert()
+            .failure()
+            .get_output()
+            .clone();
+        assert!(text(&e.stderr).contains(want), "{}", text(&e.stderr));
+    }
 }
 
 #[test]

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
+pub mod figure;
 pub mod plot;
 
 /// What can go wrong while writing a report.
@@ -83,6 +84,68 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
                 source,
             })
     })
+}
+
+/// Checks before a long measurement that `dir` (an existing folder) takes files: writes and
+/// removes a small probe file. Also removes the temporary files ([`write_atomic_with`]'s
+/// hidden `.NAME.PID.tmp`) that a killed run left there (their process is gone).
+pub fn check_writable_dir(dir: &Path) -> Result<(), ReportError> {
+    remove_stale_temporaries(dir);
+    let probe = dir.join(format!(".rig-write-check.{}.tmp", std::process::id()));
+    let written = std::fs::File::create(&probe)
+        .and_then(|mut f| f.write_all(b"rig\n"))
+        .and_then(|()| std::fs::remove_file(&probe));
+    written.map_err(|source| {
+        let _ = std::fs::remove_file(&probe);
+        ReportError::File {
+            action: "write in folder",
+            path: dir.display().to_string(),
+            source,
+        }
+    })
+}
+
+/// Removes the temporary files of [`write_atomic_with`] in `dir` whose process no longer
+/// runs (a run killed between writing and renaming). Only where the process table can be
+/// read (`/proc`); a file of a running process is never touched.
+pub fn remove_stale_temporaries(dir: &Path) {
+    let proc = Path::new("/proc/self");
+    if !proc.exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if let Some(pid) = temporary_pid(&name)
+            && pid != std::process::id()
+            && !Path::new("/proc").join(pid.to_string()).exists()
+        {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// The process id in a temporary file name `.NAME.PID.tmp` ([`temporary_path`]).
+fn temporary_pid(name: &str) -> Option<u32> {
+    let stem = name.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let (base, pid) = stem.rsplit_once('.')?;
+    if base.is_empty() {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// A measured number rounded to `digits` significant digits (a mean of `f32` readings
+/// keeps 7: 3.166320013999939 is written 3.16632); non-finite values and zero unchanged.
+pub fn significant(value: f64, digits: u8) -> f64 {
+    if !value.is_finite() || value == 0.0 || digits == 0 {
+        return value;
+    }
+    format!("{:.*e}", usize::from(digits - 1), value)
+        .parse()
+        .unwrap_or(value)
 }
 
 /// A float as a person writes it: the shortest decimal that reads back to the same `f32`
@@ -194,6 +257,40 @@ impl UtcTime {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn measured_means_keep_seven_significant_digits() {
+        assert_eq!(significant(3.166320013999939, 7).to_string(), "3.16632");
+        assert_eq!(significant(-0.001234567891, 7), -0.001234568);
+        assert_eq!(significant(62.1, 7), 62.1);
+        assert_eq!(significant(0.0, 7), 0.0);
+        assert!(significant(f64::NAN, 7).is_nan());
+    }
+
+    #[test]
+    fn a_killed_runs_temporaries_are_removed_and_a_live_ones_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        // No process has id 4294967; this process is alive.
+        let stale = dir.path().join(".points.csv.4294967.tmp");
+        let live = dir
+            .path()
+            .join(format!(".points.csv.{}.tmp", std::process::id()));
+        let data = dir.path().join("points.csv");
+        for p in [&stale, &live, &data] {
+            std::fs::write(p, "x").unwrap();
+        }
+        check_writable_dir(dir.path()).unwrap();
+        if Path::new("/proc/self").exists() {
+            assert!(!stale.exists());
+        }
+        assert!(live.exists() && data.exists());
+        assert_eq!(temporary_pid(".a.b.12.tmp"), Some(12));
+        assert_eq!(temporary_pid("a.12.tmp"), None);
+        assert_eq!(temporary_pid(".12.tmp"), None);
+        let missing = dir.path().join("no-such-folder");
+        let e = check_writable_dir(&missing).unwrap_err().to_string();
+        assert!(e.contains("no-such-folder"), "{e}");
+    }
 
     #[test]
     fn utc_dates_and_times() {

@@ -8,6 +8,11 @@
 //! - [`span`], the padded axis range, and [`PALETTE`], the series colours;
 //! - [`residual_figure`], the residual plots of `rig explain`.
 //!
+//! The style for a paper: axis labels with their units in brackets (`i_in [A]`), a panel
+//! letter on every panel of a multi-panel figure ((a), (b), ...), legends beside the data
+//! ([`Legend::Outside`]) rather than over it, shaded phases ([`Band`]), reference values
+//! from the paper drawn as their own labelled series.
+//!
 //! `rig design`'s sweep figure (host `sweep_report`) is built from these; the calibration's
 //! fit plot (a panel over a residual panel sharing its x axis) fits them too: [`svg_figure`]
 //! with a vertical split, [`XyPanel::x_range`] for the shared axis and
@@ -157,6 +162,9 @@ pub enum Legend {
     LowerLeft,
     /// Bottom right corner.
     LowerRight,
+    /// Right of the plot, outside the data (the panel's plot is narrower by the legend's
+    /// width).
+    Outside,
 }
 
 impl Legend {
@@ -167,13 +175,35 @@ impl Legend {
             Self::MiddleRight => SeriesLabelPosition::MiddleRight,
             Self::LowerLeft => SeriesLabelPosition::LowerLeft,
             Self::LowerRight => SeriesLabelPosition::LowerRight,
+            Self::Outside => SeriesLabelPosition::UpperRight,
         }
     }
 }
 
+/// A shaded range of x (a phase of an experiment), with its name written at its top.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Band {
+    /// Start and end of the range, in x units.
+    pub from: f64,
+    /// End of the range.
+    pub to: f64,
+    /// The name written in the band.
+    pub label: String,
+    /// Fill colour (drawn at 15 % opacity).
+    pub color: RGBColor,
+}
+
+/// Width of an outside legend, px.
+const LEGEND_WIDTH: u32 = 130;
+
 /// One pair of axes with its series.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct XyPanel {
+    /// Panel letter, drawn as "(a)" in the top left corner ([`columns_figure`] letters
+    /// the panels of a multi-panel figure when none is set).
+    pub letter: Option<char>,
+    /// Shaded x ranges, drawn under the series.
+    pub bands: Vec<Band>,
     /// Caption above the panel.
     pub caption: Option<String>,
     /// x axis label.
@@ -224,6 +254,55 @@ impl XyPanel {
 
 /// Draws `panel` into `area`; errors are the drawing backend's, as text.
 pub fn draw_panel(area: &Area<'_>, panel: &XyPanel) -> Result<(), String> {
+    let outside =
+        panel.legend == Some(Legend::Outside) && panel.series.iter().any(|s| s.label.is_some());
+    let (width, _) = area.dim_in_pixel();
+    let (plot_area, legend_area) = if outside && width > 2 * LEGEND_WIDTH {
+        let (a, b) = area.split_horizontally(width - LEGEND_WIDTH);
+        (a, Some(b))
+    } else {
+        (area.clone(), None)
+    };
+    draw_axes(&plot_area, panel, legend_area.is_none())?;
+    if let Some(legend) = legend_area {
+        draw_outside_legend(&legend, panel)?;
+    }
+    if let Some(letter) = panel.letter {
+        area.draw(&Text::new(
+            format!("({letter})"),
+            (4, 4),
+            ("sans-serif", 18).into_font().style(FontStyle::Bold),
+        ))
+        .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+/// The legend of `panel`'s labelled series in its own strip beside the plot.
+fn draw_outside_legend(area: &Area<'_>, panel: &XyPanel) -> Result<(), String> {
+    let mut y = 40;
+    for s in panel.series.iter().filter(|s| s.label.is_some()) {
+        let color = s.color.mix(s.opacity);
+        match s.mark {
+            Mark::Points(r) => area
+                .draw(&Circle::new((14, y), r.max(2), color.filled()))
+                .map_err(|e| e.to_string())?,
+            Mark::Line(w) => area
+                .draw(&PathElement::new([(4, y), (24, y)], color.stroke_width(w)))
+                .map_err(|e| e.to_string())?,
+        }
+        area.draw(&Text::new(
+            s.label.clone().unwrap_or_default(),
+            (30, y - 7),
+            ("sans-serif", 13),
+        ))
+        .map_err(|e| e.to_string())?;
+        y += 20;
+    }
+    Ok(())
+}
+
+fn draw_axes(area: &Area<'_>, panel: &XyPanel, inside_legend: bool) -> Result<(), String> {
     let (x0, x1) = panel.x_span();
     let (y0, y1) = panel.y_span();
     let mut builder = ChartBuilder::on(area);
@@ -244,6 +323,26 @@ pub fn draw_panel(area: &Area<'_>, panel: &XyPanel) -> Result<(), String> {
         mesh.light_line_style(WHITE);
     }
     mesh.draw().map_err(|e| e.to_string())?;
+    for (k, b) in panel.bands.iter().enumerate() {
+        let (from, to) = (b.from.max(x0), b.to.min(x1));
+        if to <= from {
+            continue;
+        }
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(from, y0), (to, y1)],
+                b.color.mix(0.15).filled(),
+            )))
+            .map_err(|e| e.to_string())?;
+        chart
+            .draw_series(std::iter::once(Text::new(
+                b.label.clone(),
+                // Every other label a line lower: narrow neighbours do not run together.
+                (from, y1 - (k % 2) as f64 * 0.07 * (y1 - y0)),
+                ("sans-serif", 12).into_font().color(&BLACK.mix(0.7)),
+            )))
+            .map_err(|e| e.to_string())?;
+    }
     for s in &panel.series {
         let color = s.color.mix(s.opacity);
         let drawn = match s.mark {
@@ -272,7 +371,7 @@ pub fn draw_panel(area: &Area<'_>, panel: &XyPanel) -> Result<(), String> {
             });
         }
     }
-    if let Some(at) = panel.legend {
+    if let Some(at) = panel.legend.filter(|_| inside_legend) {
         chart
             .configure_series_labels()
             .position(at.position())
@@ -322,11 +421,22 @@ pub fn columns_figure(
     let n = panels.len().max(1);
     let size = (panel_size.0 * n as u32, panel_size.1);
     svg_figure(path, size, title, |root| {
-        for (area, p) in root.split_evenly((1, n)).iter().zip(panels) {
-            draw_panel(area, p)?;
+        for (k, (area, p)) in root.split_evenly((1, n)).iter().zip(panels).enumerate() {
+            if n > 1 && p.letter.is_none() {
+                let mut lettered = p.clone();
+                lettered.letter = Some(panel_letter(k));
+                draw_panel(area, &lettered)?;
+            } else {
+                draw_panel(area, p)?;
+            }
         }
         Ok(())
     })
+}
+
+/// The letter of the `k`-th panel (0-based): a, b, c, ...
+pub fn panel_letter(k: usize) -> char {
+    char::from(b'a' + (k % 26) as u8)
 }
 
 /// One panel: residuals (mA) against one test condition.
@@ -362,7 +472,7 @@ pub fn residual_figure(
                     .collect();
             XyPanel {
                 x_label: p.x_label.clone(),
-                y_label: "measured - model, mA".into(),
+                y_label: "measured - model [mA]".into(),
                 series: vec![
                     Series::line(BLACK, 1, vec![(x0, 0.0), (x1, 0.0)]),
                     Series {
@@ -419,12 +529,20 @@ mod tests {
                 Series::points(PALETTE[0], 3, vec![(0.368, 2.3), (3.68, 2.9)]).labelled("3.6 V"),
                 Series::line(PALETTE[1], 2, vec![(3.68, 3.0), (0.368, 2.4)]),
             ],
-            legend: Some(Legend::UpperLeft),
+            legend: Some(Legend::Outside),
+            bands: vec![Band {
+                from: 1.0,
+                to: 2.0,
+                label: "release".into(),
+                color: PALETTE[2],
+            }],
             ..XyPanel::default()
         };
         columns_figure(&path, (400, 300), Some("sweep"), &[panel.clone(), panel]).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         assert!(svg.starts_with("<svg") && svg.contains("3.6 V") && svg.contains("sweep"));
+        // Each panel lettered, the band named.
+        assert!(svg.contains("(a)") && svg.contains("(b)") && svg.contains("release"));
         // A failed drawing leaves the file as it was and nothing else.
         let r = svg_figure(&path, (100, 100), None, |_| Err("no data".into()));
         assert!(r.unwrap_err().to_string().contains("no data"));
@@ -439,7 +557,7 @@ mod tests {
         assert!(
             std::fs::read_to_string(&path)
                 .unwrap()
-                .contains("measured - model")
+                .contains("measured - model [mA]")
         );
     }
 }

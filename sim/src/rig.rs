@@ -155,9 +155,6 @@ pub struct SimRig {
     frozen_count: u16,
     flash: Option<RigParameters>,
     bench: SimBench,
-    /// The core has latched the break the plant's comparator tripped (so a later clear of
-    /// `HW_OVERCURRENT` re-arms it).
-    break_reported: bool,
 }
 
 impl SimRig {
@@ -196,7 +193,6 @@ impl SimRig {
                 sensor_supply_v: None,
                 commands: 0,
             },
-            break_reported: false,
         }
     }
 
@@ -246,13 +242,6 @@ impl SimRig {
     }
 
     fn control_step(&mut self) {
-        if self.break_reported && !self.core.break_latched() {
-            // ClearFaults cleared HW_OVERCURRENT: the binary clears the break flag and sets
-            // MOE again before it reads this step's inputs. A cause still present trips the
-            // comparator again; one that is gone leaves the fault cleared.
-            self.plant.rearm_break();
-            self.break_reported = false;
-        }
         let encoder_count = if self.injections.encoder_frozen {
             self.frozen_count
         } else {
@@ -288,8 +277,15 @@ impl SimRig {
             release_button: self.button,
         };
         let out = self.core.step(&inputs);
-        if self.plant.break_tripped() && self.core.break_latched() {
-            self.break_reported = true;
+        if self.plant.break_tripped()
+            && !out.enable
+            && self.core.break_latched()
+            && self.plant.state().current.abs() < model::hardware::comparator::TRIP_A
+        {
+            // As the binary (`CamMotor::rearm`): once the core stopped driving and latched
+            // HW_OVERCURRENT, and the current is back under the threshold, the break flag is
+            // cleared; ClearFaults can then clear the fault (its condition is gone).
+            self.plant.rearm_break();
         }
         self.adc.clear();
         self.drive = Drive {

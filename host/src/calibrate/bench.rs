@@ -28,20 +28,65 @@ fn cam_setup(setup: Setup) -> CamSetup {
 pub struct SimBench<'a> {
     device: &'a VirtualDevice,
     gauge: Option<Vec<f64>>,
+    held_nmm: Option<f64>,
+    window: WindowMean,
+}
+
+/// The virtual gauge's mean over an averaging window, N mm.
+#[derive(Debug, Default)]
+struct WindowMean {
+    sum: f64,
+    n: usize,
+}
+
+impl WindowMean {
+    fn add(&mut self, v: f64) {
+        self.sum += v;
+        self.n += 1;
+    }
+
+    /// The mean so far (`None` without a sample), and a fresh start.
+    fn take(&mut self) -> Option<f64> {
+        let mean = (self.n > 0).then(|| self.sum / self.n as f64);
+        *self = Self::default();
+        mean
+    }
 }
 
 impl<'a> SimBench<'a> {
     /// The bench of `device`; `gauge` readings (N mm), when given, replace the simulated
     /// gauge.
     pub fn new(device: &'a VirtualDevice, gauge: Option<Vec<f64>>) -> Self {
-        Self { device, gauge }
+        Self {
+            device,
+            gauge,
+            held_nmm: None,
+            window: WindowMean::default(),
+        }
     }
+}
+
+/// The virtual gauge's torque now, N mm.
+fn virtual_gauge_nmm(device: &VirtualDevice) -> f64 {
+    device.with_plant(|p| p.state().gauge_torque) * 1e3
 }
 
 impl Bench for SimBench<'_> {
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError> {
         self.device.with_plant(|p| p.set_cam(cam_setup(setup)));
         Ok(())
+    }
+
+    fn window_sample(&mut self, _step: usize) {
+        self.window.add(virtual_gauge_nmm(self.device));
+    }
+
+    fn pressed(&mut self, _step: usize) {
+        // What the gauge showed over the window the current was averaged on.
+        self.held_nmm = self
+            .window
+            .take()
+            .or_else(|| Some(virtual_gauge_nmm(self.device)));
     }
 
     fn gauge_nmm(
@@ -53,9 +98,12 @@ impl Bench for SimBench<'_> {
         if let Some(g) = &self.gauge {
             return from_file(g, step);
         }
-        Ok(Reading::Nmm(
-            self.device.with_plant(|p| p.state().gauge_torque) * 1e3,
-        ))
+        self.held_nmm.take().map(Reading::Nmm).ok_or_else(|| {
+            RigError::Operator(format!(
+                "the virtual gauge held no reading at torque step {}",
+                step + 1
+            ))
+        })
     }
 }
 
@@ -79,6 +127,8 @@ pub struct OperatorBench<'a> {
     lines: Option<Receiver<std::io::Result<String>>>,
     interrupted: Arc<AtomicBool>,
     device: Option<&'a VirtualDevice>,
+    held_nmm: Option<f64>,
+    window: WindowMean,
 }
 
 impl<'a> OperatorBench<'a> {
@@ -97,6 +147,8 @@ impl<'a> OperatorBench<'a> {
             lines: None,
             interrupted,
             device: None,
+            held_nmm: None,
+            window: WindowMean::default(),
         }
     }
 
@@ -177,6 +229,16 @@ impl Bench for OperatorBench<'_> {
         .map(|_| ())
     }
 
+    fn window_sample(&mut self, _step: usize) {
+        if let Some(d) = self.device {
+            self.window.add(virtual_gauge_nmm(d));
+        }
+    }
+
+    fn pressed(&mut self, _step: usize) {
+        self.held_nmm = self.window.take();
+    }
+
     fn gauge_nmm(
         &mut self,
         step: usize,
@@ -186,6 +248,12 @@ impl Bench for OperatorBench<'_> {
         if let Some(g) = &self.gauge {
             return from_file(g, step);
         }
+        // Rehearsal on the virtual rig: what its gauge held, for the person to type.
+        let shown = self
+            .held_nmm
+            .take()
+            .map(|v| format!(" The virtual gauge holds {v:.1} N mm."))
+            .unwrap_or_default();
         let what = match self.unit {
             GaugeUnit::Torque => "Gauge torque (N mm".to_string(),
             GaugeUnit::Force { arm_m: Some(l) } => {
@@ -196,7 +264,7 @@ impl Bench for OperatorBench<'_> {
         loop {
             let answer = self.ask(
                 &format!(
-                    "step {}: {:.2} V, {:.3} A. {what}; r: redo the step): ",
+                    "step {}: {:.2} V, {:.3} A; the drive is off, the gear locked.{shown} Held {what}; r: redo the step): ",
                     step + 1,
                     m.volts,
                     m.current_a

@@ -60,8 +60,13 @@ pub struct CalibrateArgs {
     operator: bool,
     /// Write a fit that is implausible for the vibrator's motor (the firmware's rule,
     /// model::Calibration::check) anyway: to the rig file only, the firmware refuses it.
+    /// Also replaces an earlier run's points.csv in --out.
     #[arg(long)]
     force: bool,
+    /// Continue the interrupted run in --out DIR: the steps in its points.csv are kept,
+    /// the others measured (the set-up prompts start at the first missing step).
+    #[arg(long, requires = "out", conflicts_with_all = ["from_points", "dry_run"])]
+    resume: bool,
 }
 
 /// `rig calibrate --gauge`.
@@ -148,12 +153,30 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         .out
         .clone()
         .unwrap_or_else(|| default_out_dir(SystemTime::now()));
+    let mut resumed = None;
     if !a.dry_run {
+        // Every output is checked before the first measurement: minutes of gauge readings
+        // must have somewhere to go.
         std::fs::create_dir_all(&out).map_err(|source| RigError::File {
             action: "create folder",
             path: out.display().to_string(),
             source,
         })?;
+        reporting::check_writable_dir(&out)?;
+        let points = out.join("points.csv");
+        if a.resume {
+            if points.exists() {
+                resumed = Some(calibrate::read_points_csv(&points)?);
+            }
+        } else if a.from_points.is_none() && !a.force && points.exists() {
+            return Err(RigError::BadValue {
+                what: format!("--out {}", out.display()),
+                why: format!(
+                    "already holds an earlier run's {}: it was left unchanged; continue that run with --resume, give a new --out folder, or pass --force to replace it",
+                    points.display()
+                ),
+            });
+        }
     }
     let stop = super::connect::interrupt_flag();
     // Refitting earlier points needs the device only to read its record and write the
@@ -173,17 +196,27 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             let session = session
                 .as_mut()
                 .expect("a session unless refitting offline");
-            match measure(session, &a, &plan, gauge, unit, &out, &stop) {
+            match measure(session, &a, &plan, gauge, unit, &out, &stop, resumed) {
                 Ok(m) => m,
                 Err(e) if stop.load(Ordering::SeqCst) => {
                     eprintln!("{e}");
-                    return Ok(ExitCode::from(130));
+                    return Ok(crate::signals::interrupt_exit_code());
                 }
                 Err(e) => return Err(e),
             }
         }
     };
-    let result = calibrate::analyse(&measurements)?;
+    let result = match calibrate::analyse(&measurements) {
+        Ok(r) => r,
+        Err(e) => {
+            return Err(partial_refit(
+                &measurements,
+                &plan,
+                a.from_points.as_deref(),
+                e,
+            ));
+        }
+    };
     let motor = *firmware_core::CoreConfig::default().motor.constants();
     let plausible = result.calibration.check(&motor);
     if let Err(issue) = &plausible
@@ -267,8 +300,59 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The error of a fit that needs more points: for a partial points file (an interrupted
+/// run), what its points do give (the no-load fit's C5 and C6 when the sweep is complete)
+/// and how to measure the rest.
+fn partial_refit(
+    m: &Measurements,
+    plan: &Plan,
+    from: Option<&Path>,
+    fit_error: RigError,
+) -> RigError {
+    let Some(file) = from else {
+        return fit_error;
+    };
+    let missing_torque = plan.torque_volts.len().saturating_sub(m.torque.len());
+    let missing_sweep = plan.sweep_volts.len().saturating_sub(m.no_load.len());
+    if missing_torque == 0 && missing_sweep == 0 {
+        return fit_error;
+    }
+    let (w, i): (Vec<f64>, Vec<f64>) = m
+        .no_load
+        .iter()
+        .filter(|s| s.cam_speed_rad_s > 0.02)
+        .map(|s| (s.cam_speed_rad_s, s.current_a))
+        .unzip();
+    let no_load = crate::calibrate::fit::LineFit::fit(&w, &i)
+        .filter(|_| missing_sweep == 0)
+        .map(|f| {
+            format!(
+                "its no-load sweep gives C5 = {} A s/rad, C6 = {} A (R^2 {:.5}); ",
+                reporting::human(reporting::significant(f.slope, 4)),
+                reporting::human(reporting::significant(f.intercept, 4)),
+                f.r_squared
+            )
+        })
+        .unwrap_or_default();
+    let dir = file
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    RigError::CalibrationFit(format!(
+        "{} is from an interrupted run ({} of {} no-load steps, {} of {} torque steps): {no_load}C1-C4 need the missing steps: `rig calibrate --resume --out {}` measures only those",
+        file.display(),
+        m.no_load.len(),
+        plan.sweep_volts.len(),
+        m.torque.len(),
+        plan.torque_volts.len(),
+        dir.display()
+    ))
+}
+
 /// Measures on the device of `session`, writing the points to `out`/points.csv (atomically)
 /// as they are taken, unless a dry run; Ctrl-C (`stop`) ends it with the gear locked.
+/// `resumed`: the points of an interrupted run, kept and continued.
+#[allow(clippy::too_many_arguments)]
 fn measure(
     session: &mut Session,
     a: &CalibrateArgs,
@@ -277,6 +361,7 @@ fn measure(
     unit: GaugeUnit,
     out: &Path,
     stop: &Arc<AtomicBool>,
+    resumed: Option<Measurements>,
 ) -> Result<Measurements, RigError> {
     let latched = session.client.faults()?.latched;
     if !latched.is_empty() {
@@ -302,7 +387,22 @@ fn measure(
             &mut operator_bench
         }
     };
-    let mut taken = Measurements::default();
+    let mut taken = resumed.unwrap_or_default();
+    if taken.no_load.len() > plan.sweep_volts.len() || taken.torque.len() > plan.torque_volts.len()
+    {
+        return Err(RigError::BadValue {
+            what: "--resume".into(),
+            why: format!(
+                "{} holds more steps ({} no-load, {} torque) than the procedure has ({}, {}): it is not from an interrupted `rig calibrate`",
+                out.join("points.csv").display(),
+                taken.no_load.len(),
+                taken.torque.len(),
+                plan.sweep_volts.len(),
+                plan.torque_volts.len()
+            ),
+        });
+    }
+    bar.inc((taken.no_load.len() + taken.torque.len()) as u64);
     let mut write_error = None;
     let result = calibrate::measure(
         client,

@@ -187,6 +187,7 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>,
         plan: plan.clone(),
         window: Window::Start,
         resume: false,
+        force: false,
         command: "rig compare".into(),
     };
     let outcome = sweep::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
@@ -384,6 +385,14 @@ pub fn gap_figure(path: &Path, c: &Comparison) -> Result<(), RigError> {
 
 /// Runs `rig compare`.
 pub fn run(a: CompareArgs) -> Result<ExitCode, RigError> {
+    crate::output_paths::refuse_outputs_over_inputs(
+        &[
+            ("--measured", Some(a.measured.as_path())),
+            ("--model", a.model.as_deref()),
+            ("--rig", a.rig.as_deref()),
+        ],
+        &[("--svg", a.svg.as_deref())],
+    )?;
     let model_rig = match &a.model {
         Some(p) => {
             let rig = RigFile::load(p)?;

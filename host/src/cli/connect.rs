@@ -7,8 +7,6 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
 use clap::Args;
 
@@ -16,7 +14,7 @@ use crate::RigError;
 pub use crate::connection::{DeviceOpts, Session};
 
 /// The verbs that use a device, for messages.
-pub const DEVICE_VERBS: &str = "info, faults, clear, release, monitor, capture, calibrate, calibration, experiment, discover, flash and demo";
+pub const DEVICE_VERBS: &str = "info, faults, clear, release, bringup, monitor, capture, calibrate, calibration, experiment, discover, flash and demo";
 
 /// The device options as given on the command line (nothing defaulted), declared twice:
 /// before the verb (not global, so a verb without a device does not take them after its
@@ -71,7 +69,7 @@ device_args!(
     /// Device options before the verb: `rig --sim info`. Device verbs only.
     DeviceArgs,
     global = false,
-    heading = "Device options (for info, faults, clear, release, monitor, capture, calibrate, calibration, experiment, discover, demo; also after the verb)",
+    heading = "Device options (for info, faults, clear, release, bringup, monitor, capture, calibrate, calibration, experiment, discover, demo; also after the verb)",
     model
 );
 device_args!(
@@ -167,17 +165,7 @@ pub fn parse_speed(s: &str) -> Result<f64, String> {
     }
 }
 
-/// A flag raised by Ctrl-C (SIGINT) or SIGTERM; a second Ctrl-C ends the process at once.
-pub fn interrupt_flag() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        // Registration only fails for forbidden signals; without it Ctrl-C still ends the
-        // process, and the device stops at its comms timeout (the safe state).
-        let _ = signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(&flag));
-        let _ = signal_hook::flag::register(signal, Arc::clone(&flag));
-    }
-    flag
-}
+pub use crate::signals::interrupt_flag;
 
 /// Asks `question` on the terminal; false without a terminal (scripts pass `--yes`).
 pub fn confirm(question: &str) -> Result<bool, RigError> {

@@ -24,6 +24,19 @@ pub struct DemoArgs {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// Figure format: svg, png (resvg) or pdf (svg2pdf); the SVG is always kept too, and
+    /// report.md shows the figures in this format.
+    #[arg(long, default_value = "svg", value_parser = parse_format)]
+    pub format: reporting::figure::Format,
+    /// Figure width: pixels of a PNG, points of a PDF [default: the figure's own size].
+    #[arg(long, value_name = "WIDTH", value_parser = reporting::figure::parse_width)]
+    pub size: Option<u32>,
+}
+
+fn parse_format(s: &str) -> Result<reporting::figure::Format, String> {
+    let f: reporting::figure::Format = s.parse()?;
+    f.check_available()?;
+    Ok(f)
 }
 
 /// Runs `rig demo`: the simulated rig by default; with `--port` the parts that cannot move
@@ -45,6 +58,12 @@ pub fn run(a: DemoArgs, dev: &DeviceOpts, given: &[&str]) -> Result<ExitCode, Ri
                 .into(),
         });
     }
+    if real && (a.format != reporting::figure::Format::Svg || a.size.is_some()) {
+        return Err(RigError::BadValue {
+            what: if a.size.is_some() { "--size" } else { "--format" }.into(),
+            why: "`rig demo --port` draws no figures (it runs only what cannot move a load): leave it out".into(),
+        });
+    }
     let chatty = !a.json && std::io::stderr().is_terminal();
     let summary = if real {
         demo::run_on_device(dev, &a.out)?
@@ -53,6 +72,10 @@ pub fn run(a: DemoArgs, dev: &DeviceOpts, given: &[&str]) -> Result<ExitCode, Ri
             out: a.out.clone(),
             quick: a.quick,
             seed: a.seed,
+            figures: reporting::figure::FigureOptions {
+                format: a.format,
+                width: a.size,
+            },
         };
         demo::run_simulated(&opts, &write_calibration, &mut |step| {
             if chatty {

@@ -39,9 +39,15 @@ pub const ROUND_POINTS: usize = 12;
 /// Arguments of `rig discover`.
 #[derive(Debug, Args)]
 pub struct DiscoverArgs {
-    /// The CSV every round's rows are appended to (`rig explain`'s columns, provenance first).
+    /// The CSV to write, a new file (an existing one is refused unless --force): every
+    /// round's rows are appended to it as they complete (`rig explain`'s columns, provenance
+    /// first).
     #[arg(long, value_name = "FILE.csv")]
     pub csv: PathBuf,
+    /// Replace an existing --csv (without it an existing file is refused and left
+    /// unchanged).
+    #[arg(long)]
+    pub force: bool,
     /// Budget of test points (plan points x repeats; the paper's sweep has 150).
     #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(12..=10_000))]
     pub max_points: u32,
@@ -159,28 +165,31 @@ fn measured(r: &Row) -> MeasuredRow {
     }
 }
 
-/// Appends `rows` to `path` (creating it with `head` first), synced.
-fn append(path: &Path, head: Option<&str>, rows: &[Row]) -> Result<(), RigError> {
+/// Appends `rows` to `path` (creating it with `head` first: an existing file only with
+/// `force`), synced.
+fn append(path: &Path, head: Option<&str>, rows: &[Row], force: bool) -> Result<(), RigError> {
     let fail = |source| RigError::File {
         action: "write",
         path: path.display().to_string(),
         source,
     };
-    let mut file = std::fs::OpenOptions::new()
-        .create(true)
-        .write(true)
-        .append(head.is_none())
-        .truncate(head.is_some())
-        .open(path)
-        .map_err(fail)?;
+    let mut file = if head.is_some() {
+        sweep::create_new(path, force)?
+    } else {
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map_err(fail)?
+    };
     let mut w = csv::WriterBuilder::new()
         .has_headers(head.is_some())
         .from_writer(Vec::new());
     for r in rows {
-        w.serialize(r).map_err(|e| RigError::BadValue {
-            what: "a sweep row".into(),
-            why: e.to_string(),
-        })?;
+        w.serialize(r.for_people())
+            .map_err(|e| RigError::BadValue {
+                what: "a sweep row".into(),
+                why: e.to_string(),
+            })?;
     }
     let body = w.into_inner().map_err(|e| RigError::BadValue {
         what: "a sweep row".into(),
@@ -282,6 +291,8 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         None => RigFile::paper(),
     }
     .with_drive_decay(model::hardware::board::REGENERATIVE_DECAY);
+    // An existing CSV is refused before the rig moves, and never truncated.
+    sweep::check_output(&a.csv, false, a.force)?;
     let stop = interrupt_flag();
     let mut operator = Operator::stdin(false, stop);
     let mut bench = bench_for(&a, dev)?;
@@ -316,6 +327,7 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                 // mesh-load-sharing-ripple once proposals repeat points there.
                 window: Window::Revolutions,
                 resume: false,
+                force: false,
                 command: std::env::args().collect::<Vec<_>>().join(" "),
             };
             let head = if all.is_empty() {
@@ -340,7 +352,7 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             for r in &mut rows {
                 r.point += offset;
             }
-            append(&a.csv, head.as_deref(), &rows)?;
+            append(&a.csv, head.as_deref(), &rows, a.force)?;
             all.extend(rows);
             if let Some(e) = failed {
                 return Err(e);
@@ -389,7 +401,7 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     if let Err(e) = result {
         if operator.interrupted() {
             eprintln!("{e}; {} completed rows kept in {source}", all.len());
-            return Ok(ExitCode::from(130));
+            return Ok(crate::signals::interrupt_exit_code());
         }
         return Err(e);
     }

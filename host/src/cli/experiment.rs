@@ -47,12 +47,17 @@ pub struct SweepArgs {
     /// The short plan (same as `--plan quick`).
     #[arg(long)]
     pub quick: bool,
-    /// The CSV to write (rows are appended as they complete).
+    /// The CSV to write, a new file (an existing one only with --resume or --force); rows
+    /// are appended as they complete.
     #[arg(long)]
     pub csv: PathBuf,
     /// Continue an interrupted run in the same CSV with the same plan.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "force")]
     pub resume: bool,
+    /// Replace an existing CSV (without it, or --resume, an existing file is refused and
+    /// left unchanged).
+    #[arg(long)]
+    pub force: bool,
     /// Averaging window: `start` (the paper: window_s from constant rotation) or
     /// `revolutions` (at least window_s, whole cam revolutions).
     #[arg(long, value_enum, default_value_t = Window::Start)]
@@ -89,6 +94,9 @@ pub struct HoldArgs {
     /// Recorded after the vibration stops, s.
     #[arg(long, default_value_t = 1.5, value_parser = crate::args::non_negative)]
     pub after: f64,
+    /// Replace an existing --csv (without it an existing file is refused, unchanged).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Arguments of `rig experiment backdrive`.
@@ -131,7 +139,14 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let mut operator = Operator::stdin(a.operator, stop);
     // Check the arguments before the rig moves.
     let plan = match &a.procedure {
-        Procedure::TorqueSweep(s) => Some(plan_of(s)?),
+        Procedure::TorqueSweep(s) => {
+            sweep::check_output(&s.csv, s.resume, s.force)?;
+            Some(plan_of(s)?)
+        }
+        Procedure::HoldRelease(h) => {
+            sweep::check_new_output(&h.csv, h.force)?;
+            None
+        }
         _ => None,
     };
     let mut bench = DeviceBench::new(dev.connect()?);
@@ -144,6 +159,7 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                     plan: plan.unwrap_or_else(Plan::quick),
                     window: s.window,
                     resume: s.resume,
+                    force: s.force,
                     command: std::env::args().collect::<Vec<_>>().join(" "),
                 };
                 let quiet = s.json;
@@ -185,10 +201,24 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                 }
             }
             Procedure::HoldRelease(h) => {
+                // The same ranges as `rig release`: nothing is silently changed.
+                let calibration = bench.calibration()?;
+                let hz = crate::limits::check_release_freq("--freq", h.freq, &calibration)?;
+                let cap = model::BoardLimits::PAPER.max_release_load_nm;
+                if h.load > cap {
+                    return Err(RigError::BadValue {
+                        what: format!("--load {}", reporting::human(h.load)),
+                        why: format!(
+                            "is above the gear's tooth-strength limit of {} N m ({}): give at most that",
+                            reporting::human(cap),
+                            crate::experiment::load_text(cap)
+                        ),
+                    });
+                }
                 let opts = hold_release::HoldRelease {
                     load_nm: Some(h.load),
                     hold_s: h.hold,
-                    hz: h.freq,
+                    hz: f64::from(hz),
                     release_s: h.release,
                     after_s: h.after,
                 };
@@ -206,6 +236,30 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
                     h.csv.display(),
                     svg.display()
                 )?;
+                if samples.iter().any(|s| s.output_angle_rad.is_some()) {
+                    // The verdict of Fig. 5: held? moved? how far?
+                    let n = hold_release::fig5_numbers(&samples, model::paper::R_OUT);
+                    writeln!(
+                        out,
+                        "verdict: {} during the {} s hold; {}; {} mm of rope paid out on the 75 mm pulley; {}",
+                        if n.held_without_vibration {
+                            "held"
+                        } else {
+                            "MOVED"
+                        },
+                        reporting::human(h.hold),
+                        match n.release_to_motion_s {
+                            Some(t) => format!("moved {t:.2} s after the release request"),
+                            None => "never moved while released".into(),
+                        },
+                        reporting::human(reporting::significant(n.load_drop_m * 1e3, 3)),
+                        if n.output_speed_after_stop_rad_s.abs() > 1e-3 {
+                            "still moving after the vibration stopped"
+                        } else {
+                            "at rest after the vibration stopped"
+                        }
+                    )?;
+                }
                 Ok(())
             }
             Procedure::Backdrive(b) => {
@@ -265,7 +319,7 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         Ok(()) => Ok(ExitCode::SUCCESS),
         Err(e) if operator.interrupted() => {
             eprintln!("{e}");
-            Ok(ExitCode::from(130))
+            Ok(crate::signals::interrupt_exit_code())
         }
         Err(e) => Err(e),
     }

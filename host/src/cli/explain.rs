@@ -230,6 +230,18 @@ pub fn synthetic_sweep(
 
 /// Runs `rig explain`.
 pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
+    // An output over an input would destroy the measurement: refused before anything runs.
+    crate::output_paths::refuse_outputs_over_inputs(
+        &[
+            ("--measured", args.measured.as_deref()),
+            ("--model", args.model.as_deref()),
+        ],
+        &[
+            ("--write-model", args.write_model.as_deref()),
+            ("--propose", args.propose.as_deref()),
+            ("--write-synthetic", args.write_synthetic.as_deref()),
+        ],
+    )?;
     let mut rig = match &args.model {
         Some(p) => RigFile::load(p)?,
         None => RigFile::paper(),

@@ -9,6 +9,7 @@ use std::io::Write;
 use clap::{Parser, Subcommand};
 use serde::Serialize;
 
+pub mod bringup;
 pub mod calibrate;
 pub mod calibration;
 pub mod capture;
@@ -130,6 +131,16 @@ pub enum Command {
         #[command(flatten)]
         device: VerbDeviceArgs,
     },
+    /// Guided first power-up: identity, faults, bus voltage, current zero, encoders,
+    /// overcurrent trip, first release; pass/fail and what to check for each.
+    Bringup {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: bringup::BringupArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// Live telemetry: charts of current, cam speed, tau_cam, load estimate and state.
     Monitor {
         /// The verb's arguments.
@@ -179,6 +190,19 @@ pub enum Command {
     Log(log::LogArgs),
 }
 
+/// A verb that uses no device whose reader went away (`rig design --table1 | head`) ends
+/// normally: its output was read as far as the reader wanted.
+fn reader_gone_is_normal(
+    result: Result<std::process::ExitCode, crate::RigError>,
+) -> Result<std::process::ExitCode, crate::RigError> {
+    match result {
+        Err(crate::RigError::Output(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+            Ok(std::process::ExitCode::SUCCESS)
+        }
+        other => other,
+    }
+}
+
 impl Cli {
     /// Runs the chosen verb.
     pub fn run(self) -> Result<std::process::ExitCode, crate::RigError> {
@@ -186,11 +210,11 @@ impl Cli {
         match self.command {
             Command::Design(a) => {
                 before.refuse_for("design")?;
-                design::run(a)
+                reader_gone_is_normal(design::run(a))
             }
             Command::Sim(a) => {
                 before.refuse_for("sim")?;
-                sim::run(a)
+                reader_gone_is_normal(sim::run(a))
             }
             Command::Explain(a) => {
                 before.refuse_for("explain")?;
@@ -234,6 +258,7 @@ impl Cli {
                 conformance::run(args, &before.resolve(&device)?)
             }
             Command::Release { args, device } => release::run(args, &before.resolve(&device)?),
+            Command::Bringup { args, device } => bringup::run(args, &before.resolve(&device)?),
             Command::Monitor { args, device } => monitor::run(args, &before.resolve(&device)?),
             Command::Capture { args, device } => capture::run(args, &before.resolve(&device)?),
             Command::Calibrate { args, device } => calibrate::run(args, &before.resolve(&device)?),

@@ -1,7 +1,10 @@
 //! `rig monitor`: live telemetry. In a terminal, a full-screen view with charts of the
-//! current, cam speed, tau_cam and the load estimate and the supervisor state (ratatui);
-//! `--plain` (or no terminal) prints one line per sample in 80 columns under a header of
-//! the CSV's column names; `--csv FILE` logs every sample.
+//! current, cam speed, tau_cam and the load estimate, the supervisor state and what the
+//! board reports once a second (bus voltage, motor temperature, control-step cycles), the
+//! output shaft's angle and speed, and the keys (ratatui); `--plain` (or no terminal)
+//! prints one line per sample in 80 columns under a header of the CSV's column names;
+//! `--csv FILE` logs every sample. One unit per quantity everywhere (tau in N m); a stale
+//! estimate is `-` on screen, an empty CSV field and `null` in JSON.
 
 use std::collections::VecDeque;
 use std::fs::File;
@@ -12,7 +15,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use protocol::{StatusFlags, SupervisorState, TelemetrySample};
+use protocol::{DeviceMessage, HealthSample, StatusFlags, SupervisorState, TelemetrySample};
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Style, Stylize};
@@ -114,8 +117,9 @@ enum KeyAction {
     ToggleRelease,
 }
 
-/// CSV header of the monitor log.
-pub const CSV_HEADER: [&str; 10] = [
+/// CSV header of the monitor log. The first ten columns are the original log's; the
+/// output shaft and the board's health (its newest once-a-second report) follow.
+pub const CSV_HEADER: [&str; 16] = [
     "device_time_s",
     "state",
     "cam_speed_rad_s",
@@ -126,9 +130,40 @@ pub const CSV_HEADER: [&str; 10] = [
     "tau_rot_nm",
     "faults",
     "status",
+    "output_rad",
+    "output_rad_s",
+    "bus_v",
+    "motor_temp_c",
+    "step_cycles_mean",
+    "step_cycles_max",
 ];
 
-fn csv_row(t: &TelemetrySample) -> [String; 10] {
+/// `v` with `digits` decimals, empty when not current or not a number.
+fn field(ok: bool, v: f32, digits: usize) -> String {
+    if ok && v.is_finite() {
+        format!("{v:.digits$}")
+    } else {
+        String::new()
+    }
+}
+
+/// The board's health values that are reported: NaN means not sensed, and the step
+/// cycles are 0 until measured (never on the virtual rig).
+fn health_values(h: Option<&HealthSample>) -> (f32, f32, Option<u32>, Option<u32>) {
+    match h {
+        Some(h) => (
+            h.bus_voltage_v,
+            h.motor_temp_c,
+            (h.step_cycles_mean > 0).then_some(h.step_cycles_mean),
+            (h.step_cycles_max > 0).then_some(h.step_cycles_max),
+        ),
+        None => (f32::NAN, f32::NAN, None, None),
+    }
+}
+
+fn csv_row(t: &TelemetrySample, fresh: bool, health: Option<&HealthSample>) -> [String; 16] {
+    let (bus, temp, mean, max) = health_values(health);
+    let count = |c: Option<u32>| c.map(|c| c.to_string()).unwrap_or_default();
     [
         format!("{:.6}", t.device_time_us as f64 * 1e-6),
         t.state.name().to_owned(),
@@ -136,10 +171,16 @@ fn csv_row(t: &TelemetrySample) -> [String; 10] {
         format!("{:.4}", t.cam_speed_rad_s.abs() / std::f32::consts::TAU),
         format!("{:.4}", t.current_a),
         format!("{:.4}", t.pwm_duty),
-        format!("{:.6}", t.tau_cam_nm),
-        format!("{:.5}", t.tau_rot_nm),
+        field(fresh, t.tau_cam_nm, 6),
+        field(fresh, t.tau_rot_nm, 5),
         t.faults.names().collect::<Vec<_>>().join("|"),
         t.status.names().collect::<Vec<_>>().join("|"),
+        field(true, t.output_angle_rad, 5),
+        field(true, t.output_speed_rad_s, 4),
+        field(true, bus, 3),
+        field(true, temp, 2),
+        count(mean),
+        count(max),
     ]
 }
 
@@ -147,23 +188,27 @@ fn csv_row(t: &TelemetrySample) -> [String; 10] {
 pub const PLAIN_WIDTH: usize = 80;
 
 /// The column heads of `--plain` output, printed once before the first sample: the CSV's
-/// column names (and units), so a line reads the same as a row of `--csv`.
+/// column names (and units), so a line reads the same as a row of `--csv`. The load
+/// estimate, the drive's duty, the motor temperature and the step cycles are in the CSV,
+/// the JSON and the full-screen view (80 columns hold no more).
 pub const PLAIN_HEADER: &str =
-    "   time_s state     cam_hz current_a pwm_duty tau_cam_nm tau_rot_nm faults";
+    "   time_s state     cam_hz current_a tau_cam_nm bus_v output_rad faults";
 
 /// One sample of `--plain` output, under [`PLAIN_HEADER`], at most [`PLAIN_WIDTH`]
-/// columns; the estimates are `-` unless `fresh` ([`Freshness`]). Faults that do not fit
-/// their column are counted there and listed on the lines below (indented).
-pub fn plain_line(t: &TelemetrySample, fresh: bool) -> String {
+/// columns; the estimates are `-` unless `fresh` ([`Freshness`]), the bus voltage (from
+/// the newest `health` report) and the output angle `-` when not reported. Faults that do
+/// not fit their column are counted there and listed on the lines below (indented).
+pub fn plain_line(t: &TelemetrySample, fresh: bool, health: Option<&HealthSample>) -> String {
+    let (bus, _, _, _) = health_values(health);
     let head = format!(
-        "{:9.3} {:<9} {:6.2} {:9.3} {:+8.3} {} {}",
+        "{:9.3} {:<9} {:6.2} {:9.3} {} {} {}",
         t.device_time_us as f64 * 1e-6,
         t.state.name(),
         t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
         t.current_a,
-        t.pwm_duty,
         estimate(fresh, t.tau_cam_nm, 1.0, 10, 5),
-        estimate(fresh, t.tau_rot_nm, 1.0, 10, 3),
+        estimate(true, bus, 1.0, 5, 2),
+        estimate(true, t.output_angle_rad, 1.0, 10, 4),
     );
     let faults = t.faults.to_string().replace(" | ", "|");
     if head.len() + 1 + faults.len() <= PLAIN_WIDTH {
@@ -171,7 +216,10 @@ pub fn plain_line(t: &TelemetrySample, fresh: bool) -> String {
     }
     // Too many to fit: the count here, the names below, wrapped at '|'.
     let names: Vec<&str> = faults.split('|').collect();
-    let mut text = format!("{head} {} faults:", names.len());
+    let mut text = match names.len() {
+        1 => format!("{head} 1 fault:"),
+        n => format!("{head} {n} faults:"),
+    };
     const INDENT: &str = "          ";
     let mut line = String::from(INDENT);
     for (k, name) in names.iter().enumerate() {
@@ -196,6 +244,7 @@ pub fn plain_line(t: &TelemetrySample, fresh: bool) -> String {
 #[derive(Debug, Default)]
 pub struct MonitorView {
     history: VecDeque<(TelemetrySample, bool)>,
+    health: Option<HealthSample>,
     freshness: Freshness,
     series: [Vec<(f64, f64)>; 4],
     port: String,
@@ -232,6 +281,16 @@ impl MonitorView {
         fresh
     }
 
+    /// Records the board's newest once-a-second report.
+    pub fn set_health(&mut self, health: HealthSample) {
+        self.health = Some(health);
+    }
+
+    /// The board's newest report, if one came.
+    pub fn health(&self) -> Option<&HealthSample> {
+        self.health.as_ref()
+    }
+
     /// Records the link counters to show.
     pub fn set_stats(&mut self, stats: LinkStats) {
         self.stats = stats;
@@ -240,7 +299,7 @@ impl MonitorView {
     /// Draws the view into `frame`.
     pub fn render(&mut self, frame: &mut Frame<'_>) {
         let [status, top, bottom] = Layout::vertical([
-            Constraint::Length(7),
+            Constraint::Length(8),
             Constraint::Fill(1),
             Constraint::Fill(1),
         ])
@@ -252,7 +311,7 @@ impl MonitorView {
         let values: [fn(&TelemetrySample) -> f64; 4] = [
             |t| f64::from(t.current_a),
             |t| f64::from(t.cam_speed_rad_s.abs()) / std::f64::consts::TAU,
-            |t| f64::from(t.tau_cam_nm) * 1e3,
+            |t| f64::from(t.tau_cam_nm),
             |t| f64::from(t.tau_rot_nm),
         ];
         for (k, value) in values.iter().enumerate() {
@@ -267,7 +326,7 @@ impl MonitorView {
         let titles = [
             ("current i_in, A", Color::Yellow),
             ("cam speed, Hz", Color::Cyan),
-            ("tau_cam (estimate), N mm", Color::Green),
+            ("tau_cam (estimate), N m", Color::Green),
             ("load tau_rot (estimate), N m", Color::Magenta),
         ];
         for ((area, series), (title, color)) in
@@ -308,13 +367,25 @@ impl MonitorView {
         };
         let line2 = Line::from(vec![
             format!(
-                "tau_cam {} N mm  tau_rot {} N m  ",
-                estimate(fresh, t.tau_cam_nm, 1e3, 1, 2).trim(),
+                "tau_cam {} N m  tau_rot {} N m  ",
+                estimate(fresh, t.tau_cam_nm, 1.0, 1, 4).trim(),
                 estimate(fresh, t.tau_rot_nm, 1.0, 1, 3).trim()
             )
             .into(),
             faults,
         ]);
+        let (bus, temp, mean, max) = health_values(self.health.as_ref());
+        let cycles = match (mean, max) {
+            (Some(m), Some(x)) => format!("{m}/{x} cyc"),
+            _ => "- cyc".into(),
+        };
+        let board = Line::from(format!(
+            "bus {} V  motor {} C  step {cycles}  output {} rad {} rad/s",
+            estimate(true, bus, 1.0, 1, 2).trim(),
+            estimate(true, temp, 1.0, 1, 1).trim(),
+            estimate(true, t.output_angle_rad, 1.0, 1, 3).trim(),
+            estimate(true, t.output_speed_rad_s, 1.0, 1, 2).trim(),
+        ));
         let line3 = Line::from(format!(
             "status {}  link {} frames, {} bad, {} lost",
             if t.status.is_empty() {
@@ -333,16 +404,19 @@ impl MonitorView {
             .filter_map(|name| status_meaning(name).map(|m| format!("{name}: {m}")))
             .collect();
         let line4 = Line::from(if legend.is_empty() {
-            "r release/lock  q quit  `-`: estimate stale (locked, fault, no turn in 1 s)"
-                .to_string()
+            "`-`: not reported, or an estimate stale (locked, fault, no turn in 1 s)".to_string()
         } else {
             legend.join("; ")
         })
         .fg(Color::DarkGray);
         let line5 = Line::from(self.note.clone().unwrap_or_default()).fg(Color::Yellow);
-        Paragraph::new(vec![line1, line2, line3, line4, line5])
+        Paragraph::new(vec![line1, line2, board, line3, line4, line5])
             .wrap(ratatui::widgets::Wrap { trim: true })
-            .block(Block::bordered().title(format!(" rig monitor: {} ", self.port)))
+            .block(
+                Block::bordered()
+                    .title(format!(" rig monitor: {} ", self.port))
+                    .title_bottom(" keys: r release/lock  q quit "),
+            )
     }
 }
 
@@ -497,21 +571,30 @@ fn watch(
                     KeyAction::None => {}
                 }
             }
-            if let Some(t) = s.client.next_telemetry(Duration::from_millis(30))? {
+            let t = match s.client.recv(Duration::from_millis(30))? {
+                Some(DeviceMessage::Telemetry(t)) => Some(t),
+                Some(DeviceMessage::Health(h)) => {
+                    view.set_health(h);
+                    None
+                }
+                _ => None,
+            };
+            if let Some(t) = t {
                 count += 1;
                 let start = *first.get_or_insert(t.device_time_us);
+                let fresh = view.push(t);
                 if let Some((w, path)) = csv.as_mut() {
-                    w.write_record(csv_row(&t)).map_err(csv_error(path))?;
+                    w.write_record(csv_row(&t, fresh, view.health()))
+                        .map_err(csv_error(path))?;
                     *logged += 1;
                 }
-                let fresh = view.push(t);
                 if a.json {
-                    super::print_json_line(&mut out, &sample_json(&t))?;
+                    super::print_json_line(&mut out, &sample_json(&t, fresh, view.health()))?;
                 } else if terminal.is_none() {
                     if count == 1 {
                         writeln!(out, "{PLAIN_HEADER}")?;
                     }
-                    writeln!(out, "{}", plain_line(&t, fresh))?;
+                    writeln!(out, "{}", plain_line(&t, fresh, view.health()))?;
                 }
                 if a.seconds
                     .is_some_and(|limit| (t.device_time_us - start) as f64 * 1e-6 >= limit)
@@ -559,8 +642,16 @@ fn csv_error(path: &Path) -> impl Fn(csv::Error) -> RigError + '_ {
     }
 }
 
-/// A telemetry sample as a JSON object (SI units, names as in the CSV).
-pub fn sample_json(t: &TelemetrySample) -> serde_json::Value {
+/// A telemetry sample as a JSON object (SI units, names as in the CSV): a stale estimate
+/// (`fresh` false) and what is not reported are `null`; the health values are the newest
+/// once-a-second report's.
+pub fn sample_json(
+    t: &TelemetrySample,
+    fresh: bool,
+    health: Option<&HealthSample>,
+) -> serde_json::Value {
+    let num = |ok: bool, v: f32| (ok && v.is_finite()).then(|| reporting::human_f64(f64::from(v)));
+    let (bus, temp, mean, max) = health_values(health);
     serde_json::json!({
         "device_time_s": t.device_time_us as f64 / 1e6,
         "seq": t.seq,
@@ -568,10 +659,16 @@ pub fn sample_json(t: &TelemetrySample) -> serde_json::Value {
         "cam_speed_rad_s": t.cam_speed_rad_s,
         "current_a": t.current_a,
         "pwm_duty": t.pwm_duty,
-        "tau_cam_nm": t.tau_cam_nm,
-        "tau_rot_nm": t.tau_rot_nm,
+        "tau_cam_nm": num(fresh, t.tau_cam_nm),
+        "tau_rot_nm": num(fresh, t.tau_rot_nm),
         "faults": t.faults.names().collect::<Vec<_>>(),
         "status": t.status.names().collect::<Vec<_>>(),
+        "output_rad": num(true, t.output_angle_rad),
+        "output_rad_s": num(true, t.output_speed_rad_s),
+        "bus_v": num(true, bus),
+        "motor_temp_c": num(true, temp),
+        "step_cycles_mean": mean,
+        "step_cycles_max": max,
     })
 }
 
@@ -602,6 +699,18 @@ mod tests {
     use protocol::FaultFlags;
     use ratatui::Terminal;
     use ratatui::backend::TestBackend;
+
+    fn health(bus_v: f32) -> HealthSample {
+        HealthSample {
+            device_time_us: 1_000_000,
+            bus_voltage_v: bus_v,
+            motor_temp_c: f32::NAN,
+            step_cycles_mean: 0,
+            step_cycles_max: 0,
+            rx_frame_errors: 0,
+            tx_frames_dropped: 0,
+        }
+    }
 
     fn sample(ms: u64, state: SupervisorState) -> TelemetrySample {
         TelemetrySample {
@@ -660,19 +769,21 @@ mod tests {
         t.pwm_duty = -1.0;
         t.tau_cam_nm = -0.123_45;
         t.tau_rot_nm = -3.68;
+        t.output_angle_rad = -12_345.678;
         assert!(PLAIN_HEADER.len() <= PLAIN_WIDTH);
-        let one = plain_line(&t, true);
+        let h = health(24.0);
+        let one = plain_line(&t, true, Some(&h));
         assert!(!one.contains('\n') && one.len() <= PLAIN_WIDTH, "{one}");
         assert!(one.ends_with(" none"), "{one}");
-        // One fault fits its column; all of them wrap below, every name kept.
+        // A fault wraps below its count, every name kept.
         t.faults = FaultFlags::OVERCURRENT;
-        let one = plain_line(&t, false);
+        let one = plain_line(&t, false, Some(&h));
         assert!(
             one.ends_with(" OVERCURRENT") && one.len() <= PLAIN_WIDTH,
             "{one}"
         );
         t.faults = FaultFlags::all();
-        let many = plain_line(&t, false);
+        let many = plain_line(&t, false, Some(&h));
         let n = FaultFlags::all().names().count();
         assert!(
             many.lines()
@@ -718,9 +829,16 @@ mod tests {
         assert!(f.update(&t));
         t.device_time_us = 1_400_000;
         assert!(!f.update(&t), "no revolution for over 1 s: stale");
-        let line = plain_line(&locked, false);
+        let line = plain_line(&locked, false, None);
         let cols: Vec<&str> = line.split_whitespace().collect();
-        assert_eq!((cols[5], cols[6]), ("-", "-"), "{line}");
+        assert_eq!(cols[4], "-", "{line}");
+        // Stale in the files too: an empty CSV field and JSON null, not a number.
+        let row = csv_row(&locked, false, None);
+        assert_eq!((row[6].as_str(), row[7].as_str()), ("", ""));
+        let json = sample_json(&locked, false, None);
+        assert!(json["tau_cam_nm"].is_null() && json["tau_rot_nm"].is_null());
+        let json = sample_json(&t, true, None);
+        assert_eq!(json["tau_rot_nm"], 1.2);
     }
 
     #[test]
@@ -732,6 +850,7 @@ mod tests {
         let mut s = sample(3_000, SupervisorState::Locked);
         s.status = StatusFlags::OUTPUT_MOVING | StatusFlags::COASTS_AFTER_STOP;
         view.push(s);
+        view.set_health(health(12.5));
         let mut term = Terminal::new(TestBackend::new(80, 24)).unwrap();
         term.draw(|f| view.render(f)).unwrap();
         let buf = term.backend().buffer().clone();
@@ -741,10 +860,15 @@ mod tests {
         let text = rows.join("\n");
         for want in [
             "LOCKED",
-            "tau_cam - N mm",
+            "tau_cam - N m",
             "tau_rot - N m",
             "OUTPUT_MOVING: the output shaft turns",
             "faults none",
+            "bus 12.50 V",
+            "motor - C",
+            "output - rad",
+            "r release/lock",
+            "q quit",
         ] {
             assert!(text.contains(want), "missing {want}:\n{text}");
         }
@@ -753,7 +877,7 @@ mod tests {
     #[test]
     fn plain_line_and_csv_row_agree() {
         let t = sample(1500, SupervisorState::Locked);
-        let line = plain_line(&t, false);
+        let line = plain_line(&t, false, None);
         let cols: Vec<&str> = line.split_whitespace().collect();
         assert_eq!(&cols[..3], ["1.500", "locked", "10.00"], "{line}");
         // The header names the CSV's columns, each above its values.
@@ -765,9 +889,9 @@ mod tests {
                 "state",
                 "cam_hz",
                 "current_a",
-                "pwm_duty",
                 "tau_cam_nm",
-                "tau_rot_nm",
+                "bus_v",
+                "output_rad",
                 "faults"
             ]
         );
@@ -777,7 +901,8 @@ mod tests {
         let mut fresh = t;
         fresh.tau_cam_nm = 0.016_48;
         fresh.tau_rot_nm = 0.368;
-        let line = plain_line(&fresh, true);
+        fresh.output_angle_rad = -0.25;
+        let line = plain_line(&fresh, true, Some(&health(12.05)));
         let end_of = |text: &str, word: &str| text.find(word).unwrap() + word.len();
         for (k, h) in heads.iter().enumerate().take(7).skip(2) {
             // Right-aligned numbers end under their head.
@@ -785,12 +910,16 @@ mod tests {
             assert_eq!(end_of(&line, value), end_of(PLAIN_HEADER, h), "{h}: {line}");
         }
         assert!(
-            line.contains(" 0.01648 ") && line.contains(" 0.368 "),
+            line.contains(" 0.01648 ") && line.contains(" 12.05 "),
             "{line}"
         );
-        let row = csv_row(&t);
+        assert!(line.contains(" -0.2500 "), "{line}");
+        let row = csv_row(&fresh, true, Some(&health(12.05)));
         assert_eq!(row.len(), CSV_HEADER.len());
         assert_eq!(row[1], "locked");
         assert_eq!(row[9], "HOST_RELEASE");
+        assert_eq!((row[10].as_str(), row[12].as_str()), ("-0.25000", "12.050"));
+        // Not sensed (NaN) and not measured (0 cycles): empty.
+        assert_eq!((row[13].as_str(), row[14].as_str()), ("", ""));
     }
 }

@@ -57,6 +57,10 @@ pub struct ReleaseReport {
     pub ended_by: &'static str,
     /// Faults seen during the hold.
     pub faults: Vec<&'static str>,
+    /// The signal that ended an `interrupt`: `Ctrl-C`, `SIGTERM` or `SIGHUP (the terminal
+    /// closed)`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub signal: Option<&'static str>,
 }
 
 /// Telemetry rate while holding, Hz.
@@ -110,55 +114,66 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         final_state: "",
         ended_by: "interrupt",
         faults: Vec::new(),
+        signal: None,
     };
     let wall_start = Instant::now();
     let mut t0 = None;
     let (mut hz_sum, mut hz_n) = (0.0, 0u32);
-    loop {
-        if stop.load(Ordering::SeqCst) {
-            break;
-        }
-        if let Some(limit) = a.hold_for {
-            // A bound in wall time too, in case telemetry stops.
-            if wall_start.elapsed().as_secs_f64() > limit / scale + 5.0 {
+    // Whatever ends the loop (a signal, a fault, a terminal gone: writing to it fails),
+    // the gear is locked before anything else.
+    let watched = (|| -> Result<(), RigError> {
+        loop {
+            if stop.load(Ordering::SeqCst) {
+                break;
+            }
+            if let Some(limit) = a.hold_for {
+                // A bound in wall time too, in case telemetry stops.
+                if wall_start.elapsed().as_secs_f64() > limit / scale + 5.0 {
+                    report.ended_by = "for";
+                    break;
+                }
+            }
+            let Some(t) = s.client.next_telemetry(Duration::from_millis(100))? else {
+                continue;
+            };
+            let start = *t0.get_or_insert(t.device_time_us);
+            let since = (t.device_time_us - start) as f64 / 1e6;
+            report.held_s = since;
+            if report.states.last() != Some(&t.state.name()) {
+                report.states.push(t.state.name());
+                if !a.json {
+                    writeln!(
+                        out,
+                        "{since:7.2} s  {:<10} cam {:5.1} Hz  current {:5.2} A",
+                        t.state.name(),
+                        t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
+                        t.current_a
+                    )?;
+                }
+            }
+            if t.state == SupervisorState::Vibrating {
+                hz_sum += f64::from(t.cam_speed_rad_s.abs()) / std::f64::consts::TAU;
+                hz_n += 1;
+            }
+            if !t.faults.is_empty() || t.state == SupervisorState::Fault {
+                let latched = s.client.faults().map(|f| f.latched).unwrap_or(t.faults);
+                report.faults = (t.faults | latched).names().collect();
+                report.ended_by = "fault";
+                break;
+            }
+            if a.hold_for.is_some_and(|limit| since >= limit) {
                 report.ended_by = "for";
                 break;
             }
         }
-        let Some(t) = s.client.next_telemetry(Duration::from_millis(100))? else {
-            continue;
-        };
-        let start = *t0.get_or_insert(t.device_time_us);
-        let since = (t.device_time_us - start) as f64 / 1e6;
-        report.held_s = since;
-        if report.states.last() != Some(&t.state.name()) {
-            report.states.push(t.state.name());
-            if !a.json {
-                writeln!(
-                    out,
-                    "{since:7.2} s  {:<10} cam {:5.1} Hz  current {:5.2} A",
-                    t.state.name(),
-                    t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
-                    t.current_a
-                )?;
-            }
-        }
-        if t.state == SupervisorState::Vibrating {
-            hz_sum += f64::from(t.cam_speed_rad_s.abs()) / std::f64::consts::TAU;
-            hz_n += 1;
-        }
-        if !t.faults.is_empty() || t.state == SupervisorState::Fault {
-            let latched = s.client.faults().map(|f| f.latched).unwrap_or(t.faults);
-            report.faults = (t.faults | latched).names().collect();
-            report.ended_by = "fault";
-            break;
-        }
-        if a.hold_for.is_some_and(|limit| since >= limit) {
-            report.ended_by = "for";
-            break;
-        }
+        Ok(())
+    })();
+    let locked = s.client.release(false, 0.0);
+    watched?;
+    locked?;
+    if report.ended_by == "interrupt" {
+        report.signal = Some(crate::signals::interrupt_name());
     }
-    s.client.release(false, 0.0)?;
     // Watch the cam come to rest (a few device seconds at most).
     let mut final_state = SupervisorState::Stopping;
     let deadline = Instant::now() + Duration::from_secs_f64(3.0 / scale + 1.0);
@@ -180,11 +195,13 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             .mean_vibrating_hz
             .map(|hz| format!(", mean {hz:.2} Hz while vibrating"))
             .unwrap_or_default();
-        writeln!(
+        let by = report.signal.map(|s| format!(" ({s})")).unwrap_or_default();
+        // The terminal may be gone (SIGHUP): the gear is locked whether this prints or not.
+        let _ = writeln!(
             out,
-            "locked after {:.2} s{mean}; state now {}",
+            "locked after {:.2} s{by}{mean}; state now {}",
             report.held_s, report.final_state
-        )?;
+        );
     }
     if report.ended_by == "fault" {
         return Err(RigError::DeviceFault {

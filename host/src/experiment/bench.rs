@@ -289,6 +289,15 @@ impl Bench for DeviceBench {
         self.session.client.request(req)
     }
 
+    fn start_telemetry(&mut self, rate_hz: u16) -> Result<(), RigError> {
+        self.session.client.start_telemetry(rate_hz)
+    }
+
+    fn stop_telemetry(&mut self) -> Result<(), RigError> {
+        // Also drops the samples received but not taken: the next reading is fresh.
+        self.session.client.stop_telemetry()
+    }
+
     fn keep_alive(&mut self, on: bool) {
         if on {
             self.session.client.start_keep_alive();
@@ -510,5 +519,8 @@ pub fn virtual_release_limit(config: &mut sim::SimConfig) {
 
 /// The error for Ctrl-C during a procedure.
 pub fn interrupted() -> RigError {
-    RigError::Operator("interrupted (Ctrl-C): the gear is locked".into())
+    RigError::Operator(format!(
+        "interrupted ({}): the gear is locked",
+        crate::signals::interrupt_name()
+    ))
 }

@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use protocol::SupervisorState;
-use reporting::plot::{self, PALETTE, Series, XyPanel};
+use reporting::plot::{self, Band, Legend, PALETTE, Series, XyPanel};
 use serde::Serialize;
 
 use super::bench::{Bench, Go, Operator, interrupted};
@@ -69,15 +69,18 @@ pub fn run<B: Bench + ?Sized>(
 ) -> Result<Vec<Sample>, RigError> {
     if let Some(load) = opts.load_nm {
         let asks = operator.forced || !bench.is_virtual();
-        let set_by_rig = !operator.forced && bench.set_load(load)?;
-        if !set_by_rig
-            && asks
+        if asks
             && operator.before(&format!(
-                "hang {} N m on the pulley (Fig. 5: 1.0 kg on 75 mm)",
-                reporting::human(load)
+                "hang {} (Fig. 5: 1.0 kg on 75 mm)",
+                super::load_text(load)
             ))? == Go::Skip
         {
             return Ok(Vec::new());
+        }
+        // On a virtual rig its hands hang what the operator confirmed (or the procedure
+        // asked for); a real rig refuses the command and the person's load is on it.
+        if bench.is_virtual() {
+            bench.set_load(load)?;
         }
     }
     bench.start_telemetry(TELEMETRY_HZ)?;
@@ -156,6 +159,14 @@ pub fn write_csv(samples: &[Sample], path: &Path) -> Result<(), RigError> {
             why: format!("cannot write the CSV: {e}"),
         })?;
         for s in samples {
+            // As a person writes them: the f32 readings as read, the angle (a difference
+            // of two f32 readings) to the 7 digits they carry.
+            let s = Sample {
+                output_angle_rad: s.output_angle_rad.map(|a| reporting::significant(a, 7)),
+                cam_speed_rad_s: reporting::human_f64(s.cam_speed_rad_s),
+                current_a: reporting::human_f64(s.current_a),
+                ..*s
+            };
             w.serialize(s).map_err(|e| RigError::BadValue {
                 what: path.display().to_string(),
                 why: format!("cannot write the CSV: {e}"),
@@ -169,10 +180,27 @@ pub fn write_csv(samples: &[Sample], path: &Path) -> Result<(), RigError> {
 /// Draws the time history (output angle, cam speed, current against time) into the SVG
 /// file `path`, atomically.
 pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
+    // The phases shaded, so the hold, the release and what follows read at a glance.
+    let bands: Vec<Band> = ["hold", "release", "after"]
+        .iter()
+        .enumerate()
+        .filter_map(|(k, &phase)| {
+            let mut t = samples.iter().filter(|s| s.phase == phase).map(|s| s.t_s);
+            let from = t.next()?;
+            let to = t.next_back().unwrap_or(from);
+            Some(Band {
+                from,
+                to,
+                label: phase.into(),
+                color: PALETTE[[2, 1, 4][k]],
+            })
+        })
+        .collect();
+    let x = plot::span(samples.iter().map(|s| s.t_s), 0.02, true);
     let panel =
         |caption: &str, y: &str, color: usize, f: &dyn Fn(&Sample) -> Option<f64>| XyPanel {
             caption: Some(caption.into()),
-            x_label: "t, s".into(),
+            x_label: "t [s]".into(),
             y_label: y.into(),
             series: vec![Series::line(
                 PALETTE[color % PALETTE.len()],
@@ -182,21 +210,40 @@ pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
                     .filter_map(|s| f(s).map(|v| (s.t_s, v)))
                     .collect(),
             )],
-            x_range: Some(plot::span(samples.iter().map(|s| s.t_s), 0.02, true)),
+            x_range: Some(x),
+            bands: bands.clone(),
             fine_grid: true,
             ..XyPanel::default()
         };
+    let mut angle = panel("output angle (Fig. 5)", "output angle [rad]", 0, &|s| {
+        s.output_angle_rad
+    });
+    // The paper's number: the load held 14.5 s without vibration (Fig. 5).
+    let paper_hold = model::paper::FIG5_HOLD_S;
+    let (y0, y1) = angle.y_span();
+    if let Some(start) = bands.first().map(|b| b.from)
+        && x.1 >= start + paper_hold
+    {
+        angle.series.push(
+            Series::line(
+                PALETTE[5],
+                1,
+                vec![(start + paper_hold, y0), (start + paper_hold, y1)],
+            )
+            .labelled(format!("paper: held {} s", reporting::human(paper_hold))),
+        );
+        angle.series[0].label = Some("output angle".into());
+        angle.legend = Some(Legend::Outside);
+    }
     let panels = [
-        panel("output angle (Fig. 5)", "output angle, rad", 0, &|s| {
-            s.output_angle_rad
-        }),
-        panel("cam speed", "w_n, rad/s", 1, &|s| Some(s.cam_speed_rad_s)),
-        panel("motor current", "i_in, A", 2, &|s| Some(s.current_a)),
+        angle,
+        panel("cam speed", "w_n [rad/s]", 1, &|s| Some(s.cam_speed_rad_s)),
+        panel("motor current", "i_in [A]", 2, &|s| Some(s.current_a)),
     ];
     Ok(plot::columns_figure(
         path,
-        (420, 360),
-        Some("hold, release, after"),
+        (470, 360),
+        Some("Fig. 5: hold, release, after"),
         &panels,
     )?)
 }

@@ -68,6 +68,7 @@ pub fn torque_sweep_with_error(
         plan,
         window: procedure::Window::Start,
         resume: false,
+        force: false,
         command: "rig sim torque-sweep".into(),
     };
     let outcome = procedure::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
@@ -200,12 +201,16 @@ pub fn fig5_fitted(
     opts: &fig5::Fig5Options,
     fitted: Option<&rigfile::RigFile>,
 ) -> Result<fig5::Fig5Result, RigError> {
-    let mut config = config(
-        model::paper::FIG5_Z,
-        model::paper::FIG5_LOAD,
-        opts.seed,
-        opts.sensor_supply_v,
-    )?;
+    fig5_history(opts, fitted).map(|(result, _)| result)
+}
+
+/// [`fig5_fitted`] with its time history (for the Fig. 5 plot).
+pub fn fig5_history(
+    opts: &fig5::Fig5Options,
+    fitted: Option<&rigfile::RigFile>,
+) -> Result<(fig5::Fig5Result, Vec<hold_release::Sample>), RigError> {
+    let z = model::paper::FIG5_Z;
+    let mut config = config(z, model::paper::FIG5_LOAD, opts.seed, opts.sensor_supply_v)?;
     config.plant.effects = opts.effects;
     if let Some(gear) = designed_gear(fitted)? {
         use_gear(&mut config, gear);
@@ -228,7 +233,7 @@ pub fn fig5_fitted(
     };
     let samples = hold_release::run(&mut bench, &mut operator, &procedure, &mut |_| {})?;
     let n = hold_release::fig5_numbers(&samples, model::paper::R_OUT);
-    Ok(fig5::Fig5Result {
+    let result = fig5::Fig5Result {
         z,
         held_without_vibration: n.held_without_vibration,
         hold_s: opts.hold_s,
@@ -240,7 +245,8 @@ pub fn fig5_fitted(
         stops_after_vibration: n.stops_after_vibration,
         after_stop_travel_rad: n.after_stop_travel_rad,
         x,
-    })
+    };
+    Ok((result, samples))
 }
 
 /// The gear set a rig file designs: its `[gear]` when that is not the paper's standard

@@ -58,6 +58,10 @@ pub struct Row {
     pub tau_cam_est_nm: f64,
     /// Whether the output moved (1) or held (0); empty when nobody could tell.
     pub backdriven: Option<u8>,
+    /// The load as the mass hung on the paper's output pulley (radius
+    /// `model::paper::R_OUT`), kg (empty in files written before this column).
+    #[serde(default)]
+    pub load_kg: Option<f64>,
 }
 
 /// What a sweep did.
@@ -85,6 +89,8 @@ pub struct SweepSetup {
     pub window: Window,
     /// Continue the plan in an existing CSV.
     pub resume: bool,
+    /// Replace an existing CSV (the operator said so: `--force`).
+    pub force: bool,
     /// The command line, for the provenance.
     pub command: String,
 }
@@ -188,23 +194,112 @@ pub fn read_rows(path: &Path) -> Result<(Vec<Row>, Option<String>), RigError> {
 
 /// The CSV header line.
 fn header() -> String {
-    "point,repeat,t_s,v_in_v,target_hz,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,tau_cam_est_nm,backdriven\n"
+    "point,repeat,t_s,v_in_v,target_hz,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,tau_cam_est_nm,backdriven,load_kg\n"
         .into()
+}
+
+impl Row {
+    /// The row as a person writes it: the means of `f32` telemetry to the 7 significant
+    /// digits they carry (3.16632, not 3.166320013999939), `f32` readings as written.
+    pub fn for_people(&self) -> Row {
+        let mean = |v: f64| reporting::significant(v, 7);
+        Row {
+            v_in_v: self.v_in_v.map(reporting::human_f64),
+            target_hz: self.target_hz.map(reporting::human_f64),
+            omega_n_rad_s: mean(self.omega_n_rad_s),
+            tau_rot_nm: reporting::human_f64(self.tau_rot_nm),
+            i_in_a: mean(self.i_in_a),
+            temp_c: self.temp_c.map(reporting::human_f64),
+            tau_cam_est_nm: mean(self.tau_cam_est_nm),
+            load_kg: self.load_kg.map(|m| reporting::significant(m, 6)),
+            ..self.clone()
+        }
+    }
 }
 
 fn csv_line(row: &Row) -> Result<String, RigError> {
     let mut w = csv::WriterBuilder::new()
         .has_headers(false)
         .from_writer(Vec::new());
-    w.serialize(row).map_err(|e| RigError::BadValue {
-        what: "a sweep row".into(),
-        why: e.to_string(),
-    })?;
+    w.serialize(row.for_people())
+        .map_err(|e| RigError::BadValue {
+            what: "a sweep row".into(),
+            why: e.to_string(),
+        })?;
     let bytes = w.into_inner().map_err(|e| RigError::BadValue {
         what: "a sweep row".into(),
         why: e.to_string(),
     })?;
     Ok(String::from_utf8_lossy(&bytes).into_owned())
+}
+
+/// Refuses to start a sweep over an existing data file: without `resume` (continue it) or
+/// `force` (replace it) an existing `path` is an error naming the file, its rows and the
+/// options, before anything moves; nothing in it is touched.
+pub fn check_output(path: &Path, resume: bool, force: bool) -> Result<(), RigError> {
+    if resume || force {
+        return Ok(());
+    }
+    match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(source) => Err(RigError::File {
+            action: "check",
+            path: path.display().to_string(),
+            source,
+        }),
+        Ok(meta) if meta.is_dir() => Err(RigError::BadValue {
+            what: format!("--csv {}", path.display()),
+            why: "is a folder: give a file name".into(),
+        }),
+        Ok(_) => {
+            let rows = read_rows(path).map(|r| r.0.len()).unwrap_or(0);
+            Err(RigError::BadValue {
+                what: format!("--csv {}", path.display()),
+                why: format!(
+                    "already exists ({rows} completed rows): it was left unchanged; pass --resume to continue it with the same plan, --force to replace it, or give a new file name"
+                ),
+            })
+        }
+    }
+}
+
+/// As [`check_output`] for a verb that writes its data file whole at the end (nothing to
+/// resume): an existing `path` only with `force`.
+pub fn check_new_output(path: &Path, force: bool) -> Result<(), RigError> {
+    if force || !path.exists() {
+        return Ok(());
+    }
+    Err(RigError::BadValue {
+        what: format!("--csv {}", path.display()),
+        why: "already exists: it was left unchanged; pass --force to replace it, or give a new file name".into(),
+    })
+}
+
+/// Opens a new data file for writing: `force` replaces an existing one, else an existing
+/// file is refused (created exclusively, so a file that appeared since
+/// [`check_output`] is not truncated either).
+pub fn create_new(path: &Path, force: bool) -> Result<std::fs::File, RigError> {
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true);
+    if force {
+        options.create(true).truncate(true);
+    } else {
+        options.create_new(true);
+    }
+    options.open(path).map_err(|source| {
+        if source.kind() == std::io::ErrorKind::AlreadyExists {
+            RigError::BadValue {
+                what: format!("--csv {}", path.display()),
+                why: "already exists: it was left unchanged; pass --resume to continue it, --force to replace it, or give a new file name".into(),
+            }
+        } else {
+            RigError::File {
+                action: "write",
+                path: path.display().to_string(),
+                source,
+            }
+        }
+    })
 }
 
 /// An append-only CSV whose every write is synced to disk.
@@ -245,6 +340,10 @@ pub fn run_to<B: Bench + ?Sized>(
     progress: &mut dyn FnMut(&str),
 ) -> Result<SweepOutcome, RigError> {
     let runs = setup.plan.runs();
+    // Every point against the rig's limits before the first one runs: an impossible point
+    // is found now, not hours into the sweep.
+    let calibration = bench.calibration()?;
+    check_plan(&setup.plan, &calibration)?;
     let top = runs.iter().map(|r| r.load_nm).fold(0.0, f64::max);
     super::bench::allow_load(bench, top)?;
     let (done, mut out) = match csv {
@@ -281,25 +380,29 @@ pub fn run_to<B: Bench + ?Sized>(
                 // falling after the vibration stops when mu_d Lambda < 1), as the
                 // operator re-hangs a fallen load; a real rig's operator is asked only
                 // when the load changes.
-                let load_changed =
-                    hung != Some(run.load_nm) || (bench.is_virtual() && !operator.forced);
                 let asks = operator.forced || !bench.is_virtual();
-                if load_changed {
-                    let set_by_rig = !operator.forced && bench.set_load(run.load_nm)?;
-                    if !set_by_rig && asks {
-                        let q = format!(
-                            "point {}/{}: hang {} N m on the pulley",
-                            run.index + 1,
-                            runs.len(),
-                            reporting::human(run.load_nm)
-                        );
-                        if operator.before(&q)? == Go::Skip {
-                            outcome.skipped += 1;
-                            break;
-                        }
+                if asks && hung != Some(run.load_nm) {
+                    // The operator hangs the load with the drive off, the gear locked and
+                    // the telemetry stopped: however long it takes, nothing times out.
+                    let q = format!(
+                        "point {}/{}: hang {}",
+                        run.index + 1,
+                        runs.len(),
+                        super::load_text(run.load_nm)
+                    );
+                    if quiet_prompt(bench, || operator.before(&q))? == Go::Skip {
+                        outcome.skipped += 1;
+                        break;
                     }
-                    hung = Some(run.load_nm);
                 }
+                // A virtual rig's load is hung again, still, before every run (its output
+                // may still be turning from the last run: the paper's rig keeps falling
+                // after the vibration stops when mu_d Lambda < 1), as the operator re-hangs
+                // a fallen load; with `--operator` it is what the operator just confirmed.
+                if bench.is_virtual() {
+                    bench.set_load(run.load_nm)?;
+                }
+                hung = Some(run.load_nm);
                 wait_for_temperature(bench, operator, run)?;
                 let mut row = match measure(bench, operator, setup, run) {
                     Ok(row) => row,
@@ -322,16 +425,17 @@ pub fn run_to<B: Bench + ?Sized>(
                     },
                 };
                 let summary = format!(
-                    "point {}/{}: {} N m, {}: i = {:.3} A, w = {:.1} rad/s",
+                    "point {}/{}: {}, {}: i = {:.3} A, w = {:.1} rad/s",
                     run.index + 1,
                     runs.len(),
-                    reporting::human(run.load_nm),
+                    super::load_text(run.load_nm),
                     drive_text(run),
                     row.i_in_a,
                     row.omega_n_rad_s
                 );
                 if asks {
-                    match operator.after(&summary, row.backdriven.is_none())? {
+                    let ask_moved = row.backdriven.is_none();
+                    match quiet_prompt(bench, || operator.after(&summary, ask_moved))? {
                         Verdict::Redo => continue,
                         Verdict::Keep(moved) => {
                             if let Some(m) = moved {
@@ -358,6 +462,77 @@ pub fn run_to<B: Bench + ?Sized>(
     result.map(|()| outcome)
 }
 
+/// Runs an operator prompt with the telemetry stopped (the drive is already off and the
+/// gear locked), then restarts it: a person may take minutes, and no stale samples pile up
+/// for the next point to read.
+fn quiet_prompt<B: Bench + ?Sized, R>(
+    bench: &mut B,
+    ask: impl FnOnce() -> Result<R, RigError>,
+) -> Result<R, RigError> {
+    bench.lock_gear();
+    bench.stop_telemetry()?;
+    let answer = ask();
+    bench.start_telemetry(TELEMETRY_HZ)?;
+    answer
+}
+
+/// Checks every point of `plan` against the limits a rig takes (the board's and the
+/// calibration's): the load at most the gear's tooth-strength cap, a supply voltage the
+/// bridge can give, a release frequency the controller accepts. All the points that do not
+/// fit are named in one error, before anything moves.
+pub fn check_plan(plan: &Plan, calibration: &protocol::RigParameters) -> Result<(), RigError> {
+    let core = firmware_core::CoreConfig::default();
+    let max_volts = f64::from(core.supply_v * core.motor.max_duty);
+    let (lo_hz, hi_hz) = crate::limits::release_freq_range(calibration);
+    let max_load = model::BoardLimits::PAPER.max_release_load_nm;
+    let mut bad = Vec::new();
+    for (k, p) in plan.points.iter().enumerate() {
+        let mut why = Vec::new();
+        if !(0.0..=max_load).contains(&p.load_nm) {
+            why.push(format!(
+                "load_nm {} is outside 0 to {} N m (the gear's tooth strength)",
+                reporting::human(p.load_nm),
+                reporting::human(max_load)
+            ));
+        }
+        if let Some(v) = p.volts
+            && !(v > 0.0 && v <= max_volts)
+        {
+            why.push(format!(
+                "volts {} is outside 0 to {} V (the bridge's supply at its highest duty)",
+                reporting::human(v),
+                reporting::human(reporting::significant(max_volts, 4))
+            ));
+        }
+        if let Some(hz) = p.hz
+            && !(hz >= f64::from(lo_hz) && hz <= f64::from(hi_hz))
+        {
+            why.push(format!(
+                "hz {} is outside {} to {} Hz (the controller and the calibration's max_freq_hz)",
+                reporting::human(hz),
+                reporting::human(f64::from(lo_hz)),
+                reporting::human(f64::from(hi_hz))
+            ));
+        }
+        if !why.is_empty() {
+            bad.push(format!("point {}: {}", k + 1, why.join(", ")));
+        }
+    }
+    if bad.is_empty() {
+        Ok(())
+    } else {
+        Err(RigError::BadValue {
+            what: format!("plan '{}'", plan.name),
+            why: format!(
+                "{} of its {} points cannot run on this rig, nothing was measured: {}; fix them in the plan file",
+                bad.len(),
+                plan.points.len(),
+                bad.join("; ")
+            ),
+        })
+    }
+}
+
 fn drive_text(run: &Run) -> String {
     match (run.volts, run.hz) {
         (Some(v), _) => format!("{} V", reporting::human(v)),
@@ -372,19 +547,6 @@ fn open_csv<B: Bench + ?Sized>(
     csv: &Path,
 ) -> Result<(Vec<Row>, Appender), RigError> {
     let path = csv.display().to_string();
-    let open = |append: bool| {
-        std::fs::OpenOptions::new()
-            .create(true)
-            .write(true)
-            .append(append)
-            .truncate(!append)
-            .open(csv)
-            .map_err(|source| RigError::File {
-                action: "write",
-                path: path.clone(),
-                source,
-            })
-    };
     if setup.resume && csv.exists() {
         let (rows, plan) = read_rows(csv)?;
         if plan.as_deref() != Some(setup.plan.one_line().as_str()) {
@@ -395,18 +557,24 @@ fn open_csv<B: Bench + ?Sized>(
         }
         // Drop a partial last line so appended rows start on their own line.
         let text = std::fs::read_to_string(csv).unwrap_or_default();
-        let mut out = Appender {
-            file: open(true)?,
-            path,
-        };
+        let file = std::fs::OpenOptions::new()
+            .append(true)
+            .open(csv)
+            .map_err(|source| RigError::File {
+                action: "write",
+                path: path.clone(),
+                source,
+            })?;
+        let mut out = Appender { file, path };
         if !text.is_empty() && !text.ends_with('\n') {
             out.write("\n")?;
         }
         return Ok((rows, out));
     }
+    check_output(csv, false, setup.force)?;
     let head = provenance(bench, setup)? + &header();
     let mut out = Appender {
-        file: open(false)?,
+        file: create_new(csv, setup.force)?,
         path,
     };
     out.write(&head)?;
@@ -649,6 +817,7 @@ fn average<B: Bench + ?Sized>(
                 estimates.iter().sum::<f64>() / estimates.len() as f64
             },
             backdriven: None,
+            load_kg: Some(super::load_mass_kg(run.load_nm)),
         },
         Some(last),
     ))
@@ -697,6 +866,45 @@ mod tests {
     use crate::experiment::bench::SimBench;
 
     #[test]
+    fn a_plan_is_checked_whole_before_the_first_point() {
+        let plan = Plan::parse(
+            "rest_s = 0.2\n[[points]]\nload_nm = 1.0\nvolts = 6.2\n[[points]]\nload_nm = 5.0\nvolts = 6.2\n[[points]]\nload_nm = 1.0\nvolts = 30.0\n",
+            "p.toml",
+        )
+        .unwrap();
+        let cal = protocol::RigParameters::paper();
+        let e = check_plan(&plan, &cal).unwrap_err().to_string();
+        assert!(e.contains("2 of its 3 points"), "{e}");
+        assert!(
+            e.contains("point 2: load_nm 5") && e.contains("3.68"),
+            "{e}"
+        );
+        assert!(e.contains("point 3: volts 30"), "{e}");
+        assert!(check_plan(&Plan::paper(), &cal).is_ok());
+        let hz = Plan::parse(
+            "mode = \"closed-loop\"\n[[points]]\nload_nm = 1.0\nhz = 20.0\n",
+            "h.toml",
+        )
+        .unwrap();
+        let e = check_plan(&hz, &cal).unwrap_err().to_string();
+        assert!(e.contains("hz 20") && e.contains("15 Hz"), "{e}");
+        // Nothing ran: the sweep refuses before its first point and writes no file.
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("x.csv");
+        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut op = Operator::scripted(b"", false);
+        let setup = SweepSetup {
+            plan,
+            window: Window::Start,
+            resume: false,
+            force: false,
+            command: "test".into(),
+        };
+        assert!(run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).is_err());
+        assert!(!csv.exists());
+    }
+
+    #[test]
     fn dates_are_iso() {
         let t = std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_795_910_400);
         assert_eq!(httpdate(t), "2026-11-29T00:00:00Z");
@@ -712,6 +920,7 @@ mod tests {
             plan: Plan::quick(),
             window: Window::Start,
             resume: false,
+            force: false,
             command: "test".into(),
         };
         let out = run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).unwrap();
@@ -767,6 +976,7 @@ mod tests {
             plan,
             window: Window::Revolutions,
             resume: false,
+            force: false,
             command: "test".into(),
         };
         run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).unwrap();
