@@ -544,11 +544,11 @@ fn leading(outcome: &Outcome, options: &DesignOptions) -> (Goal, Vec<Leader>) {
             }
             (Goal::Pin, list)
         }
-        Verdict::Explained => {
+        Verdict::Explained | Verdict::PartlyExplained => {
             let first = e.effects.first().map(|f| f.name.clone());
             (Goal::Pin, named(&mut first.iter()))
         }
-        Verdict::NoMissingEffect => {
+        Verdict::NoMissingEffect | Verdict::Unexplained => {
             let mut c: Vec<(&String, f64)> = e
                 .candidates
                 .iter()

@@ -250,6 +250,10 @@ struct Tally {
     ambiguous_with_truth: u32,
     wrong_confident: u32,
     findings: u32,
+    /// `unexplained` verdicts.
+    unexplained: u32,
+    /// Hits whose verdict was `partly-explained` (a lack of fit remained).
+    partly_hits: u32,
     ratios: Vec<f64>,
     /// Confidence of the explained verdicts that named the truth, and of those that did not.
     confidence_hits: Vec<f64>,
@@ -262,6 +266,20 @@ impl Tally {
         let named = e.effects.first().map(|f| f.name.as_str());
         match e.verdict {
             Verdict::NoMissingEffect => {}
+            Verdict::Unexplained => {
+                // A discrepancy said to remain, no name: a finding, never a wrong name.
+                self.findings += 1;
+                self.unexplained += 1;
+            }
+            Verdict::PartlyExplained => {
+                // Names with a significant lack of fit left: the truth named first is a
+                // hit (counted apart too), another name is not confident.
+                self.findings += 1;
+                if named == truth.expected().map(|x| x.name()) {
+                    self.hits += 1;
+                    self.partly_hits += 1;
+                }
+            }
             Verdict::Explained => {
                 self.findings += 1;
                 let c = e.confidence.unwrap_or(f64::NAN);
