@@ -413,7 +413,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             if let Some(f) = &c.fit {
                 let mut child = path.clone();
                 child.push(c.cand);
-                if !crate::plausibility::check(points, c.cand, f).plausible {
+                if !crate::plausibility::check_model(points, f).plausible {
                     implausible.insert(child.clone());
                 }
                 fits.insert(child, f.clone());
@@ -479,7 +479,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                     for (e, f) in children {
                         let mut child = p.clone();
                         child.push(e);
-                        if !crate::plausibility::check(points, e, &f).plausible {
+                        if !crate::plausibility::check_model(points, &f).plausible {
                             implausible.insert(child.clone());
                         }
                         fits.insert(child, f);

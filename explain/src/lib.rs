@@ -601,10 +601,7 @@ fn candidate_report(
 ) -> CandidateReport {
     let name = c.cand.name(points).to_string();
     let form = c.cand.form(points).map(str::to_string);
-    let plaus = c
-        .fit
-        .as_ref()
-        .map(|f| plausibility::check(points, c.cand, f));
+    let plaus = c.fit.as_ref().map(|f| plausibility::check_model(points, f));
     let plausible = plaus.as_ref().map(|p| p.plausible);
     let limits_broken = plaus
         .map(|p| p.checks.into_iter().filter(|c| !c.within).collect())

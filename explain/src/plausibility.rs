@@ -134,6 +134,25 @@ pub fn check(points: &TestPoints, cand: Cand, fit: &Fit) -> Plausibility {
         }
     }
     checks.push(check_limit(&MU_PHYSICAL, fit.model.mu, None, &ctx));
+    // A load-dependent power return must keep kappa(tau) = kappa + kappa_per_nm |tau| within
+    // the library's kappa limits at every tested load, not only at zero load.
+    if let (Cand::Term(t), Some(&k0), Some(&k1)) =
+        (cand, params.get("kappa"), params.get("kappa_per_nm"))
+        && points.terms[t].form() == Some(crate::terms::Form::LoadDependentReturn)
+        && let Some(limit) = Effect::InertiaRectification
+            .info()
+            .limits
+            .iter()
+            .find(|l| l.key == "kappa")
+    {
+        let tau_max = points
+            .ops
+            .iter()
+            .fold(0.0f64, |m, op| m.max(op.tau_rot.abs()));
+        let mut at_max = check_limit(limit, k0 + k1 * tau_max, None, &ctx);
+        at_max.param = format!("kappa at {} N m", reporting::human(tau_max));
+        checks.push(at_max);
+    }
     if let Cand::Term(t) = cand
         && let Some(pos) = fit.spec.terms.iter().position(|&x| x == t)
     {
@@ -161,6 +180,38 @@ pub fn check(points: &TestPoints, cand: Cand, fit: &Fit) -> Plausibility {
             });
         }
     }
+    Plausibility {
+        plausible: checks.iter().all(|c| c.within),
+        checks,
+    }
+}
+
+/// The plausibility of every effect and term `fit` carries (and its mu): a model is
+/// plausible only when each of its effects is, so an effect added later cannot push an
+/// earlier one beyond its limits unnoticed. Each check's parameter names its effect.
+pub fn check_model(points: &TestPoints, fit: &Fit) -> Plausibility {
+    let cands = fit
+        .spec
+        .effects
+        .iter()
+        .map(|&e| Cand::Effect(e))
+        .chain(fit.spec.terms.iter().map(|&t| Cand::Term(t)));
+    let mut checks: Vec<LimitCheck> = Vec::new();
+    for c in cands {
+        for mut k in check(points, c, fit).checks {
+            if k.param == MU_PHYSICAL.key {
+                continue;
+            }
+            k.param = format!("{} {}", c.name(points), k.param);
+            checks.push(k);
+        }
+    }
+    checks.push(check_limit(
+        &MU_PHYSICAL,
+        fit.model.mu,
+        None,
+        &context(points, fit),
+    ));
     Plausibility {
         plausible: checks.iter().all(|c| c.within),
         checks,

@@ -976,7 +976,7 @@ pub fn select_from(
                     p_text(p_value)
                 ),
             )
-        } else if let Some(why) = Some(crate::plausibility::check(points, best.cand, best_fit))
+        } else if let Some(why) = Some(crate::plausibility::check_model(points, best_fit))
             .filter(|p| !p.plausible)
             .map(|p| p.failures())
         {
