@@ -27,6 +27,7 @@
 pub mod bootstrap;
 pub mod data;
 pub mod design;
+pub mod extrapolation;
 pub mod fit;
 pub mod gap;
 pub mod lack_of_fit;
@@ -122,6 +123,9 @@ pub struct EffectReport {
     pub plausible: bool,
     /// The limits checked, each with its reason.
     pub limits: Vec<plausibility::LimitCheck>,
+    /// Held-out edges of the tested range (whole speed levels and load ranges) predicted
+    /// with and without it; null when the effect did not stay in the final model.
+    pub extrapolation: Option<extrapolation::Extrapolation>,
 }
 
 /// A row of a candidate table.
@@ -845,6 +849,8 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
                 .sum(),
             plausible: plaus.plausible,
             limits: plaus.checks,
+            extrapolation: in_final
+                .then(|| extrapolation::extrapolation(&points, &after, best.cand)),
         });
     }
     let named = selection.added();

@@ -245,6 +245,9 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                     let _ = write!(s, ", selected in {:.0} % of the resamples", 100.0 * p);
                 }
                 s.push_str(". ");
+                if let Some(x) = eff.extrapolation.as_ref().filter(|x| x.testable) {
+                    let _ = write!(s, "Extrapolation: {}. ", x.summary);
+                }
                 let rivals = accepted.get(k).map_or(&[][..], |st| &st.ambiguous_with[..]);
                 if k > 0 && !rivals.is_empty() {
                     let _ = write!(

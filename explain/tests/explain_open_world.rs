@@ -385,3 +385,25 @@ fn full_open_world_batch() {
     println!("confident wrong names: {wrong} of {total}");
     assert!(wrong as f64 <= 0.05 * total as f64, "{wrong} of {total}");
 }
+
+#[test]
+fn a_named_library_effect_predicts_the_held_out_edges_of_the_range() {
+    let rig = RigFile::paper();
+    let p = plan(0.010);
+    let mut model = rig.current_model().unwrap();
+    model.effects.viscous_loss = 0.2e-3;
+    let data = Dataset::from_rows("viscous.csv", synth::generate(&model, &p, 21)).unwrap();
+    let e = run(&data, &rig, 0.010);
+    assert_eq!(e.verdict, Verdict::Explained, "{}", e.finding);
+    let f = &e.effects[0];
+    assert_eq!(f.name, Effect::VibratorViscousLoss.name());
+    let x = f.extrapolation.as_ref().expect("the final model carries it");
+    // Five speed levels and six loads: both speed edges and both load thirds are held out.
+    assert!(x.testable && x.passed, "{x:?}");
+    assert_eq!(x.edges.len(), 4, "{x:?}");
+    let slowest = &x.edges[0];
+    assert!(slowest.held_out.starts_with("slowest speed level"), "{x:?}");
+    // Without the loss, a model fitted on the faster levels misses the slowest by far more.
+    assert!(slowest.rmse_with_ma < 0.5 * slowest.rmse_without_ma, "{x:?}");
+    assert!(e.finding.contains("Extrapolation:"), "{}", e.finding);
+}
