@@ -36,6 +36,7 @@ pub mod library;
 pub mod plausibility;
 pub mod points;
 pub mod report_files;
+pub mod residual_shape;
 pub mod robust;
 pub mod select;
 pub mod stats;
@@ -302,6 +303,9 @@ pub struct Explanation {
     pub gap_after: Gap,
     /// The final model's lack of fit against the data's own noise, and where it lives.
     pub lack_of_fit: lack_of_fit::LackOfFit,
+    /// The shape of what remains, when the verdict is `unexplained` or `partly-explained`:
+    /// a sparse description over a generic basis and a ready `[[user_effects]]` entry.
+    pub residual_shape: Option<residual_shape::ResidualShape>,
     /// The finding in words.
     pub finding: String,
     /// The report folder, when one was written.
@@ -1007,6 +1011,8 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         steps,
         gap_before,
         gap_after,
+        residual_shape: matches!(verdict, Verdict::Unexplained | Verdict::PartlyExplained)
+            .then(|| residual_shape::residual_shape(&points, &after)),
         lack_of_fit,
         finding: String::new(),
         report_dir: None,

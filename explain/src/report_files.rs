@@ -61,6 +61,12 @@ fn lack_of_fit_text(e: &Explanation) -> String {
         let _ = write!(s, " (it stands out {at})");
     }
     s.push('.');
+    if let Some(shape) = &e.residual_shape {
+        let _ = write!(s, " Its shape: {}.", shape.description);
+        if !shape.user_effect.is_empty() {
+            s.push_str(" A ready [[user_effects]] entry is in the JSON (`residual_shape.user_effect`) and the report: name it, paste it into the rig file and refit.");
+        }
+    }
     s
 }
 
@@ -464,6 +470,22 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
         "## Lack of fit\n\n{}.\n",
         capitalised(&e.lack_of_fit.text())
     );
+    if let Some(shape) = &e.residual_shape {
+        let _ = writeln!(
+            s,
+            "## The shape of what remains\n\n{} (residual RMSE {:.1} -> {:.1} mA).\n",
+            capitalised(&shape.description),
+            shape.rmse_ma[0],
+            shape.rmse_ma[1]
+        );
+        if !shape.user_effect.is_empty() {
+            let _ = writeln!(
+                s,
+                "As a user effect for the rig file (name it, paste it, refit with `rig explain --model`):\n\n```toml\n{}```\n",
+                shape.user_effect
+            );
+        }
+    }
     if !e.lack_of_fit.locations.is_empty() {
         let _ = writeln!(
             s,

@@ -397,13 +397,50 @@ fn a_named_library_effect_predicts_the_held_out_edges_of_the_range() {
     assert_eq!(e.verdict, Verdict::Explained, "{}", e.finding);
     let f = &e.effects[0];
     assert_eq!(f.name, Effect::VibratorViscousLoss.name());
-    let x = f.extrapolation.as_ref().expect("the final model carries it");
+    let x = f
+        .extrapolation
+        .as_ref()
+        .expect("the final model carries it");
     // Five speed levels and six loads: both speed edges and both load thirds are held out.
     assert!(x.testable && x.passed, "{x:?}");
     assert_eq!(x.edges.len(), 4, "{x:?}");
     let slowest = &x.edges[0];
     assert!(slowest.held_out.starts_with("slowest speed level"), "{x:?}");
     // Without the loss, a model fitted on the faster levels misses the slowest by far more.
-    assert!(slowest.rmse_with_ma < 0.5 * slowest.rmse_without_ma, "{x:?}");
+    assert!(
+        slowest.rmse_with_ma < 0.5 * slowest.rmse_without_ma,
+        "{x:?}"
+    );
     assert!(e.finding.contains("Extrapolation:"), "{}", e.finding);
+}
+
+#[test]
+fn the_shape_of_a_resonance_is_described_and_refits_as_a_user_effect() {
+    let rig = RigFile::paper();
+    let noise = 0.010;
+    let data = dataset(&rig, Some(Unknown::Resonance), &plan(noise), 7);
+    let e = run(&data, &rig, noise);
+    let shape = e.residual_shape.as_ref().expect("a discrepancy remains");
+    let first = &shape.terms[0];
+    assert!(first.basis.starts_with("peak"), "{shape:?}");
+    assert!(first.inclusion_probability >= 0.8, "{shape:?}");
+    assert!(
+        shape.description.contains("narrow peak"),
+        "{}",
+        shape.description
+    );
+    assert!(shape.rmse_ma[1] < 0.5 * shape.rmse_ma[0], "{shape:?}");
+    // Pasted into a rig file, the entry is a user effect `rig explain` names and that
+    // closes the gap.
+    let named = shape
+        .user_effect
+        .replace("residual-shape", "carrier-resonance");
+    let with = RigFile::parse(&named, "shape.toml").expect(&named);
+    let again = run(&data, &with, noise);
+    assert!(
+        again.effects.iter().any(|f| f.name == "carrier-resonance"),
+        "{}\n{named}",
+        again.finding
+    );
+    assert!(!again.lack_of_fit.significant, "{:?}", again.lack_of_fit);
 }
