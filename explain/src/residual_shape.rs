@@ -23,6 +23,67 @@ const SEED: u64 = 0x5a9e_0f4e_5100_0019;
 /// A term is part of the shape when it is selected in at least this share of the resamples.
 const FIRM_SHARE: f64 = 0.6;
 
+/// What a basis function computes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BasisKind {
+    /// (w / w_max)^pw (tau / tau_max)^pt.
+    Power {
+        /// Power of the speed.
+        pw: i32,
+        /// Power of the load.
+        pt: i32,
+        /// Speed scale, rad/s.
+        w_max: f64,
+        /// Load scale, N m.
+        tau_max: f64,
+    },
+    /// t / t_max.
+    Time {
+        /// Time scale, s.
+        t_max: f64,
+    },
+    /// (temp - lo) / span.
+    Temperature {
+        /// Lowest temperature, deg C.
+        lo: f64,
+        /// Span, K.
+        span: f64,
+    },
+    /// exp(-((w - centre) / width)^2).
+    Peak {
+        /// Centre, rad/s.
+        centre: f64,
+        /// Width, rad/s.
+        width: f64,
+    },
+    /// 1 / (1 + exp(-(w - at) / sharpness)).
+    Step {
+        /// Where, rad/s.
+        at: f64,
+        /// Sharpness, rad/s.
+        sharpness: f64,
+    },
+}
+
+impl BasisKind {
+    /// Its value at cam speed `w` (rad/s), load `tau` (N m), time `t` (s) and motor
+    /// temperature `temp` (deg C).
+    pub fn eval(&self, w: f64, tau: f64, t: f64, temp: f64) -> f64 {
+        match *self {
+            BasisKind::Power {
+                pw,
+                pt,
+                w_max,
+                tau_max,
+            } => (w / w_max).powi(pw) * (tau.abs() / tau_max).powi(pt),
+            BasisKind::Time { t_max } => t / t_max,
+            BasisKind::Temperature { lo, span } => (temp - lo) / span,
+            BasisKind::Peak { centre, width } => (-((w - centre) / width).powi(2)).exp(),
+            BasisKind::Step { at, sharpness } => 1.0 / (1.0 + (-(w - at) / sharpness).exp()),
+        }
+    }
+}
+
 /// One basis function, with how it reads in words and in a user effect's expression.
 #[derive(Debug, Clone)]
 struct Basis {
@@ -31,6 +92,7 @@ struct Basis {
     /// The expression over the user-effect variables (w, tau, t, temp) without its
     /// coefficient.
     expression: String,
+    kind: BasisKind,
     values: Vec<f64>,
 }
 
@@ -63,6 +125,20 @@ pub struct ResidualShape {
     pub user_effect: String,
     /// RMSE of the residual before and after the shape, mA.
     pub rmse_ma: [f64; 2],
+    /// The selected basis functions with their coefficients (A), for predictions.
+    #[serde(skip)]
+    pub parts: Vec<(BasisKind, f64)>,
+}
+
+impl ResidualShape {
+    /// The shape's current at cam speed `w` (rad/s), load `tau` (N m), time `t` (s) and motor
+    /// temperature `temp` (deg C), A.
+    pub fn current(&self, w: f64, tau: f64, t: f64, temp: f64) -> f64 {
+        self.parts
+            .iter()
+            .map(|(k, c)| c * k.eval(w, tau, t, temp))
+            .sum()
+    }
 }
 
 fn bases(points: &TestPoints) -> Vec<Basis> {
@@ -84,58 +160,72 @@ fn bases(points: &TestPoints) -> Vec<Basis> {
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| {
             (a.min(t), b.max(t))
         });
-    let w = |k: usize| points.ops[k].omega_n / w_max;
-    let tau = |k: usize| points.ops[k].tau_rot.abs() / tau_max;
     let (ws, ts) = (fmt(w_max), fmt(tau_max));
     let mut out = Vec::new();
-    let mut push = |name: &str, words: &str, expression: String, f: &dyn Fn(usize) -> f64| {
+    let mut push = |name: &str, words: &str, expression: String, kind: BasisKind| {
+        let values = (0..n)
+            .map(|k| {
+                let op = &points.ops[k];
+                kind.eval(op.omega_n, op.tau_rot, points.time_s[k], points.temp_c[k])
+            })
+            .collect();
         out.push(Basis {
             name: name.into(),
             words: words.into(),
             expression,
-            values: (0..n).map(f).collect(),
+            kind,
+            values,
         })
     };
-    push("1", "a constant", "1".into(), &|_| 1.0);
-    push("w", "grows like speed", format!("(w / {ws})"), &|k| w(k));
+    let power = |pw: i32, pt: i32| BasisKind::Power {
+        pw,
+        pt,
+        w_max,
+        tau_max,
+    };
+    push("1", "a constant", "1".into(), power(0, 0));
+    push("w", "grows like speed", format!("(w / {ws})"), power(1, 0));
     push(
         "w^2",
         "grows like speed squared",
         format!("(w / {ws})^2"),
-        &|k| w(k).powi(2),
+        power(2, 0),
     );
     push(
         "w^3",
         "grows like speed cubed",
         format!("(w / {ws})^3"),
-        &|k| w(k).powi(3),
+        power(3, 0),
     );
-    push("tau", "grows like load", format!("(tau / {ts})"), &|k| {
-        tau(k)
-    });
+    push(
+        "tau",
+        "grows like load",
+        format!("(tau / {ts})"),
+        power(0, 1),
+    );
     push(
         "tau^2",
         "grows like load squared",
         format!("(tau / {ts})^2"),
-        &|k| tau(k).powi(2),
+        power(0, 2),
     );
     push(
         "w tau",
         "grows like speed times load",
         format!("(w / {ws}) * (tau / {ts})"),
-        &|k| w(k) * tau(k),
+        power(1, 1),
     );
     push(
         "w^2 tau",
         "grows like speed squared times load",
         format!("(w / {ws})^2 * (tau / {ts})"),
-        &|k| w(k).powi(2) * tau(k),
+        power(2, 1),
     );
     push(
         "w tau^2",
         "grows like speed times load squared",
         format!("(w / {ws}) * (tau / {ts})^2"),
-        &|k| w(k) * tau(k).powi(2),
+        power(1, 2),
     );
     if t_max > 0.0 {
         let tm = fmt(t_max);
@@ -143,7 +233,7 @@ fn bases(points: &TestPoints) -> Vec<Basis> {
             "t",
             "grows with time through the session",
             format!("(t / {tm})"),
-            &|k| points.time_s[k] / t_max,
+            BasisKind::Time { t_max },
         );
     }
     if temp_hi - temp_lo > 1.0 {
@@ -153,7 +243,7 @@ fn bases(points: &TestPoints) -> Vec<Basis> {
             "temp",
             "grows with the motor temperature",
             format!("((temp - {lo}) / {sp})"),
-            &|k| (points.temp_c[k] - temp_lo) / span,
+            BasisKind::Temperature { lo: temp_lo, span },
         );
     }
     // Narrow peaks at each speed level and steps between neighbouring levels.
@@ -174,7 +264,7 @@ fn bases(points: &TestPoints) -> Vec<Basis> {
                 &format!("peak {hz:.1} Hz"),
                 &format!("a narrow peak at {hz:.1} Hz of cam speed (a resonance?)"),
                 format!("exp(-((w - {}) / {})^2)", fmt(c), fmt(width)),
-                &|k| (-((points.ops[k].omega_n - c) / width).powi(2)).exp(),
+                BasisKind::Peak { centre: c, width },
             );
         }
         for pair in levels.windows(2) {
@@ -185,7 +275,10 @@ fn bases(points: &TestPoints) -> Vec<Basis> {
                 &format!("step {hz:.1} Hz"),
                 &format!("a step up above {hz:.1} Hz of cam speed"),
                 format!("1 / (1 + exp(-(w - {}) / {}))", fmt(m), fmt(s)),
-                &|k| 1.0 / (1.0 + (-(points.ops[k].omega_n - m) / s).exp()),
+                BasisKind::Step {
+                    at: m,
+                    sharpness: s,
+                },
             );
         }
     }
@@ -344,7 +437,13 @@ pub fn residual_shape(points: &TestPoints, fit: &Fit) -> ResidualShape {
     let sse1 = least_squares(&bases, &chosen, &y, &points.weight).map_or(sse0, |(_, s)| s);
     let description = describe(&terms, &rivals, separable);
     let user_effect = user_effect(&bases, &chosen, &coefficients);
+    let parts = chosen
+        .iter()
+        .zip(&coefficients)
+        .map(|(&c, &k)| (bases[c].kind, k))
+        .collect();
     ResidualShape {
+        parts,
         terms,
         rivals,
         separable,

@@ -444,3 +444,43 @@ fn the_shape_of_a_resonance_is_described_and_refits_as_a_user_effect() {
     );
     assert!(!again.lack_of_fit.significant, "{:?}", again.lack_of_fit);
 }
+
+#[test]
+fn an_unexplained_discrepancy_gets_points_that_resolve_its_shape() {
+    use explain::design::{self, DesignOptions, Goal, Space};
+    let rig = RigFile::paper();
+    let noise = 0.010;
+    let data = dataset(&rig, Some(Unknown::Resonance), &plan(noise), 7);
+    let options = Options {
+        replicates: 100,
+        stated_noise_a: Some(noise),
+        ..Options::default()
+    };
+    let outcome = explain::explain(&data, &rig, &options).unwrap();
+    assert_eq!(
+        outcome.explanation.verdict,
+        Verdict::Unexplained,
+        "{}",
+        outcome.explanation.finding
+    );
+    let p = design::propose(
+        &outcome,
+        &Space::for_rig(&rig, &data),
+        &DesignOptions::default(),
+    );
+    assert_eq!(p.goal, Goal::Resolve, "{}", p.reason);
+    assert!(p.reason.contains("narrow peak"), "{}", p.reason);
+    // The points crowd about the peak: most within a speed level's gap of it.
+    let peak = outcome.explanation.gap_after.by_speed[2].centre;
+    let near = p
+        .points
+        .iter()
+        .filter(|q| (q.omega_n_rad_s - peak).abs() < 8.0)
+        .count();
+    assert!(
+        2 * near >= p.points.len(),
+        "{near} of {}: {:?}",
+        p.points.len(),
+        p.points
+    );
+}

@@ -344,9 +344,13 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
             &format!("Written by `rig explain --write-model` from {source}."),
         )?;
     }
-    // A proposal on request, and offered when the data cannot separate the leaders.
-    let ambiguous = outcome.explanation.verdict == explain::Verdict::Ambiguous;
-    let proposal = (args.propose.is_some() || ambiguous).then(|| {
+    // A proposal on request, and offered when the data cannot separate the leaders or a
+    // discrepancy remains that no named effect explains (points that resolve its shape).
+    let offered = matches!(
+        outcome.explanation.verdict,
+        explain::Verdict::Ambiguous | explain::Verdict::Unexplained
+    );
+    let proposal = (args.propose.is_some() || offered).then(|| {
         proposal_for(
             &outcome,
             &data,
