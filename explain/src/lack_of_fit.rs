@@ -165,11 +165,13 @@ fn mean_parameters(fit: &Fit) -> usize {
     fit.free.len() + fit.term_x.iter().map(Vec::len).sum::<usize>()
 }
 
-/// The lack-of-fit test of `fit` (fitted to every point of `points`), with `gap` its gap for
-/// the locations; `stated_noise_a` is the row noise the user states, if any.
+/// The lack-of-fit test of `fit` (fitted to every point of `points`), whose measured minus
+/// fitted current of every row of [`TestPoints::row_view`] is `residuals`, with `gap` its gap
+/// for the locations; `stated_noise_a` is the row noise the user states, if any.
 pub fn lack_of_fit(
     points: &TestPoints,
     fit: &Fit,
+    residuals: &[f64],
     gap: &Gap,
     stated_noise_a: Option<f64>,
 ) -> LackOfFit {
@@ -183,9 +185,7 @@ pub fn lack_of_fit(
     // Per cell: rows, sum, square sum, last residual in time order; successive differences.
     let mut acc = vec![(0usize, 0.0f64, 0.0f64, f64::NAN); cells_total];
     let (mut succ_ss, mut succ_pairs) = (0.0f64, 0usize);
-    let predicted = fit.predict_rows(points);
-    for (j, (&y, f)) in rv.current.iter().zip(predicted).enumerate() {
-        let e = y - f;
+    for (j, &e) in residuals.iter().enumerate() {
         let a = &mut acc[cell_of(j)];
         if a.3.is_finite() {
             succ_ss += (e - a.3) * (e - a.3);

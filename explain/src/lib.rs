@@ -910,7 +910,24 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         .collect();
     let gap_before = gap::gap(&points, &before);
     let gap_after = gap::gap(&points, &after);
-    let lack_of_fit = lack_of_fit::lack_of_fit(&points, &after, &gap_after, options.stated_noise_a);
+    let mut residuals: Vec<f64> = {
+        let f = after.predict_rows(&points);
+        points
+            .row_view
+            .current
+            .iter()
+            .zip(f)
+            .map(|(y, f)| y - f)
+            .collect()
+    };
+    let lack_of_fit = lack_of_fit::lack_of_fit(
+        &points,
+        &after,
+        &residuals,
+        &gap_after,
+        options.stated_noise_a,
+    );
+
     let verdict = match (effects.is_empty(), lack_of_fit.significant) {
         (true, false) => Verdict::NoMissingEffect,
         (true, true) => Verdict::Unexplained,
@@ -951,16 +968,6 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             ),
         })
         .collect();
-    let mut residuals: Vec<f64> = {
-        let f = after.predict_rows(&points);
-        points
-            .row_view
-            .current
-            .iter()
-            .zip(f)
-            .map(|(y, f)| y - f)
-            .collect()
-    };
     let robust_sigma_a = robust::robust_scale(&mut residuals);
     drop(residuals);
     let bootstrap = boot.as_ref().map(|b| BootstrapReport {

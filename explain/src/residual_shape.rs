@@ -292,70 +292,114 @@ fn fmt(v: f64) -> String {
     format!("{parsed}")
 }
 
-/// Weighted least squares of `y` on the bases `chosen`: coefficients and SSE.
-fn least_squares(
-    bases: &[Basis],
-    chosen: &[usize],
-    y: &[f64],
-    w: &[f64],
-) -> Option<(Vec<f64>, f64)> {
-    let p = chosen.len();
-    let mut a = vec![0.0; p * p];
-    let mut b = vec![0.0; p];
-    for k in 0..y.len() {
-        if w[k] == 0.0 {
-            continue;
+/// Weighted moments of the bases and the residual: the Gram matrix (B x B), the bases times
+/// the residual, the residual's square sum, the rows and the rows' spread within points.
+/// Moments add, so a bootstrap resample of blocks is a weighted sum of the blocks' moments.
+#[derive(Debug, Clone)]
+struct Moments {
+    gram: Vec<f64>,
+    xy: Vec<f64>,
+    yy: f64,
+    rows: f64,
+    within: f64,
+}
+
+impl Moments {
+    fn zero(b: usize) -> Self {
+        Self {
+            gram: vec![0.0; b * b],
+            xy: vec![0.0; b],
+            yy: 0.0,
+            rows: 0.0,
+            within: 0.0,
         }
-        for (i, &ci) in chosen.iter().enumerate() {
-            let xi = bases[ci].values[k];
-            b[i] += w[k] * xi * y[k];
-            for (j, &cj) in chosen.iter().enumerate().take(i + 1) {
-                a[i * p + j] += w[k] * xi * bases[cj].values[k];
+    }
+
+    fn add_scaled(&mut self, other: &Moments, s: f64) {
+        self.gram
+            .iter_mut()
+            .zip(&other.gram)
+            .for_each(|(a, b)| *a += s * b);
+        self.xy
+            .iter_mut()
+            .zip(&other.xy)
+            .for_each(|(a, b)| *a += s * b);
+        self.yy += s * other.yy;
+        self.rows += s * other.rows;
+        self.within += s * other.within;
+    }
+}
+
+/// The moments of each bootstrap block of `points` for residual `y`.
+fn block_moments(points: &TestPoints, bases: &[Basis], y: &[f64]) -> Vec<Moments> {
+    let nb = bases.len();
+    let blocks = points.blocks.max(1);
+    let mut out = vec![Moments::zero(nb); blocks];
+    for k in 0..y.len() {
+        let m = &mut out[(points.block[k] as usize).min(blocks - 1)];
+        let w = points.weight[k];
+        m.yy += w * y[k] * y[k];
+        m.rows += w;
+        m.within += points.within_ss[k];
+        for i in 0..nb {
+            let xi = bases[i].values[k];
+            m.xy[i] += w * xi * y[k];
+            for j in 0..=i {
+                m.gram[i * nb + j] += w * xi * bases[j].values[k];
             }
         }
     }
-    for i in 0..p {
-        for j in 0..i {
-            a[j * p + i] = a[i * p + j];
+    for m in &mut out {
+        for i in 0..nb {
+            for j in 0..i {
+                m.gram[j * nb + i] = m.gram[i * nb + j];
+            }
+        }
+    }
+    out
+}
+
+/// Weighted least squares of the residual on the bases `chosen`, from moments `m`:
+/// coefficients and SSE.
+fn least_squares(m: &Moments, nb: usize, chosen: &[usize]) -> Option<(Vec<f64>, f64)> {
+    let p = chosen.len();
+    if p == 0 {
+        return Some((Vec::new(), m.yy));
+    }
+    let mut a = vec![0.0; p * p];
+    let mut b = vec![0.0; p];
+    for (i, &ci) in chosen.iter().enumerate() {
+        b[i] = m.xy[ci];
+        for (j, &cj) in chosen.iter().enumerate() {
+            a[i * p + j] = m.gram[ci * nb + cj];
         }
         // A touch of ridge keeps nearly collinear bases solvable.
         a[i * p + i] *= 1.0 + 1e-10;
     }
     let l = stats::cholesky(&a, p)?;
     let c = stats::cholesky_solve(&l, p, &b);
-    let sse = (0..y.len())
-        .map(|k| {
-            let f: f64 = chosen
-                .iter()
-                .zip(&c)
-                .map(|(&ci, ck)| ck * bases[ci].values[k])
-                .sum();
-            w[k] * (y[k] - f) * (y[k] - f)
-        })
-        .sum();
-    Some((c, sse))
+    let fitted: f64 = c.iter().zip(&b).map(|(c, b)| c * b).sum();
+    Some((c, (m.yy - fitted).max(0.0)))
 }
 
-/// Forward selection by BIC over `bases` with point weights `w` (rows per point; `extra`:
-/// the rows' spread within points, the same for every model).
-fn select(bases: &[Basis], y: &[f64], w: &[f64], extra: f64) -> Vec<usize> {
-    let n: f64 = w.iter().sum();
+/// Forward selection by BIC over the bases, from moments `m`.
+fn select(m: &Moments, nb: usize) -> Vec<usize> {
+    let n = m.rows;
     if n < 3.0 {
         return Vec::new();
     }
-    let bic = |sse: f64, k: usize| n * ((sse + extra).max(1e-300) / n).ln() + k as f64 * n.ln();
-    let sse0: f64 = y.iter().zip(w).map(|(v, w)| w * v * v).sum();
+    let bic = |sse: f64, k: usize| n * ((sse + m.within).max(1e-300) / n).ln() + k as f64 * n.ln();
     let mut chosen: Vec<usize> = Vec::new();
-    let mut best_bic = bic(sse0, 0);
+    let mut best_bic = bic(m.yy, 0);
     while chosen.len() < MAX_TERMS {
         let mut step: Option<(usize, f64)> = None;
-        for c in 0..bases.len() {
+        for c in 0..nb {
             if chosen.contains(&c) {
                 continue;
             }
             let mut trial = chosen.clone();
             trial.push(c);
-            if let Some((_, sse)) = least_squares(bases, &trial, y, w) {
+            if let Some((_, sse)) = least_squares(m, nb, &trial) {
                 let b = bic(sse, trial.len());
                 if step.is_none_or(|(_, s)| b < s) {
                     step = Some((c, b));
@@ -376,6 +420,7 @@ fn select(bases: &[Basis], y: &[f64], w: &[f64], extra: f64) -> Vec<usize> {
 /// The shape of the residual of `fit` on `points`.
 pub fn residual_shape(points: &TestPoints, fit: &Fit) -> ResidualShape {
     let bases = bases(points);
+    let nb = bases.len();
     let predicted = fit.predict(points);
     let y: Vec<f64> = points
         .current
@@ -383,33 +428,29 @@ pub fn residual_shape(points: &TestPoints, fit: &Fit) -> ResidualShape {
         .zip(&predicted)
         .map(|(m, f)| m - f)
         .collect();
-    let within: f64 = points.within_ss.iter().sum();
-    let chosen = select(&bases, &y, &points.weight, within);
-    let coefficients = least_squares(&bases, &chosen, &y, &points.weight)
-        .map(|(c, _)| c)
-        .unwrap_or_default();
+    let by_block = block_moments(points, &bases, &y);
+    let mut total = Moments::zero(nb);
+    for m in &by_block {
+        total.add_scaled(m, 1.0);
+    }
+    let chosen = select(&total, nb);
+    let (coefficients, sse1) = least_squares(&total, nb, &chosen).unwrap_or((Vec::new(), total.yy));
     // Block bootstrap of the selection.
-    let mut counts = vec![0usize; bases.len()];
+    let mut counts = vec![0usize; nb];
     let mut rng = NoiseSource::new(SEED);
-    let blocks = points.blocks.max(1);
+    let blocks = by_block.len();
     for _ in 0..RESAMPLES {
         let mut draws = vec![0.0f64; blocks];
         for _ in 0..blocks {
             draws[(rng.next_u64() % blocks as u64) as usize] += 1.0;
         }
-        let w: Vec<f64> = points
-            .weight
-            .iter()
-            .zip(&points.block)
-            .map(|(w, &b)| w * draws[(b as usize).min(blocks - 1)])
-            .collect();
-        let extra: f64 = points
-            .within_ss
-            .iter()
-            .zip(&points.block)
-            .map(|(s, &b)| s * draws[(b as usize).min(blocks - 1)])
-            .sum();
-        for c in select(&bases, &y, &w, extra) {
+        let mut m = Moments::zero(nb);
+        for (b, d) in by_block.iter().zip(&draws) {
+            if *d > 0.0 {
+                m.add_scaled(b, *d);
+            }
+        }
+        for c in select(&m, nb) {
             counts[c] += 1;
         }
     }
@@ -432,9 +473,8 @@ pub fn residual_shape(points: &TestPoints, fit: &Fit) -> ResidualShape {
         .collect();
     let separable =
         !terms.is_empty() && terms.iter().all(|t| t.inclusion_probability >= FIRM_SHARE);
-    let n: f64 = points.weight.iter().sum::<f64>().max(1.0);
-    let sse0: f64 = y.iter().zip(&points.weight).map(|(v, w)| w * v * v).sum();
-    let sse1 = least_squares(&bases, &chosen, &y, &points.weight).map_or(sse0, |(_, s)| s);
+    let n = total.rows.max(1.0);
+    let sse0 = total.yy;
     let description = describe(&terms, &rivals, separable);
     let user_effect = user_effect(&bases, &chosen, &coefficients);
     let parts = chosen
