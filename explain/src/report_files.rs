@@ -749,6 +749,15 @@ mod tests {
     use super::*;
 
     #[test]
+    fn whiteness_words_follow_the_p_value() {
+        // The case: p = 0.017 is not "white".
+        assert!(!whiteness_words(0.017).starts_with("consistent"));
+        assert!(whiteness_words(0.017).contains("not clearly white"));
+        assert!(whiteness_words(0.004).starts_with("not white"));
+        assert_eq!(whiteness_words(0.5), "consistent with white noise");
+    }
+
+    #[test]
     fn an_ambiguous_verdict_says_what_would_separate_its_candidates() {
         let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         let none = |_: &str| false;
