@@ -341,11 +341,11 @@ fn block_moments(points: &TestPoints, bases: &[Basis], y: &[f64]) -> Vec<Moments
         m.yy += w * y[k] * y[k];
         m.rows += w;
         m.within += points.within_ss[k];
-        for i in 0..nb {
-            let xi = bases[i].values[k];
+        for (i, bi) in bases.iter().enumerate() {
+            let xi = bi.values[k];
             m.xy[i] += w * xi * y[k];
-            for j in 0..=i {
-                m.gram[i * nb + j] += w * xi * bases[j].values[k];
+            for (j, bj) in bases.iter().enumerate().take(i + 1) {
+                m.gram[i * nb + j] += w * xi * bj.values[k];
             }
         }
     }

@@ -321,7 +321,7 @@ fn affine_mu_fit(
     r: &Reading,
 ) -> (f64, f64) {
     let at = |mu: f64| {
-        let mut m = start.clone();
+        let mut m = *start;
         m.mu = mu;
         m
     };

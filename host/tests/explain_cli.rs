@@ -343,7 +343,12 @@ fn json_carries_lack_of_fit_plausibility_and_extrapolation() {
     let nmm = dir.path().join("nmm.csv");
     std::fs::write(&nmm, out).unwrap();
     let err = rig()
-        .args(["explain", "--measured", nmm.to_str().unwrap(), "--no-report"])
+        .args([
+            "explain",
+            "--measured",
+            nmm.to_str().unwrap(),
+            "--no-report",
+        ])
         .assert()
         .failure()
         .get_output()

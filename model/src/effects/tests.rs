@@ -150,8 +150,18 @@ fn every_effect_has_physical_limits_with_reasons_on_its_reported_parameters() {
     for info in EFFECTS {
         assert!(!info.limits.is_empty(), "{} has no limits", info.name);
         for l in info.limits {
-            assert!(info.param(l.key).is_some(), "{}: no parameter {}", info.name, l.key);
-            assert!(l.why.len() > 40, "{}: {} needs its reason", info.name, l.key);
+            assert!(
+                info.param(l.key).is_some(),
+                "{}: no parameter {}",
+                info.name,
+                l.key
+            );
+            assert!(
+                l.why.len() > 40,
+                "{}: {} needs its reason",
+                info.name,
+                l.key
+            );
             let (lo, hi) = l.range(&ctx);
             assert!(lo < hi, "{}: {}", info.name, l.key);
         }
@@ -172,7 +182,13 @@ fn every_effect_has_physical_limits_with_reasons_on_its_reported_parameters() {
     assert!(outside(limit(Effect::InertiaRectification, "kappa"), 2.4));
     assert!(outside(limit(Effect::ThermalDrift, "k_per_c"), -1e-3));
     // Half the 1 mm stroke at 100 N: 5 um/N.
-    assert!(outside(limit(Effect::ToothCompliance, "compliance_um_per_n"), 5.0));
-    assert!(!outside(limit(Effect::ToothCompliance, "compliance_um_per_n"), 1.0));
+    assert!(outside(
+        limit(Effect::ToothCompliance, "compliance_um_per_n"),
+        5.0
+    ));
+    assert!(!outside(
+        limit(Effect::ToothCompliance, "compliance_um_per_n"),
+        1.0
+    ));
     assert!(outside(MU_PHYSICAL, 0.0002));
 }
