@@ -18,7 +18,7 @@
 //! set of effects is, and for a named effect how often a competitor is selected without it
 //! (the ambiguity judgement of [`crate::explain`]). The seed is fixed: a run repeats exactly.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use model::effects::Effect;
 use model::plant::NoiseSource;
@@ -401,6 +401,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         .saturating_sub(selection.start.spec.effects.len());
     // Fits and steps by path (the effects added, in order), seeded from the real selection.
     let mut fits: BTreeMap<Vec<Cand>, Fit> = BTreeMap::new();
+    // Paths whose last effect's full-data fit breaks a physical limit: as in the selection,
+    // a replicate that reaches one names nothing more.
+    let mut implausible: BTreeSet<Vec<Cand>> = BTreeSet::new();
     let mut steps: BTreeMap<Vec<Cand>, StepNode> = BTreeMap::new();
     let mut path = Vec::new();
     fits.insert(path.clone(), selection.start.clone());
@@ -410,6 +413,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             if let Some(f) = &c.fit {
                 let mut child = path.clone();
                 child.push(c.cand);
+                if !crate::plausibility::check_model(points, f).plausible {
+                    implausible.insert(child.clone());
+                }
                 fits.insert(child, f.clone());
                 children.push(c.cand);
             }
@@ -473,6 +479,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                     for (e, f) in children {
                         let mut child = p.clone();
                         child.push(e);
+                        if !crate::plausibility::check_model(points, &f).plausible {
+                            implausible.insert(child.clone());
+                        }
                         fits.insert(child, f);
                     }
                     StepNode {
@@ -532,6 +541,11 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 }
             }
             let (e, gain, s) = best?;
+            let mut reached = p.clone();
+            reached.push(e);
+            if implausible.contains(&reached) {
+                return None;
+            }
             let confirmed = match (here.held_out, s.held_out) {
                 (Some(b), Some(a)) if e == Cand::Effect(Effect::MeshLoadSharingRipple) => {
                     a.nlpd < b.nlpd

@@ -21,6 +21,58 @@ pub const REQUIRED_COLUMNS: [&str; 3] = ["omega_n_rad_s", "tau_rot_nm", "i_in_a"
 pub const OPTIONAL_COLUMNS: [&str; 4] = ["t_s", "v_in_v", "temp_c", "backdriven"];
 /// Fewest rows with a current that `rig explain` works with.
 pub const MIN_ROWS: usize = 10;
+/// Longest line of a measured file, bytes: a header of every column the tools write is
+/// about 100 bytes, so a longer line is not a table (a file without line ends, `/dev/zero`,
+/// a sparse file); reading stops there instead of buffering it whole.
+pub const MAX_LINE_BYTES: usize = 64 * 1024;
+/// Most rows the column buffers reserve up front from the file's size (they grow beyond).
+const MAX_RESERVED_ROWS: u64 = 4_000_000;
+
+/// `text` cut to at most `max` characters, with how much was left out.
+fn shortened(text: &str, max: usize) -> String {
+    match text.char_indices().nth(max) {
+        None => text.to_string(),
+        Some((cut, _)) => format!(
+            "{} ... ({} more bytes not shown)",
+            &text[..cut],
+            text.len() - cut
+        ),
+    }
+}
+
+/// A reader that fails once a line grows beyond `limit` bytes, so a file without line ends
+/// is refused after a bounded read (the CSV reader would otherwise buffer the line whole).
+struct LineBounded<R> {
+    inner: R,
+    since_newline: usize,
+    line: u64,
+    limit: usize,
+}
+
+impl<R: Read> Read for LineBounded<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        let chunk = &buf[..n];
+        match chunk.iter().rposition(|&b| b == b'\n') {
+            Some(last) => {
+                self.line += chunk.iter().filter(|&&b| b == b'\n').count() as u64;
+                self.since_newline = n - last - 1;
+            }
+            None => self.since_newline += n,
+        }
+        if self.since_newline > self.limit {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "line {} is longer than {} KiB: not a CSV table of test points (a file without line ends?); reading stopped there",
+                    self.line + 1,
+                    self.limit / 1024
+                ),
+            ));
+        }
+        Ok(n)
+    }
+}
 
 /// One test point.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -295,6 +347,22 @@ impl Dataset {
 
     /// Reads a CSV file (see the module docs for the columns).
     pub fn read_csv(path: &Path) -> Result<Self, ExplainError> {
+        // A FIFO or a device would block or never end: only regular files are read.
+        if let Ok(meta) = std::fs::metadata(path)
+            && !meta.is_file()
+        {
+            return Err(ExplainError::MeasuredFile {
+                file: path.display().to_string(),
+                why: format!(
+                    "is not a regular file ({}): save the measurement to a file first",
+                    if meta.is_dir() {
+                        "a folder"
+                    } else {
+                        "a pipe, socket or device"
+                    }
+                ),
+            });
+        }
         let file = std::fs::File::open(path).map_err(|source| ExplainError::File {
             action: "read",
             path: path.display().to_string(),
@@ -321,6 +389,12 @@ impl Dataset {
     /// columns once.
     fn parse_csv_sized<R: Read>(reader: R, name: &str, bytes: u64) -> Result<Self, ExplainError> {
         // Fields are trimmed as they are parsed (cheaper than trimming every record).
+        let reader = LineBounded {
+            inner: reader,
+            since_newline: 0,
+            line: 0,
+            limit: MAX_LINE_BYTES,
+        };
         let mut csv = csv::ReaderBuilder::new()
             .trim(csv::Trim::Headers)
             .comment(Some(b'#'))
@@ -363,7 +437,7 @@ impl Dataset {
             *slot = find(column)?.ok_or_else(|| ExplainError::MissingColumn {
                 file: name.to_string(),
                 column: column.to_string(),
-                found: headers.iter().collect::<Vec<_>>().join(", "),
+                found: shortened(&headers.iter().collect::<Vec<_>>().join(", "), 240),
             })?;
         }
         let [c_omega, c_tau, c_i] = required;
@@ -372,7 +446,7 @@ impl Dataset {
         let columns = headers.len();
 
         // About 60 bytes a row in the usual files: reserve once instead of doubling.
-        let mut raw = RawColumns::with_capacity((bytes / 48).min(50_000_000) as usize);
+        let mut raw = RawColumns::with_capacity((bytes / 48).min(MAX_RESERVED_ROWS) as usize);
         let mut record = csv::ByteRecord::new();
         loop {
             let row = raw.len() + 1;

@@ -82,6 +82,10 @@ pub enum Goal {
     Pin,
     /// Look where the first step's leading candidates would show most (no finding yet).
     Seek,
+    /// Resolve the shape of a discrepancy no named effect explains (`unexplained`): where
+    /// the residual's shape ([`crate::residual_shape`]) departs most from the model, e.g. a
+    /// denser speed grid about a peak, more loads where it bends.
+    Resolve,
 }
 
 /// Cam speed at a supply voltage and load, w = a + b v + c tau (rad/s).
@@ -420,6 +424,8 @@ struct Compared {
     model: CurrentModel,
     terms: Vec<usize>,
     term_x: Vec<Vec<f64>>,
+    /// A residual shape added to the mean current (basis, coefficient in A).
+    shape: Vec<(crate::residual_shape::BasisKind, f64)>,
 }
 
 impl Compared {
@@ -429,6 +435,7 @@ impl Compared {
             model: fit.model,
             terms: fit.spec.terms.clone(),
             term_x: fit.term_x.clone(),
+            shape: Vec::new(),
         }
     }
 
@@ -442,7 +449,17 @@ impl Compared {
         temp: f64,
     ) -> Vec<f64> {
         let ev = self.model.evaluator();
-        let mut out: Vec<f64> = ops.iter().map(|op| ev.current(op)).collect();
+        let mut out: Vec<f64> = ops
+            .iter()
+            .map(|op| {
+                ev.current(op)
+                    + self
+                        .shape
+                        .iter()
+                        .map(|(k, c)| c * k.eval(op.omega_n, op.tau_rot, time, temp))
+                        .sum::<f64>()
+            })
+            .collect();
         if self.terms.is_empty() {
             return out;
         }
@@ -544,11 +561,18 @@ fn leading(outcome: &Outcome, options: &DesignOptions) -> (Goal, Vec<Leader>) {
             }
             (Goal::Pin, list)
         }
-        Verdict::Explained => {
+        Verdict::Explained | Verdict::PartlyExplained => {
             let first = e.effects.first().map(|f| f.name.clone());
             (Goal::Pin, named(&mut first.iter()))
         }
-        Verdict::NoMissingEffect => {
+        Verdict::Unexplained
+            if e.residual_shape
+                .as_ref()
+                .is_some_and(|r| !r.parts.is_empty()) =>
+        {
+            (Goal::Resolve, Vec::new())
+        }
+        Verdict::NoMissingEffect | Verdict::Unexplained => {
             let mut c: Vec<(&String, f64)> = e
                 .candidates
                 .iter()
@@ -632,6 +656,15 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
             models.push(Compared::of("base".into(), &outcome.before));
             models.extend(fit::par_map(&leaders, fitted));
             pairs.extend((1..models.len()).map(|k| (0, k)));
+        }
+        Goal::Resolve => {
+            if let Some(shape) = &outcome.explanation.residual_shape {
+                models.push(Compared::of("model".into(), &outcome.after));
+                let mut with = Compared::of("model + residual shape".into(), &outcome.after);
+                with.shape = shape.parts.clone();
+                models.push(with);
+                pairs.push((0, 1));
+            }
         }
         Goal::Pin => {
             if let Some(l) = leaders.first() {
@@ -757,6 +790,19 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
         Goal::Seek => format!(
             "no effect found yet: where the leading candidates ({}) would differ most from the model (up to {best:.1} noise sd per test at their fitted size)",
             names.join(", ")
+        ),
+        Goal::Resolve => format!(
+            "a discrepancy no named effect explains: where its shape ({}) departs most from the model (up to {best:.1} noise sd per test), to resolve it",
+            outcome
+                .explanation
+                .residual_shape
+                .as_ref()
+                .map_or("unknown".into(), |r| r
+                    .terms
+                    .iter()
+                    .map(|t| t.words.clone())
+                    .collect::<Vec<_>>()
+                    .join(", "))
         ),
     };
     let mut candidates: Vec<String> = models.iter().map(|m| m.name.clone()).collect();

@@ -27,12 +27,16 @@
 pub mod bootstrap;
 pub mod data;
 pub mod design;
+pub mod extrapolation;
 pub mod fit;
 pub mod gap;
+pub mod lack_of_fit;
 pub mod library;
 
+pub mod plausibility;
 pub mod points;
 pub mod report_files;
+pub mod residual_shape;
 pub mod robust;
 pub mod select;
 pub mod stats;
@@ -63,19 +67,27 @@ use terms::{Form, Term, TermParam};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Verdict {
-    /// One or more effects were found and added; the gap shrank.
+    /// One or more effects were found and added; what remains is within the noise.
     Explained,
-    /// The model agrees with the measurement within its noise.
+    /// Named effects shrink the gap, but a significant lack of fit remains.
+    PartlyExplained,
+    /// A significant lack of fit remains and no named effect explains it.
+    Unexplained,
+    /// The model agrees with the measurement within its noise (the lack of fit is not
+    /// significant).
     NoMissingEffect,
     /// An effect is missing, but the data cannot tell which of several candidates.
     Ambiguous,
 }
 
 impl Verdict {
-    /// The verdict as printed (`explained`, `no-missing-effect`, `ambiguous`).
+    /// The verdict as printed (`explained`, `partly-explained`, `unexplained`,
+    /// `no-missing-effect`, `ambiguous`).
     pub fn as_str(self) -> &'static str {
         match self {
             Verdict::Explained => "explained",
+            Verdict::PartlyExplained => "partly-explained",
+            Verdict::Unexplained => "unexplained",
             Verdict::NoMissingEffect => "no-missing-effect",
             Verdict::Ambiguous => "ambiguous",
         }
@@ -107,6 +119,14 @@ pub struct EffectReport {
     /// BIC weight of the models with it (in any of its laws) among the models of its step
     /// (the model without it and every candidate).
     pub bic_weight: f64,
+    /// Whether every physical limit of its parameters holds (the effects table's limits, mu,
+    /// the shape's search edges).
+    pub plausible: bool,
+    /// The limits checked, each with its reason.
+    pub limits: Vec<plausibility::LimitCheck>,
+    /// Held-out edges of the tested range (whole speed levels and load ranges) predicted
+    /// with and without it; null when the effect did not stay in the final model.
+    pub extrapolation: Option<extrapolation::Extrapolation>,
 }
 
 /// A row of a candidate table.
@@ -135,6 +155,10 @@ pub struct CandidateReport {
     pub bic_weight: Option<f64>,
     /// Share of the block-bootstrap replicates of the whole selection that select it.
     pub inclusion_probability: Option<f64>,
+    /// Whether its fit keeps every physical limit (null when not fitted).
+    pub plausible: Option<bool>,
+    /// The limits its fit breaks, with their reasons (empty when it keeps them all).
+    pub limits_broken: Vec<plausibility::LimitCheck>,
 }
 
 /// A candidate of an ambiguous verdict.
@@ -277,6 +301,11 @@ pub struct Explanation {
     pub gap_before: Gap,
     /// Where the final model disagrees.
     pub gap_after: Gap,
+    /// The final model's lack of fit against the data's own noise, and where it lives.
+    pub lack_of_fit: lack_of_fit::LackOfFit,
+    /// The shape of what remains, when the verdict is `unexplained` or `partly-explained`:
+    /// a sparse description over a generic basis and a ready `[[user_effects]]` entry.
+    pub residual_shape: Option<residual_shape::ResidualShape>,
     /// The finding in words.
     pub finding: String,
     /// The report folder, when one was written.
@@ -501,7 +530,7 @@ fn term_intervals(points: &TestPoints, t: usize, fit: &Fit) -> BTreeMap<String, 
 }
 
 /// The reported parameters of `cand` in `fit`.
-fn cand_params(
+pub(crate) fn cand_params(
     points: &TestPoints,
     cand: Cand,
     fit: &Fit,
@@ -520,7 +549,7 @@ fn cand_params(
 }
 
 /// The intervals of `cand`'s parameters in `fit`.
-fn cand_intervals(
+pub(crate) fn cand_intervals(
     points: &TestPoints,
     cand: Cand,
     fit: &Fit,
@@ -580,6 +609,11 @@ fn candidate_report(
 ) -> CandidateReport {
     let name = c.cand.name(points).to_string();
     let form = c.cand.form(points).map(str::to_string);
+    let plaus = c.fit.as_ref().map(|f| plausibility::check_model(points, f));
+    let plausible = plaus.as_ref().map(|p| p.plausible);
+    let limits_broken = plaus
+        .map(|p| p.checks.into_iter().filter(|c| !c.within).collect())
+        .unwrap_or_default();
     match &c.fit {
         Some(f) => CandidateReport {
             name,
@@ -593,6 +627,8 @@ fn candidate_report(
             holdout_rmse_a: c.held_out.map(|h| h.rmse),
             bic_weight: weight,
             inclusion_probability: inclusion,
+            plausible,
+            limits_broken,
         },
         None if c.estimated => CandidateReport {
             name,
@@ -608,6 +644,8 @@ fn candidate_report(
             holdout_rmse_a: None,
             bic_weight: None,
             inclusion_probability: inclusion,
+            plausible,
+            limits_broken,
         },
         None => CandidateReport {
             name,
@@ -621,6 +659,8 @@ fn candidate_report(
             holdout_rmse_a: None,
             bic_weight: None,
             inclusion_probability: None,
+            plausible,
+            limits_broken,
         },
     }
 }
@@ -669,6 +709,7 @@ fn screened_points(
         mut outliers,
         mut warnings,
     } = robust::range_check(data)?;
+    robust::unit_check(data, &excluded, start)?;
     let too_few = |points: &TestPoints| {
         (points.n_rows < data::MIN_ROWS).then(|| ExplainError::TooFewRows {
             file: data.name.clone(),
@@ -730,6 +771,17 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     let thermal = points.thermal;
     let before = selection.start.clone();
     let after = selection.end.clone();
+    let (mu_lo, mu_hi) = model::effects::MU_PHYSICAL.range(&model::effects::LimitContext {
+        max_axial_force_n: 0.0,
+        eccentricity_m: 0.0,
+    });
+    if !(mu_lo..=mu_hi).contains(&after.model.mu) {
+        warnings.push(format!(
+            "the fitted mu = {:.4} is outside the physical range [{mu_lo}, {mu_hi}] ({}): no effect is named on it; check the unit of tau_rot_nm (N m) and the rig file's gear and calibration",
+            after.model.mu,
+            model::effects::MU_PHYSICAL.why
+        ));
+    }
     let name_of = |c: &Cand| c.name(&points).to_string();
     // Inclusion of an effect by name: in any of its laws.
     let inclusion_of = |name: &str| {
@@ -780,6 +832,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         let f = best.fit.as_ref().expect("fitted");
         let in_final = best.cand.in_spec(&after.spec);
         let source = if in_final { &after } else { f };
+        let plaus = plausibility::check(&points, best.cand, source);
         effects.push(EffectReport {
             name: name_of(&best.cand),
             form: best.cand.form(&points).map(str::to_string),
@@ -798,6 +851,10 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
                 .filter(|(c, _)| c.cand.name(&points) == best.cand.name(&points))
                 .filter_map(|(_, w)| *w)
                 .sum(),
+            plausible: plaus.plausible,
+            limits: plaus.checks,
+            extrapolation: in_final
+                .then(|| extrapolation::extrapolation(&points, &after, best.cand)),
         });
     }
     let named = selection.added();
@@ -851,12 +908,32 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         .iter()
         .map(|c| c.name.clone())
         .collect();
-    let verdict = if effects.is_empty() {
-        Verdict::NoMissingEffect
-    } else if !ambiguous.is_empty() {
-        Verdict::Ambiguous
-    } else {
-        Verdict::Explained
+    let gap_before = gap::gap(&points, &before);
+    let gap_after = gap::gap(&points, &after);
+    let mut residuals: Vec<f64> = {
+        let f = after.predict_rows(&points);
+        points
+            .row_view
+            .current
+            .iter()
+            .zip(f)
+            .map(|(y, f)| y - f)
+            .collect()
+    };
+    let lack_of_fit = lack_of_fit::lack_of_fit(
+        &points,
+        &after,
+        &residuals,
+        &gap_after,
+        options.stated_noise_a,
+    );
+
+    let verdict = match (effects.is_empty(), lack_of_fit.significant) {
+        (true, false) => Verdict::NoMissingEffect,
+        (true, true) => Verdict::Unexplained,
+        (false, true) => Verdict::PartlyExplained,
+        (false, false) if !ambiguous.is_empty() => Verdict::Ambiguous,
+        (false, false) => Verdict::Explained,
     };
     let mut inclusion_probabilities = BTreeMap::new();
     if boot.is_some() {
@@ -891,18 +968,6 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             ),
         })
         .collect();
-    let gap_before = gap::gap(&points, &before);
-    let gap_after = gap::gap(&points, &after);
-    let mut residuals: Vec<f64> = {
-        let f = after.predict_rows(&points);
-        points
-            .row_view
-            .current
-            .iter()
-            .zip(f)
-            .map(|(y, f)| y - f)
-            .collect()
-    };
     let robust_sigma_a = robust::robust_scale(&mut residuals);
     drop(residuals);
     let bootstrap = boot.as_ref().map(|b| BootstrapReport {
@@ -953,6 +1018,9 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         steps,
         gap_before,
         gap_after,
+        residual_shape: matches!(verdict, Verdict::Unexplained | Verdict::PartlyExplained)
+            .then(|| residual_shape::residual_shape(&points, &after)),
+        lack_of_fit,
         finding: String::new(),
         report_dir: None,
         model_written: None,

@@ -31,6 +31,53 @@ fn p_text(p: f64) -> String {
     }
 }
 
+/// The residuals' whiteness in words that follow the Ljung-Box p-value: "white" only when
+/// nothing suggests otherwise (p >= 0.1).
+fn whiteness_words(p: f64) -> &'static str {
+    if p < 0.01 {
+        "not white (correlated in time)"
+    } else if p < 0.1 {
+        "not clearly white (weakly correlated in time)"
+    } else {
+        "consistent with white noise"
+    }
+}
+
+/// The lack of fit and where it lives, as a sentence.
+fn lack_of_fit_text(e: &Explanation) -> String {
+    let l = &e.lack_of_fit;
+    let mut s = format!(" {}", capitalised(&l.text()));
+    if !l.testable {
+        s.push('.');
+        return s;
+    }
+    s.push_str(if l.significant {
+        ": a significant discrepancy remains"
+    } else {
+        ": what remains is within that noise"
+    });
+    let at = l.locations_text();
+    if !at.is_empty() {
+        let _ = write!(s, " (it stands out {at})");
+    }
+    s.push('.');
+    if let Some(shape) = &e.residual_shape {
+        let _ = write!(s, " Its shape: {}.", shape.description);
+        if !shape.user_effect.is_empty() {
+            s.push_str(" A ready [[user_effects]] entry is in the JSON (`residual_shape.user_effect`) and the report: name it, paste it into the rig file and refit.");
+        }
+    }
+    s
+}
+
+fn capitalised(text: &str) -> String {
+    let mut c = text.chars();
+    match c.next() {
+        Some(f) => f.to_uppercase().collect::<String>() + c.as_str(),
+        None => String::new(),
+    }
+}
+
 /// The bin of `gap` that stands out most (largest |mean| / standard error).
 fn worst_bin(gap: &Gap) -> Option<(&'static str, &Bin)> {
     let mut best: Option<(&'static str, &Bin, f64)> = None;
@@ -146,13 +193,22 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
         )
     };
     match e.verdict {
-        Verdict::NoMissingEffect => {
-            let _ = write!(
-                s,
-                "{model} agrees with the measurement to {} RMS (held-out {}): no candidate effect is needed.",
-                ma(e.rmse_before_a),
-                opt_ma(e.holdout_rmse_before_a)
-            );
+        Verdict::NoMissingEffect | Verdict::Unexplained => {
+            if e.verdict == Verdict::NoMissingEffect {
+                let _ = write!(
+                    s,
+                    "{model} agrees with the measurement to {} RMS (held-out {}): no candidate effect is needed.",
+                    ma(e.rmse_before_a),
+                    opt_ma(e.holdout_rmse_before_a)
+                );
+            } else {
+                let _ = write!(
+                    s,
+                    "{model} misses the measurement by {} RMS (held-out {}) and none of the named effects explains it: a discrepancy remains whose cause is not in the library.",
+                    ma(e.rmse_before_a),
+                    opt_ma(e.holdout_rmse_before_a)
+                );
+            }
             if let Some(step) = selection.steps.first() {
                 let _ = write!(s, " Closest candidate: {}.", step.reason);
             }
@@ -160,15 +216,12 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
             let _ = write!(
                 s,
                 " The residuals are {} in time order (Ljung-Box {}).",
-                if w.p_value < 0.01 {
-                    "not white"
-                } else {
-                    "white"
-                },
+                whiteness_words(w.p_value),
                 p_text(w.p_value)
             );
+            s.push_str(&lack_of_fit_text(e));
         }
-        Verdict::Explained | Verdict::Ambiguous => {
+        Verdict::Explained | Verdict::Ambiguous | Verdict::PartlyExplained => {
             let _ = write!(
                 s,
                 "{model} misses the measured current by {} RMS",
@@ -198,6 +251,9 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                     let _ = write!(s, ", selected in {:.0} % of the resamples", 100.0 * p);
                 }
                 s.push_str(". ");
+                if let Some(x) = eff.extrapolation.as_ref().filter(|x| x.testable) {
+                    let _ = write!(s, "Extrapolation: {}. ", x.summary);
+                }
                 let rivals = accepted.get(k).map_or(&[][..], |st| &st.ambiguous_with[..]);
                 if k > 0 && !rivals.is_empty() {
                     let _ = write!(
@@ -233,13 +289,13 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                 ma(e.rmse_after_a),
                 opt_ma(e.holdout_rmse_before_a),
                 opt_ma(e.holdout_rmse_after_a),
-                if w.p_value < 0.01 {
-                    "still not white"
-                } else {
-                    "white"
-                },
+                whiteness_words(w.p_value),
                 p_text(w.p_value)
             );
+            s.push_str(&lack_of_fit_text(e));
+            if e.verdict == Verdict::PartlyExplained {
+                s.push_str(" The named effects shrink the gap but do not close it: part of the discrepancy has a cause the library does not name.");
+            }
         }
     }
     s
@@ -271,6 +327,11 @@ pub fn render_text(e: &Explanation, source: &str) -> String {
         opt_ma(e.holdout_rmse_after_a),
         e.mu_after
     );
+    let _ = writeln!(s, "  {}", e.lack_of_fit.text());
+    let at = e.lack_of_fit.locations_text();
+    if !at.is_empty() {
+        let _ = writeln!(s, "  the discrepancy lives {at}");
+    }
     if !e.effects.is_empty() {
         let _ = writeln!(s, "effects, strongest first:");
         for eff in &e.effects {
@@ -404,6 +465,41 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
     let _ = writeln!(s, "# rig explain: {source}\n");
     let _ = writeln!(s, "**Verdict: {}**\n", e.verdict.as_str());
     let _ = writeln!(s, "{}\n", e.finding);
+    let _ = writeln!(
+        s,
+        "## Lack of fit\n\n{}.\n",
+        capitalised(&e.lack_of_fit.text())
+    );
+    if let Some(shape) = &e.residual_shape {
+        let _ = writeln!(
+            s,
+            "## The shape of what remains\n\n{} (residual RMSE {:.1} -> {:.1} mA).\n",
+            capitalised(&shape.description),
+            shape.rmse_ma[0],
+            shape.rmse_ma[1]
+        );
+        if !shape.user_effect.is_empty() {
+            let _ = writeln!(
+                s,
+                "As a user effect for the rig file (name it, paste it, refit with `rig explain --model`):\n\n```toml\n{}```\n",
+                shape.user_effect
+            );
+        }
+    }
+    if !e.lack_of_fit.locations.is_empty() {
+        let _ = writeln!(
+            s,
+            "| where | bin | rows | mean residual, mA | z |\n|---|---|---|---|---|"
+        );
+        for l in &e.lack_of_fit.locations {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {:+.1} | {:+.1} |",
+                l.axis, l.label, l.rows, l.mean_residual_ma, l.z
+            );
+        }
+        s.push('\n');
+    }
     if !e.warnings.is_empty() {
         let _ = writeln!(s, "## Warnings\n");
         for w in &e.warnings {
@@ -651,6 +747,15 @@ pub fn write_report(dir: &Path, outcome: &Outcome, source: &str) -> Result<(), E
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn whiteness_words_follow_the_p_value() {
+        // The issue's case: p = 0.017 is not "white".
+        assert!(!whiteness_words(0.017).starts_with("consistent"));
+        assert!(whiteness_words(0.017).contains("not clearly white"));
+        assert!(whiteness_words(0.004).starts_with("not white"));
+        assert_eq!(whiteness_words(0.5), "consistent with white noise");
+    }
 
     #[test]
     fn an_ambiguous_verdict_says_what_would_separate_its_candidates() {

@@ -245,10 +245,213 @@ pub fn range_check(data: &Dataset) -> Result<RangeCheck, ExplainError> {
             ));
         }
     }
+    warnings.extend(duplicates(data));
     Ok(RangeCheck {
         excluded,
         outliers,
         warnings,
+    })
+}
+
+/// Repeated rows (every value the same as another row's) and repeated time stamps, as
+/// warnings: a logger that wrote a line twice, or files joined twice, weigh some test points
+/// double. Sorted 64-bit keys keep it linear in memory (8 bytes a row).
+fn duplicates(data: &Dataset) -> Vec<String> {
+    let n = data.len();
+    let mut out = Vec::new();
+    let mix = |h: u64, v: f64| -> u64 {
+        (h ^ v.to_bits())
+            .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            .rotate_left(29)
+    };
+    let t = data.t_s();
+    let count_repeats = |mut keys: Vec<u64>| -> usize {
+        keys.sort_unstable();
+        keys.windows(2).filter(|w| w[0] == w[1]).count()
+    };
+    let rows = count_repeats(
+        (0..n)
+            .map(|k| {
+                let mut h = mix(0, data.omega_n()[k]);
+                h = mix(h, data.tau_rot()[k]);
+                h = mix(h, data.i_in()[k]);
+                t.map_or(h, |t| mix(h, t[k]))
+            })
+            .collect(),
+    );
+    if rows > 0 {
+        out.push(format!(
+            "{rows} of {n} rows repeat an earlier row exactly (cam speed, load, current{}): a line written twice or a file joined twice weighs those test points double; remove the copies if they are not real repeats",
+            if t.is_some() { " and time" } else { "" }
+        ));
+    }
+    if let Some(t) = t {
+        let stamps = count_repeats(
+            t.iter()
+                .filter(|v| v.is_finite())
+                .map(|v| v.to_bits())
+                .collect(),
+        );
+        if stamps > rows {
+            out.push(format!(
+                "{stamps} of {n} rows share their t_s with another row: the time order (whiteness, drift, blocks) is ambiguous there; check the logger's clock or the column"
+            ));
+        }
+    }
+    out
+}
+
+/// Rows the unit screen ([`unit_check`]) reads at most (evenly spread over the file).
+const UNIT_SCREEN_ROWS: usize = 20_000;
+
+/// One reading of the speed and load columns: scale factors to SI and the unit they assume.
+struct Reading {
+    speed_scale: f64,
+    load_scale: f64,
+    speed_unit: &'static str,
+    load_unit: &'static str,
+}
+
+/// The paper's model with mu fitted by least squares on `rows` (speed, load, current) read
+/// with `r`: (mu, RMSE in A). The current is affine in mu (Eq. 10), so two evaluations per
+/// row give it exactly.
+fn affine_mu_fit(
+    start: &model::effects::CurrentModel,
+    rows: &[(f64, f64, f64)],
+    r: &Reading,
+) -> (f64, f64) {
+    let at = |mu: f64| {
+        let mut m = *start;
+        m.mu = mu;
+        m
+    };
+    let (m0, m1) = (at(0.0), at(1.0));
+    let (mut saa, mut say) = (0.0, 0.0);
+    let mut parts = Vec::with_capacity(rows.len());
+    for &(w, t, y) in rows {
+        let op = model::effects::OperatingPoint::new(w * r.speed_scale, t * r.load_scale, 0.0);
+        let b = m0.current(&op);
+        let a = m1.current(&op) - b;
+        saa += a * a;
+        say += a * (y - b);
+        parts.push((a, b, y));
+    }
+    let mu = if saa > 0.0 { say / saa } else { 0.0 };
+    let sse: f64 = parts
+        .iter()
+        .map(|(a, b, y)| (y - b - mu * a) * (y - b - mu * a))
+        .sum();
+    (mu, (sse / rows.len().max(1) as f64).sqrt())
+}
+
+/// Refuses a speed or load column in another unit than the header says (cam speed in Hz in
+/// `omega_n_rad_s`, loads in N mm in `tau_rot_nm`): the paper's model is fitted to a sample of
+/// the rows read as given and read in each probable unit; when another reading fits at least
+/// as well with a physical mu where the given one needs an unphysical mu, or at least twice as
+/// well (and the given one needs an unphysical mu or fits four times worse), the column is
+/// named with its probable unit. rpm and mA are caught by the
+/// range rules of [`range_check`].
+pub fn unit_check(
+    data: &Dataset,
+    excluded: &[bool],
+    start: &model::effects::CurrentModel,
+) -> Result<(), ExplainError> {
+    let current = data.i_in();
+    let usable: Vec<usize> = (0..data.len())
+        .filter(|&k| !excluded[k] && current[k].is_finite())
+        .collect();
+    if usable.len() < crate::data::MIN_ROWS {
+        return Ok(());
+    }
+    let step = usable.len().div_ceil(UNIT_SCREEN_ROWS).max(1);
+    let rows: Vec<(f64, f64, f64)> = usable
+        .iter()
+        .step_by(step)
+        .map(|&k| (data.omega_n()[k], data.tau_rot()[k], current[k]))
+        .collect();
+    let w_max = no_load_cam_speed();
+    let top_speed = rows.iter().fold(0.0f64, |m, r| m.max(r.0.abs()));
+    let readings = [
+        Reading {
+            speed_scale: 1.0,
+            load_scale: 1.0,
+            speed_unit: "rad/s",
+            load_unit: "N m",
+        },
+        Reading {
+            speed_scale: 1.0,
+            load_scale: 1e-3,
+            speed_unit: "rad/s",
+            load_unit: "N mm",
+        },
+        Reading {
+            speed_scale: std::f64::consts::TAU,
+            load_scale: 1.0,
+            speed_unit: "Hz",
+            load_unit: "N m",
+        },
+        Reading {
+            speed_scale: std::f64::consts::TAU,
+            load_scale: 1e-3,
+            speed_unit: "Hz",
+            load_unit: "N mm",
+        },
+    ];
+    let physical = model::effects::MU_PHYSICAL.range(&model::effects::LimitContext {
+        max_axial_force_n: 0.0,
+        eccentricity_m: 0.0,
+    });
+    let is_physical = |mu: f64| mu >= physical.0 && mu <= physical.1;
+    let (mu0, rmse0) = affine_mu_fit(start, &rows, &readings[0]);
+    let mut best: Option<(&Reading, f64, f64)> = None;
+    for r in &readings[1..] {
+        // A reading in Hz must still be a speed the motor reaches.
+        if top_speed * r.speed_scale > w_max {
+            continue;
+        }
+        let (mu, rmse) = affine_mu_fit(start, &rows, r);
+        if is_physical(mu) && best.is_none_or(|b| rmse < b.2) {
+            best = Some((r, mu, rmse));
+        }
+    }
+    let Some((r, mu, rmse)) = best else {
+        return Ok(());
+    };
+    // Loads scaled by 1000 scale mu by 1/1000 and fit as well: an unphysical mu that a
+    // probable unit makes physical, at no worse a fit, is enough; otherwise the other
+    // reading must fit clearly better.
+    let same_fit_physical_mu = !is_physical(mu0) && rmse <= 1.25 * rmse0;
+    let clearly_better = rmse < 0.5 * rmse0 && (!is_physical(mu0) || rmse < 0.25 * rmse0);
+    if !(same_fit_physical_mu || clearly_better) {
+        return Ok(());
+    }
+    let mut columns = Vec::new();
+    if r.load_scale != 1.0 {
+        columns.push(format!(
+            "column tau_rot_nm looks like {} (largest load {}), not N m: give the load in N m (divide the column by 1000)",
+            r.load_unit,
+            short(data.tau_rot().iter().fold(0.0f64, |m, v| m.max(v.abs())))
+        ));
+    }
+    if r.speed_scale != 1.0 {
+        columns.push(format!(
+            "column omega_n_rad_s looks like the cam speed in {} (largest {}), not rad/s: give it in rad/s (multiply the column by 2 pi = 6.283)",
+            r.speed_unit,
+            short(top_speed)
+        ));
+    }
+    Err(ExplainError::BadValue {
+        what: format!("{} units", data.name),
+        why: format!(
+            "{}. Read as given, the paper's model needs mu = {} and misses by {:.0} mA RMS; read in {} and {} it fits with mu = {:.3} to {:.0} mA RMS",
+            columns.join("; "),
+            short(mu0),
+            rmse0 * 1e3,
+            r.speed_unit,
+            r.load_unit,
+            mu,
+            rmse * 1e3
+        ),
     })
 }
 

@@ -62,6 +62,9 @@ pub struct Options {
     /// A competitor is ambiguous with a named effect when at least this share of the
     /// bootstrap replicates select the competitor without the named effect.
     pub ambiguity_share: f64,
+    /// Row noise of the current the user states, A (the lack-of-fit test's reference when
+    /// the data has too few repeats for a pure error).
+    pub stated_noise_a: Option<f64>,
 }
 
 impl Default for Options {
@@ -73,6 +76,7 @@ impl Default for Options {
             folds: 5,
             replicates: 200,
             ambiguity_share: 0.2,
+            stated_noise_a: None,
         }
     }
 }
@@ -967,6 +971,19 @@ pub fn select_from(
                 false,
                 format!(
                     "{} improves the BIC by {:.1} ({}) but does not predict held-out points better ({held_note})",
+                    best.cand.name(points),
+                    best_improvement,
+                    p_text(p_value)
+                ),
+            )
+        } else if let Some(why) = Some(crate::plausibility::check_model(points, best_fit))
+            .filter(|p| !p.plausible)
+            .map(|p| p.failures())
+        {
+            (
+                false,
+                format!(
+                    "{} improves the BIC by {:.1} ({}), but only with values no rig can have: {why}; it is not named",
                     best.cand.name(points),
                     best_improvement,
                     p_text(p_value)

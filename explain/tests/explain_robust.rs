@@ -243,8 +243,10 @@ fn data_that_cannot_separate_two_candidates_is_ambiguous() {
             Verdict::Explained if e.effects[0].inclusion_probability.unwrap() >= 0.8 => {
                 confident_wrong += 1;
             }
-            Verdict::Explained => {}
-            Verdict::NoMissingEffect => {}
+            Verdict::Explained
+            | Verdict::NoMissingEffect
+            | Verdict::PartlyExplained
+            | Verdict::Unexplained => {}
         }
     }
     assert!(ambiguous >= 3, "ambiguous {ambiguous} of 8");

@@ -68,6 +68,8 @@ fn discover_names_a_hidden_effect_on_the_in_process_virtual_rig() {
             .args([
                 "--sim",
                 "discover",
+                "--preset",
+                "ideal",
                 "--effect",
                 "speed-dependent-axial-friction",
                 "--json",
@@ -112,6 +114,8 @@ fn discover_gives_no_finding_on_an_effect_free_virtual_rig() {
                 .args([
                     "--sim",
                     "discover",
+                    "--preset",
+                    "ideal",
                     "--seed",
                     seed,
                     "--json",
@@ -251,4 +255,28 @@ fn discover_gives_no_finding_on_an_effect_free_served_rig_batch() {
         );
         assert_no_finding(&v, &csv);
     }
+}
+
+/// Issue 22: `discover` takes the same virtual rig as every other verb when no preset is
+/// given (`paper`), and says why a hidden current-sensor offset cannot show in its rows.
+#[test]
+fn discover_defaults_to_the_preset_of_every_other_verb_and_explains_an_unseen_offset() {
+    let help = |args: &[&str]| {
+        let out = rig()
+            .args(args)
+            .assert()
+            .success()
+            .get_output()
+            .stdout
+            .clone();
+        String::from_utf8_lossy(&out).into_owned()
+    };
+    let discover = help(&["discover", "--help"]);
+    let serve = help(&["sim", "serve", "--help"]);
+    assert!(discover.contains("[default: paper]"), "{discover}");
+    assert!(serve.contains("[default: paper]"), "{serve}");
+    let note = host::cli::discover::unseen_effect_note("current-sensor-offset:offset_a=0.05")
+        .expect("the offset is named");
+    assert!(note.contains("zeroes"), "{note}");
+    assert!(host::cli::discover::unseen_effect_note("thermal-drift").is_none());
 }

@@ -288,3 +288,72 @@ fn bad_input_fails_with_a_message_naming_the_row_or_column() {
         .assert()
         .failure();
 }
+
+/// Issue 19's JSON contract: `lack_of_fit` (statistic, dof, p, against what), per-effect
+/// `plausible` with its limits and `extrapolation`; loads in N mm are refused naming the
+/// column and the unit.
+#[test]
+fn json_carries_lack_of_fit_plausibility_and_extrapolation() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = synthetic_csv(dir.path(), "vibrator-viscous-loss", "2");
+    let v = json(&["explain", "--measured", &csv, "--json", "--no-report"]);
+    let l = &v["lack_of_fit"];
+    for key in ["statistic", "dof", "p_value", "alpha", "sigma_a"] {
+        assert!(l[key].as_f64().is_some(), "lack_of_fit.{key}: {l}");
+    }
+    assert_eq!(l["against"], "pure-error", "{l}");
+    assert_eq!(l["test"], "F");
+    assert!(l["against_text"].as_str().unwrap().contains("repeats"));
+    assert!(l["locations"].is_array());
+    assert_eq!(v["verdict"], "explained", "{}", v["finding"]);
+    let f = &v["effects"][0];
+    assert_eq!(f["plausible"], true);
+    assert!(
+        f["limits"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|c| c["param"] == "c_v_n_mm_s_per_rad" && c["within"] == true),
+        "{f}"
+    );
+    assert_eq!(f["extrapolation"]["testable"], true, "{f}");
+    assert!(f["extrapolation"]["edges"].as_array().unwrap().len() >= 2);
+    // The same rows with the loads in N mm.
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut out = String::new();
+    let mut tau_col = None;
+    for line in text.lines() {
+        if line.starts_with('#') {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').collect();
+        match tau_col {
+            None => {
+                tau_col = fields.iter().position(|f| *f == "tau_rot_nm");
+                out += line;
+            }
+            Some(c) => {
+                let mut f: Vec<String> = fields.iter().map(|s| s.to_string()).collect();
+                f[c] = format!("{}", f[c].parse::<f64>().unwrap() * 1000.0);
+                out += &f.join(",");
+            }
+        }
+        out.push('\n');
+    }
+    let nmm = dir.path().join("nmm.csv");
+    std::fs::write(&nmm, out).unwrap();
+    let err = rig()
+        .args([
+            "explain",
+            "--measured",
+            nmm.to_str().unwrap(),
+            "--no-report",
+        ])
+        .assert()
+        .failure()
+        .get_output()
+        .stderr
+        .clone();
+    let err = String::from_utf8_lossy(&err);
+    assert!(err.contains("tau_rot_nm") && err.contains("N mm"), "{err}");
+}

@@ -7,6 +7,14 @@ use model::effects::{CurrentModel, Effect, EffectParams, ParamValue};
 
 use crate::{RigFile, RigFileError};
 
+/// Most `[[user_effects]]` entries a rig file may hold (each is a candidate of every step).
+pub const MAX_USER_EFFECTS: usize = 16;
+/// Longest `[[user_effects]]` expression, bytes (a few terms take a few dozen; the
+/// expression is evaluated at every point of every fit and finite difference).
+pub const MAX_EXPRESSION_BYTES: usize = 1024;
+/// Most parameters of one user effect.
+pub const MAX_USER_PARAMS: usize = 8;
+
 /// How the plant (`model::plant`) runs a rig file's model: see [`RigFile::plant_effects`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlantSetup {
@@ -31,8 +39,26 @@ impl RigFile {
     /// expressions themselves are checked by `rig explain`.
     pub(crate) fn check_user_effects(&self) -> Result<(), String> {
         let mut names: Vec<&str> = Vec::new();
+        if self.user_effects.len() > MAX_USER_EFFECTS {
+            return Err(format!(
+                "[[user_effects]]: {} entries, at most {MAX_USER_EFFECTS} are searched: keep the ones you mean to test",
+                self.user_effects.len()
+            ));
+        }
         for u in &self.user_effects {
             let what = format!("[[user_effects]] {}", u.name);
+            if u.expression.len() > MAX_EXPRESSION_BYTES {
+                return Err(format!(
+                    "{what}: expression is {} bytes long, at most {MAX_EXPRESSION_BYTES} are allowed (each is evaluated at every test point of every fit): write the law in fewer terms",
+                    u.expression.len()
+                ));
+            }
+            if u.params.len() > MAX_USER_PARAMS {
+                return Err(format!(
+                    "{what}: {} parameters, at most {MAX_USER_PARAMS}: the data of a sweep cannot pin more",
+                    u.params.len()
+                ));
+            }
             if u.name.is_empty()
                 || Effect::from_name(&u.name).is_some()
                 || names.contains(&u.name.as_str())

@@ -123,6 +123,9 @@ pub struct RigFile {
     pub extra: toml::Table,
 }
 
+/// Largest rig file read, bytes (a rig file with every section is about 2 KiB).
+pub const MAX_RIG_FILE_BYTES: u64 = 1024 * 1024;
+
 impl RigFile {
     /// The paper's rig, no fitted model.
     pub fn paper() -> Self {
@@ -136,6 +139,24 @@ impl RigFile {
 
     /// Reads and checks a rig file, saying which format it had and which keys it set.
     pub fn load_detailed(path: &Path) -> Result<Loaded, RigFileError> {
+        // A rig file is a few KiB: a pipe, a device or a huge file is refused before reading.
+        if let Ok(meta) = std::fs::metadata(path)
+            && (!meta.is_file() || meta.len() > MAX_RIG_FILE_BYTES)
+        {
+            return Err(RigFileError::BadValue {
+                what: format!("rig file {}", path.display()),
+                why: if meta.is_file() {
+                    format!(
+                        "is {} bytes, more than the {} KiB a rig file can need: give the rig file (TOML), not a data file",
+                        meta.len(),
+                        MAX_RIG_FILE_BYTES / 1024
+                    )
+                } else {
+                    "is not a regular file (a folder, pipe or device): give a rig file (TOML)"
+                        .into()
+                },
+            });
+        }
         let text = std::fs::read_to_string(path).map_err(|source| RigFileError::File {
             action: "read",
             path: path.display().to_string(),

@@ -48,7 +48,16 @@ test points) gives each effect's inclusion_probability and the top-level confide
 replicates reaching the same finding); ambiguous when a competitor is selected instead of
 the leading effect in a fifth or more of them.
 
-Verdicts: explained, no-missing-effect, ambiguous. Exit code 0 for any verdict, 1 on bad input.";
+Lack of fit (JSON \"lack_of_fit\"): the final model's cell means (speed level x load level)
+against the pure error of the data's repeats (an F-test), or, with drifting repeats, against
+successive repeats; without repeats against --stated-noise-ma, else the ACS714's specification
+(27 mA per sample); the model's own resolution (2.9 mA) is added to every cell mean. It says
+which, and where the discrepancy lives (speed level, load range, time).
+
+Verdicts: explained (named effects, what remains is within the noise), partly-explained (named
+effects shrink the gap, a significant lack of fit remains), unexplained (a significant lack of
+fit and no named effect explains it), ambiguous, no-missing-effect (no effect needed and the
+lack of fit is not significant). Exit code 0 for any verdict, 1 on bad input.";
 
 /// Arguments of `rig explain`.
 #[derive(Debug, Clone, Args)]
@@ -101,6 +110,11 @@ pub struct ExplainArgs {
     /// Folds of the held-out validation over blocks of test points.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u8).range(2..=20))]
     pub folds: u8,
+    /// Row noise of the current that you know (from repeats elsewhere or the logger), mA: the
+    /// lack-of-fit test's reference when the data has too few repeats for a pure error
+    /// [default for --synthetic: --noise-ma].
+    #[arg(long, value_name = "MA", value_parser = crate::args::non_negative)]
+    pub stated_noise_ma: Option<f64>,
     /// Write a test plan (docs/plans.md) with the points that best separate the leading
     /// candidates (or pin the finding) for `rig experiment torque-sweep --plan FILE`; JSON
     /// gains `proposal`.
@@ -296,6 +310,11 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
         alpha: args.alpha,
         folds: args.folds as usize,
         replicates: args.replicates as usize,
+        stated_noise_a: args
+            .stated_noise_ma
+            .or(args.synthetic.map(|_| args.noise_ma))
+            .filter(|v| *v > 0.0)
+            .map(|v| v * 1e-3),
         ..Options::default()
     };
     let mut outcome = explain::explain(&data, &rig, &options)?;
@@ -337,9 +356,13 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
             &format!("Written by `rig explain --write-model` from {source}."),
         )?;
     }
-    // A proposal on request, and offered when the data cannot separate the leaders.
-    let ambiguous = outcome.explanation.verdict == explain::Verdict::Ambiguous;
-    let proposal = (args.propose.is_some() || ambiguous).then(|| {
+    // A proposal on request, and offered when the data cannot separate the leaders or a
+    // discrepancy remains that no named effect explains (points that resolve its shape).
+    let offered = matches!(
+        outcome.explanation.verdict,
+        explain::Verdict::Ambiguous | explain::Verdict::Unexplained
+    );
+    let proposal = (args.propose.is_some() || offered).then(|| {
         proposal_for(
             &outcome,
             &data,

@@ -32,7 +32,62 @@ pub struct EffectInfo {
     pub likelihood_params: usize,
     /// How the plant takes it.
     pub plant: PlantTakes,
+    /// The physical limits of its reported parameters, each with its reason: a fit that
+    /// needs a value beyond one does not name the effect.
+    pub limits: &'static [PhysicalLimit],
 }
+
+/// A physical limit of one reported parameter of an effect, with its reason.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhysicalLimit {
+    /// The reported parameter ([`EffectParam::key`]).
+    pub key: &'static str,
+    /// The limit.
+    pub kind: LimitKind,
+    /// Why, in a sentence.
+    pub why: &'static str,
+}
+
+/// The shape of a physical limit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LimitKind {
+    /// The reported value lies in [lo, hi].
+    Range(f64, f64),
+    /// The deflection, reported value (um/N) times the largest axial force of the data, stays
+    /// below this share of the cam's eccentricity.
+    StrokeShare(f64),
+}
+
+/// What a limit that depends on the data needs to know of it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LimitContext {
+    /// The largest axial tooth force at the tested loads, N.
+    pub max_axial_force_n: f64,
+    /// The cam's eccentricity, m.
+    pub eccentricity_m: f64,
+}
+
+impl PhysicalLimit {
+    /// The allowed range of the reported value on data described by `ctx`.
+    pub fn range(&self, ctx: &LimitContext) -> (f64, f64) {
+        match self.kind {
+            LimitKind::Range(lo, hi) => (lo, hi),
+            LimitKind::StrokeShare(share) => {
+                // um/N whose deflection at the largest force is `share` of the stroke.
+                let f = ctx.max_axial_force_n.max(1e-9);
+                (0.0, share * ctx.eccentricity_m * 1e6 / f)
+            }
+        }
+    }
+}
+
+/// Physical range of the friction coefficient mu of Eq. (10): lubricated steel gears run at
+/// 0.02-0.2, dry ones up to about 0.6; the paper measured 0.17-0.27.
+pub const MU_PHYSICAL: PhysicalLimit = PhysicalLimit {
+    key: "mu",
+    kind: LimitKind::Range(0.02, 0.6),
+    why: "tooth friction of steel gears lies between about 0.02 (well lubricated) and 0.6 (dry); the paper measured 0.17-0.27",
+};
 
 /// The mean-current parameter of an effect and the reported parameter it is shown as.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -251,6 +306,11 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "PlantEffects::axial_friction_speed = Some((depth, omega0))",
             note: "AxialSpeedLaw::ExponentialDip, mu (1 - depth exp(-w_n / w_0)): a shape the library does not fit, so the tests show `rig explain` finding the effect from a law it does not contain; PlantParams::friction_split applies Eq. (40) with the simulated output speed instead of a fixed corner",
         },
+        limits: &[PhysicalLimit {
+            key: "omega_c_rad_s",
+            kind: LimitKind::Range(0.0, 500.0),
+            why: "w_c = |w_t| / lambda is a sliding speed of the output; far above the motor's top cam speed (about 100 rad/s) mu_ax is proportional to speed everywhere, a viscous law rather than a corner",
+        }],
     },
     EffectInfo {
         effect: Effect::LoadDependentFriction,
@@ -287,6 +347,11 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "PlantEffects::load_friction = Some((exponent, tau_ref))",
             note: "the same law with tau_ref free",
         },
+        limits: &[PhysicalLimit {
+            key: "exponent",
+            kind: LimitKind::Range(-0.5, 0.5),
+            why: "seed 003's Eq. 12 gives b = 0.2 for lubricated teeth; |b| above 0.5 would change mu more than threefold over a tenfold load range, beyond any lubrication regime it describes",
+        }],
     },
     EffectInfo {
         effect: Effect::CurrentSensorOffset,
@@ -311,6 +376,11 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "PlantEffects::current_offset",
             note: "added to the logger's reading (Plant::logged_current), not to the firmware's ADC",
         },
+        limits: &[PhysicalLimit {
+            key: "offset_a",
+            kind: LimitKind::Range(-0.25, 0.25),
+            why: "the ACS714's zero lies within its electrical offset (+-15 mV, 81 mA at 185 mV/A) plus the zero's share of the 5 V supply's tolerance; a larger shift is a scaling or wiring fault, not an offset",
+        }],
     },
     EffectInfo {
         effect: Effect::ThermalDrift,
@@ -357,6 +427,18 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "PlantEffects::thermal_drift = Some(k)",
             note: "against the simulated winding temperature above ambient; a drift against time is not representable",
         },
+        limits: &[
+            PhysicalLimit {
+                key: "k_per_c",
+                kind: LimitKind::Range(0.0, 0.005),
+                why: "the torque constant falls as the magnets warm (ferrite about 0.2 %/K, rare-earth 0.1 %/K): it cannot rise, and 0.5 %/K is beyond any permanent magnet",
+            },
+            PhysicalLimit {
+                key: "k_per_s",
+                kind: LimitKind::Range(0.0, f64::INFINITY),
+                why: "the winding warms during a session, so the torque constant falls with time: it cannot rise",
+            },
+        ],
     },
     EffectInfo {
         effect: Effect::VibratorViscousLoss,
@@ -385,6 +467,11 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "PlantEffects::extra_viscous",
             note: "an extra viscous torque at the cam shaft",
         },
+        limits: &[PhysicalLimit {
+            key: "c_v_n_mm_s_per_rad",
+            kind: LimitKind::Range(-0.235, 2.35),
+            why: "the vibrator's whole viscous loss C3 + c_v cannot be negative (C3 = 0.235 N mm s/rad, Table 2), and ten times C3 would be a seized gearhead, not a loss the calibration missed",
+        }],
     },
     EffectInfo {
         effect: Effect::InertiaRectification,
@@ -409,6 +496,11 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "PlantParams::regeneration",
             note: "Eq. (9)'s instantaneous inertia term, rectified without regeneration: kappa = -1 with regeneration, -1/2 without; other kappas are not representable (kappa_returns_power picks the nearer drive)",
         },
+        limits: &[PhysicalLimit {
+            key: "kappa",
+            kind: LimitKind::Range(-1.0, 1.0),
+            why: "kappa = -1 returns all of the carrier's power to the drive and 1 rectifies all of it; beyond either the inertia term would need more energy than the carrier's motion holds",
+        }],
     },
     EffectInfo {
         effect: Effect::LinearBushFriction,
@@ -457,6 +549,11 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "PlantEffects::bush_friction, bush_hold_arm, bush_omega",
             note: "T_0 = bush_friction x bush_hold_arm; the force adds to Eq. (9)'s axial Coulomb force (F e |sin|, whose turn mean is (2/pi) F e)",
         },
+        limits: &[PhysicalLimit {
+            key: "force_n",
+            kind: LimitKind::Range(0.0, 100.0),
+            why: "a linear bush guiding the 3.82 kg carrier: even a dry bush (mu 0.3) under a side load of ten times its weight rubs with about 110 N",
+        }],
     },
     EffectInfo {
         effect: Effect::ToothCompliance,
@@ -485,6 +582,11 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "",
             note: "not modelled",
         },
+        limits: &[PhysicalLimit {
+            key: "compliance_um_per_n",
+            kind: LimitKind::StrokeShare(0.25),
+            why: "teeth that deflect by a quarter of the cam's stroke or more at the largest load would no longer slide as Eq. (10) assumes; the elastic deflection of module-1 steel teeth is a few micrometres",
+        }],
     },
     EffectInfo {
         effect: Effect::MeshLoadSharingRipple,
@@ -514,6 +616,11 @@ pub const EFFECTS: &[EffectInfo] = &[
             setting: "",
             note: "not modelled",
         },
+        limits: &[PhysicalLimit {
+            key: "ripple_rms",
+            kind: LimitKind::Range(0.0, 0.5),
+            why: "seed 003's load sharing changes the mesh friction by a few tens of percent over a mesh cycle; averaged over a test it scatters far less than half the friction term",
+        }],
     },
 ];
 

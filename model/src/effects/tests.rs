@@ -140,3 +140,55 @@ fn names_round_trip() {
     assert_eq!(Effect::from_name("nope"), None);
     assert_eq!(Effect::MeshLoadSharingRipple.mean_param(), None);
 }
+
+#[test]
+fn every_effect_has_physical_limits_with_reasons_on_its_reported_parameters() {
+    let ctx = LimitContext {
+        max_axial_force_n: 100.0,
+        eccentricity_m: 1e-3,
+    };
+    for info in EFFECTS {
+        assert!(!info.limits.is_empty(), "{} has no limits", info.name);
+        for l in info.limits {
+            assert!(
+                info.param(l.key).is_some(),
+                "{}: no parameter {}",
+                info.name,
+                l.key
+            );
+            assert!(
+                l.why.len() > 40,
+                "{}: {} needs its reason",
+                info.name,
+                l.key
+            );
+            let (lo, hi) = l.range(&ctx);
+            assert!(lo < hi, "{}: {}", info.name, l.key);
+        }
+    }
+    // The cases: kappa beyond fully rectified, a torque constant that rises as the
+    // motor warms, teeth that deflect by half the stroke.
+    let limit = |e: Effect, key: &str| {
+        *e.info()
+            .limits
+            .iter()
+            .find(|l| l.key == key)
+            .expect("limit")
+    };
+    let outside = |l: PhysicalLimit, v: f64| {
+        let (lo, hi) = l.range(&ctx);
+        v < lo || v > hi
+    };
+    assert!(outside(limit(Effect::InertiaRectification, "kappa"), 2.4));
+    assert!(outside(limit(Effect::ThermalDrift, "k_per_c"), -1e-3));
+    // Half the 1 mm stroke at 100 N: 5 um/N.
+    assert!(outside(
+        limit(Effect::ToothCompliance, "compliance_um_per_n"),
+        5.0
+    ));
+    assert!(!outside(
+        limit(Effect::ToothCompliance, "compliance_um_per_n"),
+        1.0
+    ));
+    assert!(outside(MU_PHYSICAL, 0.0002));
+}
