@@ -23,26 +23,31 @@ fn requests_sent_during_a_save_are_answered_after_it() {
     rig.step();
     assert_eq!(rig.persisted, [new], "handed to the persist task");
 
-    // The erase runs; the host sends a heartbeat and a GetInfo every 10 ms (a client
-    // retrying an unanswered request), which wait in the ring.
+    // The erase runs; the host keeps sending into the ring, as a client that keeps to the
+    // request window does: with the save outstanding, `REQUEST_WINDOW - 1` more (a heartbeat
+    // and a GetInfo every 10 ms), then one request beyond the window, which must still get
+    // exactly one reply (`Busy`).
     let mut ring = Vec::new();
     let mut sent = Vec::new();
     // Sequence numbers of their own, apart from the rig's.
     let mut seq = 1000u16;
+    let schedule = [Request::Heartbeat, Request::GetInfo, Request::Heartbeat];
+    assert_eq!(schedule.len(), protocol::REQUEST_WINDOW - 1);
+    let mut next = schedule.iter().cloned();
     for ms in 0..SAVE_STALL_MS {
-        let requests = if ms % 10 == 0 {
-            &[Request::Heartbeat, Request::GetInfo][..]
-        } else {
-            &[]
-        };
-        for request in requests.iter().cloned() {
-            let mut buf = [0u8; MAX_FRAME_SIZE];
-            ring.extend_from_slice(encode_frame(seq, &request, &mut buf).unwrap());
-            sent.push((seq, request));
-            seq += 1;
+        if ms % 10 == 0 {
+            for request in next.by_ref().take(2) {
+                let mut buf = [0u8; MAX_FRAME_SIZE];
+                ring.extend_from_slice(encode_frame(seq, &request, &mut buf).unwrap());
+                sent.push((seq, request));
+                seq += 1;
+            }
         }
         rig.step();
     }
+    let beyond = seq;
+    let mut buf = [0u8; MAX_FRAME_SIZE];
+    ring.extend_from_slice(encode_frame(beyond, &Request::GetInfo, &mut buf).unwrap());
     assert!(
         ring.len() <= 4096,
         "{} bytes: more than the ring holds",
@@ -69,4 +74,17 @@ fn requests_sent_during_a_save_are_answered_after_it() {
             request.name()
         );
     }
+    let replies = rig
+        .received
+        .iter()
+        .filter(|m| m.reply_to() == Some(beyond))
+        .count();
+    assert_eq!(replies, 1, "one reply to the request beyond the window");
+    assert!(
+        rig.answered(beyond, |r| matches!(
+            r,
+            Reply::Nack(protocol::NackCode::Busy)
+        )),
+        "the request beyond the window is refused Busy"
+    );
 }
