@@ -264,7 +264,11 @@ mod tests {
             tags.insert(b[1]);
         }
         // Every variant has an example, so the constant cannot fall behind the enum.
-        assert_eq!(u32::try_from(tags.len()).unwrap(), REQUEST_VARIANTS, "{tags:?}");
+        assert_eq!(
+            u32::try_from(tags.len()).unwrap(),
+            REQUEST_VARIANTS,
+            "{tags:?}"
+        );
         // `Release { on: 2 }`: a known request with a bad field.
         assert!(Request::names_known_request(&[7, 2, 2, 0, 0, 0x20, 0x41]));
         // Tags past the last request, and a simulation command past the last.
