@@ -125,6 +125,17 @@ pub enum RigError {
         /// The operating system's reason, with what to do.
         why: String,
     },
+    /// A serial port another program holds (another `rig`, a serial terminal, a modem
+    /// manager): the port is there, but this client may not drive the rig through it.
+    #[error(
+        "serial port {port} is busy: {why}; close that program (or end the other `rig`), then try again"
+    )]
+    PortBusy {
+        /// The port asked for.
+        port: String,
+        /// The operating system's reason, and who holds the port when that can be found.
+        why: String,
+    },
     /// No device was named.
     #[error(
         "no device given: pass --port PORT (`rig ports` lists them; RIG_PORT also works) or --sim for the virtual device"

@@ -149,6 +149,64 @@ fn served_rig_keeps_calibration_and_faults_between_clients_and_stops_on_sigint()
     assert_eq!(status.code(), Some(0), "SIGINT ends serve with exit 0");
 }
 
+/// A second client of a port one client holds is told the port is busy and who holds it,
+/// not that it is missing, and cannot drive the rig; once the first ends, the port opens.
+#[test]
+fn a_second_client_is_told_the_port_is_busy_and_by_whom() {
+    let server = Server::start_at("1", &["--preset", "ideal"]);
+    let bin = assert_cmd::cargo::cargo_bin("rig");
+    let mut release = std::process::Command::new(bin)
+        .args(["--port", &server.port, "release", "on", "--for", "60"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // The first line is printed once the release was accepted: the port is open by then.
+    // The reader lives to the end: a closed pipe would end the release at its next line.
+    let mut lines = std::io::BufReader::new(release.stdout.take().unwrap());
+    let mut first = String::new();
+    std::io::BufRead::read_line(&mut lines, &mut first).unwrap();
+    assert!(first.starts_with("released"), "{first}");
+
+    let out = server.client(&["info"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{first} {err} {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(
+        err.contains(&format!("serial port {} is busy", server.port)),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!("held by process {} (rig)", release.id())),
+        "{err}"
+    );
+    assert!(err.contains("close that program"), "{err}");
+    assert!(!err.contains("does not exist"), "{err}");
+    // The release the first client holds is untouched by the refused one.
+    assert_eq!(
+        release.try_wait().unwrap(),
+        None,
+        "the first client still runs"
+    );
+
+    let sent = std::process::Command::new("kill")
+        .args(["-INT", &release.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = release.wait().unwrap();
+    assert!(status.success(), "Ctrl-C ends release on, locked: {status}");
+    let info = server.json(&["info", "--json"]);
+    assert_eq!(
+        info["board"], "virtual",
+        "the port opens once its holder ended: {info}"
+    );
+}
+
 /// Issue 12's "done when", in one session: a served ideal rig with the effect hidden, info,
 /// a calibration written by one command and read by the next, a quick torque sweep through
 /// 50 random bytes a second on the line, `rig explain` naming the hidden effect first, and

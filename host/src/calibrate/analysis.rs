@@ -147,19 +147,30 @@ pub fn analyse(m: &Measurements) -> Result<CalibrationResult, RigError> {
     })?;
     let (c1, c2) = (torque_fit.slope, torque_fit.intercept);
     let (c5, c6) = (no_load_fit.slope, no_load_fit.intercept);
-    let c3 = Estimate::new(
-        c1 * c5,
-        (c5.powi(2) * torque_fit.slope_se.powi(2) + c1.powi(2) * no_load_fit.slope_se.powi(2))
-            .sqrt(),
+    // The two fits are independent: each contributes its own variance, with its own
+    // degrees of freedom, to the derived constants' intervals.
+    let (dof_t, dof_n) = (
+        torque_fit.n.saturating_sub(2),
+        no_load_fit.n.saturating_sub(2),
     );
-    let c4 = Estimate::new(
+    let c3 = Estimate::from_parts(
+        c1 * c5,
+        &[
+            (c5.powi(2) * torque_fit.slope_se.powi(2), dof_t),
+            (c1.powi(2) * no_load_fit.slope_se.powi(2), dof_n),
+        ],
+    );
+    let c4 = Estimate::from_parts(
         c1 * c6 + c2,
-        (c6.powi(2) * torque_fit.slope_se.powi(2)
-            + c1.powi(2) * no_load_fit.intercept_se.powi(2)
-            + torque_fit.intercept_se.powi(2)
-            + 2.0 * c6 * torque_fit.covariance)
-            .max(0.0)
-            .sqrt(),
+        &[
+            (
+                c6.powi(2) * torque_fit.slope_se.powi(2)
+                    + torque_fit.intercept_se.powi(2)
+                    + 2.0 * c6 * torque_fit.covariance,
+                dof_t,
+            ),
+            (c1.powi(2) * no_load_fit.intercept_se.powi(2), dof_n),
+        ],
     );
     let loss: Vec<f64> = i0.iter().map(|&i| c1 * i + c2).collect();
     let loss_fit = LineFit::fit(&w, &loss).ok_or_else(|| {

@@ -418,12 +418,14 @@ mod lock {
                     _port: None,
                 })
             }
-            Err(e @ RigError::PortOpen { .. }) => Err(RigError::BadValue {
-                what: "rig flash".into(),
-                why: format!(
-                    "{e}. rig flash locks the rig over its serial port before flashing and will not flash while it cannot (a program holding the port may hold a release)"
-                ),
-            }),
+            Err(e @ (RigError::PortOpen { .. } | RigError::PortBusy { .. })) => {
+                Err(RigError::BadValue {
+                    what: "rig flash".into(),
+                    why: format!(
+                        "{e}. rig flash locks the rig over its serial port before flashing and will not flash while it cannot (a program holding the port may hold a release)"
+                    ),
+                })
+            }
             Err(e) => {
                 // Something that does not speak this protocol (older firmware, none): it
                 // cannot hold a release without a host's heartbeat, and we hold the port.

@@ -22,6 +22,10 @@ pub type SerialTransport = Box<dyn SerialPort>;
 
 /// Opens `port` at `baud` (8N1, no flow control) for the client, and drops anything the
 /// port buffered before.
+///
+/// The port is opened exclusively (TIOCEXCL and an exclusive `flock` on Unix), so a second
+/// client (another `rig`, a terminal program that locks) cannot drive the rig at the same
+/// time: it gets [`RigError::PortBusy`], naming the holder where it can be found.
 pub fn open_serial(port: &str, baud: u32) -> Result<SerialTransport, RigError> {
     let opened = serialport::new(port, baud)
         .timeout(SERIAL_READ_TIMEOUT)
@@ -29,6 +33,7 @@ pub fn open_serial(port: &str, baud: u32) -> Result<SerialTransport, RigError> {
         .parity(serialport::Parity::None)
         .stop_bits(serialport::StopBits::One)
         .flow_control(serialport::FlowControl::None)
+        .exclusive(true)
         .open();
     let serial = opened.map_err(|e| port_open_error(port, baud, &e))?;
     // A stale byte from before (a half frame) only costs one frame, so failing to clear is
@@ -40,22 +45,104 @@ pub fn open_serial(port: &str, baud: u32) -> Result<SerialTransport, RigError> {
 /// The error for a port that would not open, with what to do about it.
 fn port_open_error(port: &str, baud: u32, e: &serialport::Error) -> RigError {
     use serialport::ErrorKind;
+    if is_busy(e) {
+        return RigError::PortBusy {
+            port: port.to_owned(),
+            why: format!("{e}; {}", holder_hint(port)),
+        };
+    }
     let why = match e.kind() {
-        ErrorKind::NoDevice => format!("{e} (the port does not exist or is gone)"),
+        // Windows reports a missing port and one another program holds alike.
+        ErrorKind::NoDevice => {
+            format!("{e} (the port does not exist, is gone, or another program holds it)")
+        }
         ErrorKind::Io(io::ErrorKind::NotFound) => format!("{e} (no such port)"),
         ErrorKind::Io(io::ErrorKind::PermissionDenied) => {
             format!("{e} (no permission: add your user to the `dialout` group, then log in again)")
         }
         ErrorKind::InvalidInput => format!("{e} (the port does not accept {baud} baud)"),
-        _ if e.description.contains("busy") || e.description.contains("Busy") => {
-            format!("{e} (another program holds the port: close it first)")
-        }
         _ => e.to_string(),
     };
     RigError::PortOpen {
         port: port.to_owned(),
         why,
     }
+}
+
+/// Whether the open failed because another opener holds the port. On Unix serialport
+/// reports both the TIOCEXCL refusal (EBUSY) and a held exclusive `flock` as `NoDevice`
+/// (a missing port is `NotFound` there); elsewhere only the operating system's words tell.
+fn is_busy(e: &serialport::Error) -> bool {
+    let words = e.description.to_ascii_lowercase();
+    (cfg!(unix) && e.kind() == serialport::ErrorKind::NoDevice)
+        || words.contains("busy")
+        || words.contains("in use")
+}
+
+/// Who holds `port`, in words: the processes found with it open (Linux, those this user
+/// may see), else the command that finds them.
+fn holder_hint(port: &str) -> String {
+    let holders = port_holders(port);
+    if holders.is_empty() {
+        if cfg!(target_os = "linux") {
+            format!("another program holds it (`fuser -v {port}` or `lsof {port}` names it)")
+        } else if cfg!(unix) {
+            format!("another program holds it (`lsof {port}` names it)")
+        } else {
+            "another program holds it".to_owned()
+        }
+    } else {
+        let list: Vec<String> = holders
+            .iter()
+            .map(|(pid, name)| format!("process {pid} ({name})"))
+            .collect();
+        format!("held by {}", list.join(", "))
+    }
+}
+
+/// The processes (id, command name) other than this one with `port` open, from /proc.
+#[cfg(target_os = "linux")]
+fn port_holders(port: &str) -> Vec<(u32, String)> {
+    let Ok(target) = std::fs::canonicalize(port) else {
+        return Vec::new();
+    };
+    let me = std::process::id();
+    let Ok(procs) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    let mut found = Vec::new();
+    for entry in procs.flatten() {
+        let Some(pid) = entry
+            .file_name()
+            .to_str()
+            .and_then(|n| n.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid == me {
+            continue;
+        }
+        // Processes of other users are unreadable without privileges: skipped.
+        let Ok(fds) = std::fs::read_dir(entry.path().join("fd")) else {
+            continue;
+        };
+        let holds = fds
+            .flatten()
+            .any(|fd| std::fs::read_link(fd.path()).is_ok_and(|p| p == target));
+        if holds {
+            let name = std::fs::read_to_string(entry.path().join("comm"))
+                .map(|n| n.trim().to_owned())
+                .unwrap_or_else(|_| "unknown".to_owned());
+            found.push((pid, name));
+        }
+    }
+    found
+}
+
+/// Not looked up outside Linux: the hint names the command that finds them.
+#[cfg(not(target_os = "linux"))]
+fn port_holders(_port: &str) -> Vec<(u32, String)> {
+    Vec::new()
 }
 
 /// One direction of an in-memory pipe.
@@ -201,5 +288,24 @@ mod tests {
         let text = err.to_string();
         assert!(text.contains("/dev/does-not-exist"), "{text}");
         assert!(text.contains("rig ports"), "{text}");
+    }
+
+    /// A port another opener holds is busy, not missing: the served rig's pseudo-terminal
+    /// held by one open, opened again.
+    #[cfg(unix)]
+    #[test]
+    fn held_port_is_busy_not_missing() {
+        let (_master, name) = crate::device::PtyMaster::open().expect("a pseudo-terminal");
+        let first = open_serial(&name, 921_600).expect("the first open");
+        let err = open_serial(&name, 921_600).expect_err("the port is held");
+        let text = err.to_string();
+        assert!(matches!(err, RigError::PortBusy { .. }), "{text}");
+        assert!(
+            text.contains(&format!("serial port {name} is busy")),
+            "{text}"
+        );
+        assert!(!text.contains("does not exist"), "{text}");
+        drop(first);
+        open_serial(&name, 921_600).expect("free again once the first is closed");
     }
 }
