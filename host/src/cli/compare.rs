@@ -179,8 +179,12 @@ fn header_plan(path: &Path) -> HeaderPlan {
 
 /// Mean currents of `plan` run on the in-process virtual rig of `config`, one per plan
 /// point in plan order: `None` for a point the virtual rig did not measure (a load above
-/// the rig's `max_release_load_nm`, a point its protections skipped).
+/// the rig's `max_release_load_nm`, a point its protections skipped), as the measuring
+/// sensor reads them (with the plant's `current_offset`).
 pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>, RigError> {
+    // The replay reads the board's current (telemetry); a fitted `current-sensor-offset` is
+    // the measuring sensor's (the plant adds it to the logger only), so it is added here.
+    let sensor_offset = config.plant.effects.current_offset;
     let mut bench = SimBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
     let setup = SweepSetup {
@@ -194,7 +198,7 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>,
     let mut currents = vec![None; plan.points.len()];
     for r in &outcome.rows {
         if let Some(slot) = currents.get_mut(r.point) {
-            *slot = Some(r.i_in_a);
+            *slot = Some(r.i_in_a + sensor_offset);
         }
     }
     Ok(currents)
