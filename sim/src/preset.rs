@@ -369,6 +369,37 @@ mod tests {
     }
 
     #[test]
+    fn a_fitted_rectification_runs_as_its_kappa_and_no_term_is_dropped() {
+        // `rig explain`'s load-dependent rectification, as `--write-model` writes it.
+        let mut rig = rigfile::RigFile::paper().with_model_terms(
+            0.27,
+            vec![],
+            vec![rigfile::TermEntry {
+                name: "inertia-rectification".into(),
+                form: Some("load-dependent".into()),
+                params: [
+                    ("kappa".to_string(), -0.45),
+                    ("kappa_per_nm".to_string(), 0.03),
+                ]
+                .into(),
+            }],
+        );
+        let mut plant = crate::SimConfig::paper().plant;
+        apply_model(&rig, &mut plant).unwrap();
+        assert_eq!(plant.effects.inertia_kappa, Some((-0.45, 0.03)));
+        assert!(!plant.regeneration);
+        // A term the plant has no law for is named, not silently left out.
+        if let Some(m) = rig.model.as_mut() {
+            m.terms[0].form = Some("warm-up-in-time".into());
+            m.terms[0].name = "thermal-drift".into();
+        }
+        let err = apply_model(&rig, &mut crate::SimConfig::paper().plant)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("thermal-drift (warm-up-in-time)"), "{err}");
+    }
+
+    #[test]
     fn presets_and_effects_parse() {
         assert_eq!(
             Preset::by_name("ideal").unwrap().effects,

@@ -81,7 +81,7 @@ pub struct Comparison {
     pub measured: String,
     /// The fitted model file.
     pub model: Option<String>,
-    /// Effects of the fitted model.
+    /// Effects of the fitted model, then its `[[model.terms]]` as `name (form)`.
     pub model_effects: Vec<String>,
     /// Test points replayed (rows with a current that the virtual rig could run).
     pub points: usize,
@@ -271,7 +271,18 @@ pub fn compare(
         model: None,
         model_effects: model_rig
             .and_then(|m| m.model.as_ref())
-            .map(|m| m.effects.iter().map(|e| e.name.clone()).collect())
+            .map(|m| {
+                // Its effects, then its `[[model.terms]]` as `name (form)`: the plant runs both.
+                let terms = m.terms.iter().map(|t| match &t.form {
+                    Some(f) => format!("{} ({f})", t.name),
+                    None => t.name.clone(),
+                });
+                m.effects
+                    .iter()
+                    .map(|e| e.name.clone())
+                    .chain(terms)
+                    .collect()
+            })
             .unwrap_or_default(),
         points: rows.len(),
         skipped_rows,

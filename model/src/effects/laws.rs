@@ -247,7 +247,11 @@ pub fn carrier_inertia_torque_taken(full: f64, omega_n: f64, power_returned: boo
 pub fn carrier_inertia_torque_at_kappa(full: f64, omega_n: f64, kappa: f64) -> f64 {
     if full * omega_n < 0.0 {
         let weight = -(1.0 + 2.0 * kappa);
-        if weight == 0.0 { 0.0 } else { full * weight.min(1.0) }
+        if weight == 0.0 {
+            0.0
+        } else {
+            full * weight.min(1.0)
+        }
     } else {
         full
     }
