@@ -26,6 +26,8 @@ pub struct PlantSetup {
     pub regeneration: Option<bool>,
     /// Effects of the model the plant cannot represent.
     pub not_in_plant: Vec<Effect>,
+    /// `[[model.terms]]` entries the plant cannot represent, as `name (form)`.
+    pub terms_not_in_plant: Vec<String>,
 }
 
 impl RigFile {
@@ -158,8 +160,9 @@ impl RigFile {
     /// The plant's switchable effects (`model::plant`) for the effects of `[model]`, so the
     /// simulator can run the augmented model, with the names of the effects the plant cannot
     /// represent. Exact: load-dependent friction, current offset, thermal drift (per K),
-    /// viscous loss, linear bush (lever arm = hold / force); inertia rectification maps to the
-    /// drive's regeneration (kappa < -0.75: regenerating). Not in the plant: the
+    /// viscous loss, linear bush (lever arm = hold / force), inertia rectification (its kappa,
+    /// also as the `load-dependent` term of `[[model.terms]]`; the drive regenerates when
+    /// kappa < -0.75). Not in the plant: the
     /// speed-dependent axial friction of Eq. (40) with a fixed corner speed (the plant's
     /// `friction_split` applies Eq. 40 with the simulated output speed instead), tooth
     /// compliance, the mesh ripple and a thermal drift against time.
@@ -171,6 +174,7 @@ impl RigFile {
         let mut out = model::plant::PlantEffects::default();
         let mut regeneration = None;
         let mut missing = Vec::new();
+        let mut missing_terms = Vec::new();
         let time_driven = self
             .model
             .iter()
@@ -192,14 +196,33 @@ impl RigFile {
                 }
                 Effect::InertiaRectification => {
                     regeneration = Some(model::effects::kappa_returns_power(p.rectification));
+                    out.inertia_kappa = Some((p.rectification, 0.0));
                 }
                 other => missing.push(other),
+            }
+        }
+        // `[[model.terms]]`: the family forms the plant runs by the same law; any other is
+        // named as not in the plant, never dropped.
+        for t in self.term_entries() {
+            let effect = Effect::from_name(&t.name);
+            match (effect, t.form.as_deref()) {
+                (Some(Effect::InertiaRectification), Some("load-dependent")) => {
+                    let kappa = t.params.get("kappa").copied().unwrap_or(p.rectification);
+                    let per_nm = t.params.get("kappa_per_nm").copied().unwrap_or(0.0);
+                    regeneration = Some(model::effects::kappa_returns_power(kappa));
+                    out.inertia_kappa = Some((kappa, per_nm));
+                }
+                _ => missing_terms.push(match &t.form {
+                    Some(f) => format!("{} ({f})", t.name),
+                    None => t.name.clone(),
+                }),
             }
         }
         Ok(PlantSetup {
             effects: out,
             regeneration,
             not_in_plant: missing,
+            terms_not_in_plant: missing_terms,
         })
     }
 }

@@ -192,7 +192,10 @@ impl EffectSpec {
                 e.bush_hold_arm = p.bush_hold_torque / p.bush_force;
                 e.bush_omega = p.bush_corner_speed;
             }
-            Effect::InertiaRectification => plant.regeneration = p.rectification < -0.75,
+            Effect::InertiaRectification => {
+                plant.regeneration = model::effects::kappa_returns_power(p.rectification);
+                e.inertia_kappa = Some((p.rectification, 0.0));
+            }
             other => {
                 return Err(bad(format!(
                     "the plant cannot represent {} (it runs: {})",
@@ -251,7 +254,7 @@ pub fn axial_dip_for_corner(omega_c: f64) -> (f64, f64) {
 
 /// Runs the fitted `[model]` of `rig` in `plant`: mu (the axial friction's) and every
 /// effect, each at its physical place (`rigfile`'s mapping, and the speed-dependent axial
-/// friction's Eq. (40) corner matched by the plant's own law, [`axial_dip_for_corner`]).
+/// friction as Eq. (40) with its fitted corner, the law `rig explain` fits).
 /// An effect the plant cannot run is an error naming it. Without a `[model]`, nothing
 /// changes.
 pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<(), SimError> {
@@ -268,9 +271,10 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
     let mut effects = setup.effects;
     for e in setup.not_in_plant {
         match e {
+            // The law `rig explain` fits (Eq. 40 with its corner), run as fitted.
             Effect::SpeedDependentAxialFriction => {
-                let (depth, omega0) = axial_dip_for_corner(params.axial_corner_speed);
-                effects.axial_friction_speed = (depth > 0.0).then_some((depth, omega0));
+                effects.axial_friction_corner =
+                    (params.axial_corner_speed > 0.0).then_some(params.axial_corner_speed);
             }
             Effect::ThermalDrift => missing.push(format!(
                 "{} against time (k_per_s: the plant drifts with its winding temperature; log temp_c and refit)",
@@ -279,6 +283,7 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
             other => missing.push(other.name().to_string()),
         }
     }
+    missing.extend(setup.terms_not_in_plant);
     if !missing.is_empty() {
         return Err(bad(format!(
             "the virtual rig's plant cannot run {} (it runs: {}); remove {} from [model] to simulate the rest",
@@ -349,7 +354,9 @@ mod tests {
         apply_model(&rig, &mut plant).unwrap();
         assert_eq!(plant.mu_ax, 0.25);
         assert!((plant.effects.current_offset - 0.04).abs() < 1e-12);
-        assert!(plant.effects.axial_friction_speed.is_some());
+        // Eq. (40) with the fitted corner, the law `rig explain` fitted, not an approximation.
+        assert_eq!(plant.effects.axial_friction_corner, Some(20.0));
+        assert!(plant.effects.axial_friction_speed.is_none());
         let tooth = rigfile::RigFile::paper().with_model(
             0.25,
             vec![rigfile::EffectEntry {
@@ -359,6 +366,37 @@ mod tests {
         );
         let e = apply_model(&tooth, &mut plant).unwrap_err().to_string();
         assert!(e.contains("cannot run tooth-compliance"), "{e}");
+    }
+
+    #[test]
+    fn a_fitted_rectification_runs_as_its_kappa_and_no_term_is_dropped() {
+        // `rig explain`'s load-dependent rectification, as `--write-model` writes it.
+        let mut rig = rigfile::RigFile::paper().with_model_terms(
+            0.27,
+            vec![],
+            vec![rigfile::TermEntry {
+                name: "inertia-rectification".into(),
+                form: Some("load-dependent".into()),
+                params: [
+                    ("kappa".to_string(), -0.45),
+                    ("kappa_per_nm".to_string(), 0.03),
+                ]
+                .into(),
+            }],
+        );
+        let mut plant = crate::SimConfig::paper().plant;
+        apply_model(&rig, &mut plant).unwrap();
+        assert_eq!(plant.effects.inertia_kappa, Some((-0.45, 0.03)));
+        assert!(!plant.regeneration);
+        // A term the plant has no law for is named, not silently left out.
+        if let Some(m) = rig.model.as_mut() {
+            m.terms[0].form = Some("warm-up-in-time".into());
+            m.terms[0].name = "thermal-drift".into();
+        }
+        let err = apply_model(&rig, &mut crate::SimConfig::paper().plant)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("thermal-drift (warm-up-in-time)"), "{err}");
     }
 
     #[test]

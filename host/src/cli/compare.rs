@@ -81,7 +81,7 @@ pub struct Comparison {
     pub measured: String,
     /// The fitted model file.
     pub model: Option<String>,
-    /// Effects of the fitted model.
+    /// Effects of the fitted model, then its `[[model.terms]]` as `name (form)`.
     pub model_effects: Vec<String>,
     /// Test points replayed (rows with a current that the virtual rig could run).
     pub points: usize,
@@ -179,8 +179,12 @@ fn header_plan(path: &Path) -> HeaderPlan {
 
 /// Mean currents of `plan` run on the in-process virtual rig of `config`, one per plan
 /// point in plan order: `None` for a point the virtual rig did not measure (a load above
-/// the rig's `max_release_load_nm`, a point its protections skipped).
+/// the rig's `max_release_load_nm`, a point its protections skipped), as the measuring
+/// sensor reads them (with the plant's `current_offset`).
 pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>, RigError> {
+    // The replay reads the board's current (telemetry); a fitted `current-sensor-offset` is
+    // the measuring sensor's (the plant adds it to the logger only), so it is added here.
+    let sensor_offset = config.plant.effects.current_offset;
     let mut bench = SimBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
     let setup = SweepSetup {
@@ -194,7 +198,7 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>,
     let mut currents = vec![None; plan.points.len()];
     for r in &outcome.rows {
         if let Some(slot) = currents.get_mut(r.point) {
-            *slot = Some(r.i_in_a);
+            *slot = Some(r.i_in_a + sensor_offset);
         }
     }
     Ok(currents)
@@ -267,7 +271,18 @@ pub fn compare(
         model: None,
         model_effects: model_rig
             .and_then(|m| m.model.as_ref())
-            .map(|m| m.effects.iter().map(|e| e.name.clone()).collect())
+            .map(|m| {
+                // Its effects, then its `[[model.terms]]` as `name (form)`: the plant runs both.
+                let terms = m.terms.iter().map(|t| match &t.form {
+                    Some(f) => format!("{} ({f})", t.name),
+                    None => t.name.clone(),
+                });
+                m.effects
+                    .iter()
+                    .map(|e| e.name.clone())
+                    .chain(terms)
+                    .collect()
+            })
             .unwrap_or_default(),
         points: rows.len(),
         skipped_rows,

@@ -233,11 +233,35 @@ pub fn carrier_inertia_torque(
 /// [`rectified_inertia_torque`] with [`KAPPA_POWER_NOT_RETURNED`].
 #[inline]
 pub fn carrier_inertia_torque_taken(full: f64, omega_n: f64, power_returned: bool) -> f64 {
-    if !power_returned && full * omega_n < 0.0 {
-        0.0
+    carrier_inertia_torque_at_kappa(full, omega_n, drive_kappa(power_returned))
+}
+
+/// The part of the instantaneous inertia torque `full` a drive of rectification `kappa`
+/// takes at cam speed `omega_n`: all of it while the motor drives the carrier, and
+/// -(1 + 2 kappa) times it while the carrier pushes the cam, so that the turn mean is
+/// exactly [`rectified_inertia_torque`] with that `kappa` (the half-turns of either sign
+/// each average M_hat w_n^2 e^2 / (2 pi)). kappa = -1 returns all the power, -1/2 loses
+/// it, 0 (Eq. 10) and above brake the carrier too; below -1 the weight is held at 1 (the
+/// law's floor at zero).
+#[inline]
+pub fn carrier_inertia_torque_at_kappa(full: f64, omega_n: f64, kappa: f64) -> f64 {
+    if full * omega_n < 0.0 {
+        let weight = -(1.0 + 2.0 * kappa);
+        if weight == 0.0 {
+            0.0
+        } else {
+            full * weight.min(1.0)
+        }
     } else {
         full
     }
+}
+
+/// The rectification of a drive whose kappa depends on the load, kappa + kappa_per_nm
+/// |tau_rot| (`rig explain`'s `load-dependent` form of `inertia-rectification`).
+#[inline]
+pub fn load_dependent_kappa(kappa: f64, kappa_per_nm: f64, tau_rot: f64) -> f64 {
+    kappa + kappa_per_nm * tau_rot.abs()
 }
 
 // ---------------------------------------------------------------------------------------
@@ -367,6 +391,22 @@ mod tests {
             let law = rectified_inertia_torque(&drive, w, drive_kappa(returned));
             assert!((mean - law).abs() < 1e-9, "{returned}: {mean} vs {law}");
         }
+        // Any fitted kappa: the instantaneous law's turn mean is the kappa law's.
+        for kappa in [-1.5, -1.0, -0.75, -0.5, -0.3, 0.0, 0.4, 1.0] {
+            let mean = (0..n)
+                .map(|k| {
+                    let theta = (k as f64 + 0.5) / n as f64 * 2.0 * PI;
+                    let (s, c) = (libm::sin(theta), libm::cos(theta));
+                    let full =
+                        carrier_inertia_torque(drive.carrier_mass, drive.eccentricity, s, c, w);
+                    carrier_inertia_torque_at_kappa(full, w, kappa)
+                })
+                .sum::<f64>()
+                / n as f64;
+            let law = rectified_inertia_torque(&drive, w, kappa);
+            assert!((mean - law).abs() < 1e-9, "kappa {kappa}: {mean} vs {law}");
+        }
+        assert!((load_dependent_kappa(-0.5, 0.1, -2.0) + 0.3).abs() < 1e-12);
         assert!(kappa_returns_power(-0.9) && !kappa_returns_power(-0.6));
         // Eq. (10) and the fully rectified form.
         let eq10 = drive.required_inertia_torque(w);

@@ -493,8 +493,8 @@ pub const EFFECTS: &[EffectInfo] = &[
         likelihood_params: 1,
         plant: PlantTakes {
             form: PlantForm::Same,
-            setting: "PlantParams::regeneration",
-            note: "Eq. (9)'s instantaneous inertia term, rectified without regeneration: kappa = -1 with regeneration, -1/2 without; other kappas are not representable (kappa_returns_power picks the nearer drive)",
+            setting: "PlantEffects::inertia_kappa",
+            note: "Eq. (9)'s instantaneous inertia term taken with the fitted kappa (carrier_inertia_torque_at_kappa, whose turn mean is this law; `load-dependent`: kappa + kappa_per_nm |tau_rot|); without it the drive's own, PlantParams::regeneration (kappa -1 or -1/2)",
         },
         limits: &[PhysicalLimit {
             key: "kappa",

@@ -17,6 +17,10 @@ pub struct PlantEffects {
     /// at 3.6 V. Deliberately not the Eq. (40) shape `rig explain` fits: the tests show it
     /// finding the effect from a law it does not contain. `(depth, omega0 rad/s)`.
     pub axial_friction_speed: Option<(f64, f64)>,
+    /// `speed-dependent-axial-friction` as a rig file's `[model]` fits it: Eq. (40) with a
+    /// fixed corner speed, mu_ax(w) = mu w / sqrt(w^2 + w_c^2), [`AxialSpeedLaw::Eq40`]: the
+    /// law `rig explain` fits, run as fitted. `w_c` in rad/s.
+    pub axial_friction_corner: Option<f64>,
     /// `load-dependent-friction`: mu(tau) = mu (tau_rot / tau_ref)^exponent, the tooth-load
     /// dependence of an average friction coefficient. `(exponent, tau_ref N m)`.
     pub load_friction: Option<(f64, f64)>,
@@ -35,6 +39,10 @@ pub struct PlantEffects {
     pub bush_hold_arm: f64,
     /// Cam speed at which the bush's grip has halved, rad/s.
     pub bush_omega: f64,
+    /// `inertia-rectification` as fitted: the drive takes Eq. (9)'s inertia torque with
+    /// kappa + kappa_per_nm |tau_rot| ([`crate::effects::carrier_inertia_torque_at_kappa`]),
+    /// `(kappa, kappa_per_nm 1/(N m))`; `None`: the drive's own (`PlantParams::regeneration`).
+    pub inertia_kappa: Option<(f64, f64)>,
 }
 
 impl PlantEffects {
@@ -49,6 +57,9 @@ impl PlantEffects {
         let mut m = mu;
         if let Some(law) = self.axial_speed_law() {
             m *= law.factor(omega_n);
+        }
+        if let Some(corner) = self.axial_friction_corner {
+            m *= AxialSpeedLaw::Eq40 { corner }.factor(omega_n);
         }
         if let Some((exponent, tau_ref)) = self.load_friction
             && tau_rot.abs() > 0.0

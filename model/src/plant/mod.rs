@@ -21,7 +21,8 @@ pub use sensors::{AdcTransfer, SensorParams};
 
 use crate::effects::{
     axial_corner_speed, axial_friction_speed_factor, carrier_inertia_torque,
-    carrier_inertia_torque_taken, offset_current, viscous_loss_torque,
+    carrier_inertia_torque_at_kappa, carrier_inertia_torque_taken, load_dependent_kappa,
+    offset_current, viscous_loss_torque,
 };
 use crate::hardware::{board, rs735};
 use crate::math::{cos, sin};
@@ -592,7 +593,16 @@ impl Plant {
         let t_carrier_full = carrier_inertia_torque(mass, e, s, c, omega);
         // Without regeneration the drive cannot take back the carrier's inertial power: the
         // part of the cycle where the carrier pushes the cam is lost, not returned.
-        let t_carrier = carrier_inertia_torque_taken(t_carrier_full, omega, p.regeneration);
+        // A fitted rectification (`inertia-rectification` in a rig file's [model]) runs as
+        // its kappa law; otherwise the drive's own (regenerating or not).
+        let t_carrier = match p.effects.inertia_kappa {
+            Some((kappa, per_nm)) => carrier_inertia_torque_at_kappa(
+                t_carrier_full,
+                omega,
+                load_dependent_kappa(kappa, per_nm, tau_rot),
+            ),
+            None => carrier_inertia_torque_taken(t_carrier_full, omega, p.regeneration),
+        };
         let new_omega = if p.cam == CamSetup::Blocked {
             self.state.gauge_torque = if t_motor.abs() > m.coulomb {
                 t_motor - m.coulomb * t_motor.signum()
