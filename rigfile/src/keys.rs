@@ -313,7 +313,7 @@ pub const KEYS: &[KeySpec] = &[
         FIT_RANGE,
         "-",
         None,
-        "95 % interval of C3 = C1 C5 (propagated)",
+        "95 % interval of C3 = C1 C5 (propagated from both fits, Student's t at the Welch-Satterthwaite degrees of freedom)",
     ),
     key(
         "calibration.fit",
@@ -322,7 +322,7 @@ pub const KEYS: &[KeySpec] = &[
         FIT_RANGE,
         "-",
         None,
-        "95 % interval of C4 = C1 C6 + C2 (propagated)",
+        "95 % interval of C4 = C1 C6 + C2 (propagated from both fits, Student's t at the Welch-Satterthwaite degrees of freedom)",
     ),
     key(
         "calibration.fit",
