@@ -148,7 +148,14 @@ proptest! {
         let mut stream = Vec::new();
         for (i, f) in frames.iter().enumerate() {
             if i == victim {
-                let at = 1 + position % (f.len() - 1);
+                // A delimiter right after the frame's leading one or right before its
+                // trailing one only adds an empty frame (skipped): the frame stays whole. So a
+                // noise delimiter goes between two body bytes; any other byte anywhere inside.
+                let at = if byte == FRAME_DELIMITER {
+                    2 + position % (f.len() - 3)
+                } else {
+                    1 + position % (f.len() - 1)
+                };
                 stream.extend(&f[..at]);
                 stream.push(byte);
                 stream.extend(&f[at..]);
