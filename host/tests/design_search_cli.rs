@@ -11,15 +11,13 @@ fn rig() -> Command {
     Command::cargo_bin("rig").expect("the rig binary is built")
 }
 
+mod support {
+    pub mod cli;
+}
+use support::cli::json_of;
+
 fn json(args: &[&str]) -> Value {
-    let out = rig()
-        .args(args)
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    serde_json::from_slice(&out).expect("stdout is JSON")
+    json_of(rig().args(args))
 }
 
 /// A small search around the paper's gear that still finds designs that stop.
