@@ -1,0 +1,576 @@
+"""backdrive_rig: the backdrive rig (a 2K-H planetary gear switched between holding and
+backdrivable by vibration), its virtual rig, ``explain`` and ``design`` from Python.
+
+A thin door onto the Rust host library of the ``rig`` command-line tool: the same client,
+procedures, checks and error messages. A Rust thread owns each rig's port; every blocking
+call releases the GIL, and Ctrl-C (KeyboardInterrupt) stops a call with the gear locked.
+
+    >>> from backdrive_rig import Rig
+    >>> with Rig.virtual(speed=10) as rig:
+    ...     with rig.release(freq_hz=10, seconds=2):
+    ...         df = rig.record(seconds=2, rate_hz=1000)
+
+Results carry the CLI's ``--json`` keys (``rig info --json`` ...), data the columns and
+units of the CLI's CSV files (``rig monitor --csv``, ``rig capture --csv``, ``rig experiment
+torque-sweep --csv``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import threading
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _native
+from ._native import (
+    BadValueError,
+    DeviceFaultError,
+    LinkError,
+    NoReplyError,
+    RefusedError,
+    RigClosedError,
+    RigError,
+    VersionMismatchError,
+)
+
+__all__ = [
+    "Rig",
+    "Release",
+    "Recorder",
+    "Report",
+    "design",
+    "explain",
+    "versions",
+    "TELEMETRY_COLUMNS",
+    "RigError",
+    "BadValueError",
+    "RefusedError",
+    "NoReplyError",
+    "VersionMismatchError",
+    "LinkError",
+    "DeviceFaultError",
+    "RigClosedError",
+]
+
+#: The columns of ``rig monitor --csv`` (telemetry), in order; ``record`` adds ``seq``.
+TELEMETRY_COLUMNS: List[str] = list(_native.TELEMETRY_COLUMNS)
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+class Report(dict):
+    """A result as the CLI's ``--json`` prints it: a dict with the same keys, also
+    readable as attributes (``report.verdict`` is ``report["verdict"]``)."""
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    def __dir__(self) -> Iterable[str]:
+        return list(super().__dir__()) + [k for k in self.keys() if isinstance(k, str)]
+
+
+def _report(text: str) -> Any:
+    value = json.loads(text)
+    if isinstance(value, dict):
+        return Report(value)
+    if isinstance(value, list):
+        return [Report(v) if isinstance(v, dict) else v for v in value]
+    return value
+
+
+def _frame(columns: Sequence[Any], pandas: bool):
+    """Columns (name, dtype, bytes or list) to a DataFrame or a dict of numpy arrays."""
+    data: Dict[str, np.ndarray] = {}
+    for name, dtype, value in columns:
+        if dtype == "str":
+            data[name] = np.asarray(value, dtype=object)
+        else:
+            data[name] = np.frombuffer(value, dtype=dtype).copy()
+    if not pandas:
+        return data
+    import pandas as pd
+
+    return pd.DataFrame(data)
+
+
+def versions() -> Dict[str, str]:
+    """This library's version, protocol version and schema hash (what it asks a device
+    for at Hello; a device of another version is refused with VersionMismatchError)."""
+    package, protocol, schema = _native.versions()
+    return {"package": package, "protocol_version": str(protocol), "schema_hash": schema}
+
+
+__version__ = _native.versions()[0]
+
+
+class Release:
+    """A release (vibration on: the gear is backdrivable and a load can move), kept alive by
+    heartbeats from a Rust thread. Use it as a context manager::
+
+        with rig.release(freq_hz=10, seconds=5):
+            ...
+
+    The gear is locked again when the block ends, on any exception (KeyboardInterrupt
+    included), when ``seconds`` of device time have passed (even while Python is busy or
+    hung), when the rig is closed or dropped, and, if the process dies, within the device's
+    comms timeout (500 ms). A release without a duration (``seconds=None``) lasts only
+    while Python calls :meth:`confirm` at least every ``confirm_s`` seconds.
+    """
+
+    def __init__(self, rig: "Rig", freq_hz: float, seconds: Optional[float], confirm_s: Optional[float]):
+        self._rig = rig
+        self.freq_hz = float(freq_hz)
+        self.seconds = None if seconds is None else float(seconds)
+        self.confirm_s = None if confirm_s is None else float(confirm_s)
+        self._status = _native.NativeReleaseStatus()
+
+    def start(self) -> "Release":
+        """Starts vibrating (checked against the calibration's frequency range)."""
+        self._rig._native.start_release(self.freq_hz, self.seconds, self.confirm_s, self._status)
+        return self
+
+    def stop(self) -> None:
+        """Locks the gear (ends the release); harmless when it already ended."""
+        self._rig._native.stop_release("stop")
+
+    def confirm(self) -> None:
+        """Confirms that the program is alive (releases without a duration)."""
+        self._status.confirm()
+
+    @property
+    def live(self) -> bool:
+        """Whether the release is still live."""
+        return self._status.live
+
+    @property
+    def ended_by(self) -> Optional[str]:
+        """How it ended: ``duration``, ``stop``, ``exception``, ``keep-alive`` (not
+        confirmed in time), ``rig closed``; None while live."""
+        return self._status.ended_by
+
+    def __enter__(self) -> "Release":
+        return self.start()
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        why = "stop" if exc_type is None else "exception"
+        try:
+            self._rig._native.stop_release(why)
+        except KeyboardInterrupt:
+            # A second Ctrl-C while locking: lock again, then let it propagate.
+            self._rig._native.stop_release(why)
+            raise
+        return False
+
+    def __del__(self) -> None:
+        try:
+            if self._status.live:
+                self._rig._native.stop_release("dropped")
+        except Exception:
+            pass
+
+
+class Recorder:
+    """A background telemetry recording: the port's Rust thread stores every sample while
+    Python does other work. Samples lost on the link (gaps in the device's sample counter)
+    are counted in :attr:`lost` and listed in :attr:`gaps`, never hidden."""
+
+    def __init__(self, rig: "Rig", native: Any):
+        self._rig = rig
+        self._native = native
+
+    @property
+    def rate_hz(self) -> int:
+        """Telemetry rate, Hz."""
+        return self._native.rate_hz
+
+    @property
+    def done(self) -> bool:
+        """Whether the recording has ended."""
+        return self._native.done
+
+    @property
+    def lost(self) -> int:
+        """Samples missing from the stream so far."""
+        return self._native.lost
+
+    @property
+    def gaps(self) -> List[tuple]:
+        """(sequence number before, after) of each gap."""
+        return list(self._native.gaps)
+
+    def __len__(self) -> int:
+        return len(self._native)
+
+    def wait(self) -> "Recorder":
+        """Waits until a recording with a duration has ended (GIL released)."""
+        self._rig._native.wait_recording(self._native)
+        self._raise_error()
+        return self
+
+    def stop(self) -> "Recorder":
+        """Stops the recording and the telemetry stream."""
+        self._rig._native.stop_recording(self._native)
+        return self
+
+    def _raise_error(self) -> None:
+        err = self._native.error
+        if err is not None:
+            raise RigError(f"the recording stopped: {err}")
+
+    def take(self, pandas: bool = True):
+        """The samples recorded since the last take (the buffer is emptied)."""
+        return self._result(self._native.columns(True), pandas)
+
+    def data(self, pandas: bool = True):
+        """All samples held (the buffer is kept)."""
+        return self._result(self._native.columns(False), pandas)
+
+    def _result(self, columns, pandas: bool):
+        out = _frame(columns, pandas)
+        if pandas:
+            out.attrs["lost"] = self.lost
+            out.attrs["gaps"] = self.gaps
+            out.attrs["rate_hz"] = self.rate_hz
+        return out
+
+    def __enter__(self) -> "Recorder":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        self.stop()
+        return False
+
+
+class Rig:
+    """A rig: a board on a serial port, a served virtual rig (``rig sim serve``), or the
+    in-process virtual rig. Thread-safe: calls from several Python threads are queued to
+    the one Rust thread that owns the port. Use as a context manager, or call
+    :meth:`close` (the gear is locked)."""
+
+    def __init__(self, native: Any):
+        self._native = native
+        self._lock = threading.Lock()
+
+    @classmethod
+    def open(cls, port: str, baud: int = 921600) -> "Rig":
+        """Opens the board or served virtual rig on ``port`` and says Hello; a device of
+        another protocol version or schema raises VersionMismatchError naming which side
+        to update."""
+        return cls(_native.NativeRig.open(str(port), int(baud)))
+
+    @classmethod
+    def virtual(
+        cls,
+        preset: str = "paper",
+        effects: Sequence[str] = (),
+        model: Optional[PathLike] = None,
+        speed: float = 1.0,
+        seed: int = 1,
+    ) -> "Rig":
+        """Starts the in-process virtual rig (the firmware's control core and the plant):
+        ``preset`` ``paper`` or ``ideal``, hidden ``effects`` as ``NAME[:k=v,...]`` (``rig
+        explain``'s names), ``model`` a rig file, ``speed`` virtual seconds per wall
+        second (at most 1000). As ``rig sim serve``'s options."""
+        return cls(
+            _native.NativeRig.virtual_rig(
+                str(preset),
+                [str(e) for e in effects],
+                None if model is None else os.fspath(model),
+                float(speed),
+                int(seed),
+            )
+        )
+
+    @property
+    def port(self) -> str:
+        """The port's name (a pseudo-terminal for a virtual rig)."""
+        return self._native.port
+
+    def info(self) -> Report:
+        """Device identity and versions: ``rig info --json``'s keys."""
+        return _report(self._native.info())
+
+    def faults(self) -> Report:
+        """Active and latched faults: ``rig faults --json``'s keys (``active``, ``latched``)."""
+        return _report(self._native.faults())
+
+    def clear(self) -> Report:
+        """Clears latched faults whose cause is gone: ``rig clear --json``'s keys."""
+        return _report(self._native.clear())
+
+    def parameters(self) -> Dict[str, Dict[str, Any]]:
+        """The device's calibration record as the rig file's sections (docs/rig-file.md):
+        ``{"gear": {...}, "calibration": {...}, "limits": {...}, ...}``."""
+        return json.loads(self._native.parameters())
+
+    def set_parameters(
+        self, rig_file: Optional[PathLike] = None, **sections: Mapping[str, Any]
+    ) -> Report:
+        """Writes a calibration to the device, checked as ``rig calibration set`` checks it
+        (the rig file's rules, then the device's: a refusal names the field), and reads it
+        back. Either a rig file's path, or sections to change, merged over the device's
+        current ones (``set_parameters(limits={"max_freq_hz": 12})``): a key not given
+        keeps its value on the device. Returns ``changed``, ``written``, ``defaulted``
+        (and ``calibration`` when written)."""
+        if rig_file is not None and sections:
+            raise BadValueError("set_parameters: give a rig file or sections, not both")
+        if rig_file is not None:
+            path = os.fspath(rig_file)
+            try:
+                with open(path, "r", encoding="utf-8") as f:
+                    text = f.read()
+            except OSError as e:
+                raise BadValueError(f"rig file {path}: cannot read it ({e})") from None
+            return _report(self._native.set_parameters(text, path))
+        if not sections:
+            raise BadValueError("set_parameters: give a rig file or sections to change")
+        merged = self.parameters()
+        for name, keys in sections.items():
+            if not isinstance(keys, Mapping):
+                raise BadValueError(
+                    f"set_parameters: section {name} must be a dict of keys (e.g. limits={{'max_freq_hz': 12}})"
+                )
+            merged.setdefault(name, {}).update(keys)
+        return _report(self._native.set_parameters(_toml(merged), "set_parameters"))
+
+    def release(
+        self, freq_hz: float = 10.0, seconds: Optional[float] = ..., confirm_s: Optional[float] = None
+    ) -> Release:
+        """A release at ``freq_hz`` for ``seconds`` of device time (required: pass
+        ``seconds=None, confirm_s=...`` to opt out of a duration, then call
+        ``Release.confirm()`` within every ``confirm_s``). Use with ``with``."""
+        if seconds is ...:
+            raise BadValueError(
+                "release: give seconds (the release's duration, device s), or seconds=None with confirm_s to keep it by Release.confirm()"
+            )
+        if seconds is None and confirm_s is None:
+            raise BadValueError(
+                "release: seconds=None needs confirm_s: the release then lasts while Release.confirm() is called within every confirm_s seconds"
+            )
+        return Release(self, freq_hz, seconds, confirm_s)
+
+    def recorder(self, rate_hz: int = 1000, seconds: Optional[float] = None) -> Recorder:
+        """Starts a background telemetry recording at ``rate_hz`` (the device's 1 kHz
+        divided by a whole number) for ``seconds`` of device time, or until ``stop()``."""
+        return Recorder(self, self._native.start_recording(int(rate_hz), seconds))
+
+    def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True):
+        """Telemetry for ``seconds`` of device time at ``rate_hz``: a DataFrame (or a dict
+        of numpy arrays) with ``rig monitor --csv``'s columns and units, plus ``seq``;
+        ``attrs["lost"]`` and ``attrs["gaps"]`` report samples lost on the link."""
+        rec = self.recorder(rate_hz, seconds)
+        try:
+            rec.wait()
+        finally:
+            rec.stop()
+        return rec.take(pandas)
+
+    def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True):
+        """The raw burst (``rig capture``): ``seconds`` at ``rate_hz`` recorded on the device
+        and uploaded; ``rig capture --csv``'s columns (index, t_s, current_adc, current_a,
+        encoder_count, cam_angle_rad). ``attrs`` (or the dict's ``"summary"``) has the
+        counters: ``dropped``, ``gaps``, ``completed``."""
+        summary, columns = self._native.capture(float(seconds), int(rate_hz))
+        out = _frame(columns, pandas)
+        if pandas:
+            out.attrs.update(json.loads(summary))
+        else:
+            out["summary"] = json.loads(summary)
+        return out
+
+    def torque_sweep(
+        self, plan: Union[str, PathLike, None] = None, quick: bool = False, window: str = "start"
+    ):
+        """The required-torque test of Figs. 8-9 (``rig experiment torque-sweep``): ``plan``
+        ``"paper"`` (150 runs, the default), ``"quick"`` (30; or ``quick=True``) or a plan
+        file's path (docs/plans.md). Returns a DataFrame with the sweep CSV's columns
+        (``rig explain`` reads them); ``attrs`` has the summary (``planned``, ``written``,
+        ``skipped``) and ``provenance`` (the CSV's ``#`` header)."""
+        import pandas as pd
+
+        if window not in ("start", "revolutions"):
+            raise BadValueError(f"window {window}: give 'start' or 'revolutions'")
+        if quick:
+            if plan not in (None, "quick"):
+                raise BadValueError("torque_sweep: give a plan or quick=True, not both")
+            plan = "quick"
+        plan = "paper" if plan is None else plan
+        if plan in ("paper", "quick"):
+            text, name = str(plan), str(plan)
+        else:
+            name = os.fspath(plan)
+            try:
+                with open(name, "r", encoding="utf-8") as f:
+                    text = f.read()
+            except OSError as e:
+                raise BadValueError(f"plan {name}: cannot read it ({e})") from None
+        summary, provenance = self._native.torque_sweep(text, name, window == "revolutions")
+        outcome = json.loads(summary)
+        rows = outcome.pop("rows")
+        df = pd.DataFrame(rows, columns=_SWEEP_COLUMNS)
+        df.attrs.update(outcome)
+        df.attrs["provenance"] = provenance
+        return df
+
+    def hold_release(
+        self,
+        load_nm: Optional[float] = 0.7355,
+        hold_s: float = 14.5,
+        freq_hz: float = 5.0,
+        release_s: float = 2.0,
+        after_s: float = 1.5,
+    ):
+        """Fig. 5 (``rig experiment hold-release``): hold ``load_nm`` without vibration for
+        ``hold_s``, release at ``freq_hz`` for ``release_s``, record ``after_s`` more. A
+        DataFrame with the CSV's columns (t_s, phase, state, output_angle_rad,
+        cam_speed_rad_s, current_a); ``attrs["fig5"]``: the verdict numbers."""
+        import pandas as pd
+
+        out = json.loads(self._native.hold_release(load_nm, hold_s, freq_hz, release_s, after_s))
+        df = pd.DataFrame(out["samples"], columns=_HOLD_COLUMNS)
+        df.attrs["fig5"] = out["fig5"]
+        return df
+
+    def link_stats(self) -> Report:
+        """Link counters: frames, errors, retries, heartbeats, telemetry samples lost."""
+        return _report(self._native.link_stats())
+
+    def close(self) -> None:
+        """Locks the gear and closes the port (an in-process virtual rig stops)."""
+        self._native.close()
+
+    def __enter__(self) -> "Rig":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        self.close()
+        return False
+
+    def __repr__(self) -> str:
+        return f"Rig(port={self.port!r})"
+
+
+# Columns of `rig experiment torque-sweep --csv` (experiment::sweep::Row).
+_SWEEP_COLUMNS = [
+    "point",
+    "repeat",
+    "t_s",
+    "v_in_v",
+    "target_hz",
+    "omega_n_rad_s",
+    "tau_rot_nm",
+    "i_in_a",
+    "temp_c",
+    "tau_cam_est_nm",
+    "backdriven",
+    "load_kg",
+]
+# Columns of `rig experiment hold-release --csv`.
+_HOLD_COLUMNS = ["t_s", "phase", "state", "output_angle_rad", "cam_speed_rad_s", "current_a"]
+
+
+def _toml(sections: Mapping[str, Mapping[str, Any]]) -> str:
+    """The rig file's sections as TOML text (flat keys, numbers, strings, booleans, lists)."""
+
+    def value(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (int, float)):
+            return repr(float(v)) if isinstance(v, float) else str(v)
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, Mapping):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        raise BadValueError(f"set_parameters: {v!r} is not a rig-file value")
+
+    lines: List[str] = []
+    for name, keys in sections.items():
+        if isinstance(keys, list):
+            for entry in keys:
+                lines.append(f"[[{name}]]")
+                lines.extend(f"{k} = {value(v)}" for k, v in entry.items())
+            continue
+        lines.append(f"[{name}]")
+        lines.extend(f"{k} = {value(v)}" for k, v in keys.items())
+    return "\n".join(lines) + "\n"
+
+
+def design(
+    z: Optional[Sequence[int]] = None,
+    x: Optional[Sequence[float]] = None,
+    table1: bool = False,
+    eta_gross: Optional[float] = None,
+    **rig: float,
+):
+    """The design calculator (``rig design --json``): tooth counts ``z`` = (Z1, Z2, Z3,
+    Z4) (default the paper's rig), profile shifts ``x``, ``eta_gross`` (adds
+    ``mu_from_eta``), or ``table1=True`` for the six sets of Table 1 (a list). Rig values
+    as keywords: module_mm, pressure_angle_deg, mu_s, mu_d, eccentricity_mm,
+    carrier_mass_kg, tau_rot_nm, freq_hz, max_current_a. Keys: z, n, rho,
+    contact_ratios, big_lambda, small_lambda, mu_s_lambda, mu_d_lambda, holds_load,
+    keeps_moving_after_stop, tau_cam_hat_nm, checks, warnings, ..."""
+    allowed = {
+        "module_mm",
+        "pressure_angle_deg",
+        "mu_s",
+        "mu_d",
+        "eccentricity_mm",
+        "carrier_mass_kg",
+        "tau_rot_nm",
+        "freq_hz",
+        "max_current_a",
+    }
+    unknown = sorted(set(rig) - allowed)
+    if unknown:
+        raise BadValueError(f"design: unknown option(s) {', '.join(unknown)} (options: {', '.join(sorted(allowed))})")
+    return _report(
+        _native.design(
+            None if z is None else [int(v) for v in z],
+            None if x is None else [float(v) for v in x],
+            table1,
+            eta_gross,
+            **{k: float(v) for k, v in rig.items()},
+        )
+    )
+
+
+def explain(
+    data: Any,
+    model: Optional[PathLike] = None,
+    alpha: Optional[float] = None,
+    folds: Optional[int] = None,
+    replicates: Optional[int] = None,
+    stated_noise_ma: Optional[float] = None,
+) -> Report:
+    """The discrepancy workflow (``rig explain --json``) on ``data``: a CSV path, or a
+    DataFrame with the sweep's columns (``omega_n_rad_s``, ``tau_rot_nm``, ``i_in_a``;
+    optional ``t_s``, ``v_in_v``, ``temp_c``, ``backdriven``), e.g. from
+    :meth:`Rig.torque_sweep` (its provenance travels in ``attrs``). ``model``: a rig file.
+    Keys: ``verdict``, ``effects``, ``rmse_before_a``, ``rmse_after_a``, ``lack_of_fit``,
+    ... (no report folder is written)."""
+    if isinstance(data, (str, os.PathLike)):
+        return _report(
+            _native.explain(os.fspath(data), None if model is None else os.fspath(model), alpha, folds, replicates, stated_noise_ma)
+        )
+    if not hasattr(data, "to_csv"):
+        raise BadValueError("explain: give a CSV path or a pandas DataFrame")
+    fd, path = tempfile.mkstemp(suffix=".csv", prefix="backdrive_rig_explain_")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+            provenance = getattr(data, "attrs", {}).get("provenance", "")
+            f.write(provenance)
+            data.to_csv(f, index=False, lineterminator="\n")
+        return _report(
+            _native.explain(path, None if model is None else os.fspath(model), alpha, folds, replicates, stated_noise_ma)
+        )
+    finally:
+        os.unlink(path)

@@ -1,0 +1,102 @@
+//! Data as columns for numpy and pandas: each column a (name, dtype, value) triple, the
+//! value little-endian bytes for `numpy.frombuffer` (dtype `<f8`, `<u4`, ...) or a list
+//! of strings (dtype `str`). Names and units are the CLI's CSV columns: `rig monitor
+//! --csv` for telemetry, `rig capture --csv` for captures.
+
+use host::client::{Capture, cam_angle_rad, current_amps};
+use host::reports::TELEMETRY_CSV_HEADER;
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyList};
+
+use crate::worker::Row;
+
+/// (name, dtype, bytes or list of str) per column.
+pub type TypedColumns<'py> = Vec<(&'static str, &'static str, Bound<'py, PyAny>)>;
+
+fn f64_bytes<'py>(py: Python<'py>, values: impl Iterator<Item = f64>) -> Bound<'py, PyAny> {
+    let bytes: Vec<u8> = values.flat_map(f64::to_le_bytes).collect();
+    PyBytes::new(py, &bytes).into_any()
+}
+
+/// An estimate as the CSV has it: NaN (empty) when not current or not a number.
+fn estimate(fresh: bool, v: f32) -> f64 {
+    if fresh && v.is_finite() {
+        f64::from(v)
+    } else {
+        f64::NAN
+    }
+}
+
+/// A count the board reports once measured (0 until then: empty in the CSV).
+fn count(v: Option<u32>) -> f64 {
+    v.filter(|c| *c > 0).map_or(f64::NAN, f64::from)
+}
+
+/// One numeric value of the monitor CSV's column `name` (None: a text column).
+fn number(name: &str, r: &Row) -> Option<f64> {
+    let t = &r.sample;
+    let h = r.health.as_ref();
+    Some(match name {
+        "device_time_s" => t.device_time_us as f64 * 1e-6,
+        "cam_speed_rad_s" => f64::from(t.cam_speed_rad_s),
+        "cam_hz" => f64::from(t.cam_speed_rad_s.abs() / std::f32::consts::TAU),
+        "current_a" => f64::from(t.current_a),
+        "pwm_duty" => f64::from(t.pwm_duty),
+        "tau_cam_nm" => estimate(r.fresh, t.tau_cam_nm),
+        "tau_rot_nm" => estimate(r.fresh, t.tau_rot_nm),
+        "output_rad" => f64::from(t.output_angle_rad),
+        "output_rad_s" => f64::from(t.output_speed_rad_s),
+        "bus_v" => h.map_or(f64::NAN, |h| f64::from(h.bus_voltage_v)),
+        "motor_temp_c" => h.map_or(f64::NAN, |h| f64::from(h.motor_temp_c)),
+        "step_cycles_mean" => count(h.map(|h| h.step_cycles_mean)),
+        "step_cycles_max" => count(h.map(|h| h.step_cycles_max)),
+        _ => return None,
+    })
+}
+
+/// One text value of the monitor CSV's column `name`.
+fn text(name: &str, r: &Row) -> String {
+    let t = &r.sample;
+    match name {
+        "state" => t.state.name().to_owned(),
+        "faults" => t.faults.names().collect::<Vec<_>>().join("|"),
+        "status" => t.status.names().collect::<Vec<_>>().join("|"),
+        _ => String::new(),
+    }
+}
+
+/// Telemetry rows as the monitor CSV's columns (every one, in its order), then `seq`, the
+/// device's sample counter (a gap there is a lost sample).
+pub fn telemetry<'py>(py: Python<'py>, rows: &[Row]) -> PyResult<TypedColumns<'py>> {
+    let mut out: TypedColumns<'py> = Vec::with_capacity(TELEMETRY_CSV_HEADER.len() + 1);
+    for name in TELEMETRY_CSV_HEADER {
+        if !matches!(name, "state" | "faults" | "status") {
+            let values = rows.iter().map(|r| number(name, r).unwrap_or(f64::NAN));
+            out.push((name, "<f8", f64_bytes(py, values)));
+        } else {
+            let list = PyList::new(py, rows.iter().map(|r| text(name, r)))?;
+            out.push((name, "str", list.into_any()));
+        }
+    }
+    let seq: Vec<u8> = rows.iter().flat_map(|r| r.sample.seq.to_le_bytes()).collect();
+    out.push(("seq", "<u4", PyBytes::new(py, &seq).into_any()));
+    Ok(out)
+}
+
+/// A capture as `rig capture --csv`'s columns: `index,t_s,current_adc,current_a,
+/// encoder_count,cam_angle_rad`.
+pub fn capture<'py>(py: Python<'py>, cap: &Capture) -> PyResult<TypedColumns<'py>> {
+    let rate = f64::from(cap.sample_rate_hz.max(1));
+    let s = &cap.samples;
+    let index: Vec<u8> = s.iter().flat_map(|(i, _)| i.to_le_bytes()).collect();
+    let adc: Vec<u8> = s.iter().flat_map(|(_, x)| x.current_adc.to_le_bytes()).collect();
+    let enc: Vec<u8> = s.iter().flat_map(|(_, x)| x.encoder_count.to_le_bytes()).collect();
+    Ok(vec![
+        ("index", "<u4", PyBytes::new(py, &index).into_any()),
+        ("t_s", "<f8", f64_bytes(py, s.iter().map(|(i, _)| f64::from(*i) / rate))),
+        ("current_adc", "<u2", PyBytes::new(py, &adc).into_any()),
+        ("current_a", "<f8", f64_bytes(py, s.iter().map(|(_, x)| current_amps(x.current_adc)))),
+        ("encoder_count", "<i4", PyBytes::new(py, &enc).into_any()),
+        ("cam_angle_rad", "<f8", f64_bytes(py, s.iter().map(|(_, x)| cam_angle_rad(x.encoder_count)))),
+    ])
+}

@@ -1,0 +1,200 @@
+//! `backdrive_rig._native`: the Python extension behind the `backdrive_rig` package. A thin
+//! door onto the host library (the `rig` tool's): the same client, procedures, checks and
+//! error messages; no protocol, procedure or physics of its own. A Rust thread owns each
+//! rig's port ([`worker`]); every blocking call releases the GIL.
+//!
+//! Built as a wheel by maturin (`python/pyproject.toml`, feature `extension-module`); the
+//! Python package (`python/backdrive_rig/`) turns the JSON and column bytes returned here
+//! into objects, numpy arrays and pandas DataFrames.
+
+// pyo3's macros expand to `unsafe` FFI glue; this crate writes none itself.
+#![allow(unsafe_code)]
+
+mod columns;
+mod errors;
+mod rig;
+mod worker;
+
+use std::path::PathBuf;
+
+use host::RigError;
+use host::design::RigParams;
+use pyo3::prelude::*;
+
+use errors::to_py;
+
+/// `rig design --json` for tooth counts `z` (profile shifts `x`), or `--table1` (a list):
+/// the paper's rig with the given values replaced.
+#[pyfunction(name = "design")]
+#[pyo3(signature = (z = None, x = None, table1 = false, eta_gross = None, module_mm = None,
+    pressure_angle_deg = None, mu_s = None, mu_d = None, eccentricity_mm = None,
+    carrier_mass_kg = None, tau_rot_nm = None, freq_hz = None, max_current_a = None))]
+#[allow(clippy::too_many_arguments)]
+fn design_report(
+    z: Option<[u32; 4]>,
+    x: Option<[f64; 4]>,
+    table1: bool,
+    eta_gross: Option<f64>,
+    module_mm: Option<f64>,
+    pressure_angle_deg: Option<f64>,
+    mu_s: Option<f64>,
+    mu_d: Option<f64>,
+    eccentricity_mm: Option<f64>,
+    carrier_mass_kg: Option<f64>,
+    tau_rot_nm: Option<f64>,
+    freq_hz: Option<f64>,
+    max_current_a: Option<f64>,
+) -> PyResult<String> {
+    (|| -> Result<String, RigError> {
+        let bad = |what: String, why: &str| RigError::BadValue {
+            what,
+            why: why.into(),
+        };
+        let mut p = RigParams::default();
+        for (name, v) in [
+            ("module_mm", module_mm),
+            ("eccentricity_mm", eccentricity_mm),
+            ("carrier_mass_kg", carrier_mass_kg),
+            ("freq_hz", freq_hz),
+            ("max_current_a", max_current_a),
+        ] {
+            if let Some(v) = v
+                && !(v.is_finite() && v > 0.0)
+            {
+                return Err(bad(format!("{name} {v}"), "give a positive number"));
+            }
+        }
+        for (name, v) in [("mu_s", mu_s), ("mu_d", mu_d), ("tau_rot_nm", tau_rot_nm)] {
+            if let Some(v) = v
+                && !(v.is_finite() && v >= 0.0)
+            {
+                return Err(bad(format!("{name} {v}"), "give zero or a positive number"));
+            }
+        }
+        if let Some(a) = pressure_angle_deg
+            && !(a.is_finite() && a > 0.0 && a < 45.0)
+        {
+            return Err(bad(
+                format!("pressure_angle_deg {a}"),
+                "must be above 0 and below 45 degrees (standard gears use 20)",
+            ));
+        }
+        p.module = module_mm.map_or(p.module, |v| v * 1e-3);
+        p.pressure_angle = pressure_angle_deg.map_or(p.pressure_angle, f64::to_radians);
+        p.mu_s = mu_s.unwrap_or(p.mu_s);
+        p.mu_d = mu_d.unwrap_or(p.mu_d);
+        p.eccentricity = eccentricity_mm.map_or(p.eccentricity, |v| v * 1e-3);
+        p.carrier_mass = carrier_mass_kg.unwrap_or(p.carrier_mass);
+        p.tau_rot = tau_rot_nm.unwrap_or(p.tau_rot);
+        p.vibration_hz = freq_hz.unwrap_or(p.vibration_hz);
+        p.max_current_a = max_current_a.unwrap_or(p.max_current_a);
+        if table1 {
+            if z.is_some() || x.is_some() {
+                return Err(bad(
+                    "table1".into(),
+                    "evaluates the six sets of Table 1: leave z and x out",
+                ));
+            }
+            let reports = model::TABLE1
+                .iter()
+                .map(|&z| host::design::evaluate(z, &p, eta_gross))
+                .collect::<Result<Vec<_>, _>>()?;
+            return Ok(serde_json::to_string(&reports)?);
+        }
+        let z = z.unwrap_or(model::paper::RIG_Z);
+        let report = host::design::evaluate_shifted(z, x.unwrap_or([0.0; 4]), &p, eta_gross)?;
+        Ok(serde_json::to_string(&report)?)
+    })()
+    .map_err(to_py)
+}
+
+/// `rig explain --measured CSV [--model RIG] --json` (no report folder, no proposal): the
+/// explanation's JSON. The CSV's provenance line of the drive's decay mode is read as the
+/// CLI reads it.
+#[pyfunction(name = "explain")]
+#[pyo3(signature = (csv, model = None, alpha = None, folds = None, replicates = None, stated_noise_ma = None))]
+fn explain_csv(
+    py: Python<'_>,
+    csv: PathBuf,
+    model: Option<PathBuf>,
+    alpha: Option<f64>,
+    folds: Option<u32>,
+    replicates: Option<u32>,
+    stated_noise_ma: Option<f64>,
+) -> PyResult<String> {
+    py.detach(|| -> Result<String, RigError> {
+        let bad = |what: String, why: &str| RigError::BadValue {
+            what,
+            why: why.into(),
+        };
+        let mut options = ::explain::Options::default();
+        if let Some(a) = alpha {
+            if !(a > 0.0 && a < 0.5) {
+                return Err(bad(
+                    format!("alpha {a}"),
+                    "the guard level must lie in (0, 0.5), e.g. 0.01",
+                ));
+            }
+            options.alpha = a;
+        }
+        if let Some(f) = folds {
+            if !(2..=20).contains(&f) {
+                return Err(bad(format!("folds {f}"), "give 2 to 20 folds"));
+            }
+            options.folds = f as usize;
+        }
+        if let Some(r) = replicates {
+            if r > 10_000 {
+                return Err(bad(format!("replicates {r}"), "give 0 to 10000 replicates"));
+            }
+            options.replicates = r as usize;
+        }
+        if let Some(n) = stated_noise_ma {
+            if !(n.is_finite() && n >= 0.0) {
+                return Err(bad(
+                    format!("stated_noise_ma {n}"),
+                    "give zero or a positive noise in mA",
+                ));
+            }
+            options.stated_noise_a = (n > 0.0).then_some(n * 1e-3);
+        }
+        let mut rig = match &model {
+            Some(p) => rigfile::RigFile::load(p)?,
+            None => rigfile::RigFile::paper(),
+        };
+        let data = ::explain::Dataset::read_csv(&csv)?;
+        if let Some(regenerative) = host::experiment::sweep::read_drive(&csv) {
+            rig = rig.with_drive_decay(regenerative);
+        }
+        let outcome = ::explain::explain(&data, &rig, &options)?;
+        Ok(serde_json::to_string(&outcome.explanation)?)
+    })
+    .map_err(to_py)
+}
+
+/// The host library's versions: the package's, the protocol's and its schema hash.
+#[pyfunction]
+fn versions() -> (String, u16, String) {
+    (
+        env!("CARGO_PKG_VERSION").to_owned(),
+        protocol::PROTOCOL_VERSION,
+        format!("{:#010x}", protocol::SCHEMA_HASH),
+    )
+}
+
+/// The module.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    errors::register(m)?;
+    m.add_class::<rig::NativeRig>()?;
+    m.add_class::<rig::NativeReleaseStatus>()?;
+    m.add_class::<rig::NativeRecording>()?;
+    m.add_function(wrap_pyfunction!(design_report, m)?)?;
+    m.add_function(wrap_pyfunction!(explain_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(versions, m)?)?;
+    m.add(
+        "TELEMETRY_COLUMNS",
+        host::reports::TELEMETRY_CSV_HEADER.to_vec(),
+    )?;
+    Ok(())
+}

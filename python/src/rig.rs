@@ -1,0 +1,648 @@
+//! `Rig`: one device (a board, a served virtual rig, or the in-process virtual rig), its
+//! port owned by a Rust thread ([`crate::worker`]). Every method sends a job to that thread
+//! and waits for its answer with the GIL released, checking for Ctrl-C (KeyboardInterrupt)
+//! meanwhile. Results cross as JSON text (the CLI's `--json` keys) or as little-endian
+//! column bytes; the Python package turns them into objects, arrays and DataFrames.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use host::RigError;
+use host::client::{Client, ClientOptions, open_serial};
+use host::connection::{DeviceOpts, Session};
+use host::device::VirtualDevice;
+use host::experiment::bench::{Bench, DeviceBench, Operator};
+use host::experiment::sweep::{self, SweepSetup, Window};
+use host::experiment::{Plan, hold_release};
+use host::reports::{ClearReport, FaultsReport, InfoReport};
+use pyo3::prelude::*;
+use serde::Serialize;
+
+use crate::errors::{closed, to_py};
+use crate::worker::{self, Job, LiveRelease, Recording, ReleaseStatus, Worker, lock};
+
+/// How often a waiting call looks for Ctrl-C.
+const SIGNAL_POLL: Duration = Duration::from_millis(50);
+
+fn json<T: Serialize>(v: &T) -> Result<String, RigError> {
+    Ok(serde_json::to_string(v)?)
+}
+
+fn bad(what: impl Into<String>, why: impl Into<String>) -> RigError {
+    RigError::BadValue {
+        what: what.into(),
+        why: why.into(),
+    }
+}
+
+/// Waits for `rx` with the GIL released; on Ctrl-C sets `stop`, waits for the job to
+/// finish (it locks the gear on its way out) and raises the KeyboardInterrupt.
+fn wait<R: Send>(
+    py: Python<'_>,
+    rx: mpsc::Receiver<Result<R, RigError>>,
+    stop: &AtomicBool,
+) -> PyResult<R> {
+    // `detach` needs what it borrows to be `Sync`; a receiver is only `Send`.
+    let rx = Mutex::new(rx);
+    let rx = &rx;
+    loop {
+        match py.detach(|| lock(rx).recv_timeout(SIGNAL_POLL)) {
+            Ok(r) => return r.map_err(to_py),
+            Err(RecvTimeoutError::Disconnected) => return Err(closed()),
+            Err(RecvTimeoutError::Timeout) => {
+                if let Err(interrupt) = py.check_signals() {
+                    stop.store(true, Ordering::SeqCst);
+                    // The job stops at its next check and locks the gear; its result is
+                    // dropped, the interrupt raised.
+                    let _ = py.detach(|| lock(rx).recv());
+                    stop.store(false, Ordering::SeqCst);
+                    return Err(interrupt);
+                }
+            }
+        }
+    }
+}
+
+/// The rig file's sections as JSON text, from a device's calibration record.
+fn record_sections(record: &protocol::RigParameters) -> Result<String, RigError> {
+    let (rig, _) = host::calibrate::file::for_record(record, None);
+    let text = rig.to_toml()?;
+    let value: toml::Value = toml::from_str(&text).map_err(|e| {
+        RigError::Protocol(format!("the rig file of the device's record does not parse: {e}"))
+    })?;
+    json(&value)
+}
+
+/// `[("field", old, new)]` of two records' differing fields.
+fn changes(old: &protocol::RigParameters, new: &protocol::RigParameters) -> Vec<String> {
+    let (a, b) = (serde_json::to_value(old), serde_json::to_value(new));
+    let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) = (a, b) else {
+        return Vec::new();
+    };
+    b.iter()
+        .filter(|(k, v)| a.get(*k) != Some(*v))
+        .map(|(k, v)| {
+            let was = a.get(k).map_or("none".into(), |w| w.to_string());
+            format!("{k}: {was} -> {v}")
+        })
+        .collect()
+}
+
+/// A rig: a board on a serial port, a served virtual rig (`rig sim serve`), or the
+/// in-process virtual rig.
+#[pyclass(module = "backdrive_rig._native", name = "NativeRig")]
+pub struct NativeRig {
+    jobs: Mutex<Option<Sender<Job>>>,
+    stop: Arc<AtomicBool>,
+    port: String,
+    in_process: bool,
+}
+
+impl NativeRig {
+    fn start(session: Session) -> Result<Self, RigError> {
+        let port = session.port().to_owned();
+        let in_process = session.device.is_some();
+        let stop = Arc::new(AtomicBool::new(false));
+        let tx = worker::spawn(DeviceBench::new(session), stop.clone())?;
+        Ok(Self {
+            jobs: Mutex::new(Some(tx)),
+            stop,
+            port,
+            in_process,
+        })
+    }
+
+    /// Runs `f` on the port's thread and waits for it (GIL released, Ctrl-C checked).
+    fn call<R, F>(&self, py: Python<'_>, f: F) -> PyResult<R>
+    where
+        R: Send + 'static,
+        F: FnOnce(&mut Worker) -> Result<R, RigError> + Send + 'static,
+    {
+        let (tx, rx) = mpsc::channel();
+        let job: Job = Box::new(move |w: &mut Worker| {
+            let _ = tx.send(f(w));
+        });
+        let sender = lock(&self.jobs).clone().ok_or_else(closed)?;
+        sender.send(job).map_err(|_| closed())?;
+        self.stop.store(false, Ordering::SeqCst);
+        wait(py, rx, &self.stop)
+    }
+}
+
+/// Refuses a procedure while a recording or a release of the user's runs (both use the
+/// telemetry stream and the drive).
+fn idle(w: &Worker, what: &str) -> Result<(), RigError> {
+    if w.recording.is_some() {
+        return Err(bad(
+            what,
+            "a recording is running: stop it (Recorder.stop()) before starting a procedure",
+        ));
+    }
+    if w.release.is_some() {
+        return Err(bad(
+            what,
+            "a release is live: end it (leave its `with` block) before starting a procedure",
+        ));
+    }
+    Ok(())
+}
+
+#[pymethods]
+impl NativeRig {
+    /// Opens a board or a served virtual rig on serial port `port` and says Hello (a device
+    /// of another protocol version or schema is refused, naming which side to update).
+    #[staticmethod]
+    #[pyo3(signature = (port, baud = protocol::DEFAULT_BAUD_RATE))]
+    fn open(py: Python<'_>, port: String, baud: u32) -> PyResult<Self> {
+        py.detach(|| {
+            let session = DeviceOpts {
+                port: Some(port),
+                baud,
+                ..DeviceOpts::default()
+            }
+            .connect()?;
+            Self::start(session)
+        })
+        .map_err(to_py)
+    }
+
+    /// Starts the in-process virtual rig (firmware core + plant) and opens it.
+    #[staticmethod]
+    #[pyo3(signature = (preset = "paper".to_string(), effects = Vec::new(), model = None, speed = 1.0, seed = 1))]
+    fn virtual_rig(
+        py: Python<'_>,
+        preset: String,
+        effects: Vec<String>,
+        model: Option<PathBuf>,
+        speed: f64,
+        seed: u64,
+    ) -> PyResult<Self> {
+        py.detach(|| {
+            if !(speed.is_finite() && speed > 0.0 && speed <= 1000.0) {
+                return Err(bad(
+                    format!("speed {speed}"),
+                    "not a speed factor: give a number above 0 and at most 1000 (1 = real time)",
+                ));
+            }
+            let preset_value = sim::Preset::by_name(&preset)?;
+            let mut config = match &model {
+                Some(path) => VirtualDevice::rig_file_config(
+                    &rigfile::RigFile::load(path)?,
+                    &preset_value,
+                )?,
+                None => VirtualDevice::paper_config(&preset_value),
+            };
+            for e in &effects {
+                sim::EffectSpec::parse(e)?.apply(&mut config.plant)?;
+            }
+            config.seed = seed;
+            let device = VirtualDevice::start(config, speed)?;
+            let port = device.port_name().to_owned();
+            let io = open_serial(&port, protocol::DEFAULT_BAUD_RATE)?;
+            let mut opts = ClientOptions::new(format!("the virtual device ({port})"));
+            opts.time_scale = speed;
+            // As `--sim`: pseudo-terminal bytes wait for a kernel worker.
+            opts.reply_timeout = Duration::from_secs(1);
+            let (client, info) = Client::connect(io, opts)?;
+            Self::start(Session {
+                client,
+                info,
+                device: Some(device),
+            })
+        })
+        .map_err(to_py)
+    }
+
+    /// The port's name.
+    #[getter]
+    fn port(&self) -> String {
+        self.port.clone()
+    }
+
+    /// `rig info --json`.
+    fn info(&self, py: Python<'_>) -> PyResult<String> {
+        let (port, sim) = (self.port.clone(), self.in_process);
+        self.call(py, move |w| {
+            let info = w.bench.session.client.info()?;
+            json(&InfoReport::new(&info, &port, sim))
+        })
+    }
+
+    /// `rig faults --json`.
+    fn faults(&self, py: Python<'_>) -> PyResult<String> {
+        self.call(py, |w| {
+            json(&FaultsReport::from(w.bench.session.client.faults()?))
+        })
+    }
+
+    /// `rig clear --json`.
+    fn clear(&self, py: Python<'_>) -> PyResult<String> {
+        self.call(py, |w| {
+            let before = w.bench.session.client.faults()?;
+            let after = w.bench.session.client.clear_faults()?;
+            json(&ClearReport {
+                cleared: before.latched.difference(after.latched).names().collect(),
+                faults: FaultsReport::from(after),
+            })
+        })
+    }
+
+    /// The device's calibration record as the rig file's sections (JSON text).
+    fn parameters(&self, py: Python<'_>) -> PyResult<String> {
+        self.call(py, |w| record_sections(&w.bench.session.client.calibration()?))
+    }
+
+    /// Sends a rig file (TOML text, named `name` in errors) as the device's calibration:
+    /// the rig file's checks, then the device's (a refusal names the field), then read back.
+    fn set_parameters(&self, py: Python<'_>, toml_text: String, name: String) -> PyResult<String> {
+        self.call(py, move |w| {
+            let loaded = host::calibrate::file::parse(&toml_text, &name)?;
+            let new = loaded.rig.to_wire()?;
+            let defaulted: Vec<&str> = loaded.defaulted().iter().filter_map(|k| k.wire).collect();
+            let client = &mut w.bench.session.client;
+            let current = client.calibration()?;
+            let changed = changes(&current, &new);
+            if changed.is_empty() {
+                return json(&serde_json::json!({
+                    "changed": [], "written": false, "defaulted": defaulted
+                }));
+            }
+            client.set_calibration(&new)?;
+            let back = client.calibration()?;
+            if back != new {
+                return Err(RigError::Protocol(format!(
+                    "the device stored a different calibration than sent on {}",
+                    client.options().port_name
+                )));
+            }
+            json(&serde_json::json!({
+                "changed": changed, "written": true, "calibration": new, "defaulted": defaulted
+            }))
+        })
+    }
+
+    /// Starts a release at `freq_hz` (checked against the calibration's range as `rig
+    /// release` does). `seconds`: its duration (device time); `None` with `confirm_s`:
+    /// no duration, but it ends when Python has not called `confirm` for `confirm_s`.
+    fn start_release(
+        &self,
+        py: Python<'_>,
+        freq_hz: f64,
+        seconds: Option<f64>,
+        confirm_s: Option<f64>,
+        status: &NativeReleaseStatus,
+    ) -> PyResult<()> {
+        let status = status.inner.clone();
+        self.call(py, move |w| {
+            if w.release.is_some() {
+                return Err(bad(
+                    "release",
+                    "a release is already live on this rig: end it first (one `with rig.release(...)` at a time)",
+                ));
+            }
+            if let Some(s) = seconds
+                && !(s.is_finite() && s > 0.0)
+            {
+                return Err(bad(format!("seconds {s}"), "give a positive duration (device seconds), or None for a release kept by confirm()"));
+            }
+            let confirm_within = match (seconds, confirm_s) {
+                (None, Some(c)) if c.is_finite() && c > 0.0 => Some(w.wall(c)),
+                (None, _) => {
+                    return Err(bad("confirm_s", "a release without a duration needs a positive confirm_s (Python must confirm it within that)"));
+                }
+                (Some(_), _) => None,
+            };
+            let cal = w.bench.session.client.calibration()?;
+            let hz = host::limits::check_release_freq("freq_hz", freq_hz, &cal)?;
+            let ends = seconds.map(|s| Instant::now() + w.wall(s));
+            w.bench.session.client.release(true, hz)?;
+            {
+                let mut st = lock(&status);
+                st.live = true;
+                st.ended_by = None;
+                st.touched = Some(Instant::now());
+            }
+            w.release = Some(LiveRelease {
+                status,
+                ends,
+                confirm_within,
+            });
+            Ok(())
+        })
+    }
+
+    /// Ends the live release (locks the gear); `why` is recorded as how it ended.
+    fn stop_release(&self, py: Python<'_>, why: String) -> PyResult<()> {
+        self.call(py, move |w| w.end_release(&why))
+    }
+
+    /// Starts recording telemetry at `rate_hz` for `seconds` of device time (None: until
+    /// stopped); returns the recording.
+    fn start_recording(
+        &self,
+        py: Python<'_>,
+        rate_hz: u32,
+        seconds: Option<f64>,
+    ) -> PyResult<NativeRecording> {
+        self.call(py, move |w| {
+            if w.recording.is_some() {
+                return Err(bad("record", "a recording is already running on this rig: stop it first"));
+            }
+            let hz = u16::try_from(rate_hz).map_err(|_| bad(format!("rate_hz {rate_hz}"), "too high: the device sends telemetry at most at 1000 Hz"))?;
+            host::limits::check_telemetry_rate("rate_hz", hz)?;
+            let duration_us = match seconds {
+                Some(s) if s.is_finite() && s > 0.0 => Some((s * 1e6).round() as u64),
+                Some(s) => return Err(bad(format!("seconds {s}"), "give a positive duration (device seconds), or None to record until stopped")),
+                None => None,
+            };
+            let rec = Arc::new(Recording::new(duration_us));
+            w.bench.session.client.start_telemetry(hz)?;
+            w.recording = Some(rec.clone());
+            Ok(NativeRecording { inner: rec, rate_hz })
+        })
+    }
+
+    /// Stops a recording (and the telemetry stream).
+    fn stop_recording(&self, py: Python<'_>, recording: &NativeRecording) -> PyResult<()> {
+        let rec = recording.inner.clone();
+        self.call(py, move |w| {
+            rec.done.store(true, Ordering::SeqCst);
+            if w.recording.as_ref().is_some_and(|r| Arc::ptr_eq(r, &rec)) {
+                w.recording = None;
+            }
+            w.bench.session.client.stop_telemetry()
+        })
+    }
+
+    /// Waits (GIL released) until `recording` is done; Ctrl-C raises KeyboardInterrupt.
+    fn wait_recording(&self, py: Python<'_>, recording: &NativeRecording) -> PyResult<()> {
+        loop {
+            if recording.inner.done.load(Ordering::SeqCst) {
+                return Ok(());
+            }
+            py.detach(|| std::thread::sleep(Duration::from_millis(10)));
+            py.check_signals()?;
+            if lock(&self.jobs).is_none() {
+                return Err(closed());
+            }
+        }
+    }
+
+    /// A raw capture (`rig capture`): `seconds` at `rate_hz` recorded on the device and
+    /// uploaded. Returns (JSON summary: the capture's counters, columns: `rig capture`'s CSV
+    /// columns as (name, dtype, little-endian bytes)).
+    fn capture<'py>(
+        &self,
+        py: Python<'py>,
+        seconds: f64,
+        rate_hz: u32,
+    ) -> PyResult<(String, TypedColumns<'py>)> {
+        let (summary, cap) = self.call(py, move |w| {
+            idle(w, "capture")?;
+            let hz = u16::try_from(rate_hz).map_err(|_| bad(format!("rate_hz {rate_hz}"), "too high: the device records at most at 10000 Hz"))?;
+            host::limits::check_capture_rate("rate_hz", hz)?;
+            let samples = (seconds * f64::from(hz)).round();
+            if !(samples >= 1.0) {
+                return Err(bad(format!("seconds {seconds}"), format!("shorter than one sample at {hz} Hz: give at least {} s", 1.0 / f64::from(hz))));
+            }
+            let capacity = host::limits::capture_capacity();
+            if samples > f64::from(capacity) {
+                return Err(bad(format!("seconds {seconds}"), format!("too long for one capture: the device's buffer holds {capacity} samples ({} s at {hz} Hz); give at most that, or a lower rate_hz", f64::from(capacity) / f64::from(hz))));
+            }
+            let cap = w.bench.session.client.capture(hz, samples as u32, |_| {})?;
+            Ok((json(&cap)?, cap))
+        })?;
+        Ok((summary, crate::columns::capture(py, &cap)?))
+    }
+
+    /// `rig experiment torque-sweep` with `plan` (`paper`, `quick`, or a plan file's TOML
+    /// text named `plan_name`), no CSV: returns (the outcome's JSON with `rows`, the
+    /// provenance header).
+    #[pyo3(signature = (plan, plan_name, window_revolutions = false))]
+    fn torque_sweep(
+        &self,
+        py: Python<'_>,
+        plan: String,
+        plan_name: String,
+        window_revolutions: bool,
+    ) -> PyResult<(String, String)> {
+        self.call(py, move |w| {
+            idle(w, "torque_sweep")?;
+            let plan = match plan.as_str() {
+                "paper" => Plan::paper(),
+                "quick" => Plan::quick(),
+                text => Plan::parse(text, &plan_name)?,
+            };
+            let setup = SweepSetup {
+                plan,
+                window: if window_revolutions {
+                    Window::Revolutions
+                } else {
+                    Window::Start
+                },
+                resume: false,
+                force: false,
+                command: "backdrive_rig Rig.torque_sweep".into(),
+            };
+            let mut operator = Operator::scripted(b"", false);
+            operator.stop = w.stop.clone();
+            let provenance = sweep::provenance(&mut w.bench, &setup)?;
+            let outcome = sweep::run_to(&mut w.bench, &mut operator, &setup, None, &mut |_| {})?;
+            let mut value = serde_json::to_value(&outcome)?;
+            if let Some(map) = value.as_object_mut() {
+                map.insert("rows".into(), serde_json::to_value(&outcome.rows)?);
+            }
+            Ok((json(&value)?, provenance))
+        })
+    }
+
+    /// `rig experiment hold-release` (Fig. 5): returns the samples as JSON (the CSV's
+    /// columns) and the verdict numbers.
+    fn hold_release(
+        &self,
+        py: Python<'_>,
+        load_nm: Option<f64>,
+        hold_s: f64,
+        freq_hz: f64,
+        release_s: f64,
+        after_s: f64,
+    ) -> PyResult<String> {
+        self.call(py, move |w| {
+            idle(w, "hold_release")?;
+            for (name, v, positive) in [
+                ("hold_s", hold_s, false),
+                ("release_s", release_s, true),
+                ("after_s", after_s, false),
+            ] {
+                if !(v.is_finite() && (v > 0.0 || (!positive && v == 0.0))) {
+                    return Err(bad(
+                        format!("{name} {v}"),
+                        if positive { "give a positive number of seconds" } else { "give zero or a positive number of seconds" },
+                    ));
+                }
+            }
+            let calibration = w.bench.calibration()?;
+            let hz = host::limits::check_release_freq("freq_hz", freq_hz, &calibration)?;
+            let cap = model::BoardLimits::PAPER.max_release_load_nm;
+            if let Some(load) = load_nm
+                && !(load.is_finite() && (0.0..=cap).contains(&load))
+            {
+                return Err(bad(
+                    format!("load_nm {load}"),
+                    format!(
+                        "outside 0 to {cap} N m (the gear's tooth strength, {}): give at most that",
+                        host::experiment::load_text(cap)
+                    ),
+                ));
+            }
+            let opts = hold_release::HoldRelease {
+                load_nm,
+                hold_s,
+                hz: f64::from(hz),
+                release_s,
+                after_s,
+            };
+            let mut operator = Operator::scripted(b"", false);
+            operator.stop = w.stop.clone();
+            let samples = hold_release::run(&mut w.bench, &mut operator, &opts, &mut |_| {})?;
+            let numbers = samples
+                .iter()
+                .any(|s| s.output_angle_rad.is_some())
+                .then(|| hold_release::fig5_numbers(&samples, model::paper::R_OUT))
+                .map(|n| {
+                    serde_json::json!({
+                        "held_without_vibration": n.held_without_vibration,
+                        "release_to_motion_s": n.release_to_motion_s,
+                        "output_speed_at_stop_rad_s": n.output_speed_at_stop_rad_s,
+                        "output_speed_after_stop_rad_s": n.output_speed_after_stop_rad_s,
+                        "load_drop_m": n.load_drop_m,
+                        "stops_after_vibration": n.stops_after_vibration,
+                        "after_stop_travel_rad": n.after_stop_travel_rad,
+                    })
+                });
+            json(&serde_json::json!({ "samples": samples, "fig5": numbers }))
+        })
+    }
+
+    /// Link counters (`LinkStats`) as JSON.
+    fn link_stats(&self, py: Python<'_>) -> PyResult<String> {
+        self.call(py, |w| json(&w.bench.session.client.stats()))
+    }
+
+    /// Locks the gear and closes the port (the in-process virtual rig stops). Also on drop.
+    fn close(&self, py: Python<'_>) {
+        let sender = lock(&self.jobs).take();
+        if let Some(sender) = sender {
+            let (tx, rx) = mpsc::channel::<()>();
+            // The thread locks the gear when its last sender is gone; wait for that.
+            let _ = sender.send(Box::new(move |w: &mut Worker| {
+                let _ = w.end_release("rig closed");
+                w.bench.lock_gear();
+                let _ = tx.send(());
+            }));
+            drop(sender);
+            let rx = Mutex::new(rx);
+            let _ = py.detach(|| lock(&rx).recv_timeout(Duration::from_secs(5)));
+        }
+    }
+}
+
+/// How a release stands, shared between Python's `Release` and the port's thread.
+#[pyclass(module = "backdrive_rig._native", name = "NativeReleaseStatus")]
+#[derive(Default)]
+pub struct NativeReleaseStatus {
+    inner: Arc<Mutex<ReleaseStatus>>,
+}
+
+#[pymethods]
+impl NativeReleaseStatus {
+    /// A status for a release not yet started.
+    #[new]
+    fn new() -> Self {
+        Self::default()
+    }
+
+    /// Whether the release is live.
+    #[getter]
+    fn live(&self) -> bool {
+        lock(&self.inner).live
+    }
+
+    /// Why it ended (None while live or before it started).
+    #[getter]
+    fn ended_by(&self) -> Option<String> {
+        lock(&self.inner).ended_by.clone()
+    }
+
+    /// Confirms from Python that the program is alive (a release without a duration ends
+    /// when this is not called within its `confirm_s`).
+    fn confirm(&self) {
+        lock(&self.inner).touched = Some(Instant::now());
+    }
+}
+
+/// A telemetry recording filled by the port's thread.
+#[pyclass(module = "backdrive_rig._native", name = "NativeRecording")]
+pub struct NativeRecording {
+    inner: Arc<Recording>,
+    rate_hz: u32,
+}
+
+/// Column bytes of the monitor CSV's numeric columns, and its text columns.
+use crate::columns::TypedColumns;
+
+#[pymethods]
+impl NativeRecording {
+    /// Telemetry rate, Hz.
+    #[getter]
+    fn rate_hz(&self) -> u32 {
+        self.rate_hz
+    }
+
+    /// Whether it has ended.
+    #[getter]
+    fn done(&self) -> bool {
+        self.inner.done.load(Ordering::SeqCst)
+    }
+
+    /// Samples lost so far (gaps in the device's sample counter).
+    #[getter]
+    fn lost(&self) -> u64 {
+        *lock(&self.inner.lost)
+    }
+
+    /// The gaps: (sequence number before, sequence number after).
+    #[getter]
+    fn gaps(&self) -> Vec<(u32, u32)> {
+        lock(&self.inner.gaps).clone()
+    }
+
+    /// Why it failed, if it did.
+    #[getter]
+    fn error(&self) -> Option<String> {
+        lock(&self.inner.error).clone()
+    }
+
+    /// Samples held now.
+    fn __len__(&self) -> usize {
+        lock(&self.inner.rows).len()
+    }
+
+    /// The samples so far as columns (the monitor CSV's names and units; numeric columns as
+    /// little-endian f64 bytes, NaN where the CSV is empty); `take` empties the buffer.
+    #[pyo3(signature = (take = false))]
+    fn columns<'py>(&self, py: Python<'py>, take: bool) -> PyResult<TypedColumns<'py>> {
+        let rows = {
+            let mut rows = lock(&self.inner.rows);
+            if take {
+                std::mem::take(&mut *rows)
+            } else {
+                rows.clone()
+            }
+        };
+        crate::columns::telemetry(py, &rows)
+    }
+}

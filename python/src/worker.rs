@@ -1,0 +1,271 @@
+//! The thread that owns the port. Python never touches the client: every request is a job
+//! sent to this thread, which runs it and answers on a channel. Between jobs the thread
+//! keeps the link serviced: heartbeats while a release is live, telemetry into a running
+//! recording, a release's end at its deadline or when Python stops confirming it.
+//!
+//! The device stays safe whatever Python does: a release always ends at its duration (or,
+//! for a release without one, when Python has not confirmed it within its keep-alive
+//! window), when the [`crate::rig::Rig`] is dropped (the channel closes: the thread locks
+//! the gear and exits), and when the process dies (no heartbeats: the device's comms
+//! timeout stops it).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use host::RigError;
+use host::experiment::bench::{Bench, DeviceBench};
+use host::reports::Freshness;
+use protocol::{DeviceMessage, HealthSample, TelemetrySample};
+
+/// A unit of work for the port's thread.
+pub type Job = Box<dyn FnOnce(&mut Worker) + Send + 'static>;
+
+/// Longest the thread waits for the port in one turn between jobs.
+const TURN: Duration = Duration::from_millis(5);
+/// Longest the thread sleeps on an idle link (nothing live, nothing recording).
+const IDLE: Duration = Duration::from_millis(50);
+
+/// Locks `m`, whatever a panicking holder left (the data are plain values).
+pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// How a release ended, shared with the Python `Release` object.
+#[derive(Debug, Default)]
+pub struct ReleaseStatus {
+    /// Vibrating now (as far as the host asked).
+    pub live: bool,
+    /// Why it ended: `duration`, `stop`, `keep-alive` (Python stopped confirming), `rig
+    /// closed`, or `error: ...` when locking failed.
+    pub ended_by: Option<String>,
+    /// Last confirmation from Python (explicit keep-alive releases).
+    pub touched: Option<Instant>,
+}
+
+/// A release the thread keeps alive.
+pub struct LiveRelease {
+    /// Shared with Python.
+    pub status: Arc<Mutex<ReleaseStatus>>,
+    /// End of the release's duration (wall clock).
+    pub ends: Option<Instant>,
+    /// For a release without a duration: how long a Python confirmation lasts.
+    pub confirm_within: Option<Duration>,
+}
+
+/// One telemetry sample with the newest health report at its arrival.
+#[derive(Debug, Clone, Copy)]
+pub struct Row {
+    /// The sample.
+    pub sample: TelemetrySample,
+    /// Whether its estimates are current (the monitor's rule).
+    pub fresh: bool,
+    /// The newest health report then.
+    pub health: Option<HealthSample>,
+}
+
+/// A telemetry recording, filled by the thread, read by Python.
+#[derive(Debug, Default)]
+pub struct Recording {
+    /// The samples so far (Python takes them).
+    pub rows: Mutex<Vec<Row>>,
+    /// Samples missing from the stream (gaps in the device's sample counter).
+    pub lost: Mutex<u64>,
+    /// Gaps: `(seq before, seq after)` of each.
+    pub gaps: Mutex<Vec<(u32, u32)>>,
+    /// Device time to stop at, µs (none: until stopped).
+    pub stop_at_us: Mutex<Option<u64>>,
+    /// Duration asked, device µs, from the first sample (set into `stop_at_us` then).
+    pub duration_us: Option<u64>,
+    /// Ended (duration reached, stopped, or failed).
+    pub done: AtomicBool,
+    /// Why it failed.
+    pub error: Mutex<Option<String>>,
+    /// The device's sequence of the last sample.
+    last_seq: Mutex<Option<u32>>,
+    freshness: Mutex<Freshness>,
+}
+
+impl Recording {
+    /// A recording that ends after `duration_us` of device time, or when stopped.
+    pub fn new(duration_us: Option<u64>) -> Self {
+        Self {
+            duration_us,
+            ..Self::default()
+        }
+    }
+
+    fn push(&self, sample: TelemetrySample, health: Option<HealthSample>) {
+        if self.done.load(Ordering::SeqCst) {
+            return;
+        }
+        {
+            let mut stop = lock(&self.stop_at_us);
+            if stop.is_none()
+                && let Some(d) = self.duration_us
+            {
+                *stop = Some(sample.device_time_us + d);
+            }
+            if let Some(s) = *stop
+                && sample.device_time_us >= s
+            {
+                self.done.store(true, Ordering::SeqCst);
+                return;
+            }
+        }
+        let mut last = lock(&self.last_seq);
+        if let Some(prev) = *last {
+            let expected = prev.wrapping_add(1);
+            if sample.seq != expected && sample.seq > prev {
+                *lock(&self.lost) += u64::from(sample.seq - expected);
+                lock(&self.gaps).push((prev, sample.seq));
+            }
+        }
+        *last = Some(sample.seq);
+        let fresh = lock(&self.freshness).update(&sample);
+        lock(&self.rows).push(Row {
+            sample,
+            fresh,
+            health,
+        });
+    }
+
+    fn fail(&self, e: &RigError) {
+        *lock(&self.error) = Some(e.to_string());
+        self.done.store(true, Ordering::SeqCst);
+    }
+}
+
+/// The port's thread's state.
+pub struct Worker {
+    /// The device.
+    pub bench: DeviceBench,
+    /// The release being kept alive.
+    pub release: Option<LiveRelease>,
+    /// The telemetry recording running.
+    pub recording: Option<Arc<Recording>>,
+    /// The newest health report.
+    pub health: Option<HealthSample>,
+    /// Set by Python's KeyboardInterrupt: a running procedure stops at its next check.
+    pub stop: Arc<AtomicBool>,
+}
+
+impl Worker {
+    /// Device seconds per wall-clock second.
+    pub fn time_scale(&self) -> f64 {
+        self.bench.session.time_scale().max(1e-9)
+    }
+
+    /// Wall time of `device_s` device seconds.
+    pub fn wall(&self, device_s: f64) -> Duration {
+        Duration::from_secs_f64((device_s / self.time_scale()).max(0.0))
+    }
+
+    /// Locks the gear and ends the live release (if any), saying why.
+    pub fn end_release(&mut self, why: &str) -> Result<(), RigError> {
+        let Some(r) = self.release.take() else {
+            return Ok(());
+        };
+        let locked = self.bench.session.client.release(false, 0.0);
+        self.bench.keep_alive(false);
+        let mut st = lock(&r.status);
+        st.live = false;
+        st.ended_by = Some(match &locked {
+            Ok(()) => why.to_owned(),
+            Err(e) => format!("error: {e}"),
+        });
+        locked
+    }
+
+    /// Takes the unsolicited messages that arrived (during a job too) into the recording.
+    fn drain(&mut self) -> Result<(), RigError> {
+        let wait = if self.release.is_some() || self.recording.is_some() {
+            TURN
+        } else {
+            Duration::ZERO
+        };
+        let mut first = true;
+        loop {
+            let msg = self
+                .bench
+                .session
+                .client
+                .recv(if first { wait } else { Duration::ZERO })?;
+            first = false;
+            match msg {
+                Some(DeviceMessage::Telemetry(t)) => {
+                    if let Some(rec) = &self.recording {
+                        rec.push(t, self.health);
+                        if rec.done.load(Ordering::SeqCst) {
+                            self.recording = None;
+                        }
+                    }
+                }
+                Some(DeviceMessage::Health(h)) => self.health = Some(h),
+                Some(_) => {}
+                None => return Ok(()),
+            }
+        }
+    }
+
+    /// One turn between jobs: end a release that is due, service the link.
+    fn service(&mut self) {
+        if let Some(r) = &self.release {
+            let now = Instant::now();
+            let due = r.ends.is_some_and(|e| now >= e);
+            let unconfirmed = r.confirm_within.is_some_and(|w| {
+                lock(&r.status)
+                    .touched
+                    .is_none_or(|t| now.duration_since(t) > w)
+            });
+            if due {
+                let _ = self.end_release("duration");
+            } else if unconfirmed {
+                let _ = self.end_release("keep-alive");
+            }
+        }
+        if let Err(e) = self.drain()
+            && let Some(rec) = self.recording.take()
+        {
+            rec.fail(&e);
+        }
+    }
+
+    /// The thread's loop: jobs, and the link between them, until every sender is gone;
+    /// then the gear is locked.
+    pub fn run(mut self, jobs: Receiver<Job>) {
+        loop {
+            let busy = self.release.is_some() || self.recording.is_some();
+            let wait = if busy { Duration::ZERO } else { IDLE };
+            match jobs.recv_timeout(wait) {
+                Ok(job) => job(&mut self),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+            self.service();
+        }
+        let _ = self.end_release("rig closed");
+        self.bench.lock_gear();
+        if let Some(rec) = self.recording.take() {
+            rec.done.store(true, Ordering::SeqCst);
+        }
+    }
+}
+
+/// Starts the port's thread over `bench`; returns the job sender.
+pub fn spawn(bench: DeviceBench, stop: Arc<AtomicBool>) -> Result<Sender<Job>, RigError> {
+    let (tx, rx) = std::sync::mpsc::channel::<Job>();
+    let worker = Worker {
+        bench,
+        release: None,
+        recording: None,
+        health: None,
+        stop,
+    };
+    std::thread::Builder::new()
+        .name("backdrive_rig port".into())
+        .spawn(move || worker.run(rx))
+        .map_err(|e| RigError::VirtualDevice(format!("cannot start the port's thread: {e}")))?;
+    Ok(tx)
+}
