@@ -415,6 +415,9 @@ class Rig:
         outcome = json.loads(summary)
         rows = outcome.pop("rows")
         df = pd.DataFrame(rows, columns=_SWEEP_COLUMNS)
+        # Empty CSV cells (open loop: no target_hz; no temperature sensor) as NaN.
+        for c in _SWEEP_COLUMNS:
+            df[c] = pd.to_numeric(df[c])
         df.attrs.update(outcome)
         df.attrs["provenance"] = provenance
         return df
@@ -435,6 +438,8 @@ class Rig:
 
         out = json.loads(self._native.hold_release(load_nm, hold_s, freq_hz, release_s, after_s))
         df = pd.DataFrame(out["samples"], columns=_HOLD_COLUMNS)
+        for c in ("t_s", "output_angle_rad", "cam_speed_rad_s", "current_a"):
+            df[c] = pd.to_numeric(df[c])
         df.attrs["fig5"] = out["fig5"]
         return df
 
