@@ -156,7 +156,8 @@ class Release:
         return self._status.ended_by
 
     def __enter__(self) -> "Release":
-        return self.start()
+        # A release started with start() may be handed to `with` to get its locking.
+        return self if self.live else self.start()
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         why = "stop" if exc_type is None else "exception"

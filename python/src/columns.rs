@@ -78,7 +78,10 @@ pub fn telemetry<'py>(py: Python<'py>, rows: &[Row]) -> PyResult<TypedColumns<'p
             out.push((name, "str", list.into_any()));
         }
     }
-    let seq: Vec<u8> = rows.iter().flat_map(|r| r.sample.seq.to_le_bytes()).collect();
+    let seq: Vec<u8> = rows
+        .iter()
+        .flat_map(|r| r.sample.seq.to_le_bytes())
+        .collect();
     out.push(("seq", "<u4", PyBytes::new(py, &seq).into_any()));
     Ok(out)
 }
@@ -89,14 +92,32 @@ pub fn capture<'py>(py: Python<'py>, cap: &Capture) -> PyResult<TypedColumns<'py
     let rate = f64::from(cap.sample_rate_hz.max(1));
     let s = &cap.samples;
     let index: Vec<u8> = s.iter().flat_map(|(i, _)| i.to_le_bytes()).collect();
-    let adc: Vec<u8> = s.iter().flat_map(|(_, x)| x.current_adc.to_le_bytes()).collect();
-    let enc: Vec<u8> = s.iter().flat_map(|(_, x)| x.encoder_count.to_le_bytes()).collect();
+    let adc: Vec<u8> = s
+        .iter()
+        .flat_map(|(_, x)| x.current_adc.to_le_bytes())
+        .collect();
+    let enc: Vec<u8> = s
+        .iter()
+        .flat_map(|(_, x)| x.encoder_count.to_le_bytes())
+        .collect();
     Ok(vec![
         ("index", "<u4", PyBytes::new(py, &index).into_any()),
-        ("t_s", "<f8", f64_bytes(py, s.iter().map(|(i, _)| f64::from(*i) / rate))),
+        (
+            "t_s",
+            "<f8",
+            f64_bytes(py, s.iter().map(|(i, _)| f64::from(*i) / rate)),
+        ),
         ("current_adc", "<u2", PyBytes::new(py, &adc).into_any()),
-        ("current_a", "<f8", f64_bytes(py, s.iter().map(|(_, x)| current_amps(x.current_adc)))),
+        (
+            "current_a",
+            "<f8",
+            f64_bytes(py, s.iter().map(|(_, x)| current_amps(x.current_adc))),
+        ),
         ("encoder_count", "<i4", PyBytes::new(py, &enc).into_any()),
-        ("cam_angle_rad", "<f8", f64_bytes(py, s.iter().map(|(_, x)| cam_angle_rad(x.encoder_count)))),
+        (
+            "cam_angle_rad",
+            "<f8",
+            f64_bytes(py, s.iter().map(|(_, x)| cam_angle_rad(x.encoder_count))),
+        ),
     ])
 }

@@ -90,7 +90,10 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("BadValueError", py.get_type::<BadValueError>())?;
     m.add("RefusedError", py.get_type::<RefusedError>())?;
     m.add("NoReplyError", py.get_type::<NoReplyError>())?;
-    m.add("VersionMismatchError", py.get_type::<VersionMismatchError>())?;
+    m.add(
+        "VersionMismatchError",
+        py.get_type::<VersionMismatchError>(),
+    )?;
     m.add("LinkError", py.get_type::<LinkError>())?;
     m.add("DeviceFaultError", py.get_type::<DeviceFaultError>())?;
     m.add("RigClosedError", py.get_type::<RigClosedError>())?;

@@ -71,7 +71,9 @@ fn record_sections(record: &protocol::RigParameters) -> Result<String, RigError>
     let (rig, _) = host::calibrate::file::for_record(record, None);
     let text = rig.to_toml()?;
     let value: toml::Value = toml::from_str(&text).map_err(|e| {
-        RigError::Protocol(format!("the rig file of the device's record does not parse: {e}"))
+        RigError::Protocol(format!(
+            "the rig file of the device's record does not parse: {e}"
+        ))
     })?;
     json(&value)
 }
@@ -96,6 +98,7 @@ fn changes(old: &protocol::RigParameters, new: &protocol::RigParameters) -> Vec<
 #[pyclass(module = "backdrive_rig._native", name = "NativeRig")]
 pub struct NativeRig {
     jobs: Mutex<Option<Sender<Job>>>,
+    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
     stop: Arc<AtomicBool>,
     port: String,
     in_process: bool,
@@ -106,9 +109,10 @@ impl NativeRig {
         let port = session.port().to_owned();
         let in_process = session.device.is_some();
         let stop = Arc::new(AtomicBool::new(false));
-        let tx = worker::spawn(DeviceBench::new(session), stop.clone())?;
+        let (tx, thread) = worker::spawn(DeviceBench::new(session), stop.clone())?;
         Ok(Self {
             jobs: Mutex::new(Some(tx)),
+            thread: Mutex::new(Some(thread)),
             stop,
             port,
             in_process,
@@ -189,10 +193,9 @@ impl NativeRig {
             }
             let preset_value = sim::Preset::by_name(&preset)?;
             let mut config = match &model {
-                Some(path) => VirtualDevice::rig_file_config(
-                    &rigfile::RigFile::load(path)?,
-                    &preset_value,
-                )?,
+                Some(path) => {
+                    VirtualDevice::rig_file_config(&rigfile::RigFile::load(path)?, &preset_value)?
+                }
                 None => VirtualDevice::paper_config(&preset_value),
             };
             for e in &effects {
@@ -252,7 +255,9 @@ impl NativeRig {
 
     /// The device's calibration record as the rig file's sections (JSON text).
     fn parameters(&self, py: Python<'_>) -> PyResult<String> {
-        self.call(py, |w| record_sections(&w.bench.session.client.calibration()?))
+        self.call(py, |w| {
+            record_sections(&w.bench.session.client.calibration()?)
+        })
     }
 
     /// Sends a rig file (TOML text, named `name` in errors) as the device's calibration:
@@ -480,7 +485,11 @@ impl NativeRig {
                 if !(v.is_finite() && (v > 0.0 || (!positive && v == 0.0))) {
                     return Err(bad(
                         format!("{name} {v}"),
-                        if positive { "give a positive number of seconds" } else { "give zero or a positive number of seconds" },
+                        if positive {
+                            "give a positive number of seconds"
+                        } else {
+                            "give zero or a positive number of seconds"
+                        },
                     ));
                 }
             }
@@ -532,20 +541,15 @@ impl NativeRig {
         self.call(py, |w| json(&w.bench.session.client.stats()))
     }
 
-    /// Locks the gear and closes the port (the in-process virtual rig stops). Also on drop.
+    /// Locks the gear and closes the port (the in-process virtual rig stops); returns when
+    /// the port is closed, so another program can open it. Dropping the rig does the same
+    /// without waiting.
     fn close(&self, py: Python<'_>) {
-        let sender = lock(&self.jobs).take();
-        if let Some(sender) = sender {
-            let (tx, rx) = mpsc::channel::<()>();
-            // The thread locks the gear when its last sender is gone; wait for that.
-            let _ = sender.send(Box::new(move |w: &mut Worker| {
-                let _ = w.end_release("rig closed");
-                w.bench.lock_gear();
-                let _ = tx.send(());
-            }));
-            drop(sender);
-            let rx = Mutex::new(rx);
-            let _ = py.detach(|| lock(&rx).recv_timeout(Duration::from_secs(5)));
+        // The thread locks the gear and closes the port once its last sender is gone.
+        drop(lock(&self.jobs).take());
+        let thread = lock(&self.thread).take();
+        if let Some(thread) = thread {
+            let _ = py.detach(|| thread.join());
         }
     }
 }

@@ -253,8 +253,12 @@ impl Worker {
     }
 }
 
-/// Starts the port's thread over `bench`; returns the job sender.
-pub fn spawn(bench: DeviceBench, stop: Arc<AtomicBool>) -> Result<Sender<Job>, RigError> {
+/// Starts the port's thread over `bench`; returns the job sender and the thread (which
+/// ends, the gear locked and the port closed, once every sender is dropped).
+pub fn spawn(
+    bench: DeviceBench,
+    stop: Arc<AtomicBool>,
+) -> Result<(Sender<Job>, std::thread::JoinHandle<()>), RigError> {
     let (tx, rx) = std::sync::mpsc::channel::<Job>();
     let worker = Worker {
         bench,
@@ -263,9 +267,9 @@ pub fn spawn(bench: DeviceBench, stop: Arc<AtomicBool>) -> Result<Sender<Job>, R
         health: None,
         stop,
     };
-    std::thread::Builder::new()
+    let thread = std::thread::Builder::new()
         .name("backdrive_rig port".into())
         .spawn(move || worker.run(rx))
         .map_err(|e| RigError::VirtualDevice(format!("cannot start the port's thread: {e}")))?;
-    Ok(tx)
+    Ok((tx, thread))
 }

@@ -5,11 +5,14 @@
 //! in `fuzz/` when a nightly toolchain and cargo-fuzz are installed. `cargo xtask
 //! target-bench` counts the control core's cycles in an emulated Cortex-M4F (see
 //! `target_bench`); `test` runs it with `--check` right after the firmware build (skipped
-//! with a message only when its Python packages cannot be installed).
+//! with a message only when its Python packages cannot be installed). `cargo xtask python`
+//! builds the `backdrive_rig` wheel, installs it in a fresh virtual environment and runs its
+//! pytest suite and the example notebook (`python`); `test` runs it last.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
+mod python;
 mod size;
 mod target_bench;
 
@@ -32,9 +35,10 @@ fn main() -> ExitCode {
         Some("setup") => setup(),
         Some("fuzz") => fuzz_smoke(),
         Some("target-bench") => target_bench(&args[1..]),
+        Some("python") => python_task(),
         _ => {
             eprintln!(
-                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, target bench --check, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use (fails over budget; --no-check: only prints)\n  flash         build the release firmware and flash it with probe-rs, streaming its defmt log (`cargo fw-flash`)\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]"
+                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, target bench --check, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use (fails over budget; --no-check: only prints)\n  flash         build the release firmware and flash it with probe-rs, streaming its defmt log (`cargo fw-flash`)\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]\n  python        the backdrive_rig wheel (maturin), installed in a fresh venv: pytest and the example notebook"
             );
             Err("no task given".into())
         }
@@ -371,7 +375,20 @@ fn test() -> Result {
         c.env("RIG_FIRMWARE_ELF", firmware_elf());
         c
     })?;
+    python_task()?;
     fuzz_smoke()
+}
+
+/// `cargo xtask python`: builds `rig` (the served-rig tests start `rig sim serve`), then
+/// the wheel, a fresh environment, pytest and the notebook ([`python::run`]).
+fn python_task() -> Result {
+    run("rig (for the served virtual rig of the Python tests)", {
+        let mut c = cargo();
+        c.args(["build", "--package", "host", "--bin", "rig"]);
+        c
+    })?;
+    let rig = target_dir().join("debug").join("rig");
+    python::run(&root(), &target_dir(), &rig)
 }
 
 /// The fuzz targets in `fuzz/`, one per decoder.

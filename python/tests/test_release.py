@@ -1,0 +1,185 @@
+"""Safe release: the gear is locked when the block ends, on an exception or Ctrl-C, at the
+release's duration, when the release or the rig is dropped, and, when the interpreter dies
+or hangs, by the duration or the device's comms timeout."""
+
+import gc
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from backdrive_rig import BadValueError, Rig
+
+from conftest import SPEED, settled_state
+
+
+def vibrating(rig) -> bool:
+    df = rig.record(seconds=0.3, rate_hz=100)
+    return bool((df["state"] == "vibrating").any() or (df["state"] == "spin_up").any())
+
+
+def test_block_end_locks(rig):
+    with rig.release(freq_hz=10, seconds=30) as r:
+        assert r.live
+        assert vibrating(rig)
+    assert not r.live and r.ended_by == "stop"
+    assert settled_state(rig) == "locked"
+
+
+def test_exception_locks(rig):
+    with pytest.raises(ZeroDivisionError):
+        with rig.release(freq_hz=10, seconds=30) as r:
+            assert vibrating(rig)
+            1 / 0
+    assert r.ended_by == "exception"
+    assert settled_state(rig) == "locked"
+
+
+def test_keyboard_interrupt_locks(rig):
+    with pytest.raises(KeyboardInterrupt):
+        with rig.release(freq_hz=10, seconds=30) as r:
+            assert vibrating(rig)
+            raise KeyboardInterrupt
+    assert r.ended_by == "exception"
+    assert settled_state(rig) == "locked"
+
+
+def test_duration_ends_the_release_while_python_is_busy(rig):
+    with rig.release(freq_hz=10, seconds=1.0) as r:
+        # Busy Python (the GIL held) for 1.5 device-seconds' worth of wall time and more.
+        end = time.monotonic() + 2.0 / SPEED + 0.5
+        while time.monotonic() < end:
+            sum(range(1000))
+        assert not r.live
+        assert r.ended_by == "duration"
+    assert settled_state(rig) == "locked"
+
+
+def test_dropping_the_release_locks(rig):
+    r = rig.release(freq_hz=10, seconds=30).start()
+    assert vibrating(rig)
+    del r
+    gc.collect()
+    assert settled_state(rig) == "locked"
+
+
+def test_a_release_without_duration_needs_confirmations(rig):
+    with pytest.raises(BadValueError, match="seconds"):
+        rig.release(freq_hz=10)
+    with pytest.raises(BadValueError, match="confirm_s"):
+        rig.release(freq_hz=10, seconds=None)
+    with rig.release(freq_hz=10, seconds=None, confirm_s=1.0) as r:
+        for _ in range(5):
+            r.confirm()
+            time.sleep(0.3 / SPEED)
+        assert r.live
+        time.sleep(3.0 / SPEED + 0.3)
+        assert not r.live and r.ended_by == "keep-alive"
+    assert settled_state(rig) == "locked"
+
+
+def test_frequency_is_checked_as_the_cli_checks_it(rig):
+    with pytest.raises(BadValueError, match=r"freq_hz 20: the device drives 1 to 15 Hz"):
+        rig.release(freq_hz=20, seconds=1).start()
+    with pytest.raises(BadValueError, match="seconds"):
+        rig.release(freq_hz=10, seconds=-1).start()
+
+
+def test_one_release_at_a_time(rig):
+    with rig.release(freq_hz=10, seconds=30):
+        with pytest.raises(BadValueError, match="already live"):
+            rig.release(freq_hz=5, seconds=1).start()
+
+
+SCRIPT = textwrap.dedent(
+    """
+    import os, sys, time
+    from backdrive_rig import Rig
+    rig = Rig.open(sys.argv[1])
+    mode = sys.argv[2]
+    r = rig.release(freq_hz=10, seconds=float(sys.argv[3]))
+    if mode != "ctrl-c":
+        r.start()
+        print("released", flush=True)
+    if mode == "die":
+        os._exit(0)
+    if mode == "hang":
+        while True:
+            pass
+    if mode == "ctrl-c":
+        try:
+            with r:
+                print("released", flush=True)
+                time.sleep(600)
+        except KeyboardInterrupt:
+            print("ended_by", r.ended_by, flush=True)
+            rig.close()
+    """
+)
+
+
+def run_script(port, mode, seconds):
+    p = subprocess.Popen(
+        [sys.executable, "-c", SCRIPT, port, mode, str(seconds)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    line = p.stdout.readline()
+    assert line.strip() == "released", p.stderr.read()
+    return p
+
+
+def served_state(served, clear=False):
+    """Faults, the settled state and the cam's last speed (Hz) of the served rig, seen by a
+    new client; `clear`: then clears the faults and returns the state after."""
+    with Rig.open(served.port) as rig:
+        faults = rig.faults()
+        df = rig.record(seconds=1.0, rate_hz=100)
+        state, cam_hz = df["state"].iloc[-1], df["cam_hz"].iloc[-1]
+        if clear:
+            rig.clear()
+            state = settled_state(rig)
+        return faults, state, cam_hz
+
+
+def test_ctrl_c_in_a_release_block_leaves_the_rig_locked(served):
+    p = run_script(served.port, "ctrl-c", 600)
+    time.sleep(0.5)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=30)
+    assert "ended_by exception" in out, err
+    faults, state, cam_hz = served_state(served)
+    # Locked by the library, not by the device's comms timeout.
+    assert faults["latched"] == []
+    assert state == "locked"
+
+
+def test_a_dead_interpreter_stops_within_the_comms_timeout(served):
+    p = run_script(served.port, "die", 600)
+    p.wait(timeout=30)
+    time.sleep(1.0 / SPEED + 0.2)
+    faults, state, cam_hz = served_state(served, clear=True)
+    # The device stopped itself: the comms timeout latched, the cam stands still; once
+    # cleared, the gear is locked.
+    assert "COMMS_TIMEOUT" in faults["latched"]
+    assert cam_hz < 0.1
+    assert state == "locked"
+
+
+def test_a_hung_interpreter_stops_at_the_duration(served):
+    p = run_script(served.port, "hang", 1.0)
+    try:
+        # The GIL is held by the busy loop; the Rust thread ends the release at 1 device-s.
+        time.sleep(2.0 / SPEED + 1.0)
+    finally:
+        p.kill()
+        p.wait()
+    faults, state, cam_hz = served_state(served)
+    # Ended by the library at its duration (no comms timeout latched by the kill).
+    assert faults["latched"] == []
+    assert state == "locked"
