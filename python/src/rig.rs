@@ -136,16 +136,16 @@ impl NativeRig {
     }
 }
 
-/// Refuses a procedure while a recording or a release of the user's runs (both use the
-/// telemetry stream and the drive).
-fn idle(w: &Worker, what: &str) -> Result<(), RigError> {
+/// Refuses a procedure while a recording (it uses the telemetry stream) or, unless
+/// `release_ok`, a release of the user's runs (the procedure drives the vibrator itself).
+fn idle(w: &Worker, what: &str, release_ok: bool) -> Result<(), RigError> {
     if w.recording.is_some() {
         return Err(bad(
             what,
             "a recording is running: stop it (Recorder.stop()) before starting a procedure",
         ));
     }
-    if w.release.is_some() {
+    if w.release.is_some() && !release_ok {
         return Err(bad(
             what,
             "a release is live: end it (leave its `with` block) before starting a procedure",
@@ -406,7 +406,7 @@ impl NativeRig {
         rate_hz: u32,
     ) -> PyResult<(String, TypedColumns<'py>)> {
         let (summary, cap) = self.call(py, move |w| {
-            idle(w, "capture")?;
+            idle(w, "capture", true)?;
             let hz = u16::try_from(rate_hz).map_err(|_| bad(format!("rate_hz {rate_hz}"), "too high: the device records at most at 10000 Hz"))?;
             host::limits::check_capture_rate("rate_hz", hz)?;
             let samples = (seconds * f64::from(hz)).round();
@@ -435,7 +435,7 @@ impl NativeRig {
         window_revolutions: bool,
     ) -> PyResult<(String, String)> {
         self.call(py, move |w| {
-            idle(w, "torque_sweep")?;
+            idle(w, "torque_sweep", false)?;
             let plan = match plan.as_str() {
                 "paper" => Plan::paper(),
                 "quick" => Plan::quick(),
@@ -476,7 +476,7 @@ impl NativeRig {
         after_s: f64,
     ) -> PyResult<String> {
         self.call(py, move |w| {
-            idle(w, "hold_release")?;
+            idle(w, "hold_release", false)?;
             for (name, v, positive) in [
                 ("hold_s", hold_s, false),
                 ("release_s", release_s, true),
