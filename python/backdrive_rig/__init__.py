@@ -20,7 +20,6 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-import threading
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
@@ -257,7 +256,6 @@ class Rig:
 
     def __init__(self, native: Any):
         self._native = native
-        self._lock = threading.Lock()
 
     @classmethod
     def open(cls, port: str, baud: int = 921600) -> "Rig":

@@ -35,7 +35,7 @@ fn main() -> ExitCode {
         Some("setup") => setup(),
         Some("fuzz") => fuzz_smoke(),
         Some("target-bench") => target_bench(&args[1..]),
-        Some("python") => python_task(),
+        Some("python") => python_task(true),
         _ => {
             eprintln!(
                 "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, target bench --check, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use (fails over budget; --no-check: only prints)\n  flash         build the release firmware and flash it with probe-rs, streaming its defmt log (`cargo fw-flash`)\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]\n  python        the backdrive_rig wheel (maturin), installed in a fresh venv: pytest and the example notebook"
@@ -375,18 +375,22 @@ fn test() -> Result {
         c.env("RIG_FIRMWARE_ELF", firmware_elf());
         c
     })?;
-    python_task()?;
+    // `cargo test --workspace` built target/debug/rig for the CLI tests: reused.
+    python_task(false)?;
     fuzz_smoke()
 }
 
-/// `cargo xtask python`: builds `rig` (the served-rig tests start `rig sim serve`), then
-/// the wheel, a fresh environment, pytest and the notebook ([`python::run`]).
-fn python_task() -> Result {
-    run("rig (for the served virtual rig of the Python tests)", {
-        let mut c = cargo();
-        c.args(["build", "--package", "host", "--bin", "rig"]);
-        c
-    })?;
+/// `cargo xtask python`: builds `rig` (the served-rig tests start `rig sim serve`) unless
+/// `cargo test` just did, then the wheel, a fresh environment, pytest and the notebook
+/// ([`python::run`]).
+fn python_task(build_rig: bool) -> Result {
+    if build_rig {
+        run("rig (for the served virtual rig of the Python tests)", {
+            let mut c = cargo();
+            c.args(["build", "--package", "host", "--bin", "rig"]);
+            c
+        })?;
+    }
     let rig = target_dir().join("debug").join("rig");
     python::run(&root(), &target_dir(), &rig)
 }
