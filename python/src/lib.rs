@@ -1,7 +1,7 @@
 //! `backdrive_rig._native`: the Python extension behind the `backdrive_rig` package. A thin
 //! door onto the host library (the `rig` tool's): the same client, procedures, checks and
 //! error messages; no protocol, procedure or physics of its own. A Rust thread owns each
-//! rig's port ([`worker`]); every blocking call releases the GIL.
+//! rig's port (module `worker`); every blocking call releases the GIL.
 //!
 //! Built as a wheel by maturin (`python/pyproject.toml`, feature `extension-module`); the
 //! Python package (`python/backdrive_rig/`) turns the JSON and column bytes returned here

@@ -410,7 +410,7 @@ impl NativeRig {
             let hz = u16::try_from(rate_hz).map_err(|_| bad(format!("rate_hz {rate_hz}"), "too high: the device records at most at 10000 Hz"))?;
             host::limits::check_capture_rate("rate_hz", hz)?;
             let samples = (seconds * f64::from(hz)).round();
-            if !(samples >= 1.0) {
+            if samples.is_nan() || samples < 1.0 {
                 return Err(bad(format!("seconds {seconds}"), format!("shorter than one sample at {hz} Hz: give at least {} s", 1.0 / f64::from(hz))));
             }
             let capacity = host::limits::capture_capacity();

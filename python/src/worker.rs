@@ -5,7 +5,7 @@
 //!
 //! The device stays safe whatever Python does: a release always ends at its duration (or,
 //! for a release without one, when Python has not confirmed it within its keep-alive
-//! window), when the [`crate::rig::Rig`] is dropped (the channel closes: the thread locks
+//! window), when the [`crate::rig::NativeRig`] is dropped (the channel closes: the thread locks
 //! the gear and exits), and when the process dies (no heartbeats: the device's comms
 //! timeout stops it).
 

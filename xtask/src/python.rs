@@ -201,7 +201,8 @@ pub fn run(root: &Path, target_dir: &Path, rig: &Path) -> Result<(), String> {
     status("example notebook (nbclient)", c)
 }
 
-/// Executes the notebook argv[1] and writes it, with outputs, to argv[2].
+/// Executes the notebook named by its first argument and writes it, with outputs, to the
+/// second.
 const EXECUTE_NOTEBOOK: &str = r#"
 import sys, nbformat
 from nbclient import NotebookClient
