@@ -273,3 +273,61 @@ pub fn spawn(
         .map_err(|e| RigError::VirtualDevice(format!("cannot start the port's thread: {e}")))?;
     Ok((tx, thread))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{FaultFlags, StatusFlags, SupervisorState};
+
+    fn sample(seq: u32, t_us: u64) -> TelemetrySample {
+        TelemetrySample {
+            seq,
+            device_time_us: t_us,
+            cam_speed_rad_s: 62.8,
+            current_a: 2.5,
+            pwm_duty: 0.5,
+            tau_cam_nm: 0.02,
+            tau_rot_nm: 1.5,
+            state: SupervisorState::Vibrating,
+            faults: FaultFlags::empty(),
+            status: StatusFlags::HOST_RELEASE,
+            output_angle_rad: 0.0,
+            output_speed_rad_s: 0.0,
+        }
+    }
+
+    #[test]
+    fn gaps_in_the_device_counter_are_counted_and_placed() {
+        let rec = Recording::new(None);
+        // 1 kHz from seq 100; 103-104 and 110 never arrive.
+        for seq in (100..=102).chain(105..=109).chain(111..=112) {
+            rec.push(sample(seq, u64::from(seq) * 1000), None);
+        }
+        assert_eq!(*lock(&rec.lost), 3);
+        assert_eq!(*lock(&rec.gaps), vec![(102, 105), (109, 111)]);
+        assert_eq!(lock(&rec.rows).len(), 10);
+        assert!(!rec.done.load(Ordering::SeqCst));
+    }
+
+    #[test]
+    fn a_duration_counts_from_the_first_sample_in_device_time() {
+        // 2 ms from the first sample at t = 5 s: samples at 5.000 and 5.001 s, not 5.002.
+        let rec = Recording::new(Some(2_000));
+        for (k, seq) in (7..12).enumerate() {
+            rec.push(sample(seq, 5_000_000 + k as u64 * 1000), None);
+        }
+        assert_eq!(lock(&rec.rows).len(), 2);
+        assert!(rec.done.load(Ordering::SeqCst));
+        assert_eq!(*lock(&rec.lost), 0);
+    }
+
+    #[test]
+    fn stale_estimates_follow_the_monitor_rule() {
+        // Locked: the estimates are not current, whatever the cam does.
+        let rec = Recording::new(None);
+        let mut s = sample(1, 0);
+        s.state = SupervisorState::Locked;
+        rec.push(s, None);
+        assert!(!lock(&rec.rows)[0].fresh);
+    }
+}
