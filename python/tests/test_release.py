@@ -183,3 +183,36 @@ def test_a_hung_interpreter_stops_at_the_duration(served):
     # Ended by the library at its duration (no comms timeout latched by the kill).
     assert faults["latched"] == []
     assert state == "locked"
+
+
+SWEEP_SCRIPT = textwrap.dedent(
+    """
+    import sys, time
+    from backdrive_rig import Rig
+    rig = Rig.open(sys.argv[1])
+    print("sweeping", flush=True)
+    t0 = time.monotonic()
+    try:
+        rig.torque_sweep(quick=True)
+    except KeyboardInterrupt:
+        print(f"interrupted after {time.monotonic() - t0:.1f} s", flush=True)
+        rig.close()
+    """
+)
+
+
+def test_ctrl_c_stops_a_running_sweep_with_the_gear_locked(served):
+    p = subprocess.Popen(
+        [sys.executable, "-c", SWEEP_SCRIPT, served.port],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert p.stdout.readline().strip() == "sweeping"
+    time.sleep(1.5)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert out.startswith("interrupted after"), (out, err)
+    faults, state, cam_hz = served_state(served)
+    assert faults["latched"] == []
+    assert state == "locked" and cam_hz < 0.1
