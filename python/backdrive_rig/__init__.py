@@ -60,6 +60,9 @@ TELEMETRY_COLUMNS: List[str] = list(_native.TELEMETRY_COLUMNS)
 
 PathLike = Union[str, "os.PathLike[str]"]
 
+# `rig experiment hold-release`'s defaults (Fig. 5), from the host library.
+_FIG5: Dict[str, Any] = dict(_native.HOLD_RELEASE_DEFAULTS)
+
 
 class Report(dict):
     """A result as the CLI's ``--json`` prints it: a dict with the same keys, also
@@ -120,7 +123,7 @@ class Release:
     included), when ``seconds`` of device time have passed (even while Python is busy or
     hung), when the rig is closed or dropped, and, if the process dies, within the device's
     comms timeout (500 ms). A release without a duration (``seconds=None``) lasts only
-    while Python calls :meth:`confirm` at least every ``confirm_s`` seconds.
+    while Python calls :meth:`confirm` at least every ``confirm_s`` (device) seconds.
     """
 
     def __init__(self, rig: "Rig", freq_hz: float, seconds: Optional[float], confirm_s: Optional[float]):
@@ -258,7 +261,7 @@ class Rig:
         self._native = native
 
     @classmethod
-    def open(cls, port: str, baud: int = 921600) -> "Rig":
+    def open(cls, port: str, baud: int = _native.DEFAULT_BAUD_RATE) -> "Rig":
         """Opens the board or served virtual rig on ``port`` and says Hello; a device of
         another protocol version or schema raises VersionMismatchError naming which side
         to update."""
@@ -344,7 +347,7 @@ class Rig:
     ) -> Release:
         """A release at ``freq_hz`` for ``seconds`` of device time (required: pass
         ``seconds=None, confirm_s=...`` to opt out of a duration, then call
-        ``Release.confirm()`` within every ``confirm_s``). Use with ``with``."""
+        ``Release.confirm()`` within every ``confirm_s`` device seconds). Use with ``with``."""
         if seconds is ...:
             raise BadValueError(
                 "release: give seconds (the release's duration, device s), or seconds=None with confirm_s to keep it by Release.confirm()"
@@ -423,14 +426,16 @@ class Rig:
 
     def hold_release(
         self,
-        load_nm: Optional[float] = 0.7355,
-        hold_s: float = 14.5,
-        freq_hz: float = 5.0,
-        release_s: float = 2.0,
-        after_s: float = 1.5,
+        load_nm: Optional[float] = _FIG5["load_nm"],
+        hold_s: float = _FIG5["hold_s"],
+        freq_hz: float = _FIG5["freq_hz"],
+        release_s: float = _FIG5["release_s"],
+        after_s: float = _FIG5["after_s"],
     ):
         """Fig. 5 (``rig experiment hold-release``): hold ``load_nm`` without vibration for
-        ``hold_s``, release at ``freq_hz`` for ``release_s``, record ``after_s`` more. A
+        ``hold_s``, release at ``freq_hz`` for ``release_s``, record ``after_s`` more (the
+        defaults are the CLI's: 1.0 kg on the 75 mm pulley, 14.5 s, 5 Hz, 2 s, 1.5 s;
+        ``load_nm=None``: the load already on the rig, nothing is hung). A
         DataFrame with the CSV's columns (t_s, phase, state, output_angle_rad,
         cam_speed_rad_s, current_a); ``attrs["fig5"]``: the verdict numbers."""
         import pandas as pd

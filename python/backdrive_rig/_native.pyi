@@ -3,9 +3,11 @@ tests/test_stubs.py). Use the `backdrive_rig` package; this layer returns JSON t
 column bytes that the package turns into objects, arrays and DataFrames."""
 
 from os import PathLike
-from typing import Any, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 TELEMETRY_COLUMNS: List[str]
+DEFAULT_BAUD_RATE: int
+HOLD_RELEASE_DEFAULTS: Dict[str, Optional[float]]
 
 class RigError(Exception):
     """Any error of the rig library; the message is the CLI's."""

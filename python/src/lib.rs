@@ -192,6 +192,16 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(design_report, m)?)?;
     m.add_function(wrap_pyfunction!(explain_csv, m)?)?;
     m.add_function(wrap_pyfunction!(versions, m)?)?;
+    m.add("DEFAULT_BAUD_RATE", protocol::DEFAULT_BAUD_RATE)?;
+    // Fig. 5's procedure as `rig experiment hold-release` runs it by default.
+    let fig5 = host::experiment::hold_release::HoldRelease::default();
+    let defaults = pyo3::types::PyDict::new(m.py());
+    defaults.set_item("load_nm", fig5.load_nm)?;
+    defaults.set_item("hold_s", fig5.hold_s)?;
+    defaults.set_item("freq_hz", fig5.hz)?;
+    defaults.set_item("release_s", fig5.release_s)?;
+    defaults.set_item("after_s", fig5.after_s)?;
+    m.add("HOLD_RELEASE_DEFAULTS", defaults)?;
     m.add(
         "TELEMETRY_COLUMNS",
         host::reports::TELEMETRY_CSV_HEADER.to_vec(),
