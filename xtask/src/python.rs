@@ -211,3 +211,21 @@ NotebookClient(nb, timeout=900, kernel_name="python3").execute()
 nbformat.write(nb, sys.argv[2])
 print(f"executed {sys.argv[1]}: {len(nb.cells)} cells, written to {sys.argv[2]}")
 "#;
+
+#[cfg(test)]
+mod tests {
+    use super::PINS;
+
+    #[test]
+    fn every_tool_is_pinned_exactly_and_named_in_the_readme() {
+        let readme = std::fs::read_to_string(crate::root().join("README.md")).unwrap();
+        for pin in PINS {
+            let (name, version) = pin.split_once("==").expect("an exact pin");
+            assert!(!name.is_empty() && version.split('.').all(|p| p.parse::<u32>().is_ok()));
+            assert!(
+                readme.contains(&format!("{name} {version}")),
+                "README's Python section does not list {pin}"
+            );
+        }
+    }
+}
