@@ -189,3 +189,13 @@ def test_a_closed_rig_says_so():
     r.close()
     with pytest.raises(RigError, match="closed"):
         r.info()
+
+
+def test_virtual_rig_from_a_rig_file(tmp_path):
+    path = tmp_path / "rig.toml"
+    path.write_text("[limits]\nmax_freq_hz = 12.0\n")
+    # A plain rig file puts its rig (here its limits) on the virtual device.
+    with Rig.virtual(model=path, speed=10) as rig:
+        assert rig.parameters()["limits"]["max_freq_hz"] == pytest.approx(12.0)
+    with pytest.raises(BadValueError, match="missing.toml"):
+        Rig.virtual(model=tmp_path / "missing.toml")
