@@ -388,23 +388,33 @@ class Rig:
         return out
 
     def torque_sweep(
-        self, plan: Union[str, PathLike, None] = None, quick: bool = False, window: str = "start"
+        self,
+        plan: Union[str, PathLike, None] = None,
+        quick: bool = False,
+        window: str = "start",
+        plan_toml: Optional[str] = None,
     ):
         """The required-torque test of Figs. 8-9 (``rig experiment torque-sweep``): ``plan``
         ``"paper"`` (150 runs, the default), ``"quick"`` (30; or ``quick=True``) or a plan
-        file's path (docs/plans.md). Returns a DataFrame with the sweep CSV's columns
+        file's path (docs/plans.md); or ``plan_toml``, a plan's text (as ``explain(...,
+        propose=True).proposal["plan_toml"]`` gives it). Returns a DataFrame with the sweep CSV's columns
         (``rig explain`` reads them); ``attrs`` has the summary (``planned``, ``written``,
         ``skipped``) and ``provenance`` (the CSV's ``#`` header)."""
         import pandas as pd
 
         if window not in ("start", "revolutions"):
             raise BadValueError(f"window {window}: give 'start' or 'revolutions'")
+        given = [n for n, v in (("plan", plan), ("quick=True", quick or None), ("plan_toml", plan_toml)) if v is not None]
+        if len(given) > 1:
+            raise BadValueError(
+                f"torque_sweep: give one of plan, quick=True or plan_toml, not {' and '.join(given)}"
+            )
         if quick:
-            if plan not in (None, "quick"):
-                raise BadValueError("torque_sweep: give a plan or quick=True, not both")
             plan = "quick"
         plan = "paper" if plan is None else plan
-        if plan in ("paper", "quick"):
+        if plan_toml is not None:
+            text, name = str(plan_toml), "plan_toml"
+        elif plan in ("paper", "quick"):
             text, name = str(plan), str(plan)
         else:
             name = os.fspath(plan)
@@ -559,16 +569,20 @@ def explain(
     folds: Optional[int] = None,
     replicates: Optional[int] = None,
     stated_noise_ma: Optional[float] = None,
+    propose: bool = False,
 ) -> Report:
     """The discrepancy workflow (``rig explain --json``) on ``data``: a CSV path, or a
     DataFrame with the sweep's columns (``omega_n_rad_s``, ``tau_rot_nm``, ``i_in_a``;
     optional ``t_s``, ``v_in_v``, ``temp_c``, ``backdriven``), e.g. from
     :meth:`Rig.torque_sweep` (its provenance travels in ``attrs``). ``model``: a rig file.
     Keys: ``verdict``, ``effects``, ``rmse_before_a``, ``rmse_after_a``, ``lack_of_fit``,
-    ... (no report folder is written)."""
+    ... (no report folder is written). ``proposal`` (as ``rig explain --propose``) when
+    ``propose`` or when the verdict is ambiguous or unexplained: the test points that best
+    separate the leading candidates, its plan text in ``proposal["plan_toml"]`` for
+    :meth:`Rig.torque_sweep`."""
     if isinstance(data, (str, os.PathLike)):
         return _report(
-            _native.explain(os.fspath(data), None if model is None else os.fspath(model), alpha, folds, replicates, stated_noise_ma)
+            _native.explain(os.fspath(data), None if model is None else os.fspath(model), alpha, folds, replicates, stated_noise_ma, propose)
         )
     if not hasattr(data, "to_csv"):
         raise BadValueError("explain: give a CSV path or a pandas DataFrame")
@@ -579,7 +593,7 @@ def explain(
             f.write(provenance)
             data.to_csv(f, index=False, lineterminator="\n")
         return _report(
-            _native.explain(path, None if model is None else os.fspath(model), alpha, folds, replicates, stated_noise_ma)
+            _native.explain(path, None if model is None else os.fspath(model), alpha, folds, replicates, stated_noise_ma, propose)
         )
     finally:
         os.unlink(path)

@@ -124,5 +124,6 @@ def explain(
     folds: Optional[int] = None,
     replicates: Optional[int] = None,
     stated_noise_ma: Optional[float] = None,
+    propose: bool = False,
 ) -> str: ...
 def versions() -> Tuple[str, int, str]: ...

@@ -112,7 +112,8 @@ fn design_report(
 /// explanation's JSON. The CSV's provenance line of the drive's decay mode is read as the
 /// CLI reads it.
 #[pyfunction(name = "explain")]
-#[pyo3(signature = (csv, model = None, alpha = None, folds = None, replicates = None, stated_noise_ma = None))]
+#[pyo3(signature = (csv, model = None, alpha = None, folds = None, replicates = None, stated_noise_ma = None, propose = false))]
+#[allow(clippy::too_many_arguments)]
 fn explain_csv(
     py: Python<'_>,
     csv: PathBuf,
@@ -121,6 +122,7 @@ fn explain_csv(
     folds: Option<u32>,
     replicates: Option<u32>,
     stated_noise_ma: Option<f64>,
+    propose: bool,
 ) -> PyResult<String> {
     py.detach(|| -> Result<String, RigError> {
         let bad = |what: String, why: &str| RigError::BadValue {
@@ -167,7 +169,38 @@ fn explain_csv(
             rig = rig.with_drive_decay(regenerative);
         }
         let outcome = ::explain::explain(&data, &rig, &options)?;
-        Ok(serde_json::to_string(&outcome.explanation)?)
+        let mut value = serde_json::to_value(&outcome.explanation)?;
+        // As the CLI: a proposal on request, and offered when the data cannot separate the
+        // leaders or a discrepancy remains that no named effect explains.
+        let offered = matches!(
+            outcome.explanation.verdict,
+            ::explain::Verdict::Ambiguous | ::explain::Verdict::Unexplained
+        );
+        if propose || offered {
+            let space = ::explain::design::Space::for_rig(&rig, &data);
+            let proposal = ::explain::design::propose(
+                &outcome,
+                &space,
+                &::explain::design::DesignOptions::default(),
+            );
+            let mut p = serde_json::to_value(&proposal)?;
+            if let Some(m) = p.as_object_mut() {
+                m.insert("plan_written".into(), serde_json::Value::Null);
+                m.insert(
+                    "plan_toml".into(),
+                    proposal
+                        .to_plan_toml(
+                            &format!("proposed by backdrive_rig.explain for {}", csv.display()),
+                            1,
+                        )
+                        .into(),
+                );
+            }
+            if let Some(map) = value.as_object_mut() {
+                map.insert("proposal".into(), p);
+            }
+        }
+        Ok(serde_json::to_string(&value)?)
     })
     .map_err(to_py)
 }

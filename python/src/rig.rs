@@ -435,12 +435,13 @@ impl NativeRig {
         window_revolutions: bool,
     ) -> PyResult<(String, String)> {
         self.call(py, move |w| {
-            idle(w, "torque_sweep", false)?;
+            // A plan that cannot run is refused first, whatever else stands in the way.
             let plan = match plan.as_str() {
                 "paper" => Plan::paper(),
                 "quick" => Plan::quick(),
                 text => Plan::parse(text, &plan_name)?,
             };
+            idle(w, "torque_sweep", false)?;
             let setup = SweepSetup {
                 plan,
                 window: if window_revolutions {

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from backdrive_rig import BadValueError, Rig, design, explain
+from backdrive_rig import BadValueError, Rig, RigError, design, explain
 
 from conftest import rig_cli
 
@@ -53,6 +53,23 @@ def test_explain_on_a_csv_is_rig_explain_json(tmp_path):
         assert ours[key] == cli[key], key
     with pytest.raises(BadValueError, match="alpha 0.7"):
         explain(csv, alpha=0.7)
+    # A proposal on request, as `rig explain --propose`: the same keys, and its plan text.
+    proposed = explain(csv, replicates=20, propose=True)
+    cli_p = cli_json(
+        "explain", "--measured", str(csv), "--json", "--no-report", "--replicates", "20",
+        "--propose", str(tmp_path / "next.toml"),
+    )["proposal"]
+    assert set(proposed.proposal) - {"plan_toml"} == set(cli_p)
+    assert proposed.proposal["plan_written"] is None
+    plan_text = proposed.proposal["plan_toml"]
+    assert "[[points]]" in plan_text or "points" in plan_text
+    with Rig.virtual(speed=10) as rig:
+        # The plan parses (the refusal that follows is the live release, checked after it).
+        with rig.release(freq_hz=10, seconds=30):
+            with pytest.raises(BadValueError, match="release is live"):
+                rig.torque_sweep(plan_toml=plan_text)
+        with pytest.raises(RigError, match="plan_toml"):
+            rig.torque_sweep(plan_toml="[[points]]\nload_nm = 'heavy'\n")
 
 
 def test_explain_refuses_a_frame_without_the_columns():
