@@ -323,7 +323,7 @@ mod app {
                 sense,
                 button: release_button,
                 stall,
-            }
+            },
         )));
         spawner.spawn(spawned(host_rx(core, host_link.rx)));
         spawner.spawn(spawned(host_tx(core, host_link.tx)));
