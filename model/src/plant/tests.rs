@@ -483,3 +483,43 @@ fn a_braking_drive_returns_the_inertia_term_over_a_turn() {
         }
     }
 }
+
+#[test]
+fn a_braking_drive_fed_forward_on_its_pumped_bus_still_returns_the_inertia_term() {
+    // As the firmware drives it: duty = volts / measured bus, once a millisecond, with the
+    // returned power charging the board's bus capacitor. Within 1 mA of Eq. (10) with the
+    // inertia term returned (0.07 mA seen).
+    for tau in [paper::TAU_ROT_MIN_TESTED, 2.0] {
+        for volts in [6.2, 8.8] {
+            let gear = GearSet::paper(paper::RIG_Z).unwrap();
+            let mut params = PlantParams::paper(gear, Load::Torque(tau));
+            params.regeneration = true;
+            params.bus_capacitance = board::BUS_CAPACITANCE_F;
+            let mut p = Plant::new(params, 42);
+            let (mut w, mut i, mut n) = (0.0, 0.0, 0.0);
+            for ms in 0..4_000 {
+                let drive = Drive {
+                    duty: volts / p.bus_voltage(),
+                    enabled: true,
+                };
+                for _ in 0..10 {
+                    p.step(DT, drive);
+                    if ms >= 2_000 {
+                        w += p.state().cam_speed;
+                        i += p.state().current;
+                        n += 1.0;
+                    }
+                }
+            }
+            let (w, i) = (w / n, i / n);
+            let drive = p.params().drive;
+            let tau_cam = drive.required_cam_torque(p.params().mu_ax, tau, w)
+                - drive.required_inertia_torque(w);
+            let excess_ma = (i - Calibration::PAPER.current_for(tau_cam, w)) * 1e3;
+            assert!(
+                excess_ma.abs() < 1.0,
+                "{volts} V, {tau} N m: {excess_ma} mA"
+            );
+        }
+    }
+}
