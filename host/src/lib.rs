@@ -6,6 +6,7 @@ pub mod bringup;
 pub mod calibrate;
 pub mod cli;
 pub mod client;
+pub mod compare;
 pub mod conformance;
 pub mod connection;
 pub mod demo;
