@@ -16,6 +16,7 @@ pub mod error;
 pub mod experiment;
 pub mod flash;
 pub mod limits;
+pub mod monitor;
 pub mod output_paths;
 pub mod ports;
 pub mod scenario;
