@@ -14,6 +14,7 @@ pub mod design;
 pub mod device;
 pub mod error;
 pub mod experiment;
+pub mod explanation;
 pub mod flash;
 pub mod limits;
 pub mod monitor;
@@ -22,5 +23,6 @@ pub mod ports;
 pub mod scenario;
 pub mod signals;
 pub mod sweep_report;
+pub mod synthetic;
 
 pub use error::RigError;

@@ -183,9 +183,8 @@ impl MonitorRow {
 
     /// The row's CSV fields under [`CSV_HEADER`] (fixed decimals; empty where `None`).
     pub fn csv_record(&self) -> [String; 16] {
-        let num = |v: Option<f32>, digits: usize| {
-            v.map(|v| format!("{v:.digits$}")).unwrap_or_default()
-        };
+        let num =
+            |v: Option<f32>, digits: usize| v.map(|v| format!("{v:.digits$}")).unwrap_or_default();
         let count = |c: Option<u32>| c.map(|c| c.to_string()).unwrap_or_default();
         [
             format!("{:.6}", self.device_time_s),
@@ -236,7 +235,12 @@ mod tests {
     fn json_keys_are_the_csv_columns_plus_seq() {
         let row = MonitorRow::new(&sample(), true, None);
         let json = serde_json::to_value(&row).unwrap();
-        let mut keys: Vec<&str> = json.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        let mut keys: Vec<&str> = json
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(|k| k.as_str())
+            .collect();
         keys.sort_unstable();
         let mut want: Vec<&str> = CSV_HEADER
             .iter()

@@ -80,7 +80,6 @@ pub fn run(a: CompareArgs) -> Result<ExitCode, RigError> {
     Ok(ExitCode::SUCCESS)
 }
 
-
 /// The comparison in words.
 fn write_text(out: &mut impl Write, c: &Comparison) -> std::io::Result<()> {
     writeln!(

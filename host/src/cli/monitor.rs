@@ -25,8 +25,8 @@ use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType, Paragraph};
 
 use super::connect::{DeviceOpts, interrupt_flag};
 use crate::client::LinkStats;
-pub use crate::monitor::{CSV_HEADER, Freshness, MonitorRow, STALE_RULE, status_meaning};
 use crate::monitor::HealthValues;
+pub use crate::monitor::{CSV_HEADER, Freshness, MonitorRow, STALE_RULE, status_meaning};
 use crate::{RigError, args, limits};
 
 /// Arguments of `rig monitor`.
