@@ -12,6 +12,7 @@ pub mod connection;
 pub mod demo;
 pub mod design;
 pub mod device;
+pub mod discover;
 pub mod error;
 pub mod experiment;
 pub mod explanation;
