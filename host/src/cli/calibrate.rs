@@ -653,7 +653,10 @@ fn decide_write(
 }
 
 /// Writes `new_cal` to the device and reads it back.
-fn store(session: &mut Session, new_cal: &protocol::RigParameters) -> Result<(), RigError> {
+pub(super) fn store(
+    session: &mut Session,
+    new_cal: &protocol::RigParameters,
+) -> Result<(), RigError> {
     session.client.set_calibration(new_cal)?;
     let back = session.client.calibration()?;
     if back != *new_cal {
