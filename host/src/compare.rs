@@ -11,7 +11,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::RigError;
-use crate::experiment::plan::{Mode, Order, Plan, PlanPoint};
+use crate::experiment::plan::{DriveMode, Order, Plan, PlanPoint};
 use crate::experiment::sweep::{SweepSetup, Window};
 use crate::experiment::{Operator, SimBench, sweep};
 use explain::data::Dataset;
@@ -96,9 +96,9 @@ fn replay_plan(data: &Dataset, header: &HeaderPlan) -> Result<(Plan, Vec<usize>)
     let volts = data.v_in();
     let temps = data.temp_c();
     let mode = if volts.is_some() {
-        Mode::OpenLoop
+        DriveMode::OpenLoop
     } else {
-        Mode::ClosedLoop
+        DriveMode::ClosedLoop
     };
     let points = order
         .iter()
@@ -181,8 +181,7 @@ pub fn virtual_rig(rig: &RigFile, with_model: bool, seed: u64) -> Result<sim::Si
     if !with_model {
         base.model = None;
     }
-    let mut config = sim::SimConfig::from_rig_file(&base)?;
-    config.core.board_name = "virtual";
+    let mut config = sim::SimConfig::from_rig_file(&base)?.virtual_board();
     if with_model {
         sim::preset::apply_model(&base, &mut config.plant)?;
     }

@@ -19,9 +19,9 @@ use serde::Serialize;
 
 use crate::RigError;
 use crate::experiment::bench::{Bench, Operator};
-use crate::experiment::plan::{Mode, Order, Plan, PlanPoint};
+use crate::experiment::plan::Plan;
 use crate::experiment::sweep::{self, Row, SweepSetup, Window};
-use explain::design::{DesignOptions, DriveMode, Proposal};
+use explain::design::{DesignOptions, Proposal};
 use explain::{Dataset, MeasuredRow, Options, Verdict};
 use rigfile::RigFile;
 
@@ -61,33 +61,9 @@ pub struct Round {
     pub confidence: Option<f64>,
 }
 
-/// The plan of a proposal.
+/// The plan of a proposal ([`Proposal::to_plan`]), named for `rig discover`.
 pub fn plan_of(p: &Proposal, seed: u64) -> Plan {
-    Plan {
-        name: format!("rig discover: {}", p.reason),
-        mode: match p.mode {
-            DriveMode::OpenLoop => Mode::OpenLoop,
-            DriveMode::ClosedLoop => Mode::ClosedLoop,
-        },
-        repeats: 1,
-        order: Order::Random,
-        seed,
-        rest_s: 2.0,
-        window_s: model::paper::CURRENT_AVERAGING_S,
-        reason: p.reason.clone(),
-        points: p
-            .points
-            .iter()
-            .map(|q| PlanPoint {
-                load_nm: q.load_nm,
-                volts: q.volts,
-                hz: q.hz,
-                repeats: Some(q.repeats),
-                duration_s: None,
-                temp_c: None,
-            })
-            .collect(),
-    }
+    p.to_plan(&format!("rig discover: {}", p.reason), seed)
 }
 
 /// A sweep row as the explanation reads it.

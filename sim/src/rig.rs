@@ -116,7 +116,17 @@ impl SimConfig {
             seed: 1,
         })
     }
+
+    /// This configuration reporting itself as board [`VIRTUAL_BOARD`], as the host's
+    /// virtual rigs do (the firmware core's default names the Nucleo board).
+    pub fn virtual_board(mut self) -> Self {
+        self.core.board_name = VIRTUAL_BOARD;
+        self
+    }
 }
+
+/// The board name a virtual rig reports in `Info`.
+pub const VIRTUAL_BOARD: &str = "virtual";
 
 /// The build the virtual rig reports in `Info`: it runs the firmware core compiled into
 /// the host tool, so there is no separate firmware build to name.

@@ -89,8 +89,7 @@ fn bench_for(a: &DiscoverArgs, dev: &DeviceOpts) -> Result<Box<dyn Bench>, RigEr
         let preset = sim::Preset::by_name(a.preset.as_deref().unwrap_or(DEFAULT_PRESET))?;
         // The simulator's own rig (`rig sim torque-sweep`'s): backdrive is read from the
         // plant's output, as the in-process bench does.
-        let mut config = sim::SimConfig::paper();
-        config.core.board_name = "virtual";
+        let mut config = sim::SimConfig::paper().virtual_board();
         preset.apply(&mut config.plant);
         for e in &a.effects {
             sim::EffectSpec::parse(e)?.apply(&mut config.plant)?;

@@ -129,7 +129,7 @@ fn plan_of(a: &SweepArgs) -> Result<Plan, RigError> {
     match a.plan.as_str() {
         "paper" => Ok(Plan::paper()),
         "quick" => Ok(Plan::quick()),
-        file => Plan::read(std::path::Path::new(file)),
+        file => Ok(Plan::read(std::path::Path::new(file))?),
     }
 }
 
