@@ -366,20 +366,9 @@ fn run_step(
 
 fn identity(session: &mut Session) -> Result<Step, RigError> {
     let info = session.client.info()?;
-    let fw = info.firmware_version;
     let detail = format!(
-        "firmware {}.{}.{} build {} on board {}, protocol {}, capabilities {}, calibration {}",
-        fw.major,
-        fw.minor,
-        fw.patch,
-        info.firmware_build.as_str(),
-        info.board.as_str(),
-        info.protocol_version,
-        if info.capabilities.is_empty() {
-            "none".to_string()
-        } else {
-            info.capabilities.to_string()
-        },
+        "firmware {}, calibration {}",
+        crate::provenance::identity(&info),
         info.parameters_status.name()
     );
     let ok = info.parameters_status != ParametersStatus::Invalid;

@@ -136,12 +136,7 @@ struct HeaderPlan {
 }
 
 fn header_plan(path: &Path) -> HeaderPlan {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
-    let plan = text
-        .lines()
-        .take_while(|l| l.starts_with('#'))
-        .find_map(|l| l.strip_prefix("# plan: "))
-        .and_then(|j| serde_json::from_str::<Plan>(j).ok());
+    let plan = crate::provenance::Header::read(path).plan();
     HeaderPlan {
         rest_s: plan.as_ref().map(|p| p.rest_s),
         window_s: plan.as_ref().map(|p| p.window_s),

@@ -21,6 +21,7 @@ pub mod limits;
 pub mod monitor;
 pub mod output_paths;
 pub mod ports;
+pub mod provenance;
 pub mod scenario;
 pub mod signals;
 pub mod sweep_report;

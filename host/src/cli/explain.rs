@@ -168,7 +168,7 @@ fn input(args: &ExplainArgs, rig: &mut RigFile) -> Result<Input, RigError> {
     match (&args.measured, args.synthetic) {
         (Some(path), _) => {
             let data = Dataset::read_csv(path)?;
-            if let Some(regenerative) = crate::experiment::sweep::read_drive(path) {
+            if let Some(regenerative) = crate::provenance::Header::read(path).regenerative {
                 *rig = rig.clone().with_drive_decay(regenerative);
             }
             Ok(Input {

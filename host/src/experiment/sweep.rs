@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use super::bench::{Bench, Go, Operator, Verdict, interrupted};
 use super::plan::{Plan, Run};
 use crate::RigError;
+use crate::provenance::{Header, Provenance};
 
 /// Telemetry rate during a point, Hz.
 pub const TELEMETRY_HZ: u16 = 100;
@@ -95,75 +96,34 @@ pub struct SweepSetup {
     pub command: String,
 }
 
-/// The provenance header: `#` lines `rig explain` skips.
+/// The provenance header of a sweep on `bench` ([`crate::provenance`]).
 pub fn provenance<B: Bench + ?Sized>(
     bench: &mut B,
     setup: &SweepSetup,
 ) -> Result<String, RigError> {
     let info = bench.info().clone();
-    let cal = bench.calibration()?;
-    let fw = info.firmware_version;
-    let date = httpdate(std::time::SystemTime::now());
-    Ok(format!(
-        "# rig experiment torque-sweep ({})\n# date: {date}\n# host: rig {}\n# firmware: {}.{}.{} build {} board {} protocol {} capabilities {}\n# calibration ({}): {}\n# window: {}\n# plan: {}\n{}",
-        setup.command,
-        env!("CARGO_PKG_VERSION"),
-        fw.major,
-        fw.minor,
-        fw.patch,
-        info.firmware_build.as_str(),
-        info.board.as_str(),
-        info.protocol_version,
-        if info.capabilities.is_empty() {
-            "none".to_string()
-        } else {
-            info.capabilities.to_string()
-        },
-        info.parameters_status.name(),
-        serde_json::to_string(&cal).unwrap_or_default(),
-        match setup.window {
+    let calibration = bench.calibration()?;
+    Ok(Provenance {
+        procedure: "rig experiment torque-sweep",
+        command: &setup.command,
+        date: std::time::SystemTime::now(),
+        info: &info,
+        calibration: &calibration,
+        window: setup.window.describe(),
+        plan: &setup.plan,
+        regenerative: model::hardware::board::REGENERATIVE_DECAY,
+    }
+    .header())
+}
+
+impl Window {
+    /// The window in words, as the provenance states it.
+    pub fn describe(self) -> &'static str {
+        match self {
             Window::Start => "start of constant cam rotation",
             Window::Revolutions => "whole cam revolutions from the start of constant rotation",
-        },
-        setup.plan.one_line(),
-        drive_line(model::hardware::board::REGENERATIVE_DECAY),
-    ))
-}
-
-/// The provenance line of the drive's decay mode (the board setting the firmware is built
-/// with and the virtual rig follows), which `rig explain` reads ([`read_drive`]).
-pub fn drive_line(regenerative: bool) -> String {
-    format!(
-        "{DRIVE_PREFIX}{regenerative} (inertia-rectification kappa = {})\n",
-        model::effects::drive_kappa(regenerative)
-    )
-}
-
-const DRIVE_PREFIX: &str = "# drive: regenerative_decay = ";
-
-/// The drive's decay mode from a measured CSV's provenance ([`drive_line`]), if the file
-/// says it (files from `rig experiment torque-sweep` do): only the leading `#` lines are
-/// read.
-pub fn read_drive(path: &Path) -> Option<bool> {
-    use std::io::BufRead;
-    let file = std::fs::File::open(path).ok()?;
-    std::io::BufReader::new(file)
-        .lines()
-        .map_while(Result::ok)
-        .take_while(|l| l.starts_with('#'))
-        .find_map(|l| {
-            let rest = l.strip_prefix(DRIVE_PREFIX)?;
-            match rest.split_whitespace().next()? {
-                "true" => Some(true),
-                "false" => Some(false),
-                _ => None,
-            }
-        })
-}
-
-/// A UTC date and time, `2026-11-22T23:55:00Z`.
-fn httpdate(t: std::time::SystemTime) -> String {
-    reporting::UtcTime::of(t).iso()
+        }
+    }
 }
 
 /// The rows already in `path` and its plan line (for `--resume`).
@@ -173,10 +133,7 @@ pub fn read_rows(path: &Path) -> Result<(Vec<Row>, Option<String>), RigError> {
         path: path.display().to_string(),
         source,
     })?;
-    let plan = text
-        .lines()
-        .find_map(|l| l.strip_prefix("# plan: "))
-        .map(str::to_string);
+    let plan = Header::parse(&text).plan_line;
     let mut reader = csv::ReaderBuilder::new()
         .comment(Some(b'#'))
         .flexible(true)
@@ -844,24 +801,6 @@ mod tests {
         assert!(!load_protection_only(FaultFlags::empty()));
     }
 
-    #[test]
-    fn the_drive_line_is_read_back_from_the_provenance_only() {
-        let dir = tempfile::tempdir().unwrap();
-        for regenerative in [false, true] {
-            let path = dir.path().join(format!("d{regenerative}.csv"));
-            let text = format!(
-                "# plan: {{}}\n{}point,i_in_a\n0,1.0\n",
-                drive_line(regenerative)
-            );
-            std::fs::write(&path, text).unwrap();
-            assert_eq!(read_drive(&path), Some(regenerative));
-        }
-        // Not in the leading comments (or absent): unknown, the paper's Eq. (10) stays.
-        let path = dir.path().join("late.csv");
-        std::fs::write(&path, format!("point,i_in_a\n{}0,1.0\n", drive_line(true))).unwrap();
-        assert_eq!(read_drive(&path), None);
-        assert!(drive_line(false).contains("kappa = -0.5"));
-    }
     use super::*;
     use crate::experiment::bench::SimBench;
 
@@ -902,12 +841,6 @@ mod tests {
         };
         assert!(run(&mut bench, &mut op, &setup, &csv, &mut |_| {}).is_err());
         assert!(!csv.exists());
-    }
-
-    #[test]
-    fn dates_are_iso() {
-        let t = std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_795_910_400);
-        assert_eq!(httpdate(t), "2026-11-29T00:00:00Z");
     }
 
     #[test]
