@@ -13,7 +13,7 @@ use serde::Serialize;
 use crate::RigError;
 use crate::experiment::plan::{DriveMode, Order, Plan, PlanPoint};
 use crate::experiment::sweep::{SweepSetup, Window};
-use crate::experiment::{Operator, SimBench, sweep};
+use crate::experiment::{InProcessBench, Operator, sweep};
 use explain::data::Dataset;
 use rigfile::RigFile;
 
@@ -151,7 +151,7 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>,
     // The replay reads the board's current (telemetry); a fitted `current-sensor-offset` is
     // the measuring sensor's (the plant adds it to the logger only), so it is added here.
     let sensor_offset = config.plant.effects.current_offset;
-    let mut bench = SimBench::new(config)?;
+    let mut bench = InProcessBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
     let setup = SweepSetup {
         plan: plan.clone(),

@@ -11,7 +11,6 @@ pub mod conformance;
 pub mod connection;
 pub mod demo;
 pub mod design;
-pub mod device;
 pub mod discover;
 pub mod error;
 pub mod experiment;
@@ -26,5 +25,6 @@ pub mod scenario;
 pub mod signals;
 pub mod sweep_report;
 pub mod synthetic;
+pub mod virtual_device;
 
 pub use error::RigError;

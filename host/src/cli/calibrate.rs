@@ -15,12 +15,12 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
-use super::connect::{DeviceOpts, Session, confirm};
+use super::connect::{Connection, DeviceOpts, confirm};
 use crate::RigError;
-use crate::calibrate::bench::{OperatorBench, SimBench};
+use crate::calibrate::operator::{TerminalOperator, VirtualOperator};
 use crate::calibrate::plot::{self, FitPlot};
 use crate::calibrate::{
-    self, Bench, CalibrationResult, GaugeUnit, Measurements, Plan, Progress, Setup,
+    self, CalibrationResult, GaugeOperator, GaugeUnit, Measurements, Plan, Progress, Setup,
 };
 use rigfile::{RigFile, paper_units};
 
@@ -255,7 +255,7 @@ fn partial_refit(
 /// `resumed`: the points of an interrupted run, kept and continued.
 #[allow(clippy::too_many_arguments)]
 fn measure(
-    session: &mut Session,
+    session: &mut Connection,
     a: &CalibrateArgs,
     plan: &Plan,
     gauge: Option<Vec<f64>>,
@@ -272,16 +272,16 @@ fn measure(
         });
     }
     let bar = progress_bar(plan, a.json);
-    let Session { client, device, .. } = session;
+    let Connection { client, device, .. } = session;
     let mut sim_bench;
     let mut operator_bench;
-    let bench: &mut dyn Bench = match device {
+    let bench: &mut dyn GaugeOperator = match device {
         Some(d) if !a.operator => {
-            sim_bench = SimBench::new(d, gauge);
+            sim_bench = VirtualOperator::new(d, gauge);
             &mut sim_bench
         }
         d => {
-            operator_bench = OperatorBench::new(gauge, unit, bar.clone(), Arc::clone(stop));
+            operator_bench = TerminalOperator::new(gauge, unit, bar.clone(), Arc::clone(stop));
             if let Some(d) = d {
                 operator_bench = operator_bench.with_device(d);
             }
@@ -654,7 +654,7 @@ fn decide_write(
 
 /// Writes `new_cal` to the device and reads it back.
 pub(super) fn store(
-    session: &mut Session,
+    session: &mut Connection,
     new_cal: &protocol::RigParameters,
 ) -> Result<(), RigError> {
     session.client.set_calibration(new_cal)?;

@@ -26,7 +26,7 @@ pub use crate::discover::{
     MIN_POINTS_FOR_NONE, ROUND_POINTS, Round, SETTLED_CONFIDENCE, VIRTUAL_FAULT_RETRIES, plan_of,
     unseen_effect_note,
 };
-use crate::experiment::SimBench;
+use crate::experiment::InProcessBench;
 use crate::experiment::bench::{Bench, DeviceBench, Operator};
 use crate::experiment::sweep;
 use crate::explanation::default_report_dir;
@@ -95,7 +95,7 @@ fn bench_for(a: &DiscoverArgs, dev: &DeviceOpts) -> Result<Box<dyn Bench>, RigEr
             sim::EffectSpec::parse(e)?.apply(&mut config.plant)?;
         }
         config.seed = a.seed;
-        return Ok(Box::new(SimBench::new(config)?));
+        return Ok(Box::new(InProcessBench::new(config)?));
     }
     if !a.effects.is_empty() || a.preset.is_some() {
         return Err(RigError::BadValue {

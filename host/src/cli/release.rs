@@ -11,7 +11,7 @@ use protocol::SupervisorState;
 use serde::Serialize;
 
 use super::connect::{DeviceOpts, interrupt_flag};
-use crate::connection::Session;
+use crate::connection::Connection;
 use crate::{RigError, args, limits};
 
 /// On or off.
@@ -136,7 +136,7 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
 }
 
 /// `rig release off`: locks and reports how the output behaves after.
-fn lock(a: &ReleaseArgs, s: &mut Session, out: &mut impl Write) -> Result<ExitCode, RigError> {
+fn lock(a: &ReleaseArgs, s: &mut Connection, out: &mut impl Write) -> Result<ExitCode, RigError> {
     s.client.release(false, 0.0)?;
     let scale = s.time_scale();
     let after = after_lock(&mut s.client, scale)?;
@@ -190,7 +190,7 @@ impl Held {
 /// Holds the release until `--for` passes, a fault or a signal, recording into `held`.
 fn hold(
     a: &ReleaseArgs,
-    s: &mut Session,
+    s: &mut Connection,
     stop: &AtomicBool,
     held: &mut Held,
     out: &mut impl Write,
@@ -244,7 +244,7 @@ fn hold(
 
 /// Watches the cam come to rest after the lock (a few device seconds at most); the state
 /// it ends in.
-fn come_to_rest(s: &mut Session) -> Result<SupervisorState, RigError> {
+fn come_to_rest(s: &mut Connection) -> Result<SupervisorState, RigError> {
     let scale = s.time_scale();
     let mut final_state = SupervisorState::Stopping;
     let deadline = Instant::now() + Duration::from_secs_f64(3.0 / scale + 1.0);

@@ -1,5 +1,5 @@
 //! [`Bench`]: the one interface the procedures drive a rig through, with its two
-//! implementations: [`SimBench`] (the in-process virtual rig, [`sim::SimLink`], virtual
+//! implementations: [`InProcessBench`] (the in-process virtual rig, [`sim::SimLink`], virtual
 //! time) and [`DeviceBench`] (a device over the serial client: a real rig, a served virtual
 //! rig, or `--sim`); and [`Operator`], the person at the bench (prompts on stderr, answers
 //! on stdin).
@@ -15,7 +15,7 @@ use protocol::{
 };
 
 use crate::RigError;
-use crate::connection::Session;
+use crate::connection::Connection;
 
 /// Output rotation that counts as "the output moved", rad: 0.1 mm of rope on the paper's
 /// 75 mm pulley (docs/plans.md).
@@ -135,7 +135,7 @@ pub trait Bench {
 }
 
 /// The in-process virtual rig, in virtual time (as fast as the machine runs it).
-pub struct SimBench {
+pub struct InProcessBench {
     /// The session with the simulated rig.
     pub link: sim::SimLink,
     info: DeviceInfo,
@@ -146,7 +146,7 @@ pub struct SimBench {
     cam_torque: Vec<(f64, model::plant::CamTorqueLedger)>,
 }
 
-impl SimBench {
+impl InProcessBench {
     /// Boots `config`'s rig and opens the session (hello).
     pub fn new(mut config: sim::SimConfig) -> Result<Self, RigError> {
         virtual_release_limit(&mut config);
@@ -189,7 +189,7 @@ impl SimBench {
     }
 }
 
-impl Bench for SimBench {
+impl Bench for InProcessBench {
     fn info(&self) -> &DeviceInfo {
         &self.info
     }
@@ -253,13 +253,13 @@ impl Bench for SimBench {
 /// A device over the serial client: a real rig, a served virtual rig, or `--sim`.
 pub struct DeviceBench {
     /// The session.
-    pub session: Session,
+    pub session: Connection,
     temp_c: Option<f64>,
 }
 
 impl DeviceBench {
     /// Wraps an open session.
-    pub fn new(session: Session) -> Self {
+    pub fn new(session: Connection) -> Self {
         Self {
             session,
             temp_c: None,

@@ -802,7 +802,7 @@ mod tests {
     }
 
     use super::*;
-    use crate::experiment::bench::SimBench;
+    use crate::experiment::bench::InProcessBench;
 
     #[test]
     fn a_plan_is_checked_whole_before_the_first_point() {
@@ -830,7 +830,7 @@ mod tests {
         // Nothing ran: the sweep refuses before its first point and writes no file.
         let dir = tempfile::tempdir().unwrap();
         let csv = dir.path().join("x.csv");
-        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut bench = InProcessBench::new(sim::SimConfig::paper()).unwrap();
         let mut op = Operator::scripted(b"", false);
         let setup = SweepSetup {
             plan,
@@ -847,7 +847,7 @@ mod tests {
     fn quick_sweep_on_the_virtual_rig_is_read_by_explain() {
         let dir = tempfile::tempdir().unwrap();
         let csv = dir.path().join("sweep.csv");
-        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut bench = InProcessBench::new(sim::SimConfig::paper()).unwrap();
         let mut op = Operator::scripted(b"", false);
         let setup = SweepSetup {
             plan: Plan::quick(),
@@ -903,7 +903,7 @@ mod tests {
             "cl.toml",
         )
         .unwrap();
-        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut bench = InProcessBench::new(sim::SimConfig::paper()).unwrap();
         let mut op = Operator::scripted(b"", false);
         let setup = SweepSetup {
             plan,

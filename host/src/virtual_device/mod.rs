@@ -32,7 +32,7 @@ use std::time::{Duration, Instant};
 use model::plant::Plant;
 
 use crate::RigError;
-use sim::{PLANT_HZ, SimConfig, SimRig};
+use sim::{ADC_HZ, SimConfig, SimRig};
 
 mod pty;
 
@@ -297,7 +297,7 @@ fn run(
     // The host's last byte, in virtual and in wall time; whether time waits for it.
     let mut last_rx = (0.0f64, Instant::now());
     let mut waiting = false;
-    let tick = 1.0 / f64::from(PLANT_HZ);
+    let tick = 1.0 / f64::from(ADC_HZ);
     while !shared.stop.load(Ordering::SeqCst) {
         let received = if master.wait_readable(POLL) {
             master.read_available(&mut buf)
