@@ -22,7 +22,7 @@ use crate::experiment::bench::{Bench, Operator};
 use crate::experiment::plan::Plan;
 use crate::experiment::sweep::{self, Row, SweepSetup, Window};
 use explain::design::{DesignOptions, Proposal};
-use explain::{Dataset, MeasuredRow, Options, Verdict};
+use explain::{Dataset, Options, Verdict};
 use rigfile::RigFile;
 
 /// Confidence at which a verdict is settled.
@@ -66,19 +66,6 @@ pub fn plan_of(p: &Proposal, seed: u64) -> Plan {
     p.to_plan(&format!("rig discover: {}", p.reason), seed)
 }
 
-/// A sweep row as the explanation reads it.
-pub fn measured(r: &Row) -> MeasuredRow {
-    MeasuredRow {
-        omega_n: r.omega_n_rad_s,
-        tau_rot: r.tau_rot_nm,
-        i_in: Some(r.i_in_a),
-        t_s: Some(r.t_s),
-        v_in: r.v_in_v,
-        temp_c: r.temp_c,
-        backdriven: r.backdriven.map(|b| b == 1),
-    }
-}
-
 /// Appends `rows` to `path` (creating it with `head` first: an existing file only with
 /// `force`), synced.
 pub fn append(path: &Path, head: Option<&str>, rows: &[Row], force: bool) -> Result<(), RigError> {
@@ -95,24 +82,11 @@ pub fn append(path: &Path, head: Option<&str>, rows: &[Row], force: bool) -> Res
             .open(path)
             .map_err(fail)?
     };
-    let mut w = csv::WriterBuilder::new()
-        .has_headers(head.is_some())
-        .from_writer(Vec::new());
-    for r in rows {
-        w.serialize(r.for_people())
-            .map_err(|e| RigError::BadValue {
-                what: "a sweep row".into(),
-                why: e.to_string(),
-            })?;
-    }
-    let body = w.into_inner().map_err(|e| RigError::BadValue {
-        what: "a sweep row".into(),
-        why: e.to_string(),
-    })?;
+    let body = sweep::csv_text(rows, head.is_some())?;
     if let Some(h) = head {
         file.write_all(h.as_bytes()).map_err(fail)?;
     }
-    file.write_all(&body).map_err(fail)?;
+    file.write_all(body.as_bytes()).map_err(fail)?;
     file.sync_data().map_err(fail)
 }
 
@@ -309,7 +283,7 @@ pub fn discover(
             if let Some(e) = failed {
                 return Err(e);
             }
-            let data = Dataset::from_rows(&source, all.iter().map(measured).collect())?;
+            let data = Dataset::from_rows(&source, all.iter().map(Row::measured).collect())?;
             let o = explain::explain(&data, rig, &setup.options)?;
             let e = &o.explanation;
             let used = all.len();

@@ -174,15 +174,41 @@ impl Row {
     }
 }
 
+impl Row {
+    /// The row as the explanation reads it (`rig explain`'s columns).
+    pub fn measured(&self) -> explain::MeasuredRow {
+        explain::MeasuredRow {
+            omega_n: self.omega_n_rad_s,
+            tau_rot: self.tau_rot_nm,
+            i_in: Some(self.i_in_a),
+            t_s: Some(self.t_s),
+            v_in: self.v_in_v,
+            temp_c: self.temp_c,
+            backdriven: self.backdriven.map(|b| b == 1),
+        }
+    }
+}
+
 fn csv_line(row: &Row) -> Result<String, RigError> {
+    csv_text([row], false)
+}
+
+/// `rows` as CSV text, numbers as people write them ([`Row::for_people`]), under the
+/// column names when `header` (and there is a row).
+pub fn csv_text<'a>(
+    rows: impl IntoIterator<Item = &'a Row>,
+    header: bool,
+) -> Result<String, RigError> {
     let mut w = csv::WriterBuilder::new()
-        .has_headers(false)
+        .has_headers(header)
         .from_writer(Vec::new());
-    w.serialize(row.for_people())
-        .map_err(|e| RigError::BadValue {
-            what: "a sweep row".into(),
-            why: e.to_string(),
-        })?;
+    for row in rows {
+        w.serialize(row.for_people())
+            .map_err(|e| RigError::BadValue {
+                what: "a sweep row".into(),
+                why: e.to_string(),
+            })?;
+    }
     let bytes = w.into_inner().map_err(|e| RigError::BadValue {
         what: "a sweep row".into(),
         why: e.to_string(),
