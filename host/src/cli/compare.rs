@@ -8,7 +8,9 @@ use std::process::ExitCode;
 use clap::Args;
 
 use crate::RigError;
-pub use crate::compare::{Comparison, GAP_DEFINITION, GapRow, compare, gap_figure};
+pub use crate::compare::{
+    Comparison, GAP_DEFINITION, GapRow, compare, gap_figure, simulate, virtual_rig,
+};
 use rigfile::RigFile;
 
 /// Arguments of `rig compare`.
