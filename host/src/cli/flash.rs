@@ -88,7 +88,7 @@ pub struct FlashReport {
     /// The probe used.
     pub probe: Option<String>,
     /// Erase, program, verify and total times, s.
-    pub times: Option<serde_json::Value>,
+    pub times: Option<crate::flash::FlashTimes>,
     /// The post-flash check over serial.
     pub confirmed: Option<Confirmation>,
 }
@@ -312,7 +312,7 @@ fn flash_board(
         "flashed    {} bytes: erase {:.2} s, program {:.2} s, verify {:.2} s; chip reset",
         report.image_bytes, times.erase_s, times.program_s, times.verify_s
     ));
-    report.times = serde_json::to_value(times).ok();
+    report.times = Some(times);
 
     let port = guard.port.clone();
     drop(guard);
