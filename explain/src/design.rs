@@ -40,6 +40,7 @@ use std::f64::consts::PI;
 
 use model::effects::{CurrentModel, Effect, OperatingPoint};
 use rigfile::RigFile;
+use rigfile::plan::{Order, Plan, PlanPoint};
 use serde::Serialize;
 
 use crate::fit::{self, Fit};
@@ -62,15 +63,8 @@ pub const LOAD_MARGIN: f64 = 0.9;
 /// Share of the current limit a proposed point may be predicted to draw.
 pub const CURRENT_MARGIN: f64 = 0.8;
 
-/// How a proposal drives the vibrator.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum DriveMode {
-    /// Open loop at a supply voltage (`volts`).
-    OpenLoop,
-    /// Closed loop at a vibration frequency (`hz`).
-    ClosedLoop,
-}
+/// How a proposal drives the vibrator: the plan file's drive ([`rigfile::plan`]).
+pub use rigfile::plan::DriveMode;
 
 /// What a proposal is for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -377,42 +371,55 @@ impl Proposal {
         self.points.iter().map(|p| p.repeats as usize).sum()
     }
 
-    /// The plan file (docs/plans.md's format) with `name` and random order `seed`; each
-    /// point's predictions as a comment.
+    /// The plan of these points ([`rigfile::plan::Plan`]) named `name`, in random order
+    /// `seed`, with the paper's rest and averaging window.
+    pub fn to_plan(&self, name: &str, seed: u64) -> Plan {
+        Plan {
+            name: name.to_string(),
+            mode: self.mode,
+            repeats: 1,
+            order: Order::Random,
+            seed,
+            rest_s: 2.0,
+            window_s: model::paper::CURRENT_AVERAGING_S,
+            reason: self.reason.clone(),
+            points: self
+                .points
+                .iter()
+                .map(|q| PlanPoint {
+                    load_nm: q.load_nm,
+                    volts: q.volts,
+                    hz: q.hz,
+                    repeats: Some(q.repeats),
+                    duration_s: None,
+                    temp_c: None,
+                })
+                .collect(),
+        }
+    }
+
+    /// The plan file (docs/plans.md's format, written by the `toml` crate) of
+    /// [`Proposal::to_plan`]; each point's predictions as a comment above it.
     pub fn to_plan_toml(&self, name: &str, seed: u64) -> String {
-        let q = |s: &str| serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into());
-        let mut out = String::new();
-        out.push_str(&format!("# Test plan proposed by `rig explain --propose` ({} points, {} test points); run it with\n# `rig experiment torque-sweep --plan FILE --csv MORE.csv`, then explain the old and the new rows together.\n", self.points.len(), self.test_points()));
-        out.push_str(&format!("name = {}\n", q(name)));
-        out.push_str(&format!(
-            "mode = {}\n",
-            q(match self.mode {
-                DriveMode::OpenLoop => "open-loop",
-                DriveMode::ClosedLoop => "closed-loop",
-            })
-        ));
-        out.push_str("repeats = 1\norder = \"random\"\n");
-        out.push_str(&format!("seed = {seed}\nrest_s = 2.0\nwindow_s = 0.5\n"));
-        out.push_str(&format!("reason = {}\n", q(&self.reason)));
-        for p in &self.points {
+        let text = self.to_plan(name, seed).to_toml();
+        let mut out = format!(
+            "# Test plan proposed by `rig explain --propose` ({} points, {} test points); run it with\n# `rig experiment torque-sweep --plan FILE --csv MORE.csv`, then explain the old and the new rows together.\n",
+            self.points.len(),
+            self.test_points()
+        );
+        let mut tables = text.split("\n[[points]]\n");
+        out.push_str(tables.next().unwrap_or_default());
+        for (p, table) in self.points.iter().zip(tables) {
             let predicted: Vec<String> = p
                 .predicted_a
                 .iter()
                 .map(|(k, v)| format!("{k} {v:.4} A"))
                 .collect();
             out.push_str(&format!(
-                "\n# predicted: {} ({:.1} sigma per test)\n[[points]]\nload_nm = {:?}\n",
+                "\n# predicted: {} ({:.1} sigma per test)\n[[points]]\n{table}",
                 predicted.join(", "),
                 p.separation_sigma,
-                p.load_nm
             ));
-            if let Some(v) = p.volts {
-                out.push_str(&format!("volts = {v:?}\n"));
-            }
-            if let Some(hz) = p.hz {
-                out.push_str(&format!("hz = {hz:?}\n"));
-            }
-            out.push_str(&format!("repeats = {}\n", p.repeats));
         }
         out
     }
@@ -1030,5 +1037,8 @@ mod separation_tests {
             assert!(text.contains(key), "{key} in {text}");
         }
         assert_eq!(text.matches("[[points]]").count(), p.points.len());
+        // Written through the one plan type: it reads back as the same plan.
+        let back = Plan::parse(&text, "pin").unwrap();
+        assert_eq!(back, p.to_plan("pin", 7));
     }
 }

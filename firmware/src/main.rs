@@ -30,18 +30,54 @@
 /// Firmware version, reported at boot (and to the host in `Info`).
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 
-/// Firmware build: the git commit it was built from (short hash, `-dirty` when the work tree
-/// had uncommitted changes) or `unknown`; computed by `build.rs`.
-#[cfg_attr(not(target_os = "none"), allow(dead_code))]
+/// The firmware's build identifier, the one constant for it: the git commit it was built
+/// from (short hash, `-dirty` when the work tree had uncommitted changes), the value of
+/// `RIG_FIRMWARE_BUILD` at build time when set, or `unknown`; computed by `build.rs` (at
+/// most 20 bytes, what `Info` carries). Logged at boot, reported in `Info` and part of
+/// [`IDENTITY`].
 const BUILD: &str = env!("RIG_FIRMWARE_BUILD");
 
-/// Version and build as one record, `rig firmware <version> build <build>`.
-const IDENTITY: &str = concat!(
-    "rig firmware ",
-    env!("CARGO_PKG_VERSION"),
-    " build ",
-    env!("RIG_FIRMWARE_BUILD")
-);
+/// [`IDENTITY`]'s parts.
+const IDENTITY_PARTS: [&str; 4] = ["rig firmware ", VERSION, " build ", BUILD];
+/// [`IDENTITY`]'s length, bytes.
+const IDENTITY_LEN: usize = {
+    let mut len = 0;
+    let mut i = 0;
+    while i < IDENTITY_PARTS.len() {
+        len += IDENTITY_PARTS[i].len();
+        i += 1;
+    }
+    len
+};
+
+/// [`IDENTITY`] as a NUL-terminated array (a `const fn`: fixed at compile time).
+const fn identity_bytes() -> [u8; IDENTITY_LEN + 1] {
+    let mut out = [0u8; IDENTITY_LEN + 1];
+    let mut at = 0;
+    let mut part = 0;
+    while part < IDENTITY_PARTS.len() {
+        let bytes = IDENTITY_PARTS[part].as_bytes();
+        let mut i = 0;
+        while i < bytes.len() {
+            out[at] = bytes[i];
+            at += 1;
+            i += 1;
+        }
+        part += 1;
+    }
+    out
+}
+
+/// [`identity_bytes`], computed once.
+const IDENTITY_BYTES: [u8; IDENTITY_LEN + 1] = identity_bytes();
+
+/// Version and build as one record, `rig firmware <version> build <build>` (the image
+/// carries it as [`IDENTITY_BYTES`]; the host stub prints it).
+#[cfg_attr(target_os = "none", allow(dead_code))]
+const IDENTITY: &str = match core::str::from_utf8(IDENTITY_BYTES.split_at(IDENTITY_LEN).0) {
+    Ok(text) => text,
+    Err(_) => panic!("the identity is made of UTF-8 strings"),
+};
 
 /// [`IDENTITY`] in the image under a fixed symbol: `rig flash` reads it from the ELF (and
 /// `rig log` from the running chip) to tell which firmware a file or a board holds.
@@ -49,20 +85,7 @@ const IDENTITY: &str = concat!(
 #[used]
 #[allow(unsafe_code)] // `no_mangle`: a fixed name for the host to look up; nothing else uses it.
 #[unsafe(no_mangle)]
-static RIG_FIRMWARE_ID: [u8; IDENTITY.len() + 1] = identity_bytes();
-
-/// [`IDENTITY`] as a NUL-terminated array (a `const fn`: fixed at compile time).
-#[cfg(target_os = "none")]
-const fn identity_bytes() -> [u8; IDENTITY.len() + 1] {
-    let mut out = [0u8; IDENTITY.len() + 1];
-    let src = IDENTITY.as_bytes();
-    let mut i = 0;
-    while i < src.len() {
-        out[i] = src[i];
-        i += 1;
-    }
-    out
-}
+static RIG_FIRMWARE_ID: [u8; IDENTITY_LEN + 1] = IDENTITY_BYTES;
 
 #[cfg(not(target_os = "none"))]
 fn main() {
@@ -97,7 +120,7 @@ mod app {
     use cortex_m::peripheral::DWT;
     use defmt::{error, info, unwrap, warn};
     use defmt_rtt as _;
-    use embassy_executor::{InterruptExecutor, Spawner};
+    use embassy_executor::{InterruptExecutor, SpawnError, SpawnToken, Spawner};
     use embassy_futures::select::{Either, select};
     use embassy_stm32::gpio::Output;
     use embassy_stm32::interrupt;
@@ -137,12 +160,8 @@ mod app {
     /// A calibration the core wants written to flash.
     static PERSIST: Signal<CriticalSectionRawMutex, RigParameters> = Signal::new();
 
-    /// The build identifier `Info` reports: `RIG_FIRMWARE_BUILD` when the build script
-    /// provides it (the git short hash, `-dirty` for a changed tree), else `unknown`.
-    const BUILD_ID: &str = match option_env!("RIG_FIRMWARE_BUILD") {
-        Some(build) => build,
-        None => BootInfo::UNKNOWN_BUILD,
-    };
+    // `Info` carries the build in a fixed field: `build.rs` keeps it within.
+    const _: () = assert!(crate::BUILD.len() <= protocol::FIRMWARE_BUILD_LEN);
 
     /// The reset flags as the protocol names the cause. The G4 sets BORRSTF at power-on
     /// as well as after a brown-out, and every internal reset also pulls NRST, so the
@@ -265,7 +284,7 @@ mod app {
             } else {
                 reset_cause(&reset)
             },
-            firmware_build: BUILD_ID,
+            firmware_build: crate::BUILD,
             parameters: loaded.calibration,
             parameters_status: loaded.status,
         };
@@ -294,7 +313,7 @@ mod app {
 
         interrupt::UART4.set_priority(Priority::P6);
         let control_spawner = CONTROL_EXECUTOR.start(interrupt::UART4);
-        control_spawner.spawn(unwrap!(control(
+        control_spawner.spawn(spawned(control(
             core,
             ControlIo {
                 motor,
@@ -304,13 +323,30 @@ mod app {
                 sense,
                 button: release_button,
                 stall,
-            }
+            },
         )));
-        spawner.spawn(unwrap!(host_rx(core, host_link.rx)));
-        spawner.spawn(unwrap!(host_tx(core, host_link.tx)));
-        spawner.spawn(unwrap!(persist(core, store)));
-        spawner.spawn(unwrap!(monitor(core, led)));
-        spawner.spawn(unwrap!(watchdog_feeder(watchdog)));
+        spawner.spawn(spawned(host_rx(core, host_link.rx)));
+        spawner.spawn(spawned(host_tx(core, host_link.tx)));
+        spawner.spawn(spawned(persist(core, store)));
+        spawner.spawn(spawned(monitor(core, led)));
+        spawner.spawn(spawned(watchdog_feeder(watchdog)));
+    }
+
+    /// A task's spawn token. Each task has a pool of one and is spawned once, at boot, so a
+    /// refusal is a bug that shows on the first boot; it ends in the panic handler's safe
+    /// state through one shared path (not one `unwrap!` per task, ~30 B of flash each).
+    fn spawned<S>(token: Result<SpawnToken<S>, SpawnError>) -> SpawnToken<S> {
+        match token {
+            Ok(token) => token,
+            Err(_) => spawn_failed(),
+        }
+    }
+
+    /// [`spawned`]'s failure.
+    #[cold]
+    #[inline(never)]
+    fn spawn_failed() -> ! {
+        defmt::panic!("a task could not be spawned: its pool is full")
     }
 
     /// The drivers the control task owns.
@@ -434,7 +470,7 @@ mod app {
                 // The core stopped driving and latched HW_OVERCURRENT from the break flag:
                 // the break may be cleared once the current is back under the threshold,
                 // after which ClearFaults can clear the fault (its condition is gone).
-                let faulted = core.lock(|c| !c.borrow().status().latched_faults.is_empty());
+                let faulted = core.lock(|c| !c.borrow().latched_faults().is_empty());
                 if faulted && io.motor.rearm() {
                     warn!("overcurrent trip cleared: the core holds a latched fault");
                 }
@@ -541,10 +577,11 @@ mod app {
         let mut tick = 0u32;
         let mut last = (SupervisorState::Locked, 0u32);
         loop {
+            // Three reads, not `status()`: the binary needs no more (and the snapshot's
+            // code, ~450 B, stays out of the image).
             let (state, faults, zero) = core.lock(|c| {
-                let s = c.borrow().status();
-                let zero = (!s.zeroing).then_some(s.current_zero_adc);
-                (s.state, s.latched_faults.bits(), zero)
+                let c = c.borrow();
+                (c.state(), c.latched_faults().bits(), c.current_zero_adc())
             });
             if let Some(zero) = zero.filter(|z| *z > 0.0) {
                 CURRENT_ZERO.store(zero.to_bits(), Ordering::Relaxed);
@@ -586,5 +623,22 @@ mod app {
                 warn!("watchdog not fed: check-ins {:#05b}", seen);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_identity_is_version_and_the_one_build_constant() {
+        assert_eq!(IDENTITY, format!("rig firmware {VERSION} build {BUILD}"));
+        // NUL-terminated for the host's reader of `RIG_FIRMWARE_ID`.
+        assert_eq!(&IDENTITY_BYTES[..IDENTITY_LEN], IDENTITY.as_bytes());
+        assert_eq!(IDENTITY_BYTES[IDENTITY_LEN], 0);
+        // What `build.rs` makes: a commit (`-dirty` allowed), `unknown`, or a given string,
+        // never longer than `Info`'s 20-byte field.
+        assert!(!BUILD.is_empty() && BUILD.len() <= 20, "{BUILD}");
+        assert!(BUILD.bytes().all(|b| b.is_ascii_graphic()), "{BUILD}");
     }
 }

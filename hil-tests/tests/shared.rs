@@ -117,7 +117,7 @@ fn real_rig_identity_without_motion() {
 #[test]
 fn release_cycle_over_the_virtual_devices_serial_port() {
     // The same scenario through the real serial path: client, pseudo-terminal, firmware core.
-    let dev = host::device::VirtualDevice::paper(5.0).expect("virtual device");
+    let dev = host::virtual_device::VirtualDevice::paper(5.0).expect("virtual device");
     let io =
         host::client::open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).expect("pty opens");
     let mut opts = host::client::ClientOptions::new(dev.port_name());

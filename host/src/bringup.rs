@@ -19,9 +19,9 @@ use protocol::{
 use serde::Serialize;
 
 use crate::RigError;
-use crate::connection::Session;
-use crate::device::VirtualDevice;
+use crate::connection::Connection;
 use crate::experiment::bench::{Go, MOTION_RAD, Operator};
+use crate::virtual_device::VirtualDevice;
 
 /// The steps, in the order they run.
 pub const STEPS: [&str; 8] = [
@@ -258,7 +258,7 @@ impl Window {
 /// Reads telemetry for `seconds` of device time (and the health report that comes with
 /// it), servicing heartbeats; stops early when `done` says so.
 fn watch(
-    session: &mut Session,
+    session: &mut Connection,
     seconds: f64,
     done: impl Fn(&Window) -> bool,
 ) -> Result<Window, RigError> {
@@ -291,7 +291,7 @@ fn watch(
 
 /// Runs the bring-up on `session` with `hands`; `progress` gets a line per step.
 pub fn run(
-    session: &mut Session,
+    session: &mut Connection,
     hands: &mut dyn Hands,
     progress: &mut dyn FnMut(&Step),
 ) -> Result<Report, RigError> {
@@ -349,7 +349,7 @@ fn skip(name: &'static str, detail: String) -> Step {
 
 fn run_step(
     name: &'static str,
-    session: &mut Session,
+    session: &mut Connection,
     hands: &mut dyn Hands,
 ) -> Result<Step, RigError> {
     match name {
@@ -364,22 +364,11 @@ fn run_step(
     }
 }
 
-fn identity(session: &mut Session) -> Result<Step, RigError> {
+fn identity(session: &mut Connection) -> Result<Step, RigError> {
     let info = session.client.info()?;
-    let fw = info.firmware_version;
     let detail = format!(
-        "firmware {}.{}.{} build {} on board {}, protocol {}, capabilities {}, calibration {}",
-        fw.major,
-        fw.minor,
-        fw.patch,
-        info.firmware_build.as_str(),
-        info.board.as_str(),
-        info.protocol_version,
-        if info.capabilities.is_empty() {
-            "none".to_string()
-        } else {
-            info.capabilities.to_string()
-        },
+        "firmware {}, calibration {}",
+        crate::provenance::identity(&info),
         info.parameters_status.name()
     );
     let ok = info.parameters_status != ParametersStatus::Invalid;
@@ -391,7 +380,7 @@ fn identity(session: &mut Session) -> Result<Step, RigError> {
     ))
 }
 
-fn faults(session: &mut Session) -> Result<Step, RigError> {
+fn faults(session: &mut Connection) -> Result<Step, RigError> {
     let status = session.client.faults()?;
     let all = status.active | status.latched;
     Ok(step(
@@ -406,7 +395,7 @@ fn faults(session: &mut Session) -> Result<Step, RigError> {
     ))
 }
 
-fn bus_voltage(session: &mut Session) -> Result<Step, RigError> {
+fn bus_voltage(session: &mut Connection) -> Result<Step, RigError> {
     // The health report comes once a device second.
     let w = watch(session, 2.5, |w| w.health.is_some())?;
     let Some(h) = w.health else {
@@ -444,7 +433,7 @@ fn bus_voltage(session: &mut Session) -> Result<Step, RigError> {
     ))
 }
 
-fn current_zero(session: &mut Session) -> Result<Step, RigError> {
+fn current_zero(session: &mut Connection) -> Result<Step, RigError> {
     let w = watch(session, 0.5, |_| false)?;
     let faults = w.faults();
     let mean = w.mean(|t| t.current_a).unwrap_or(f64::NAN);
@@ -482,7 +471,7 @@ fn current_zero(session: &mut Session) -> Result<Step, RigError> {
     ))
 }
 
-fn encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, RigError> {
+fn encoder(session: &mut Connection, hands: &mut dyn Hands) -> Result<Step, RigError> {
     if !hands.set_up(Action::NoLoad)? {
         return Ok(skip("encoder", "skipped by the operator".into()));
     }
@@ -541,7 +530,7 @@ fn encoder_advice(faults: FaultFlags, speed: f64) -> &'static str {
     }
 }
 
-fn output_encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, RigError> {
+fn output_encoder(session: &mut Connection, hands: &mut dyn Hands) -> Result<Step, RigError> {
     let info = session.client.info()?;
     if !info.capabilities.contains(Capabilities::OUTPUT_ENCODER) {
         return Ok(skip(
@@ -583,7 +572,7 @@ fn output_encoder(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, 
     ))
 }
 
-fn overcurrent_trip(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, RigError> {
+fn overcurrent_trip(session: &mut Connection, hands: &mut dyn Hands) -> Result<Step, RigError> {
     let virtual_rig = hands.virtual_rig();
     let action = if virtual_rig {
         Action::JamCam
@@ -671,7 +660,7 @@ fn overcurrent_trip(session: &mut Session, hands: &mut dyn Hands) -> Result<Step
     ))
 }
 
-fn first_release(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, RigError> {
+fn first_release(session: &mut Connection, hands: &mut dyn Hands) -> Result<Step, RigError> {
     if !hands.set_up(Action::NoLoad)? {
         return Ok(skip("first_release", "skipped by the operator".into()));
     }
@@ -720,7 +709,7 @@ fn first_release(session: &mut Session, hands: &mut dyn Hands) -> Result<Step, R
 
 /// Stops the drive (release off stops an open-loop drive too). A latched fault already
 /// holds the motor off, and the device then refuses the request: that is not an error.
-fn stop_drive(session: &mut Session) -> Result<(), RigError> {
+fn stop_drive(session: &mut Connection) -> Result<(), RigError> {
     match session.client.release(false, 0.0) {
         Ok(()) | Err(RigError::Refused { .. }) => Ok(()),
         Err(e) => Err(e),
@@ -728,7 +717,7 @@ fn stop_drive(session: &mut Session) -> Result<(), RigError> {
 }
 
 /// Waits up to 3 device seconds for `Locked`.
-fn wait_locked(session: &mut Session) -> Result<bool, RigError> {
+fn wait_locked(session: &mut Connection) -> Result<bool, RigError> {
     session.client.discard_telemetry();
     let w = watch(session, 3.0, |w| {
         w.samples

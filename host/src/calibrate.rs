@@ -9,14 +9,14 @@
 //! 3. C3 = C1 C5 and C4 = C1 C6 + C2 (the loss torque is the torque of the no-load
 //!    current), checked against a direct fit of the loss torque C1 i + C2 over the sweep.
 //!
-//! The operator's part (setting up the rig, reading the gauge) is a [`Bench`]: a person at
+//! The operator's part (setting up the rig, reading the gauge) is a [`GaugeOperator`]: a person at
 //! a real rig, or the virtual device's plant in `--sim` mode.
 
 mod analysis;
-pub mod bench;
 pub mod file;
 pub mod fit;
 mod gauge;
+pub mod operator;
 pub mod plot;
 
 use std::io::{Read, Write};
@@ -69,7 +69,7 @@ pub enum Reading {
 }
 
 /// The operator's side of the procedure.
-pub trait Bench {
+pub trait GaugeOperator {
     /// Puts the rig into `setup` (asks the operator, or changes the simulated rig). The
     /// drive is off and the telemetry stopped meanwhile: a person may take minutes.
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError>;
@@ -186,7 +186,7 @@ pub enum Progress {
 /// the procedure between samples with [`interrupted_error`].
 pub fn measure<T: Read + Write>(
     client: &mut Client<T>,
-    bench: &mut dyn Bench,
+    bench: &mut dyn GaugeOperator,
     plan: &Plan,
     taken: &mut Measurements,
     progress: &mut dyn FnMut(Progress, &Measurements),
@@ -212,7 +212,7 @@ pub fn interrupted_error() -> RigError {
 
 fn measure_inner<T: Read + Write>(
     client: &mut Client<T>,
-    bench: &mut dyn Bench,
+    bench: &mut dyn GaugeOperator,
     plan: &Plan,
     taken: &mut Measurements,
     progress: &mut dyn FnMut(Progress, &Measurements),

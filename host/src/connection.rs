@@ -1,5 +1,5 @@
 //! Which device a device verb talks to ([`DeviceOpts`], resolved from the command line)
-//! and the session it opens with it ([`Session`]). Below the command line: `demo` and the
+//! and the session it opens with it ([`Connection`]). Below the command line: `demo` and the
 //! verbs both use it.
 
 use std::path::PathBuf;
@@ -8,8 +8,8 @@ use protocol::DeviceInfo;
 
 use crate::RigError;
 use crate::client::{Client, ClientOptions, SerialTransport, open_serial};
-use crate::device::VirtualDevice;
 use crate::ports;
+use crate::virtual_device::VirtualDevice;
 
 /// The device to talk to, with every default applied.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,7 +41,7 @@ impl Default for DeviceOpts {
 }
 
 /// An open session with the device, and the virtual device when `--sim` made one.
-pub struct Session {
+pub struct Connection {
     /// The client, connected and version-checked.
     pub client: Client<SerialTransport>,
     /// What the device said at `Hello`.
@@ -50,7 +50,7 @@ pub struct Session {
     pub device: Option<VirtualDevice>,
 }
 
-impl Session {
+impl Connection {
     /// The port's name.
     pub fn port(&self) -> &str {
         &self.client.options().port_name
@@ -91,7 +91,7 @@ impl DeviceOpts {
     }
 
     /// Opens the device (starting the virtual one for `--sim`) and says `Hello`.
-    pub fn connect(&self) -> Result<Session, RigError> {
+    pub fn connect(&self) -> Result<Connection, RigError> {
         if !self.sim && self.speed != 1.0 {
             return Err(RigError::BadValue {
                 what: format!("--speed {}", self.speed),
@@ -126,7 +126,7 @@ impl DeviceOpts {
             opts.reply_timeout = std::time::Duration::from_secs(1);
         }
         let (client, info) = Client::connect(io, opts)?;
-        Ok(Session {
+        Ok(Connection {
             client,
             info,
             device,

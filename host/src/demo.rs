@@ -10,8 +10,8 @@ use model::paper;
 use serde::Serialize;
 
 use crate::RigError;
-use crate::calibrate::{self, CalibrationResult, Measurements, Plan, bench::SimBench};
-use crate::connection::{DeviceOpts, Session};
+use crate::calibrate::{self, CalibrationResult, Measurements, Plan, operator::VirtualOperator};
+use crate::connection::{Connection, DeviceOpts};
 use crate::design::{self, DesignReport, RigParams};
 use sim::scenarios::{faults, fig5, sweep, table1};
 
@@ -277,11 +277,11 @@ fn calibrate_virtual(
     let mut session = dev.connect()?;
     let base = session.client.calibration()?;
     let plan = Plan::default();
-    let Session { client, device, .. } = &mut session;
+    let Connection { client, device, .. } = &mut session;
     let device = device
         .as_ref()
         .ok_or_else(|| RigError::Protocol("the virtual device did not start".into()))?;
-    let mut bench = SimBench::new(device, None);
+    let mut bench = VirtualOperator::new(device, None);
     let mut measurements = calibrate::Measurements::default();
     calibrate::measure(
         client,

@@ -28,48 +28,6 @@ pub enum RigError {
     /// JSON serialisation failed.
     #[error("cannot format JSON: {0}")]
     Json(#[from] serde_json::Error),
-    /// A row of the measured data that cannot be used.
-    #[error("{file} row {row} (line {line}): {why}")]
-    MeasuredRow {
-        /// The data file.
-        file: String,
-        /// Data row, 1-based (the header is not counted).
-        row: usize,
-        /// Line in the file, 1-based.
-        line: u64,
-        /// What is wrong and what the row needs.
-        why: String,
-    },
-    /// A required column is missing from the measured data.
-    #[error(
-        "{file}: missing required column {column} (found: {found}); the header needs omega_n_rad_s, tau_rot_nm and i_in_a"
-    )]
-    MissingColumn {
-        /// The data file.
-        file: String,
-        /// The missing column.
-        column: String,
-        /// The columns the header has.
-        found: String,
-    },
-    /// Measured data without a single data row.
-    #[error("{file} is empty: it needs a header and at least {min_rows} rows")]
-    EmptyData {
-        /// The data file.
-        file: String,
-        /// Rows the analysis needs.
-        min_rows: usize,
-    },
-    /// Measured data with too few usable rows.
-    #[error("{file} has only {rows} rows with a current: explain needs at least {min_rows}")]
-    TooFewRows {
-        /// The data file.
-        file: String,
-        /// Rows with a measured current.
-        rows: usize,
-        /// Rows the analysis needs.
-        min_rows: usize,
-    },
     /// Measured data that is not readable as CSV with a header.
     #[error("{file}: {why}")]
     MeasuredFile {

@@ -9,10 +9,10 @@
 
 use std::time::Duration;
 
-use host::calibrate::bench::SimBench;
+use host::calibrate::operator::VirtualOperator;
 use host::calibrate::{Measurements, Plan, analyse, measure};
 use host::client::{Client, ClientOptions, open_serial};
-use host::device::VirtualDevice;
+use host::virtual_device::VirtualDevice;
 
 /// The plant's C4, N mm: what its motor is built around.
 fn plant_c4_nmm() -> f64 {
@@ -30,7 +30,7 @@ fn calibrate_c4(seed: u64, speed: f64) -> (f64, f64, [f64; 2]) {
     opts.time_scale = speed;
     opts.reply_timeout = Duration::from_secs(1);
     let (mut client, _) = Client::connect(io, opts).expect("hello");
-    let mut bench = SimBench::new(&device, None);
+    let mut bench = VirtualOperator::new(&device, None);
     let mut taken = Measurements::default();
     measure(
         &mut client,

@@ -227,6 +227,21 @@ fn proposed_plan_loads_in_the_experiments_plan_parser() {
     );
     let p = &v["proposal"];
     assert_eq!(p["plan_written"], plan.display().to_string());
+    // The proposal's keys, pinned: readers of `--json` depend on them.
+    let mut keys: Vec<&str> = p.as_object().unwrap().keys().map(String::as_str).collect();
+    keys.sort_unstable();
+    assert_eq!(
+        keys,
+        [
+            "candidates",
+            "goal",
+            "mode",
+            "plan_written",
+            "points",
+            "reason",
+            "sigma_a"
+        ]
+    );
     let n = p["points"].as_array().unwrap().len();
     assert!(n >= 1, "{p}");
     // The host's plan loader reads it as written.

@@ -41,9 +41,29 @@ fn assert_named(v: &Value, effect: &str, csv: &Path) {
     let total: u64 = rounds.iter().map(|r| r["points"].as_u64().unwrap()).sum();
     assert_eq!(total, used);
     assert_eq!(rounds.last().unwrap()["points_used"], used);
-    for key in ["verdict", "leading_effect", "confidence"] {
-        assert!(rounds[0].get(key).is_some(), "{key}");
+    // The loop's keys beside explain's, and each round's, pinned: readers depend on them.
+    for key in ["points_used", "max_points", "settled", "csv", "rounds"] {
+        assert!(v.get(key).is_some(), "{key}");
     }
+    let mut round_keys: Vec<&str> = rounds[0]
+        .as_object()
+        .unwrap()
+        .keys()
+        .map(String::as_str)
+        .collect();
+    round_keys.sort_unstable();
+    assert_eq!(
+        round_keys,
+        [
+            "confidence",
+            "leading_effect",
+            "plan",
+            "points",
+            "points_used",
+            "round",
+            "verdict"
+        ]
+    );
     // explain's keys are there too.
     for key in [
         "confidence",
@@ -134,10 +154,11 @@ use support::served::Server;
 
 #[test]
 fn discover_names_a_hidden_effect_on_a_served_virtual_rig() {
-    // A served rig keeps board time: at 4x a client has 125 ms of wall time between
-    // accepted requests, enough beside the other tests (at 20x it had 25 ms).
+    // A served rig keeps board time: at the board's own pace a client has the board's
+    // 0.5 s comms timeout of wall time between heartbeats, as at a real rig. At 4x (125 ms)
+    // a client starved by a busy machine can lose its release; at 20x it had 25 ms.
     let server = Server::start_at(
-        "4",
+        "1",
         &[
             "--preset",
             "ideal",

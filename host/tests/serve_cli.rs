@@ -213,11 +213,12 @@ fn a_second_client_is_told_the_port_is_busy_and_by_whom() {
 /// SIGINT ending the server with exit 0.
 #[test]
 fn issue_12_done_when_served_rig_sweep_through_line_noise_explained() {
-    // At 2x a client has 250 ms of wall time between accepted requests (the served rig
-    // keeps board time and never waits for a host), enough on a machine busy with the
-    // other tests; at 20x it had 25 ms.
+    // At the board's own pace: a client has the board's 0.5 s comms timeout of wall time
+    // (less a heartbeat period) between heartbeats, as at a real rig (the served rig keeps
+    // board time and never waits for a host). At 2x (250 ms) a client starved by a machine
+    // under load 11 lost its release in the first point; at 20x it had 25 ms.
     let server = Server::start_at(
-        "2",
+        "1",
         &[
             "--preset",
             "ideal",

@@ -227,6 +227,12 @@ pub mod board {
     /// Pololu G2 24v13 is (PWM low brakes both outputs to ground). A firmware for the G2
     /// is built with that feature; with it the virtual rig returns the carrier's power
     /// into its bus capacitor as the G2 would.
+    ///
+    /// The board ships braking decay (the G2), so [`Decay::Brake`] is the default this
+    /// setting should have. It stays [`Decay::Coast`] while `rig discover` names
+    /// vibrator-viscous-loss (2 % of C3) on an effect-free braking virtual rig, an excess the
+    /// plant itself does not make (`a_braking_drive_returns_the_inertia_term_over_a_turn`);
+    /// the README's Pins section has the evidence.
     pub const DECAY: Decay = if cfg!(feature = "bridge-brake-decay") {
         Decay::Brake
     } else {

@@ -80,6 +80,7 @@ mod error;
 pub mod keys;
 pub mod paper_units;
 mod parse;
+pub mod plan;
 mod sections;
 pub mod wire;
 

@@ -10,7 +10,7 @@
 //! plant's output; `SetSupplyVoltage` sets the bridge supply's open-circuit voltage (the
 //! bus the firmware measures sags from it through the supply's internal resistance) and
 //! `SetSensorSupply` the ACS714's supply (ratiometric: its zero and sensitivity follow);
-//! both are also recorded in [`SimBench`].
+//! both are also recorded in [`BenchSettings`].
 
 use firmware_core::{BoardInputs, BootInfo, Core, CoreConfig, Inputs};
 use model::plant::{Drive, MotorParams, Plant, PlantParams};
@@ -21,7 +21,7 @@ use crate::SimError;
 use protocol::{Capabilities, NackCode, ParametersStatus, ResetCause, RigParameters, SimCommand};
 
 /// ADC (current sample) rate, Hz: the plant steps at a fifth of it ([`SimRig::advance`]).
-pub const PLANT_HZ: u32 = 10_000;
+pub const ADC_HZ: u32 = 10_000;
 
 /// ADC samples per plant step where the control rate allows ([`SimRig::advance`]).
 pub const SAMPLES_PER_PLANT_STEP: u32 = 5;
@@ -116,7 +116,17 @@ impl SimConfig {
             seed: 1,
         })
     }
+
+    /// This configuration reporting itself as board [`VIRTUAL_BOARD`], as the host's
+    /// virtual rigs do (the firmware core's default names the Nucleo board).
+    pub fn virtual_board(mut self) -> Self {
+        self.core.board_name = VIRTUAL_BOARD;
+        self
+    }
 }
+
+/// The board name a virtual rig reports in `Info`.
+pub const VIRTUAL_BOARD: &str = "virtual";
 
 /// The build the virtual rig reports in `Info`: it runs the firmware core compiled into
 /// the host tool, so there is no separate firmware build to name.
@@ -132,7 +142,7 @@ fn board_plant(mut plant: PlantParams) -> PlantParams {
 
 /// The bench around the virtual rig, as `Request::Simulation` commands set it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SimBench {
+pub struct BenchSettings {
     /// The supply the last `SetSupplyVoltage` set, V (the plant's open-circuit supply).
     pub supply_v: Option<f32>,
     /// The current sensor's supply the last `SetSensorSupply` set, V.
@@ -154,13 +164,13 @@ pub struct SimRig {
     injections: Injections,
     frozen_count: u16,
     flash: Option<RigParameters>,
-    bench: SimBench,
+    bench: BenchSettings,
 }
 
 impl SimRig {
     /// A rig at rest, firmware just booted.
     pub fn new(config: SimConfig) -> Self {
-        let control_hz = config.core.control_hz.clamp(1, PLANT_HZ);
+        let control_hz = config.core.control_hz.clamp(1, ADC_HZ);
         let boot = BootInfo {
             reset_cause: if config.watchdog_reset {
                 ResetCause::Watchdog
@@ -179,7 +189,7 @@ impl SimRig {
         Self {
             plant: Plant::new(config.plant, config.seed),
             core: Core::new(core_config, boot),
-            ticks_per_step: PLANT_HZ / control_hz,
+            ticks_per_step: ADC_HZ / control_hz,
             tick: 0,
             adc: Vec::with_capacity(64),
             drive: Drive::default(),
@@ -188,7 +198,7 @@ impl SimRig {
             injections: Injections::default(),
             frozen_count: 0,
             flash: Some(config.calibration),
-            bench: SimBench {
+            bench: BenchSettings {
                 supply_v: None,
                 sensor_supply_v: None,
                 commands: 0,
@@ -198,12 +208,12 @@ impl SimRig {
 
     /// Simulated time since boot, s.
     pub fn time(&self) -> f64 {
-        self.tick as f64 / PLANT_HZ as f64
+        self.tick as f64 / ADC_HZ as f64
     }
 
     /// Device clock, microseconds since boot.
     pub fn now_us(&self) -> u64 {
-        self.tick * 1_000_000 / PLANT_HZ as u64
+        self.tick * 1_000_000 / ADC_HZ as u64
     }
 
     /// Runs the closed loop for `seconds` of virtual time.
@@ -214,8 +224,8 @@ impl SimRig {
     /// step); elsewhere once per sample. The mechanics' semi-implicit step of 0.5 ms turns
     /// the cam by at most 0.05 rad at 15 Hz; the model's own tests hold at that step too.
     pub fn advance(&mut self, seconds: f64) {
-        let ticks = (seconds * PLANT_HZ as f64).round().max(0.0) as u64;
-        let dt = 1.0 / PLANT_HZ as f64;
+        let ticks = (seconds * ADC_HZ as f64).round().max(0.0) as u64;
+        let dt = 1.0 / ADC_HZ as f64;
         let group = SAMPLES_PER_PLANT_STEP;
         let grouped = self.ticks_per_step.is_multiple_of(group);
         let mut left = ticks;
@@ -317,7 +327,7 @@ impl SimRig {
     }
 
     /// The bench as the `Simulation` commands left it.
-    pub fn bench(&self) -> SimBench {
+    pub fn bench(&self) -> BenchSettings {
         self.bench
     }
 
@@ -369,7 +379,11 @@ impl SimRig {
 }
 
 /// Serves one `Simulation` command on the plant and the bench.
-fn serve(command: SimCommand, plant: &mut Plant, bench: &mut SimBench) -> Result<(), NackCode> {
+fn serve(
+    command: SimCommand,
+    plant: &mut Plant,
+    bench: &mut BenchSettings,
+) -> Result<(), NackCode> {
     let finite = |v: f32| {
         if v.is_finite() {
             Ok(f64::from(v))

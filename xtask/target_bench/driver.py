@@ -916,8 +916,9 @@ def boot_checks(writes, symbols, final, enable_bsrr, enable_bit):
     add("clock: AHB /2 across the switch, /1 at least 1 us later",
         div2_at_switch and div1 is not None
         and writes[div1][0] - writes[switch][0] >= SYSCLK_HZ // 1_000_000,
-        "RM0440 7.2.7; embassy-stm32 0.6 writes SW = PLL with HPRE = /1 in one write "
-        "(README: known gap)", gate=False)
+        "RM0440 6.1.5/7.2.7: the write with SW = PLL keeps HPRE = /2, HPRE = /1 comes "
+        "at least 1 us of SYSCLK cycles later (patches/README.md: embassy-stm32 0.6.0 "
+        "patched)")
     arr = final.get(TIM1_BASE + 0x2C)
     cr1 = final.get(TIM1_BASE + 0x00, 0)
     add("TIM1: centre-aligned, ARR 4249 (20 kHz at 170 MHz)",

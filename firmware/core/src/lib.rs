@@ -74,6 +74,7 @@ mod encoder;
 mod estimator;
 mod faults;
 mod output_encoder;
+mod release;
 mod server;
 mod speed_loop;
 pub mod storage;

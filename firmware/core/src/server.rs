@@ -13,12 +13,17 @@
 //! serves them through [`Core::receive_with`].
 
 use protocol::{
-    DeviceInfo, DeviceMessage, Error, FirmwareVersion, Frame, HelloAnswer, LegacyV1Nack,
-    MAX_TELEMETRY_RATE_HZ, NackCode, PROTOCOL_VERSION, ParametersStatus, REQUEST_WINDOW, Reply,
-    Request, SCHEMA_HASH, SimCommand, SupervisorState, hello_answer,
+    DeviceInfo, DeviceMessage, Error, FaultFlags, FirmwareVersion, Frame, HelloAnswer,
+    LegacyV1Nack, MAX_TELEMETRY_RATE_HZ, NackCode, PROTOCOL_VERSION, ParametersStatus,
+    REQUEST_WINDOW, Reply, Request, RigParameters, SCHEMA_HASH, SimCommand, SupervisorState,
+    hello_answer,
 };
 
-use crate::controller::{Core, Derived, Persist, check_board_caps};
+use crate::config::CoreConfig;
+use crate::controller::{Core, Derived, Persist, Streams, check_board_caps};
+use crate::current::CurrentSense;
+use crate::faults::FaultMonitor;
+use crate::release::{self, DriveAnswer, DriveLimits};
 
 /// This firmware's version, from the crate version.
 pub const FIRMWARE_VERSION: FirmwareVersion = parse_version(env!("CARGO_PKG_VERSION"));
@@ -121,7 +126,7 @@ impl Core {
     /// Sends the answer to request `seq`; an accepted request refreshes the heartbeat.
     fn answer(&mut self, now_us: u64, seq: u16, answer: Answer) {
         if answer.accepted() {
-            self.last_request_us = now_us;
+            self.release.last_request_us = now_us;
         }
         match answer {
             Answer::Now(reply) => self.send_reply(seq, reply),
@@ -153,10 +158,7 @@ impl Core {
     }
 
     fn faults_reply(&self) -> Reply {
-        Reply::Faults {
-            active: self.active_faults(),
-            latched: self.faults.latched(),
-        }
+        faults_reply(&self.faults, self.active_faults())
     }
 
     fn motor_idle(&self) -> bool {
@@ -166,6 +168,21 @@ impl Core {
         )
     }
 
+    /// What `Release` and `OpenLoop` are checked against now.
+    fn drive_limits(&self) -> DriveLimits {
+        let s = self.config.supervisor;
+        DriveLimits {
+            min_hz: s.min_freq_hz,
+            // Up to the parameters' own limit (at most the board's): never clamped to it.
+            max_hz: s.max_freq_hz.min(self.derived.max_hz),
+            max_volts: self.config.supply_v * self.config.motor.max_duty,
+            locked: !self.faults.latched().is_empty()
+                || self.parameters_status == ParametersStatus::Invalid,
+        }
+    }
+
+    /// Answers `msg`: the fault hold first, then each request by a plain function of the
+    /// state it acts on.
     fn handle(&mut self, now: u64, seq: u16, msg: Request) -> Answer {
         // Status, clearing and locking (the safe direction) are never held off.
         let status_or_clear = matches!(
@@ -179,56 +196,32 @@ impl Core {
         if !status_or_clear && self.faults.in_hold(now) {
             return Answer::nack(NackCode::InFaultHold);
         }
-        let ack = Answer::Now(Reply::Ack);
         match msg {
             Request::Hello {
                 protocol_version,
                 schema_hash,
-            } => match hello_answer(protocol_version, schema_hash) {
-                HelloAnswer::Info => Answer::Now(Reply::Info(self.info(now))),
-                HelloAnswer::LegacyV1Nack => Answer::LegacyV1Nack,
-                HelloAnswer::VersionMismatch => Answer::nack(NackCode::VersionMismatch {
-                    device_protocol: PROTOCOL_VERSION,
-                    device_schema_hash: SCHEMA_HASH,
-                }),
-            },
+            } => hello(protocol_version, schema_hash, self.info(now)),
             Request::GetInfo => Answer::Now(Reply::Info(self.info(now))),
-            Request::Release { on, target_hz } => self.release(on, target_hz),
-            Request::Heartbeat => ack,
+            Request::Release { on, target_hz } => {
+                let limits = self.drive_limits();
+                release::release(&mut self.release, &limits, on, target_hz).into()
+            }
+            Request::OpenLoop { volts } => {
+                let limits = self.drive_limits();
+                release::open_loop(&mut self.release, &limits, volts).into()
+            }
+            Request::Heartbeat => Answer::Now(Reply::Ack),
             Request::GetParameters => Answer::Now(Reply::Parameters(self.parameters)),
             Request::SetParameters(parameters) => {
-                if !self.motor_idle() || self.persist != Persist::Idle {
-                    return Answer::nack(NackCode::Busy);
-                }
-                let checked = Derived::new(&parameters, &self.config)
-                    .and_then(|_| check_board_caps(&parameters, &self.config));
-                match checked {
-                    Err(rejection) => Answer::nack(NackCode::ParametersRejected(rejection)),
-                    Ok(()) => {
-                        // Activated and acknowledged once the binary reports the flash write.
-                        self.persist = Persist::Requested { parameters, seq };
-                        Answer::Later
-                    }
-                }
+                let idle = self.motor_idle();
+                set_parameters(&mut self.persist, idle, &self.config, parameters, seq)
             }
             Request::StartTelemetry { rate_hz } => {
-                // Exactly the rate asked: the control rate divided by a whole number, at
-                // most MAX_TELEMETRY_RATE_HZ.
-                let control_hz = self.config.control_hz;
-                let rate = u32::from(rate_hz);
-                if rate == 0
-                    || rate_hz > MAX_TELEMETRY_RATE_HZ
-                    || rate > control_hz
-                    || !control_hz.is_multiple_of(rate)
-                {
-                    return Answer::nack(NackCode::BadArgument);
-                }
-                self.streams.start(control_hz / rate);
-                ack
+                start_telemetry(&mut self.streams, self.config.control_hz, rate_hz)
             }
             Request::StopTelemetry => {
                 self.streams.stop();
-                ack
+                Answer::Now(Reply::Ack)
             }
             Request::StartCapture {
                 sample_rate_hz,
@@ -236,75 +229,110 @@ impl Core {
             } => {
                 let adc_hz = self.config.sample_rate_hz();
                 match self.capture.start(sample_rate_hz, samples, adc_hz) {
-                    Ok(_) => ack,
+                    Ok(_) => Answer::Now(Reply::Ack),
                     Err(code) => Answer::nack(code),
                 }
             }
             Request::GetFaults => Answer::Now(self.faults_reply()),
             Request::ClearFaults => {
                 let active = self.active_faults();
-                self.faults.clear(active);
-                Answer::Now(self.faults_reply())
+                clear_faults(&mut self.faults, active)
             }
             Request::RezeroCurrent => {
-                if self.motor_idle() && !self.current.zeroing() {
-                    self.current.begin_zero();
-                    ack
-                } else {
-                    Answer::nack(NackCode::Busy)
-                }
+                let idle = self.motor_idle();
+                rezero_current(&mut self.current, idle)
             }
-            Request::OpenLoop { volts } => self.open_loop(volts),
             // Served in `receive_with`; listed so a new request fails to compile here.
             Request::Simulation(_) => Answer::nack(NackCode::SimulationOnly),
             // `Request` is non-exhaustive: a newer host's request this firmware lacks.
             _ => Answer::nack(NackCode::UnknownMessage),
         }
     }
+}
 
-    fn open_loop(&mut self, volts: f32) -> Answer {
-        if volts == 0.0 {
-            self.open_loop_volts = None;
-            Answer::Now(Reply::Ack)
-        } else if !(volts.is_finite()
-            && volts.abs() <= self.config.supply_v * self.config.motor.max_duty)
-        {
-            Answer::nack(NackCode::BadArgument)
-        } else if !self.faults.latched().is_empty()
-            || self.parameters_status == ParametersStatus::Invalid
-        {
-            Answer::nack(NackCode::InFaultHold)
-        } else if self.host_release || self.button_held {
-            Answer::nack(NackCode::Busy)
-        } else {
-            self.open_loop_volts = Some(volts);
-            Answer::Now(Reply::Ack)
+impl From<DriveAnswer> for Answer {
+    fn from(answer: DriveAnswer) -> Self {
+        match answer {
+            Ok(reply) => Self::Now(reply),
+            Err(code) => Self::nack(code),
         }
     }
+}
 
-    fn release(&mut self, on: bool, target_hz: f32) -> Answer {
-        if !on {
-            // Off stops every drive, an open-loop one included.
-            self.host_release = false;
-            self.open_loop_volts = None;
-            return Answer::Now(Reply::Ack);
+/// `Hello`: the device's `Info` when the host speaks this protocol, v1's own refusal to a
+/// v1 host, `VersionMismatch` otherwise.
+fn hello(protocol_version: u16, schema_hash: u32, info: DeviceInfo) -> Answer {
+    match hello_answer(protocol_version, schema_hash) {
+        HelloAnswer::Info => Answer::Now(Reply::Info(info)),
+        HelloAnswer::LegacyV1Nack => Answer::LegacyV1Nack,
+        HelloAnswer::VersionMismatch => Answer::nack(NackCode::VersionMismatch {
+            device_protocol: PROTOCOL_VERSION,
+            device_schema_hash: SCHEMA_HASH,
+        }),
+    }
+}
+
+/// `SetParameters`: only with the motor idle and no write under way; a record that passes
+/// the checks goes to flash, and is made active and acknowledged once the binary reports
+/// the write (`Core::persist_result`).
+fn set_parameters(
+    persist: &mut Persist,
+    motor_idle: bool,
+    config: &CoreConfig,
+    parameters: RigParameters,
+    seq: u16,
+) -> Answer {
+    if !motor_idle || *persist != Persist::Idle {
+        return Answer::nack(NackCode::Busy);
+    }
+    let checked =
+        Derived::new(&parameters, config).and_then(|_| check_board_caps(&parameters, config));
+    match checked {
+        Err(rejection) => Answer::nack(NackCode::ParametersRejected(rejection)),
+        Ok(()) => {
+            *persist = Persist::Requested { parameters, seq };
+            Answer::Later
         }
-        let s = self.config.supervisor;
-        // Up to the parameters' own limit (at most the board's): never clamped to it.
-        let max_hz = s.max_freq_hz.min(self.derived.max_hz);
-        if !(target_hz.is_finite() && (s.min_freq_hz..=max_hz).contains(&target_hz)) {
-            Answer::nack(NackCode::BadArgument)
-        } else if !self.faults.latched().is_empty()
-            || self.parameters_status == ParametersStatus::Invalid
-        {
-            Answer::nack(NackCode::InFaultHold)
-        } else if self.open_loop_volts.is_some() {
-            Answer::nack(NackCode::Busy)
-        } else {
-            self.host_release = true;
-            self.host_target_hz = target_hz;
-            Answer::Now(Reply::Ack)
-        }
+    }
+}
+
+/// `StartTelemetry`: exactly the rate asked, the control rate divided by a whole number, at
+/// most `MAX_TELEMETRY_RATE_HZ`.
+fn start_telemetry(streams: &mut Streams, control_hz: u32, rate_hz: u16) -> Answer {
+    let rate = u32::from(rate_hz);
+    if rate == 0
+        || rate_hz > MAX_TELEMETRY_RATE_HZ
+        || rate > control_hz
+        || !control_hz.is_multiple_of(rate)
+    {
+        return Answer::nack(NackCode::BadArgument);
+    }
+    streams.start(control_hz / rate);
+    Answer::Now(Reply::Ack)
+}
+
+/// `ClearFaults`: clears the latched faults whose condition (`active`) is gone.
+fn clear_faults(faults: &mut FaultMonitor, active: FaultFlags) -> Answer {
+    faults.clear(active);
+    Answer::Now(faults_reply(faults, active))
+}
+
+/// The `Faults` reply.
+fn faults_reply(faults: &FaultMonitor, active: FaultFlags) -> Reply {
+    Reply::Faults {
+        active,
+        latched: faults.latched(),
+    }
+}
+
+/// `RezeroCurrent`: a new current-sensor zero, only with the motor idle and no zeroing
+/// under way.
+fn rezero_current(current: &mut CurrentSense, motor_idle: bool) -> Answer {
+    if motor_idle && !current.zeroing() {
+        current.begin_zero();
+        Answer::Now(Reply::Ack)
+    } else {
+        Answer::nack(NackCode::Busy)
     }
 }
 

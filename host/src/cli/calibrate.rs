@@ -15,12 +15,12 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
-use super::connect::{DeviceOpts, Session, confirm};
+use super::connect::{Connection, DeviceOpts, confirm};
 use crate::RigError;
-use crate::calibrate::bench::{OperatorBench, SimBench};
+use crate::calibrate::operator::{TerminalOperator, VirtualOperator};
 use crate::calibrate::plot::{self, FitPlot};
 use crate::calibrate::{
-    self, Bench, CalibrationResult, GaugeUnit, Measurements, Plan, Progress, Setup,
+    self, CalibrationResult, GaugeOperator, GaugeUnit, Measurements, Plan, Progress, Setup,
 };
 use rigfile::{RigFile, paper_units};
 
@@ -127,17 +127,7 @@ pub fn default_out_dir(now: SystemTime) -> PathBuf {
 /// Runs `rig calibrate`.
 pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let plan = Plan::default();
-    let unit = match a.gauge {
-        GaugeKind::Torque => GaugeUnit::Torque,
-        GaugeKind::Force => GaugeUnit::Force { arm_m: a.arm_m },
-    };
-    if a.arm_m.is_some() && a.gauge == GaugeKind::Torque {
-        return Err(RigError::BadValue {
-            what: "--arm-m".into(),
-            why: "is the arm of a force gauge: add --gauge force (a torque gauge reads N mm)"
-                .into(),
-        });
-    }
+    let unit = gauge_unit(&a)?;
     // Check the inputs before anything moves.
     let gauge = a
         .gauge_csv
@@ -153,83 +143,32 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         .out
         .clone()
         .unwrap_or_else(|| default_out_dir(SystemTime::now()));
-    let mut resumed = None;
-    if !a.dry_run {
-        // Every output is checked before the first measurement: minutes of gauge readings
-        // must have somewhere to go.
-        std::fs::create_dir_all(&out).map_err(|source| RigError::File {
-            action: "create folder",
-            path: out.display().to_string(),
-            source,
-        })?;
-        reporting::check_writable_dir(&out)?;
-        let points = out.join("points.csv");
-        if a.resume {
-            if points.exists() {
-                resumed = Some(calibrate::read_points_csv(&points)?);
-            }
-        } else if a.from_points.is_none() && !a.force && points.exists() {
-            return Err(RigError::BadValue {
-                what: format!("--out {}", out.display()),
-                why: format!(
-                    "already holds an earlier run's {}: it was left unchanged; continue that run with --resume, give a new --out folder, or pass --force to replace it",
-                    points.display()
-                ),
-            });
-        }
-    }
+    let resumed = prepare_out(&a, &out)?;
     let stop = super::connect::interrupt_flag();
     // Refitting earlier points needs the device only to read its record and write the
     // result: a dry run refits offline against the paper's record.
-    let mut session = if from_points.is_some() && a.dry_run {
-        None
-    } else {
-        Some(dev.connect()?)
-    };
+    let offline = from_points.is_some() && a.dry_run;
+    let mut session = (!offline).then(|| dev.connect()).transpose()?;
     let base = match session.as_mut() {
         Some(s) => s.client.calibration()?,
         None => protocol::RigParameters::paper(),
     };
-    let measurements = match from_points {
-        Some(m) => m,
-        None => {
-            let session = session
-                .as_mut()
-                .expect("a session unless refitting offline");
-            match measure(session, &a, &plan, gauge, unit, &out, &stop, resumed) {
-                Ok(m) => m,
-                Err(e) if stop.load(Ordering::SeqCst) => {
-                    eprintln!("{e}");
-                    return Ok(crate::signals::interrupt_exit_code());
-                }
-                Err(e) => return Err(e),
-            }
-        }
+    let measured = match (from_points, session.as_mut()) {
+        (Some(m), _) => Ok(m),
+        (None, Some(session)) => measure(session, &a, &plan, gauge, unit, &out, &stop, resumed),
+        (None, None) => unreachable_offline(),
     };
-    let result = match calibrate::analyse(&measurements) {
-        Ok(r) => r,
-        Err(e) => {
-            return Err(partial_refit(
-                &measurements,
-                &plan,
-                a.from_points.as_deref(),
-                e,
-            ));
+    let measurements = match measured {
+        Ok(m) => m,
+        Err(e) if stop.load(Ordering::SeqCst) => {
+            eprintln!("{e}");
+            return Ok(crate::signals::interrupt_exit_code());
         }
+        Err(e) => return Err(e),
     };
-    let motor = *firmware_core::CoreConfig::default().motor.constants();
-    let plausible = result.calibration.check(&motor);
-    if let Err(issue) = &plausible
-        && !a.force
-        && !a.dry_run
-    {
-        // Keep what was measured; write neither the rig file nor the device.
-        write_points(&out, &measurements)?;
-        return Err(RigError::CalibrationFit(format!(
-            "the fit is implausible for the vibrator's motor: {issue} (the firmware's rule, model::Calibration::check); nothing was written to the device and no calibration.toml; the points are in {}: check the set-up and the gauge readings and measure again, or pass --force to write the rig file anyway",
-            out.join("points.csv").display()
-        )));
-    }
+    let result = calibrate::analyse(&measurements)
+        .map_err(|e| partial_refit(&measurements, &plan, a.from_points.as_deref(), e))?;
+    let plausible = check_plausible(&a, &result, &measurements, &out)?;
     let port = session
         .as_ref()
         .map_or_else(|| "(refit offline)".to_string(), |s| s.port().to_string());
@@ -239,37 +178,15 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         Some(write_files(&out, &result, &measurements, &base, &port)?)
     };
     let new_cal = result.apply_to(&base);
-    let write = if a.dry_run || plausible.is_err() {
-        if plausible.is_err() && !a.dry_run {
-            eprintln!(
-                "--force: the implausible fit is in the rig file only; the firmware refuses it, so it was not written to the device"
-            );
-        }
-        false
-    } else if a.yes {
-        true
-    } else {
-        print_text(&result, &measurements, files.as_ref(), false)?;
-        let ok = confirm("Write C1..C6 to the device?")?;
-        if !ok {
-            eprintln!(
-                "not written to the device (without a terminal, pass --yes); `rig calibration set {}` writes it later",
-                files
-                    .as_ref()
-                    .map_or("FILE".into(), |f| f.calibration.clone())
-            );
-        }
-        ok
-    };
+    let write = decide_write(
+        &a,
+        plausible.is_err(),
+        &result,
+        &measurements,
+        files.as_ref(),
+    )?;
     if write && let Some(session) = session.as_mut() {
-        session.client.set_calibration(&new_cal)?;
-        let back = session.client.calibration()?;
-        if back != new_cal {
-            return Err(RigError::Protocol(format!(
-                "the device stored a different calibration than sent on {}: {back:?}",
-                session.port()
-            )));
-        }
+        store(session, &new_cal)?;
     }
     let report = CalibrateReport {
         result,
@@ -280,23 +197,7 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         dry_run: a.dry_run,
         sim: session.as_ref().is_some_and(|s| s.device.is_some()),
     };
-    if a.json {
-        let mut out = std::io::stdout().lock();
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
-    } else {
-        if a.dry_run || a.yes || plausible.is_err() {
-            print_text(
-                &report.result,
-                &report.measurements,
-                report.files.as_ref(),
-                a.dry_run,
-            )?;
-        }
-        if write {
-            println!("written to the device on {port}");
-        }
-    }
+    print(&a, &report, plausible.is_err(), write, &port)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -354,7 +255,7 @@ fn partial_refit(
 /// `resumed`: the points of an interrupted run, kept and continued.
 #[allow(clippy::too_many_arguments)]
 fn measure(
-    session: &mut Session,
+    session: &mut Connection,
     a: &CalibrateArgs,
     plan: &Plan,
     gauge: Option<Vec<f64>>,
@@ -371,16 +272,16 @@ fn measure(
         });
     }
     let bar = progress_bar(plan, a.json);
-    let Session { client, device, .. } = session;
+    let Connection { client, device, .. } = session;
     let mut sim_bench;
     let mut operator_bench;
-    let bench: &mut dyn Bench = match device {
+    let bench: &mut dyn GaugeOperator = match device {
         Some(d) if !a.operator => {
-            sim_bench = SimBench::new(d, gauge);
+            sim_bench = VirtualOperator::new(d, gauge);
             &mut sim_bench
         }
         d => {
-            operator_bench = OperatorBench::new(gauge, unit, bar.clone(), Arc::clone(stop));
+            operator_bench = TerminalOperator::new(gauge, unit, bar.clone(), Arc::clone(stop));
             if let Some(d) = d {
                 operator_bench = operator_bench.with_device(d);
             }
@@ -602,6 +503,167 @@ fn print_text(
         )?,
         None if dry_run => writeln!(out, "  dry run: no files written, the device unchanged")?,
         None => {}
+    }
+    Ok(())
+}
+
+/// The firmware's plausibility rule on the fit (`model::Calibration::check`): an
+/// implausible fit without `--force` (or `--dry-run`) keeps the points and writes nothing
+/// else; otherwise the verdict, for the caller to act on.
+fn check_plausible(
+    a: &CalibrateArgs,
+    result: &CalibrationResult,
+    measurements: &Measurements,
+    out: &Path,
+) -> Result<Result<(), String>, RigError> {
+    let motor = *firmware_core::CoreConfig::default().motor.constants();
+    let plausible = result
+        .calibration
+        .check(&motor)
+        .map_err(|issue| issue.to_string());
+    if let Err(issue) = &plausible
+        && !a.force
+        && !a.dry_run
+    {
+        // Keep what was measured; write neither the rig file nor the device.
+        write_points(out, measurements)?;
+        return Err(RigError::CalibrationFit(format!(
+            "the fit is implausible for the vibrator's motor: {issue} (the firmware's rule, model::Calibration::check); nothing was written to the device and no calibration.toml; the points are in {}: check the set-up and the gauge readings and measure again, or pass --force to write the rig file anyway",
+            out.join("points.csv").display()
+        )));
+    }
+    Ok(plausible)
+}
+
+/// Measuring needs a device: offline is only a dry refit of `--from-points` (an error,
+/// not a panic, should that rule ever change).
+fn unreachable_offline() -> Result<Measurements, RigError> {
+    Err(RigError::BadValue {
+        what: "--dry-run".into(),
+        why: "measuring needs a device: give --from-points FILE to refit offline".into(),
+    })
+}
+
+/// The gauge's unit from `--gauge` and `--arm-m` (an arm only for a force gauge).
+fn gauge_unit(a: &CalibrateArgs) -> Result<GaugeUnit, RigError> {
+    if a.arm_m.is_some() && a.gauge == GaugeKind::Torque {
+        return Err(RigError::BadValue {
+            what: "--arm-m".into(),
+            why: "is the arm of a force gauge: add --gauge force (a torque gauge reads N mm)"
+                .into(),
+        });
+    }
+    Ok(match a.gauge {
+        GaugeKind::Torque => GaugeUnit::Torque,
+        GaugeKind::Force => GaugeUnit::Force { arm_m: a.arm_m },
+    })
+}
+
+/// Prints the report as JSON, or as text (the fit when not shown before the question).
+fn print(
+    a: &CalibrateArgs,
+    report: &CalibrateReport,
+    implausible: bool,
+    write: bool,
+    port: &str,
+) -> Result<(), RigError> {
+    if a.json {
+        let mut out = std::io::stdout().lock();
+        serde_json::to_writer_pretty(&mut out, report)?;
+        writeln!(out)?;
+    } else {
+        if a.dry_run || a.yes || implausible {
+            print_text(
+                &report.result,
+                &report.measurements,
+                report.files.as_ref(),
+                a.dry_run,
+            )?;
+        }
+        if write {
+            println!("written to the device on {port}");
+        }
+    }
+    Ok(())
+}
+
+/// Creates the output folder and checks it before the first measurement (minutes of gauge
+/// readings must have somewhere to go): an earlier run's points are resumed with
+/// `--resume` (returned), refused without it unless `--force`. Nothing for a dry run.
+fn prepare_out(a: &CalibrateArgs, out: &Path) -> Result<Option<Measurements>, RigError> {
+    if a.dry_run {
+        return Ok(None);
+    }
+    // Every output is checked before the first measurement: minutes of gauge readings
+    // must have somewhere to go.
+    std::fs::create_dir_all(out).map_err(|source| RigError::File {
+        action: "create folder",
+        path: out.display().to_string(),
+        source,
+    })?;
+    reporting::check_writable_dir(out)?;
+    let points = out.join("points.csv");
+    if a.resume {
+        if points.exists() {
+            return Ok(Some(calibrate::read_points_csv(&points)?));
+        }
+    } else if a.from_points.is_none() && !a.force && points.exists() {
+        return Err(RigError::BadValue {
+            what: format!("--out {}", out.display()),
+            why: format!(
+                "already holds an earlier run's {}: it was left unchanged; continue that run with --resume, give a new --out folder, or pass --force to replace it",
+                points.display()
+            ),
+        });
+    }
+    Ok(None)
+}
+
+/// Whether to write the new calibration to the device: never for a dry run or an
+/// implausible fit (the firmware refuses it), with `--yes`, else as the operator answers.
+fn decide_write(
+    a: &CalibrateArgs,
+    implausible: bool,
+    result: &CalibrationResult,
+    measurements: &Measurements,
+    files: Option<&CalibrationFiles>,
+) -> Result<bool, RigError> {
+    Ok(if a.dry_run || implausible {
+        if implausible && !a.dry_run {
+            eprintln!(
+                "--force: the implausible fit is in the rig file only; the firmware refuses it, so it was not written to the device"
+            );
+        }
+        false
+    } else if a.yes {
+        true
+    } else {
+        print_text(result, measurements, files, false)?;
+        let ok = confirm("Write C1..C6 to the device?")?;
+        if !ok {
+            eprintln!(
+                "not written to the device (without a terminal, pass --yes); `rig calibration set {}` writes it later",
+                files
+                    .as_ref()
+                    .map_or("FILE".into(), |f| f.calibration.clone())
+            );
+        }
+        ok
+    })
+}
+
+/// Writes `new_cal` to the device and reads it back.
+pub(super) fn store(
+    session: &mut Connection,
+    new_cal: &protocol::RigParameters,
+) -> Result<(), RigError> {
+    session.client.set_calibration(new_cal)?;
+    let back = session.client.calibration()?;
+    if back != *new_cal {
+        return Err(RigError::Protocol(format!(
+            "the device stored a different calibration than sent on {}: {back:?}",
+            session.port()
+        )));
     }
     Ok(())
 }

@@ -3,10 +3,11 @@
 //! file changes nothing). The older flat calibration file is read too.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Args, Subcommand};
+use serde::Serialize;
 
 use super::connect::{DeviceOpts, confirm};
 use crate::RigError;
@@ -49,120 +50,129 @@ pub enum CalibrationAction {
 /// Runs `rig calibration`.
 pub fn run(a: CalibrationArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     match a.action {
-        CalibrationAction::Get { file: path, json } => {
-            let mut s = dev.connect()?;
-            let cal = s.client.calibration()?;
-            let mut out = std::io::stdout().lock();
-            if json {
-                serde_json::to_writer_pretty(&mut out, &cal)?;
-                writeln!(out)?;
-                return Ok(ExitCode::SUCCESS);
-            }
-            let comment = format!("Calibration read from the device on {}.", s.port());
-            match path {
-                Some(p) => {
-                    let (rig, target) = file::for_record(&cal, Some(&p));
-                    rig.save_with_comment(&p, &comment)?;
-                    match target {
-                        Target::New => writeln!(out, "wrote {}", p.display())?,
-                        Target::Updated => writeln!(
-                            out,
-                            "wrote {} (updated: what the device does not carry is kept)",
-                            p.display()
-                        )?,
-                        Target::Replaced { why } => writeln!(
-                            out,
-                            "wrote {} (replaced a file that was not a rig file: {why})",
-                            p.display()
-                        )?,
-                    }
-                }
-                None => write!(
+        CalibrationAction::Get { file, json } => get(file, json, dev),
+        CalibrationAction::Set { file, yes, json } => set(&file, yes, json, dev),
+    }
+}
+
+/// What `rig calibration set --json` prints.
+#[derive(Debug, Serialize)]
+pub struct SetReport {
+    /// The changes, one line each (`c1: 62.1 -> 63.0`).
+    pub changed: Vec<String>,
+    /// Whether the calibration was written (and read back).
+    pub written: bool,
+    /// The calibration written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<protocol::RigParameters>,
+    /// The device's fields the file left out (the paper's values were used).
+    pub defaulted: Vec<&'static str>,
+}
+
+/// `rig calibration get`: the device's calibration as JSON, to a rig file, or printed.
+fn get(path: Option<PathBuf>, json: bool, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    let mut s = dev.connect()?;
+    let cal = s.client.calibration()?;
+    let mut out = std::io::stdout().lock();
+    if json {
+        serde_json::to_writer_pretty(&mut out, &cal)?;
+        writeln!(out)?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let comment = format!("Calibration read from the device on {}.", s.port());
+    match path {
+        Some(p) => {
+            let (rig, target) = file::for_record(&cal, Some(&p));
+            rig.save_with_comment(&p, &comment)?;
+            match target {
+                Target::New => writeln!(out, "wrote {}", p.display())?,
+                Target::Updated => writeln!(
                     out,
-                    "{}",
-                    file::for_record(&cal, None)
-                        .0
-                        .to_toml_with_comment(&comment)?
+                    "wrote {} (updated: what the device does not carry is kept)",
+                    p.display()
+                )?,
+                Target::Replaced { why } => writeln!(
+                    out,
+                    "wrote {} (replaced a file that was not a rig file: {why})",
+                    p.display()
                 )?,
             }
-            Ok(ExitCode::SUCCESS)
         }
-        CalibrationAction::Set {
-            file: path,
-            yes,
-            json,
-        } => {
-            // A file that cannot be used is refused before the device is opened.
-            let loaded = file::read(&path)?;
-            let new = loaded.rig.to_wire()?;
-            board_precheck(&new, &path)?;
-            let defaulted = loaded.defaulted();
-            let defaulted_fields: Vec<&str> = defaulted.iter().filter_map(|k| k.wire).collect();
-            let mut s = dev.connect()?;
-            let current = s.client.calibration()?;
-            let changes: Vec<String> = diff(&current, &new);
-            let mut out = std::io::stdout().lock();
-            if !json && !defaulted.is_empty() {
-                writeln!(
-                    out,
-                    "not in {}, so the paper's values (docs/rig-file.md):",
-                    path.display()
-                )?;
-                for line in defaulted_lines(&loaded) {
-                    writeln!(out, "  {line}")?;
-                }
-            }
-            if changes.is_empty() {
-                if json {
-                    writeln!(
-                        out,
-                        "{}",
-                        serde_json::json!({ "changed": [], "written": false, "defaulted": defaulted_fields })
-                    )?;
-                } else {
-                    writeln!(
-                        out,
-                        "the device already has this calibration: nothing to write"
-                    )?;
-                }
-                return Ok(ExitCode::SUCCESS);
-            }
-            if !json {
-                writeln!(out, "changes on {}:", s.port())?;
-                for c in &changes {
-                    writeln!(out, "  {c}")?;
-                }
-            }
-            if !yes && !confirm("Write this calibration to the device?")? {
-                return Err(RigError::Operator(
-                    "not written: confirm at the prompt, or pass --yes".into(),
-                ));
-            }
-            s.client.set_calibration(&new)?;
-            let back = s.client.calibration()?;
-            if back != new {
-                return Err(RigError::Protocol(format!(
-                    "the device stored a different calibration than sent on {}",
-                    s.port()
-                )));
-            }
-            if json {
-                serde_json::to_writer_pretty(
-                    &mut out,
-                    &serde_json::json!({
-                        "changed": changes,
-                        "written": true,
-                        "calibration": new,
-                        "defaulted": defaulted_fields,
-                    }),
-                )?;
-                writeln!(out)?;
-            } else {
-                writeln!(out, "written and read back")?;
-            }
-            Ok(ExitCode::SUCCESS)
+        None => write!(
+            out,
+            "{}",
+            file::for_record(&cal, None)
+                .0
+                .to_toml_with_comment(&comment)?
+        )?,
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `rig calibration set`: a rig file's calibration to the device, after showing the changes.
+fn set(path: &Path, yes: bool, json: bool, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
+    // A file that cannot be used is refused before the device is opened.
+    let loaded = file::read(path)?;
+    let new = loaded.rig.to_wire()?;
+    board_precheck(&new, path)?;
+    let defaulted = loaded.defaulted();
+    let defaulted_fields: Vec<&str> = defaulted.iter().filter_map(|k| k.wire).collect();
+    let mut s = dev.connect()?;
+    let current = s.client.calibration()?;
+    let changes: Vec<String> = diff(&current, &new);
+    let mut out = std::io::stdout().lock();
+    if !json && !defaulted.is_empty() {
+        writeln!(
+            out,
+            "not in {}, so the paper's values (docs/rig-file.md):",
+            path.display()
+        )?;
+        for line in defaulted_lines(&loaded) {
+            writeln!(out, "  {line}")?;
         }
     }
+    if changes.is_empty() {
+        if json {
+            let report = SetReport {
+                changed: Vec::new(),
+                written: false,
+                calibration: None,
+                defaulted: defaulted_fields,
+            };
+            writeln!(out, "{}", serde_json::to_string(&report)?)?;
+        } else {
+            writeln!(
+                out,
+                "the device already has this calibration: nothing to write"
+            )?;
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    if !json {
+        writeln!(out, "changes on {}:", s.port())?;
+        for c in &changes {
+            writeln!(out, "  {c}")?;
+        }
+    }
+    if !yes && !confirm("Write this calibration to the device?")? {
+        return Err(RigError::Operator(
+            "not written: confirm at the prompt, or pass --yes".into(),
+        ));
+    }
+    super::calibrate::store(&mut s, &new)?;
+    if json {
+        let report = SetReport {
+            changed: changes,
+            written: true,
+            calibration: Some(new),
+            defaulted: defaulted_fields,
+        };
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+    } else {
+        writeln!(out, "written and read back")?;
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 /// The firmware's own rule for a new record (`firmware_core::check_rules`: the model's

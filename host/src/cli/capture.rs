@@ -11,7 +11,7 @@ use clap::Args;
 use protocol::SupervisorState;
 use serde::Serialize;
 
-use super::connect::{DeviceOpts, Session};
+use super::connect::{Connection, DeviceOpts};
 use crate::client::{CAPTURE_RATE_HZ, Capture};
 use crate::{RigError, args, limits};
 
@@ -59,7 +59,7 @@ pub struct CaptureReport {
 }
 
 /// Releases at `hz` and waits until the cam runs at speed (the supervisor says vibrating).
-fn spin_up(s: &mut Session, hz: f32) -> Result<(), RigError> {
+fn spin_up(s: &mut Connection, hz: f32) -> Result<(), RigError> {
     s.client.start_telemetry(20)?;
     s.client.release(true, hz)?;
     let deadline = Instant::now() + Duration::from_secs_f64(5.0 / s.time_scale() + 2.0);

@@ -1,23 +1,16 @@
-//! `rig compare`: the simulation-versus-measurement gap, before and after a fitted effect.
-//! Replays a measured sweep's test plan (its rows in the order they were run: loads,
-//! supply voltages or vibration frequencies, the motor temperatures as logged) on the
-//! in-process virtual rig, once with the base model (the rig file's rig, the paper's
-//! equations) and once with a fitted `[model]` (`rig explain --write-model`), through the
-//! same torque-sweep procedure as `rig experiment`, and reports the gap, measured minus
-//! simulated mean current per test point, with a plot of both.
+//! `rig compare`: the simulation-versus-measurement gap, before and after a fitted effect
+//! ([`crate::compare`] replays the measured plan; this module parses and prints).
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Args;
-use serde::Serialize;
 
 use crate::RigError;
-use crate::experiment::plan::{Mode, Order, Plan, PlanPoint};
-use crate::experiment::sweep::{SweepSetup, Window};
-use crate::experiment::{Operator, SimBench, sweep};
-use explain::data::Dataset;
+pub use crate::compare::{
+    Comparison, GAP_DEFINITION, GapRow, compare, gap_figure, simulate, virtual_rig,
+};
 use rigfile::RigFile;
 
 /// Arguments of `rig compare`.
@@ -44,358 +37,6 @@ pub struct CompareArgs {
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
-}
-
-/// What `rig compare` calls the gap.
-pub const GAP_DEFINITION: &str = "measured minus simulated mean current per test point, the measured plan replayed on the virtual rig (base: the rig file's own mu and calibration, nothing fitted); rig explain's rmse_before_a is the residual of the paper's model with mu fitted to the same data, so it is smaller";
-
-/// One test point of the comparison.
-#[derive(Debug, Clone, Serialize)]
-pub struct GapRow {
-    /// Data row (1-based, as the file's data rows are counted).
-    pub row: usize,
-    /// Load, N m.
-    pub tau_rot_nm: f64,
-    /// Supply voltage (open loop), V.
-    pub v_in_v: Option<f64>,
-    /// Vibration frequency (closed loop, from the measured cam speed), Hz.
-    pub hz: Option<f64>,
-    /// Logged motor temperature, deg C.
-    pub temp_c: Option<f64>,
-    /// Measured mean current, A.
-    pub measured_a: f64,
-    /// Simulated with the base model, A.
-    pub base_a: f64,
-    /// Simulated with the fitted model, A (null without --model).
-    pub model_a: Option<f64>,
-    /// Measured minus base, A.
-    pub gap_base_a: f64,
-    /// Measured minus fitted model, A.
-    pub gap_model_a: Option<f64>,
-}
-
-/// What `rig compare --json` prints.
-#[derive(Debug, Clone, Serialize)]
-pub struct Comparison {
-    /// The measured file.
-    pub measured: String,
-    /// The fitted model file.
-    pub model: Option<String>,
-    /// Effects of the fitted model, then its `[[model.terms]]` as `name (form)`.
-    pub model_effects: Vec<String>,
-    /// Test points replayed (rows with a current that the virtual rig could run).
-    pub points: usize,
-    /// Data rows (1-based) the virtual rig could not run (a load above the rig file's
-    /// `max_release_load_nm`, a point its protections skipped): left out of every gap.
-    pub skipped_rows: Vec<usize>,
-    /// Which gap this is, in words: `rig explain`'s `rmse_before_a` is another one (the
-    /// residual of the paper's model with mu fitted to the data, not replayed).
-    pub gap_definition: &'static str,
-    /// RMS of measured minus base-model current, A.
-    pub gap_rmse_base_a: f64,
-    /// RMS of measured minus fitted-model current, A (null without --model).
-    pub gap_rmse_model_a: Option<f64>,
-    /// gap_rmse_model_a / gap_rmse_base_a.
-    pub gap_ratio: Option<f64>,
-    /// Mean gap with the base model, A.
-    pub gap_mean_base_a: f64,
-    /// Mean gap with the fitted model, A.
-    pub gap_mean_model_a: Option<f64>,
-    /// The plot, when written.
-    pub svg: Option<String>,
-    /// Per test point.
-    pub rows: Vec<GapRow>,
-}
-
-/// The replayed plan of `data` (rows with a current, in the order they were run) and each
-/// plan point's data row.
-fn replay_plan(data: &Dataset, header: &HeaderPlan) -> Result<(Plan, Vec<usize>), RigError> {
-    let mut order: Vec<usize> = (0..data.len())
-        .filter(|&k| data.i_in()[k].is_finite())
-        .collect();
-    if let Some(t) = data.t_s() {
-        order.sort_by(|&a, &b| t[a].total_cmp(&t[b]));
-    }
-    if order.is_empty() {
-        return Err(RigError::BadValue {
-            what: format!("--measured {}", data.name),
-            why: "no row has a current (i_in_a): nothing to compare".into(),
-        });
-    }
-    let volts = data.v_in();
-    let temps = data.temp_c();
-    let mode = if volts.is_some() {
-        Mode::OpenLoop
-    } else {
-        Mode::ClosedLoop
-    };
-    let points = order
-        .iter()
-        .map(|&k| PlanPoint {
-            load_nm: data.tau_rot()[k].abs(),
-            volts: volts.map(|v| v[k]),
-            hz: volts
-                .is_none()
-                .then(|| data.omega_n()[k] / (2.0 * std::f64::consts::PI)),
-            repeats: None,
-            duration_s: None,
-            temp_c: temps.map(|t| t[k]).filter(|t| t.is_finite()),
-        })
-        .collect();
-    let plan = Plan {
-        name: format!("replay of {}", data.name),
-        mode,
-        repeats: 1,
-        order: Order::AsListed,
-        seed: 1,
-        rest_s: header.rest_s.unwrap_or(2.0),
-        window_s: header.window_s.unwrap_or(model::paper::CURRENT_AVERAGING_S),
-        reason: String::new(),
-        points,
-    };
-    plan.check("replay")?;
-    Ok((plan, order))
-}
-
-/// What the measured file's provenance says about its plan.
-#[derive(Debug, Default)]
-struct HeaderPlan {
-    rest_s: Option<f64>,
-    window_s: Option<f64>,
-}
-
-fn header_plan(path: &Path) -> HeaderPlan {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
-    let plan = text
-        .lines()
-        .take_while(|l| l.starts_with('#'))
-        .find_map(|l| l.strip_prefix("# plan: "))
-        .and_then(|j| serde_json::from_str::<Plan>(j).ok());
-    HeaderPlan {
-        rest_s: plan.as_ref().map(|p| p.rest_s),
-        window_s: plan.as_ref().map(|p| p.window_s),
-    }
-}
-
-/// Mean currents of `plan` run on the in-process virtual rig of `config`, one per plan
-/// point in plan order: `None` for a point the virtual rig did not measure (a load above
-/// the rig's `max_release_load_nm`, a point its protections skipped), as the measuring
-/// sensor reads them (with the plant's `current_offset`).
-pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>, RigError> {
-    // The replay reads the board's current (telemetry); a fitted `current-sensor-offset` is
-    // the measuring sensor's (the plant adds it to the logger only), so it is added here.
-    let sensor_offset = config.plant.effects.current_offset;
-    let mut bench = SimBench::new(config)?;
-    let mut operator = Operator::scripted(b"", false);
-    let setup = SweepSetup {
-        plan: plan.clone(),
-        window: Window::Start,
-        resume: false,
-        force: false,
-        command: "rig compare".into(),
-    };
-    let outcome = sweep::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
-    let mut currents = vec![None; plan.points.len()];
-    for r in &outcome.rows {
-        if let Some(slot) = currents.get_mut(r.point) {
-            *slot = Some(r.i_in_a + sensor_offset);
-        }
-    }
-    Ok(currents)
-}
-
-/// The virtual rig of `rig` with its fitted `[model]` running in the plant (or none).
-pub fn virtual_rig(rig: &RigFile, with_model: bool, seed: u64) -> Result<sim::SimConfig, RigError> {
-    let mut base = rig.clone();
-    if !with_model {
-        base.model = None;
-    }
-    let mut config = sim::SimConfig::from_rig_file(&base)?;
-    config.core.board_name = "virtual";
-    if with_model {
-        sim::preset::apply_model(&base, &mut config.plant)?;
-    }
-    config.seed = seed;
-    Ok(config)
-}
-
-fn rms(v: impl Iterator<Item = f64>) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
-    for x in v {
-        s += x * x;
-        n += 1;
-    }
-    (s / n.max(1) as f64).sqrt()
-}
-
-fn mean(v: impl Iterator<Item = f64>) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
-    for x in v {
-        s += x;
-        n += 1;
-    }
-    s / n.max(1) as f64
-}
-
-/// Compares `measured` with the base model of `base_rig` and, when given, the fitted
-/// `model_rig`.
-pub fn compare(
-    measured: &Path,
-    base_rig: &RigFile,
-    model_rig: Option<&RigFile>,
-    seed: u64,
-) -> Result<Comparison, RigError> {
-    let data = Dataset::read_csv(measured)?;
-    let (plan, order) = replay_plan(&data, &header_plan(measured))?;
-    let base = simulate(virtual_rig(base_rig, false, seed)?, &plan)?;
-    let fitted = match model_rig {
-        Some(m) => Some(simulate(virtual_rig(m, true, seed)?, &plan)?),
-        None => None,
-    };
-    let (rows, skipped_rows) = gap_rows(&data, &order, &plan, &base, fitted.as_deref());
-    if rows.is_empty() {
-        return Err(RigError::BadValue {
-            what: format!("--measured {}", measured.display()),
-            why: format!(
-                "the virtual rig could run none of its {} test points (every load above the rig file's max_release_load_nm, or beyond the board's limits): compare with a rig file whose limits cover the measured loads (--rig)",
-                order.len()
-            ),
-        });
-    }
-    let gap_rmse_base_a = rms(rows.iter().map(|r| r.gap_base_a));
-    let gap_rmse_model_a = fitted
-        .as_ref()
-        .map(|_| rms(rows.iter().filter_map(|r| r.gap_model_a)));
-    Ok(Comparison {
-        measured: measured.display().to_string(),
-        model: None,
-        model_effects: model_rig
-            .and_then(|m| m.model.as_ref())
-            .map(|m| {
-                // Its effects, then its `[[model.terms]]` as `name (form)`: the plant runs both.
-                let terms = m.terms.iter().map(|t| match &t.form {
-                    Some(f) => format!("{} ({f})", t.name),
-                    None => t.name.clone(),
-                });
-                m.effects
-                    .iter()
-                    .map(|e| e.name.clone())
-                    .chain(terms)
-                    .collect()
-            })
-            .unwrap_or_default(),
-        points: rows.len(),
-        skipped_rows,
-        gap_definition: GAP_DEFINITION,
-        gap_rmse_base_a,
-        gap_rmse_model_a,
-        gap_ratio: gap_rmse_model_a.map(|m| m / gap_rmse_base_a.max(1e-12)),
-        gap_mean_base_a: mean(rows.iter().map(|r| r.gap_base_a)),
-        gap_mean_model_a: fitted
-            .as_ref()
-            .map(|_| mean(rows.iter().filter_map(|r| r.gap_model_a))),
-        svg: None,
-        rows,
-    })
-}
-
-/// The gap per replayed point (`base`, `fitted`: the simulated currents per plan point,
-/// `None` where the virtual rig did not run it) and the data rows (1-based) left out
-/// because either virtual rig could not run them.
-fn gap_rows(
-    data: &Dataset,
-    order: &[usize],
-    plan: &Plan,
-    base: &[Option<f64>],
-    fitted: Option<&[Option<f64>]>,
-) -> (Vec<GapRow>, Vec<usize>) {
-    let mut skipped_rows = Vec::new();
-    let rows = order
-        .iter()
-        .enumerate()
-        .filter_map(|(j, &k)| {
-            let measured_a = data.i_in()[k];
-            let base_a = base.get(j).copied().flatten();
-            let model_a = fitted.map(|f| f.get(j).copied().flatten());
-            let (Some(base_a), None | Some(Some(_))) = (base_a, model_a) else {
-                skipped_rows.push(k + 1);
-                return None;
-            };
-            let model_a = model_a.flatten();
-            let p = &plan.points[j];
-            Some(GapRow {
-                row: k + 1,
-                tau_rot_nm: data.tau_rot()[k],
-                v_in_v: p.volts,
-                hz: p.hz,
-                temp_c: p.temp_c,
-                measured_a,
-                base_a,
-                model_a,
-                gap_base_a: measured_a - base_a,
-                gap_model_a: model_a.map(|m| measured_a - m),
-            })
-        })
-        .collect();
-    (rows, skipped_rows)
-}
-
-/// Plots both gaps per test point (in run order) to `path`.
-pub fn gap_figure(path: &Path, c: &Comparison) -> Result<(), RigError> {
-    use reporting::plot::{Legend, PALETTE, Series, XyPanel, columns_figure};
-    let mut series = vec![
-        Series::points(
-            PALETTE[0],
-            3,
-            c.rows
-                .iter()
-                .enumerate()
-                .map(|(j, r)| ((j + 1) as f64, r.gap_base_a * 1e3))
-                .collect(),
-        )
-        .labelled(format!(
-            "base model (rms {:.1} mA)",
-            c.gap_rmse_base_a * 1e3
-        )),
-    ];
-    if let Some(m) = c.gap_rmse_model_a {
-        series.push(
-            Series::points(
-                PALETTE[1],
-                3,
-                c.rows
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(j, r)| Some(((j + 1) as f64, r.gap_model_a? * 1e3)))
-                    .collect(),
-            )
-            .labelled(format!(
-                "with {} (rms {:.1} mA)",
-                if c.model_effects.is_empty() {
-                    "the fitted model".to_string()
-                } else {
-                    c.model_effects.join(", ")
-                },
-                m * 1e3
-            )),
-        );
-    }
-    let panel = XyPanel {
-        caption: Some("measured minus simulated mean current".into()),
-        x_label: "test point (run order)".into(),
-        y_label: "gap, mA".into(),
-        series,
-        include_zero_y: true,
-        legend: Some(Legend::UpperRight),
-        ..XyPanel::default()
-    };
-    columns_figure(
-        path,
-        (900, 480),
-        Some("Simulation versus measurement, before and after the fitted effect"),
-        &[panel],
-    )?;
-    Ok(())
 }
 
 /// Runs `rig compare`.
@@ -436,87 +77,53 @@ pub fn run(a: CompareArgs) -> Result<ExitCode, RigError> {
     if a.json {
         super::print_json(&mut out, &c)?;
     } else {
-        writeln!(
-            out,
-            "{} test points of {} replayed on the virtual rig:",
-            c.points, c.measured
-        )?;
-        writeln!(
-            out,
-            "  gap (measured - simulated current), base model: rms {:.1} mA, mean {:+.1} mA",
-            c.gap_rmse_base_a * 1e3,
-            c.gap_mean_base_a * 1e3
-        )?;
-        if let (Some(m), Some(mm)) = (c.gap_rmse_model_a, c.gap_mean_model_a) {
-            writeln!(
-                out,
-                "  with {}: rms {:.1} mA, mean {:+.1} mA ({:.0} % of the base model's)",
-                if c.model_effects.is_empty() {
-                    "the fitted model (no effects)".to_string()
-                } else {
-                    c.model_effects.join(", ")
-                },
-                m * 1e3,
-                mm * 1e3,
-                100.0 * c.gap_ratio.unwrap_or(f64::NAN)
-            )?;
-        }
-        writeln!(out, "  (gap: {})", c.gap_definition)?;
-        if !c.skipped_rows.is_empty() {
-            writeln!(
-                out,
-                "  {} rows not replayed (the virtual rig could not run them: load above max_release_load_nm or a protection tripped), left out of the gaps: {}",
-                c.skipped_rows.len(),
-                c.skipped_rows
-                    .iter()
-                    .map(ToString::to_string)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )?;
-        }
-        if let Some(s) = &c.svg {
-            writeln!(out, "  plot: {s}")?;
-        }
+        write_text(&mut out, &c)?;
     }
     Ok(ExitCode::SUCCESS)
 }
 
-#[cfg(test)]
-mod gap_tests {
-    use super::*;
-
-    /// A point the virtual rig skipped (a load above its `max_release_load_nm`: the sweep
-    /// writes no row for it) is left out of both gaps and listed, where the replay used to
-    /// index past the simulated rows and panic.
-    #[test]
-    fn a_point_the_virtual_rig_skipped_is_listed_not_indexed() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("m.csv");
-        let mut text = String::from("omega_n_rad_s,tau_rot_nm,i_in_a\n");
-        for (k, load) in [0.4, 0.8, 5.0, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6]
-            .iter()
-            .enumerate()
-        {
-            text.push_str(&format!("62.8,{load},{}\n", 2.6 + 0.01 * k as f64));
-        }
-        std::fs::write(&path, text).unwrap();
-        let data = Dataset::read_csv(&path).unwrap();
-        let (plan, order) = replay_plan(&data, &HeaderPlan::default()).unwrap();
-        // The sweep ran every point but the third.
-        let base: Vec<Option<f64>> = (0..plan.points.len())
-            .map(|j| (j != 2).then_some(2.5))
-            .collect();
-        let (rows, skipped) = gap_rows(&data, &order, &plan, &base, None);
-        assert_eq!(skipped, [3]);
-        assert_eq!(rows.len(), 9);
-        assert!(rows.iter().all(|r| r.row != 3));
-        // The fitted model's skips count too.
-        let fitted: Vec<Option<f64>> = (0..plan.points.len())
-            .map(|j| (j != 5).then_some(2.55))
-            .collect();
-        let (rows, skipped) = gap_rows(&data, &order, &plan, &base, Some(&fitted));
-        assert_eq!(skipped, [3, 6]);
-        assert_eq!(rows.len(), 8);
-        assert!(rows.iter().all(|r| r.gap_model_a.is_some()));
+/// The comparison in words.
+fn write_text(out: &mut impl Write, c: &Comparison) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{} test points of {} replayed on the virtual rig:",
+        c.points, c.measured
+    )?;
+    writeln!(
+        out,
+        "  gap (measured - simulated current), base model: rms {:.1} mA, mean {:+.1} mA",
+        c.gap_rmse_base_a * 1e3,
+        c.gap_mean_base_a * 1e3
+    )?;
+    if let (Some(m), Some(mm)) = (c.gap_rmse_model_a, c.gap_mean_model_a) {
+        writeln!(
+            out,
+            "  with {}: rms {:.1} mA, mean {:+.1} mA ({:.0} % of the base model's)",
+            if c.model_effects.is_empty() {
+                "the fitted model (no effects)".to_string()
+            } else {
+                c.model_effects.join(", ")
+            },
+            m * 1e3,
+            mm * 1e3,
+            100.0 * c.gap_ratio.unwrap_or(f64::NAN)
+        )?;
     }
+    writeln!(out, "  (gap: {})", c.gap_definition)?;
+    if !c.skipped_rows.is_empty() {
+        writeln!(
+            out,
+            "  {} rows not replayed (the virtual rig could not run them: load above max_release_load_nm or a protection tripped), left out of the gaps: {}",
+            c.skipped_rows.len(),
+            c.skipped_rows
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )?;
+    }
+    if let Some(s) = &c.svg {
+        writeln!(out, "  plot: {s}")?;
+    }
+    Ok(())
 }

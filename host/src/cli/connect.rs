@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use crate::RigError;
-pub use crate::connection::{DeviceOpts, Session};
+pub use crate::connection::{Connection, DeviceOpts};
 
 /// The verbs that use a device, for messages.
 pub const DEVICE_VERBS: &str = "info, faults, clear, release, bringup, monitor, capture, calibrate, calibration, experiment, discover, flash and demo";

@@ -129,7 +129,7 @@ fn plan_of(a: &SweepArgs) -> Result<Plan, RigError> {
     match a.plan.as_str() {
         "paper" => Ok(Plan::paper()),
         "quick" => Ok(Plan::quick()),
-        file => Plan::read(std::path::Path::new(file)),
+        file => Ok(Plan::read(std::path::Path::new(file))?),
     }
 }
 
@@ -152,169 +152,11 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let mut bench = DeviceBench::new(dev.connect()?);
     let mut out = std::io::stdout().lock();
     // Every error of the procedure, so Ctrl-C anywhere ends with exit 130.
-    let result = (|| -> Result<(), RigError> {
-        match a.procedure {
-            Procedure::TorqueSweep(s) => {
-                let setup = SweepSetup {
-                    plan: plan.unwrap_or_else(Plan::quick),
-                    window: s.window,
-                    resume: s.resume,
-                    force: s.force,
-                    command: std::env::args().collect::<Vec<_>>().join(" "),
-                };
-                let quiet = s.json;
-                let r = sweep::run(&mut bench, &mut operator, &setup, &s.csv, &mut |line| {
-                    if !quiet {
-                        eprintln!("{line}");
-                    }
-                });
-                match r {
-                    Ok(o) => {
-                        if let Some(svg) = &s.svg {
-                            let (rows, _) = sweep::read_rows(&s.csv)?;
-                            crate::sweep_report::experiment_figure(svg, &rows)?;
-                        }
-                        if s.json {
-                            super::print_json(&mut out, &o)?;
-                        } else {
-                            writeln!(
-                                out,
-                                "torque sweep: {} of {} runs written to {} ({} resumed, {} skipped)",
-                                o.written + o.resumed,
-                                o.planned,
-                                s.csv.display(),
-                                o.resumed,
-                                o.skipped
-                            )?;
-                        }
-                        Ok(())
-                    }
-                    Err(e) => {
-                        let kept = sweep::read_rows(&s.csv).map(|r| r.0.len()).unwrap_or(0);
-                        eprintln!(
-                            "stopped: {kept} completed rows kept in {}; continue with `rig experiment torque-sweep --resume --csv {}` and the same plan",
-                            s.csv.display(),
-                            s.csv.display()
-                        );
-                        Err(e)
-                    }
-                }
-            }
-            Procedure::HoldRelease(h) => {
-                // The same ranges as `rig release`: nothing is silently changed.
-                let calibration = bench.calibration()?;
-                let hz = crate::limits::check_release_freq("--freq", h.freq, &calibration)?;
-                let cap = model::BoardLimits::PAPER.max_release_load_nm;
-                if h.load > cap {
-                    return Err(RigError::BadValue {
-                        what: format!("--load {}", reporting::human(h.load)),
-                        why: format!(
-                            "is above the gear's tooth-strength limit of {} N m ({}): give at most that",
-                            reporting::human(cap),
-                            crate::experiment::load_text(cap)
-                        ),
-                    });
-                }
-                let opts = hold_release::HoldRelease {
-                    load_nm: Some(h.load),
-                    hold_s: h.hold,
-                    hz: f64::from(hz),
-                    release_s: h.release,
-                    after_s: h.after,
-                };
-                let samples =
-                    hold_release::run(&mut bench, &mut operator, &opts, &mut |l| eprintln!("{l}"))?;
-                hold_release::write_csv(&samples, &h.csv)?;
-                let svg = h.svg.unwrap_or_else(|| h.csv.with_extension("svg"));
-                if !samples.is_empty() {
-                    hold_release::write_svg(&samples, &svg)?;
-                }
-                writeln!(
-                    out,
-                    "hold-release: {} samples to {} and {}",
-                    samples.len(),
-                    h.csv.display(),
-                    svg.display()
-                )?;
-                if samples.iter().any(|s| s.output_angle_rad.is_some()) {
-                    // The verdict of Fig. 5: held? moved? how far?
-                    let n = hold_release::fig5_numbers(&samples, model::paper::R_OUT);
-                    writeln!(
-                        out,
-                        "verdict: {} during the {} s hold; {}; {} mm of rope paid out on the 75 mm pulley; {}",
-                        if n.held_without_vibration {
-                            "held"
-                        } else {
-                            "MOVED"
-                        },
-                        reporting::human(h.hold),
-                        match n.release_to_motion_s {
-                            Some(t) => format!("moved {t:.2} s after the release request"),
-                            None => "never moved while released".into(),
-                        },
-                        reporting::human(reporting::significant(n.load_drop_m * 1e3, 3)),
-                        if n.output_speed_after_stop_rad_s.abs() > 1e-3 {
-                            "still moving after the vibration stopped"
-                        } else {
-                            "at rest after the vibration stopped"
-                        }
-                    )?;
-                }
-                Ok(())
-            }
-            Procedure::Backdrive(b) => {
-                let opts = backdrive::Backdrive {
-                    load_nm: b.load,
-                    hold_s: b.hold,
-                    hz: b.freq,
-                    release_s: b.release,
-                };
-                let sets: Vec<Option<[u32; 4]>> = if b.all_sets {
-                    model::TABLE1.iter().copied().map(Some).collect()
-                } else {
-                    vec![None]
-                };
-                if b.all_sets && !operator.forced && bench.is_virtual() {
-                    return Err(RigError::BadValue {
-                    what: "--all-sets".into(),
-                    why: "a virtual device has one gear set: `rig sim table1` runs all six, or add --operator".into(),
-                });
-                }
-                let mut verdicts = Vec::new();
-                for z in sets {
-                    if let Some(z) = z {
-                        let q = format!(
-                            "fit gear set (Z1, Z2, Z3, Z4) = ({})",
-                            z.map(|v| v.to_string()).join(", ")
-                        );
-                        if operator.before(&q)? == crate::experiment::bench::Go::Skip {
-                            continue;
-                        }
-                    }
-                    if let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, z)? {
-                        verdicts.push(v);
-                    }
-                }
-                if b.json {
-                    super::print_json(&mut out, &verdicts)?;
-                } else {
-                    for v in &verdicts {
-                        let word = |m: bool| if m { "backdriven" } else { "held" };
-                        writeln!(
-                            out,
-                            "{}{} N m: without vibration {}, with vibration {} (judged by {})",
-                            v.z.map(|z| format!("{:?} ", z)).unwrap_or_default(),
-                            reporting::human(v.load_nm),
-                            word(v.backdriven_without_vibration),
-                            word(v.backdriven_with_vibration),
-                            v.judged_by
-                        )?;
-                    }
-                }
-                Ok(())
-            }
-        }
-    })();
+    let result = match a.procedure {
+        Procedure::TorqueSweep(s) => torque_sweep(s, plan, &mut bench, &mut operator, &mut out),
+        Procedure::HoldRelease(h) => hold_release_run(h, &mut bench, &mut operator, &mut out),
+        Procedure::Backdrive(b) => backdrive_run(b, &mut bench, &mut operator, &mut out),
+    };
     match result {
         Ok(()) => Ok(ExitCode::SUCCESS),
         Err(e) if operator.interrupted() => {
@@ -323,4 +165,184 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         }
         Err(e) => Err(e),
     }
+}
+
+/// Runs the torque sweep on `bench`.
+fn torque_sweep(
+    s: SweepArgs,
+    plan: Option<Plan>,
+    bench: &mut DeviceBench,
+    operator: &mut Operator,
+    out: &mut impl Write,
+) -> Result<(), RigError> {
+    let setup = SweepSetup {
+        plan: plan.unwrap_or_else(Plan::quick),
+        window: s.window,
+        resume: s.resume,
+        force: s.force,
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+    };
+    let quiet = s.json;
+    let r = sweep::run(bench, operator, &setup, &s.csv, &mut |line| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    });
+    match r {
+        Ok(o) => {
+            if let Some(svg) = &s.svg {
+                let (rows, _) = sweep::read_rows(&s.csv)?;
+                crate::sweep_report::experiment_figure(svg, &rows)?;
+            }
+            if s.json {
+                super::print_json(out, &o)?;
+            } else {
+                writeln!(
+                    out,
+                    "torque sweep: {} of {} runs written to {} ({} resumed, {} skipped)",
+                    o.written + o.resumed,
+                    o.planned,
+                    s.csv.display(),
+                    o.resumed,
+                    o.skipped
+                )?;
+            }
+            Ok(())
+        }
+        Err(e) => {
+            let kept = sweep::read_rows(&s.csv).map(|r| r.0.len()).unwrap_or(0);
+            eprintln!(
+                "stopped: {kept} completed rows kept in {}; continue with `rig experiment torque-sweep --resume --csv {}` and the same plan",
+                s.csv.display(),
+                s.csv.display()
+            );
+            Err(e)
+        }
+    }
+}
+
+/// Runs the hold-release time history on `bench`.
+fn hold_release_run(
+    h: HoldArgs,
+    bench: &mut DeviceBench,
+    operator: &mut Operator,
+    out: &mut impl Write,
+) -> Result<(), RigError> {
+    // The same ranges as `rig release`: nothing is silently changed.
+    let calibration = bench.calibration()?;
+    let hz = crate::limits::check_release_freq("--freq", h.freq, &calibration)?;
+    let cap = model::BoardLimits::PAPER.max_release_load_nm;
+    if h.load > cap {
+        return Err(RigError::BadValue {
+            what: format!("--load {}", reporting::human(h.load)),
+            why: format!(
+                "is above the gear's tooth-strength limit of {} N m ({}): give at most that",
+                reporting::human(cap),
+                crate::experiment::load_text(cap)
+            ),
+        });
+    }
+    let opts = hold_release::HoldRelease {
+        load_nm: Some(h.load),
+        hold_s: h.hold,
+        hz: f64::from(hz),
+        release_s: h.release,
+        after_s: h.after,
+    };
+    let samples = hold_release::run(bench, operator, &opts, &mut |l| eprintln!("{l}"))?;
+    hold_release::write_csv(&samples, &h.csv)?;
+    let svg = h.svg.unwrap_or_else(|| h.csv.with_extension("svg"));
+    if !samples.is_empty() {
+        hold_release::write_svg(&samples, &svg)?;
+    }
+    writeln!(
+        out,
+        "hold-release: {} samples to {} and {}",
+        samples.len(),
+        h.csv.display(),
+        svg.display()
+    )?;
+    if samples.iter().any(|s| s.output_angle_rad.is_some()) {
+        // The verdict of Fig. 5: held? moved? how far?
+        let n = hold_release::fig5_numbers(&samples, model::paper::R_OUT);
+        writeln!(
+            out,
+            "verdict: {} during the {} s hold; {}; {} mm of rope paid out on the 75 mm pulley; {}",
+            if n.held_without_vibration {
+                "held"
+            } else {
+                "MOVED"
+            },
+            reporting::human(h.hold),
+            match n.release_to_motion_s {
+                Some(t) => format!("moved {t:.2} s after the release request"),
+                None => "never moved while released".into(),
+            },
+            reporting::human(reporting::significant(n.load_drop_m * 1e3, 3)),
+            if n.output_speed_after_stop_rad_s.abs() > 1e-3 {
+                "still moving after the vibration stopped"
+            } else {
+                "at rest after the vibration stopped"
+            }
+        )?;
+    }
+    Ok(())
+}
+
+/// Runs the backdrive verdicts on `bench`.
+fn backdrive_run(
+    b: BackdriveArgs,
+    bench: &mut DeviceBench,
+    operator: &mut Operator,
+    out: &mut impl Write,
+) -> Result<(), RigError> {
+    let opts = backdrive::Backdrive {
+        load_nm: b.load,
+        hold_s: b.hold,
+        hz: b.freq,
+        release_s: b.release,
+    };
+    let sets: Vec<Option<[u32; 4]>> = if b.all_sets {
+        model::TABLE1.iter().copied().map(Some).collect()
+    } else {
+        vec![None]
+    };
+    if b.all_sets && !operator.forced && bench.is_virtual() {
+        return Err(RigError::BadValue {
+        what: "--all-sets".into(),
+        why: "a virtual device has one gear set: `rig sim table1` runs all six, or add --operator".into(),
+    });
+    }
+    let mut verdicts = Vec::new();
+    for z in sets {
+        if let Some(z) = z {
+            let q = format!(
+                "fit gear set (Z1, Z2, Z3, Z4) = ({})",
+                z.map(|v| v.to_string()).join(", ")
+            );
+            if operator.before(&q)? == crate::experiment::bench::Go::Skip {
+                continue;
+            }
+        }
+        if let Some(v) = backdrive::run(bench, operator, &opts, z)? {
+            verdicts.push(v);
+        }
+    }
+    if b.json {
+        super::print_json(out, &verdicts)?;
+    } else {
+        for v in &verdicts {
+            let word = |m: bool| if m { "backdriven" } else { "held" };
+            writeln!(
+                out,
+                "{}{} N m: without vibration {}, with vibration {} (judged by {})",
+                v.z.map(|z| format!("{:?} ", z)).unwrap_or_default(),
+                reporting::human(v.load_nm),
+                word(v.backdriven_without_vibration),
+                word(v.backdriven_with_vibration),
+                v.judged_by
+            )?;
+        }
+    }
+    Ok(())
 }

@@ -5,13 +5,15 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args;
-use model::effects::{Effect, EffectParams};
-use model::plant::NoiseSource;
+use model::effects::Effect;
 
 use crate::RigError;
+use crate::explanation::{ExplainJson, ProposalJson};
+pub use crate::explanation::{default_report_dir, proposal_for, write_plan};
+pub use crate::synthetic::{synthetic_data, synthetic_sweep};
 use explain::data::Dataset;
-use explain::synth::{self, SweepPlan};
-use explain::{Options, SyntheticTruth, library, report_files};
+use explain::design::Proposal;
+use explain::{Options, SyntheticTruth, report_files};
 use rigfile::RigFile;
 
 const AFTER_HELP: &str = "\
@@ -122,29 +124,6 @@ pub struct ExplainArgs {
     pub propose: Option<PathBuf>,
 }
 
-/// The test points that best separate `outcome`'s leading candidates (or pin its finding)
-/// on the rig of `rig`, for data like `data` ([`explain::design`]).
-pub fn proposal_for(
-    outcome: &explain::Outcome,
-    data: &Dataset,
-    rig: &RigFile,
-    options: &explain::design::DesignOptions,
-) -> explain::design::Proposal {
-    let space = explain::design::Space::for_rig(rig, data);
-    explain::design::propose(outcome, &space, options)
-}
-
-/// Writes `proposal` as a plan file (atomically).
-pub fn write_plan(
-    path: &Path,
-    proposal: &explain::design::Proposal,
-    source: &str,
-) -> Result<(), RigError> {
-    let text = proposal.to_plan_toml(&format!("proposed by rig explain for {source}"), 1);
-    reporting::write_atomic(path, text.as_bytes())?;
-    Ok(())
-}
-
 /// The hidden effect of `--synthetic`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Hidden(pub Option<Effect>);
@@ -174,72 +153,108 @@ fn parse_alpha(s: &str) -> Result<f64, String> {
     }
 }
 
-/// The default report folder for measured data `path`: `<stem>-explain` beside it.
-pub fn default_report_dir(path: &Path) -> PathBuf {
-    let stem = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "measured".into());
-    path.with_file_name(format!("{stem}-explain"))
+/// The data `rig explain` reads or makes: the data set, the synthetic truth, the source's
+/// name and the default report folder.
+struct Input {
+    data: Dataset,
+    truth: Option<SyntheticTruth>,
+    source: String,
+    default_dir: Option<PathBuf>,
 }
 
-/// A synthetic sweep of `rig` with `hidden`, its data set and truth.
-pub fn synthetic_data(
-    rig: &RigFile,
-    hidden: Option<Effect>,
-    seed: u64,
-    noise_a: f64,
-) -> Result<(Dataset, SyntheticTruth), RigError> {
-    synthetic_sweep(rig, hidden, seed, noise_a, 5)
-}
-
-/// [`synthetic_data`] with `repeats` repeats of the sweep's test points (tests of 0.5-1.5 s
-/// beyond the paper's five repeats, so a long sweep stays within a working day).
-pub fn synthetic_sweep(
-    rig: &RigFile,
-    hidden: Option<Effect>,
-    seed: u64,
-    noise_a: f64,
-    repeats: usize,
-) -> Result<(Dataset, SyntheticTruth), RigError> {
-    let mut truth = rig.current_model()?;
-    truth.effects = EffectParams::default();
-    let plan = SweepPlan {
-        noise_a,
-        repeats,
-        test_seconds: if repeats > 5 {
-            (0.5, 1.5)
-        } else {
-            (15.0, 25.0)
-        },
-        ..SweepPlan::default()
-    };
-    let mut rng = NoiseSource::new(seed ^ 0x9e37_79b9_7f4a_7c15);
-    if let Some(e) = hidden {
-        truth.effects = synth::plausible_effect(e, &truth, &plan, &mut rng);
+/// Reads `--measured` (its provenance's drive into `rig`) or makes the `--synthetic` sweep
+/// (saved with `--write-synthetic`).
+fn input(args: &ExplainArgs, rig: &mut RigFile) -> Result<Input, RigError> {
+    match (&args.measured, args.synthetic) {
+        (Some(path), _) => {
+            let data = Dataset::read_csv(path)?;
+            if let Some(regenerative) = crate::provenance::Header::read(path).regenerative {
+                *rig = rig.clone().with_drive_decay(regenerative);
+            }
+            Ok(Input {
+                data,
+                truth: None,
+                source: path.display().to_string(),
+                default_dir: Some(default_report_dir(path)),
+            })
+        }
+        (None, Some(Hidden(hidden))) => {
+            let (data, truth) = synthetic_sweep(
+                rig,
+                hidden,
+                args.seed,
+                args.noise_ma * 1e-3,
+                args.repeats as usize,
+            )?;
+            if let Some(p) = &args.write_synthetic {
+                reporting::write_atomic_with(p, |tmp| -> Result<(), RigError> {
+                    let file = std::fs::File::create(tmp).map_err(|source| RigError::File {
+                        action: "write",
+                        path: p.display().to_string(),
+                        source,
+                    })?;
+                    data.write_csv(file)?;
+                    Ok(())
+                })?;
+            }
+            let source = format!(
+                "synthetic sweep ({}, seed {})",
+                hidden.map_or("no effect", |e| e.name()),
+                args.seed
+            );
+            Ok(Input {
+                data,
+                truth: Some(truth),
+                source,
+                default_dir: None,
+            })
+        }
+        (None, None) => Err(RigError::BadValue {
+            what: "rig explain".into(),
+            why: "give --measured FILE.csv (or --synthetic EFFECT)".into(),
+        }),
     }
-    let rows = synth::generate(&truth, &plan, seed);
-    let data = Dataset::from_rows("synthetic", rows)?;
-    let params = hidden
-        .map(|e| {
-            library::report_params(
-                e,
-                &truth.effects,
-                library::ThermalDriver::Temperature {
-                    reference_c: plan.ambient_c,
-                },
-            )
-        })
-        .unwrap_or_default();
-    Ok((
-        data,
-        SyntheticTruth {
-            effect: hidden.map(|e| e.name().to_string()),
-            params,
-            seed,
-            noise_a,
-        },
-    ))
+}
+
+/// The explanation's options from the arguments.
+fn options(args: &ExplainArgs) -> Options {
+    Options {
+        alpha: args.alpha,
+        folds: args.folds as usize,
+        replicates: args.replicates as usize,
+        stated_noise_a: args
+            .stated_noise_ma
+            .or(args.synthetic.map(|_| args.noise_ma))
+            .filter(|v| *v > 0.0)
+            .map(|v| v * 1e-3),
+        ..Options::default()
+    }
+}
+
+/// Writes the report folder (`--report`, else the default one, where a failure only
+/// warns) and names it in the explanation.
+fn write_report(
+    args: &ExplainArgs,
+    outcome: &mut explain::Outcome,
+    input: &Input,
+) -> Result<(), RigError> {
+    let dir = if args.no_report {
+        None
+    } else {
+        args.report.clone().or_else(|| input.default_dir.clone())
+    };
+    if let Some(d) = &dir {
+        outcome.explanation.report_dir = Some(d.display().to_string());
+        if let Err(e) = report_files::write_report(d, outcome, &input.source) {
+            if args.report.is_some() {
+                return Err(e.into());
+            }
+            // The default folder is a convenience: the analysis still prints.
+            eprintln!("warning: no report written ({e}); choose a folder with --report DIR");
+            outcome.explanation.report_dir = None;
+        }
+    }
+    Ok(())
 }
 
 /// Runs `rig explain`.
@@ -260,71 +275,15 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
         Some(p) => RigFile::load(p)?,
         None => RigFile::paper(),
     };
-    let (data, truth, source, default_dir) = match (&args.measured, args.synthetic) {
-        (Some(path), _) => {
-            let data = Dataset::read_csv(path)?;
-            if let Some(regenerative) = crate::experiment::sweep::read_drive(path) {
-                rig = rig.with_drive_decay(regenerative);
-            }
-            (
-                data,
-                None,
-                path.display().to_string(),
-                Some(default_report_dir(path)),
-            )
-        }
-        (None, Some(Hidden(hidden))) => {
-            let (data, truth) = synthetic_sweep(
-                &rig,
-                hidden,
-                args.seed,
-                args.noise_ma * 1e-3,
-                args.repeats as usize,
-            )?;
-            if let Some(p) = &args.write_synthetic {
-                reporting::write_atomic_with(p, |tmp| -> Result<(), RigError> {
-                    let file = std::fs::File::create(tmp).map_err(|source| RigError::File {
-                        action: "write",
-                        path: p.display().to_string(),
-                        source,
-                    })?;
-                    data.write_csv(file)?;
-                    Ok(())
-                })?;
-            }
-            let name = format!(
-                "synthetic sweep ({}, seed {})",
-                hidden.map_or("no effect", |e| e.name()),
-                args.seed
-            );
-            (data, Some(truth), name, None)
-        }
-        (None, None) => {
-            return Err(RigError::BadValue {
-                what: "rig explain".into(),
-                why: "give --measured FILE.csv (or --synthetic EFFECT)".into(),
-            });
-        }
-    };
-    let options = Options {
-        alpha: args.alpha,
-        folds: args.folds as usize,
-        replicates: args.replicates as usize,
-        stated_noise_a: args
-            .stated_noise_ma
-            .or(args.synthetic.map(|_| args.noise_ma))
-            .filter(|v| *v > 0.0)
-            .map(|v| v * 1e-3),
-        ..Options::default()
-    };
-    let mut outcome = explain::explain(&data, &rig, &options)?;
+    let input = input(&args, &mut rig)?;
+    let mut outcome = explain::explain(&input.data, &rig, &options(&args))?;
     if args.json {
         // The text output lists them itself.
         for w in &outcome.explanation.warnings {
             eprintln!("warning: {w}");
         }
     }
-    outcome.explanation.synthetic = truth;
+    outcome.explanation.synthetic = input.truth.clone();
     // The model file is written last, when everything else worked: a failed run leaves an
     // existing FILE as it was. Named in the report before it exists.
     let model_file = args
@@ -334,22 +293,8 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
     if let Some((p, _)) = &model_file {
         outcome.explanation.model_written = Some(p.display().to_string());
     }
-    let dir = if args.no_report {
-        None
-    } else {
-        args.report.clone().or(default_dir)
-    };
-    if let Some(d) = &dir {
-        outcome.explanation.report_dir = Some(d.display().to_string());
-        if let Err(e) = report_files::write_report(d, &outcome, &source) {
-            if args.report.is_some() {
-                return Err(e.into());
-            }
-            // The default folder is a convenience: the analysis still prints.
-            eprintln!("warning: no report written ({e}); choose a folder with --report DIR");
-            outcome.explanation.report_dir = None;
-        }
-    }
+    write_report(&args, &mut outcome, &input)?;
+    let source = &input.source;
     if let Some((p, rig)) = &model_file {
         rig.save_with_comment(
             p,
@@ -363,53 +308,45 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
         explain::Verdict::Ambiguous | explain::Verdict::Unexplained
     );
     let proposal = (args.propose.is_some() || offered).then(|| {
-        proposal_for(
-            &outcome,
-            &data,
-            &rig,
-            &explain::design::DesignOptions::default(),
-        )
+        let design = explain::design::DesignOptions::default();
+        proposal_for(&outcome, &input.data, &rig, &design)
     });
     if let (Some(path), Some(p)) = (&args.propose, &proposal) {
-        write_plan(path, p, &source)?;
+        write_plan(path, p, source)?;
     }
-    let mut out = std::io::stdout().lock();
-    if args.json {
-        let mut value = serde_json::to_value(&outcome.explanation)?;
-        if let (Some(p), Some(map)) = (&proposal, value.as_object_mut()) {
-            let mut v = serde_json::to_value(p)?;
-            if let Some(m) = v.as_object_mut() {
-                m.insert(
-                    "plan_written".into(),
-                    args.propose
-                        .as_ref()
-                        .map(|p| p.display().to_string())
-                        .into(),
-                );
-            }
-            map.insert("proposal".into(), v);
-        }
-        serde_json::to_writer_pretty(&mut out, &value)?;
-        writeln!(out)?;
-    } else {
-        write!(
-            out,
-            "{}",
-            report_files::render_text(&outcome.explanation, &source)
-        )?;
-        if let Some(p) = &proposal {
-            write!(
-                out,
-                "{}",
-                proposal_text(p, args.propose.as_deref(), &source)
-            )?;
-        }
-    }
+    print(&args, &outcome.explanation, proposal.as_ref(), source)?;
     Ok(ExitCode::SUCCESS)
 }
 
+/// Prints the explanation (and the proposal) as JSON or text.
+fn print(
+    args: &ExplainArgs,
+    explanation: &explain::Explanation,
+    proposal: Option<&Proposal>,
+    source: &str,
+) -> Result<(), RigError> {
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        let json = ExplainJson {
+            explanation,
+            proposal: proposal.map(|proposal| ProposalJson {
+                proposal,
+                plan_written: args.propose.as_ref().map(|p| p.display().to_string()),
+            }),
+        };
+        serde_json::to_writer_pretty(&mut out, &json)?;
+        writeln!(out)?;
+    } else {
+        write!(out, "{}", report_files::render_text(explanation, source))?;
+        if let Some(p) = proposal {
+            write!(out, "{}", proposal_text(p, args.propose.as_deref(), source))?;
+        }
+    }
+    Ok(())
+}
+
 /// The proposal in words: where it was written, or how to get it.
-fn proposal_text(p: &explain::design::Proposal, written: Option<&Path>, source: &str) -> String {
+fn proposal_text(p: &Proposal, written: Option<&Path>, source: &str) -> String {
     let mut t = format!(
         "\nNext test points ({} points, {} test points): {}\n",
         p.points.len(),

@@ -88,7 +88,7 @@ pub struct FlashReport {
     /// The probe used.
     pub probe: Option<String>,
     /// Erase, program, verify and total times, s.
-    pub times: Option<serde_json::Value>,
+    pub times: Option<crate::flash::FlashTimes>,
     /// The post-flash check over serial.
     pub confirmed: Option<Confirmation>,
 }
@@ -312,7 +312,7 @@ fn flash_board(
         "flashed    {} bytes: erase {:.2} s, program {:.2} s, verify {:.2} s; chip reset",
         report.image_bytes, times.erase_s, times.program_s, times.verify_s
     ));
-    report.times = serde_json::to_value(times).ok();
+    report.times = Some(times);
 
     let port = guard.port.clone();
     drop(guard);
@@ -377,7 +377,7 @@ mod lock {
 
     use super::DeviceOpts;
     use crate::RigError;
-    use crate::cli::connect::Session;
+    use crate::cli::connect::Connection;
     use crate::client::{SerialTransport, open_serial};
 
     /// Holds the rig's port while flashing, so no other program can release it meanwhile.
@@ -386,7 +386,7 @@ mod lock {
         pub port: Option<String>,
         /// What was done, for the user.
         pub how: String,
-        _session: Option<Session>,
+        _session: Option<Connection>,
         _port: Option<SerialTransport>,
     }
 
@@ -451,7 +451,7 @@ mod lock {
     }
 
     /// Waits (up to 3 s) until telemetry shows the vibrator stopped or stopping.
-    fn wait_until_stopped(s: &mut Session) -> Result<&'static str, RigError> {
+    fn wait_until_stopped(s: &mut Connection) -> Result<&'static str, RigError> {
         s.client.start_telemetry(20)?;
         let deadline = Instant::now() + Duration::from_secs(3);
         let mut last = None;

@@ -90,6 +90,46 @@ mod imp {
     use crate::flash::log::{LogSinks, LogTable};
     use crate::flash::{self, identity::BuildIdentity, identity::IDENTITY_SYMBOL, probe};
 
+    /// `rig log --decode FILE`: a saved raw log decoded against the ELF's table.
+    fn decode(
+        a: &LogArgs,
+        table: &LogTable,
+        file: &std::path::Path,
+        name: &str,
+        stdout: &mut std::io::StdoutLock<'_>,
+    ) -> Result<ExitCode, RigError> {
+        let raw = std::fs::read(file).map_err(|source| RigError::File {
+            action: "read the saved log",
+            path: file.display().to_string(),
+            source,
+        })?;
+        let (lines, stats) = table.decode_all(&raw);
+        let mut sinks = LogSinks {
+            out: stdout,
+            raw: None,
+            json: a.json,
+            locations: a.locations,
+        };
+        for l in &lines {
+            sinks.line(l)?;
+        }
+        if stats.malformed > 0 {
+            eprintln!(
+                "{} damaged frames skipped: bytes were lost, or the stream is from another build than {name}",
+                stats.malformed
+            );
+        }
+        if stats.frames == 0 && !raw.is_empty() {
+            return Err(RigError::BadValue {
+                what: format!("--decode {}", file.display()),
+                why: format!(
+                    "no message decodes with the defmt table of {name}: give the ELF of the firmware that wrote the log"
+                ),
+            });
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+
     pub fn run(a: LogArgs) -> Result<ExitCode, RigError> {
         let elf = elf_path(&a)?;
         let name = elf.display().to_string();
@@ -101,36 +141,7 @@ mod imp {
         let table = LogTable::from_elf(&bytes, &name)?;
         let mut stdout = std::io::stdout().lock();
         if let Some(file) = &a.decode {
-            let raw = std::fs::read(file).map_err(|source| RigError::File {
-                action: "read the saved log",
-                path: file.display().to_string(),
-                source,
-            })?;
-            let (lines, stats) = table.decode_all(&raw);
-            let mut sinks = LogSinks {
-                out: &mut stdout,
-                raw: None,
-                json: a.json,
-                locations: a.locations,
-            };
-            for l in &lines {
-                sinks.line(l)?;
-            }
-            if stats.malformed > 0 {
-                eprintln!(
-                    "{} damaged frames skipped: bytes were lost, or the stream is from another build than {name}",
-                    stats.malformed
-                );
-            }
-            if stats.frames == 0 && !raw.is_empty() {
-                return Err(RigError::BadValue {
-                    what: format!("--decode {}", file.display()),
-                    why: format!(
-                        "no message decodes with the defmt table of {name}: give the ELF of the firmware that wrote the log"
-                    ),
-                });
-            }
-            return Ok(ExitCode::SUCCESS);
+            return decode(&a, &table, file, &name, &mut stdout);
         }
 
         let map = flash::board_map()?;

@@ -25,6 +25,8 @@ use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType, Paragraph};
 
 use super::connect::{DeviceOpts, interrupt_flag};
 use crate::client::LinkStats;
+use crate::monitor::HealthValues;
+pub use crate::monitor::{CSV_HEADER, Freshness, MonitorRow, STALE_RULE, status_meaning};
 use crate::{RigError, args, limits};
 
 /// Arguments of `rig monitor`.
@@ -56,50 +58,6 @@ pub struct MonitorArgs {
     explain: bool,
 }
 
-/// When the view shows the firmware's estimates (tau_cam, tau_rot) as `-`.
-pub const STALE_RULE: &str = "tau_cam and tau_rot show `-` when stale: gear locked, a fault, or no cam revolution for more than 1 s (the estimator updates once a revolution)";
-
-/// The meaning of status flag `name`.
-pub fn status_meaning(name: &str) -> Option<&'static str> {
-    // The protocol's one table of flags and their help.
-    StatusFlags::help_of(name)
-}
-
-/// Whether the firmware's per-revolution estimates are current: not when the gear is
-/// locked, a fault is active or latched, or the cam has not completed a revolution for
-/// more than [`Freshness::STALE_AFTER_S`] of device time.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct Freshness {
-    turned_rad: f64,
-    last_us: Option<u64>,
-    last_rev_us: Option<u64>,
-}
-
-impl Freshness {
-    /// Device seconds without a whole cam revolution after which estimates are stale.
-    pub const STALE_AFTER_S: f64 = 1.0;
-
-    /// Takes sample `t`; true when its estimates are current.
-    pub fn update(&mut self, t: &TelemetrySample) -> bool {
-        let now = t.device_time_us;
-        if let Some(prev) = self.last_us {
-            let dt = now.saturating_sub(prev) as f64 * 1e-6;
-            self.turned_rad += f64::from(t.cam_speed_rad_s.abs()) * dt;
-        }
-        self.last_us = Some(now);
-        if self.turned_rad >= std::f64::consts::TAU {
-            self.turned_rad %= std::f64::consts::TAU;
-            self.last_rev_us = Some(now);
-        }
-        let turning = self
-            .last_rev_us
-            .is_some_and(|r| now.saturating_sub(r) as f64 * 1e-6 <= Self::STALE_AFTER_S);
-        let locked_or_faulted = matches!(t.state, SupervisorState::Locked | SupervisorState::Fault)
-            || !t.faults.is_empty();
-        turning && !locked_or_faulted
-    }
-}
-
 /// An estimate for display: `-` when stale.
 fn estimate(fresh: bool, v: f32, scale: f32, width: usize, digits: usize) -> String {
     if fresh && v.is_finite() {
@@ -117,73 +75,6 @@ enum KeyAction {
     ToggleRelease,
 }
 
-/// CSV header of the monitor log. The first ten columns are the original log's; the
-/// output shaft and the board's health (its newest once-a-second report) follow.
-pub const CSV_HEADER: [&str; 16] = [
-    "device_time_s",
-    "state",
-    "cam_speed_rad_s",
-    "cam_hz",
-    "current_a",
-    "pwm_duty",
-    "tau_cam_nm",
-    "tau_rot_nm",
-    "faults",
-    "status",
-    "output_rad",
-    "output_rad_s",
-    "bus_v",
-    "motor_temp_c",
-    "step_cycles_mean",
-    "step_cycles_max",
-];
-
-/// `v` with `digits` decimals, empty when not current or not a number.
-fn field(ok: bool, v: f32, digits: usize) -> String {
-    if ok && v.is_finite() {
-        format!("{v:.digits$}")
-    } else {
-        String::new()
-    }
-}
-
-/// The board's health values that are reported: NaN means not sensed, and the step
-/// cycles are 0 until measured (never on the virtual rig).
-fn health_values(h: Option<&HealthSample>) -> (f32, f32, Option<u32>, Option<u32>) {
-    match h {
-        Some(h) => (
-            h.bus_voltage_v,
-            h.motor_temp_c,
-            (h.step_cycles_mean > 0).then_some(h.step_cycles_mean),
-            (h.step_cycles_max > 0).then_some(h.step_cycles_max),
-        ),
-        None => (f32::NAN, f32::NAN, None, None),
-    }
-}
-
-fn csv_row(t: &TelemetrySample, fresh: bool, health: Option<&HealthSample>) -> [String; 16] {
-    let (bus, temp, mean, max) = health_values(health);
-    let count = |c: Option<u32>| c.map(|c| c.to_string()).unwrap_or_default();
-    [
-        format!("{:.6}", t.device_time_us as f64 * 1e-6),
-        t.state.name().to_owned(),
-        format!("{:.4}", t.cam_speed_rad_s),
-        format!("{:.4}", t.cam_speed_rad_s.abs() / std::f32::consts::TAU),
-        format!("{:.4}", t.current_a),
-        format!("{:.4}", t.pwm_duty),
-        field(fresh, t.tau_cam_nm, 6),
-        field(fresh, t.tau_rot_nm, 5),
-        t.faults.names().collect::<Vec<_>>().join("|"),
-        t.status.names().collect::<Vec<_>>().join("|"),
-        field(true, t.output_angle_rad, 5),
-        field(true, t.output_speed_rad_s, 4),
-        field(true, bus, 3),
-        field(true, temp, 2),
-        count(mean),
-        count(max),
-    ]
-}
-
 /// Widest line of `--plain` output, columns.
 pub const PLAIN_WIDTH: usize = 80;
 
@@ -199,7 +90,7 @@ pub const PLAIN_HEADER: &str =
 /// the newest `health` report) and the output angle `-` when not reported. Faults that do
 /// not fit their column are counted there and listed on the lines below (indented).
 pub fn plain_line(t: &TelemetrySample, fresh: bool, health: Option<&HealthSample>) -> String {
-    let (bus, _, _, _) = health_values(health);
+    let bus = HealthValues::of(health).bus_v.unwrap_or(f32::NAN);
     let head = format!(
         "{:9.3} {:<9} {:6.2} {:9.3} {} {} {}",
         t.device_time_us as f64 * 1e-6,
@@ -374,8 +265,12 @@ impl MonitorView {
             .into(),
             faults,
         ]);
-        let (bus, temp, mean, max) = health_values(self.health.as_ref());
-        let cycles = match (mean, max) {
+        let h = HealthValues::of(self.health.as_ref());
+        let (bus, temp) = (
+            h.bus_v.unwrap_or(f32::NAN),
+            h.motor_temp_c.unwrap_or(f32::NAN),
+        );
+        let cycles = match (h.step_cycles_mean, h.step_cycles_max) {
             (Some(m), Some(x)) => format!("{m}/{x} cyc"),
             _ => "- cyc".into(),
         };
@@ -584,12 +479,12 @@ fn watch(
                 let start = *first.get_or_insert(t.device_time_us);
                 let fresh = view.push(t);
                 if let Some((w, path)) = csv.as_mut() {
-                    w.write_record(csv_row(&t, fresh, view.health()))
+                    w.write_record(MonitorRow::new(&t, fresh, view.health()).csv_record())
                         .map_err(csv_error(path))?;
                     *logged += 1;
                 }
                 if a.json {
-                    super::print_json_line(&mut out, &sample_json(&t, fresh, view.health()))?;
+                    super::print_json_line(&mut out, &MonitorRow::new(&t, fresh, view.health()))?;
                 } else if terminal.is_none() {
                     if count == 1 {
                         writeln!(out, "{PLAIN_HEADER}")?;
@@ -640,36 +535,6 @@ fn csv_error(path: &Path) -> impl Fn(csv::Error) -> RigError + '_ {
         file: path.display().to_string(),
         why: format!("cannot write the log: {e}"),
     }
-}
-
-/// A telemetry sample as a JSON object (SI units, names as in the CSV): a stale estimate
-/// (`fresh` false) and what is not reported are `null`; the health values are the newest
-/// once-a-second report's.
-pub fn sample_json(
-    t: &TelemetrySample,
-    fresh: bool,
-    health: Option<&HealthSample>,
-) -> serde_json::Value {
-    let num = |ok: bool, v: f32| (ok && v.is_finite()).then(|| reporting::human_f64(f64::from(v)));
-    let (bus, temp, mean, max) = health_values(health);
-    serde_json::json!({
-        "device_time_s": t.device_time_us as f64 / 1e6,
-        "seq": t.seq,
-        "state": t.state.name(),
-        "cam_speed_rad_s": t.cam_speed_rad_s,
-        "current_a": t.current_a,
-        "pwm_duty": t.pwm_duty,
-        "tau_cam_nm": num(fresh, t.tau_cam_nm),
-        "tau_rot_nm": num(fresh, t.tau_rot_nm),
-        "faults": t.faults.names().collect::<Vec<_>>(),
-        "status": t.status.names().collect::<Vec<_>>(),
-        "output_rad": num(true, t.output_angle_rad),
-        "output_rad_s": num(true, t.output_speed_rad_s),
-        "bus_v": num(true, bus),
-        "motor_temp_c": num(true, temp),
-        "step_cycles_mean": mean,
-        "step_cycles_max": max,
-    })
 }
 
 /// The key pressed, if any: q, Esc or Ctrl-C quit (the terminal is in raw mode, so Ctrl-C
@@ -833,11 +698,11 @@ mod tests {
         let cols: Vec<&str> = line.split_whitespace().collect();
         assert_eq!(cols[4], "-", "{line}");
         // Stale in the files too: an empty CSV field and JSON null, not a number.
-        let row = csv_row(&locked, false, None);
+        let row = MonitorRow::new(&locked, false, None).csv_record();
         assert_eq!((row[6].as_str(), row[7].as_str()), ("", ""));
-        let json = sample_json(&locked, false, None);
+        let json = serde_json::to_value(MonitorRow::new(&locked, false, None)).unwrap();
         assert!(json["tau_cam_nm"].is_null() && json["tau_rot_nm"].is_null());
-        let json = sample_json(&t, true, None);
+        let json = serde_json::to_value(MonitorRow::new(&t, true, None)).unwrap();
         assert_eq!(json["tau_rot_nm"], 1.2);
     }
 
@@ -914,7 +779,7 @@ mod tests {
             "{line}"
         );
         assert!(line.contains(" -0.2500 "), "{line}");
-        let row = csv_row(&fresh, true, Some(&health(12.05)));
+        let row = MonitorRow::new(&fresh, true, Some(&health(12.05))).csv_record();
         assert_eq!(row.len(), CSV_HEADER.len());
         assert_eq!(row[1], "locked");
         assert_eq!(row[9], "HOST_RELEASE");

@@ -3,7 +3,7 @@
 
 use std::io::Write;
 use std::process::ExitCode;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
@@ -11,6 +11,7 @@ use protocol::SupervisorState;
 use serde::Serialize;
 
 use super::connect::{DeviceOpts, interrupt_flag};
+use crate::connection::Connection;
 use crate::{RigError, args, limits};
 
 /// On or off.
@@ -66,33 +67,29 @@ pub struct ReleaseReport {
 /// Telemetry rate while holding, Hz.
 const TELEMETRY_HZ: u16 = 20;
 
+/// What `rig release off --json` prints.
+#[derive(Debug, Serialize)]
+pub struct LockReport {
+    /// Always false: vibration is off.
+    pub released: bool,
+    /// Supervisor state after the lock.
+    pub state: &'static str,
+    /// Whether the output still moves (null without an output encoder).
+    pub output_moving: Option<bool>,
+    /// Whether the gear coasts after the vibration stops (mu_d Lambda < 1).
+    pub coasts_after_stop: bool,
+}
+
 /// Runs `rig release`.
 pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let stop = interrupt_flag();
     let mut s = dev.connect()?;
     let mut out = std::io::stdout().lock();
     if a.state == OnOff::Off {
-        s.client.release(false, 0.0)?;
-        let scale = s.time_scale();
-        let after = after_lock(&mut s.client, scale)?;
-        if a.json {
-            super::print_json_line(
-                &mut out,
-                &serde_json::json!({
-                    "released": false,
-                    "state": after.state.name(),
-                    "output_moving": after.output_moving,
-                    "coasts_after_stop": after.coasts,
-                }),
-            )?;
-        } else {
-            writeln!(out, "vibration off: {}", after.verdict())?;
-        }
-        return Ok(ExitCode::SUCCESS);
+        return lock(&a, &mut s, &mut out);
     }
     // The firmware would drive a frequency above the calibration's maximum at that maximum.
     let target_hz = limits::check_release_freq("--freq", a.freq, &s.client.calibration()?)?;
-    let scale = s.time_scale();
     s.client.start_telemetry(TELEMETRY_HZ)?;
     s.client.release(true, target_hz)?;
     if !a.json {
@@ -106,88 +103,14 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             a.freq
         )?;
     }
-    let mut report = ReleaseReport {
-        freq_hz: a.freq,
-        held_s: 0.0,
-        states: Vec::new(),
-        mean_vibrating_hz: None,
-        final_state: "",
-        ended_by: "interrupt",
-        faults: Vec::new(),
-        signal: None,
-    };
-    let wall_start = Instant::now();
-    let mut t0 = None;
-    let (mut hz_sum, mut hz_n) = (0.0, 0u32);
-    // Whatever ends the loop (a signal, a fault, a terminal gone: writing to it fails),
+    let mut held = Held::default();
+    // Whatever ends the hold (a signal, a fault, a terminal gone: writing to it fails),
     // the gear is locked before anything else.
-    let watched = (|| -> Result<(), RigError> {
-        loop {
-            if stop.load(Ordering::SeqCst) {
-                break;
-            }
-            if let Some(limit) = a.hold_for {
-                // A bound in wall time too, in case telemetry stops.
-                if wall_start.elapsed().as_secs_f64() > limit / scale + 5.0 {
-                    report.ended_by = "for";
-                    break;
-                }
-            }
-            let Some(t) = s.client.next_telemetry(Duration::from_millis(100))? else {
-                continue;
-            };
-            let start = *t0.get_or_insert(t.device_time_us);
-            let since = (t.device_time_us - start) as f64 / 1e6;
-            report.held_s = since;
-            if report.states.last() != Some(&t.state.name()) {
-                report.states.push(t.state.name());
-                if !a.json {
-                    writeln!(
-                        out,
-                        "{since:7.2} s  {:<10} cam {:5.1} Hz  current {:5.2} A",
-                        t.state.name(),
-                        t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
-                        t.current_a
-                    )?;
-                }
-            }
-            if t.state == SupervisorState::Vibrating {
-                hz_sum += f64::from(t.cam_speed_rad_s.abs()) / std::f64::consts::TAU;
-                hz_n += 1;
-            }
-            if !t.faults.is_empty() || t.state == SupervisorState::Fault {
-                let latched = s.client.faults().map(|f| f.latched).unwrap_or(t.faults);
-                report.faults = (t.faults | latched).names().collect();
-                report.ended_by = "fault";
-                break;
-            }
-            if a.hold_for.is_some_and(|limit| since >= limit) {
-                report.ended_by = "for";
-                break;
-            }
-        }
-        Ok(())
-    })();
+    let watched = hold(&a, &mut s, &stop, &mut held, &mut out);
     let locked = s.client.release(false, 0.0);
     watched?;
     locked?;
-    if report.ended_by == "interrupt" {
-        report.signal = Some(crate::signals::interrupt_name());
-    }
-    // Watch the cam come to rest (a few device seconds at most).
-    let mut final_state = SupervisorState::Stopping;
-    let deadline = Instant::now() + Duration::from_secs_f64(3.0 / scale + 1.0);
-    while Instant::now() < deadline {
-        if let Some(t) = s.client.next_telemetry(Duration::from_millis(100))? {
-            final_state = t.state;
-            if matches!(t.state, SupervisorState::Locked | SupervisorState::Fault) {
-                break;
-            }
-        }
-    }
-    let _ = s.client.stop_telemetry();
-    report.final_state = final_state.name();
-    report.mean_vibrating_hz = (hz_n > 0).then(|| hz_sum / f64::from(hz_n));
+    let report = held.report(&a, come_to_rest(&mut s)?);
     if a.json {
         super::print_json(&mut out, &report)?;
     } else {
@@ -206,19 +129,135 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     if report.ended_by == "fault" {
         return Err(RigError::DeviceFault {
             what: "release ended".into(),
-            faults: report
-                .faults
-                .iter()
-                .filter_map(|name| {
-                    protocol::FaultFlags::NAMED
-                        .iter()
-                        .find(|(n, _)| n == name)
-                        .map(|(_, f)| *f)
-                })
-                .fold(protocol::FaultFlags::empty(), |a, f| a | f),
+            faults: held.faults,
         });
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `rig release off`: locks and reports how the output behaves after.
+fn lock(a: &ReleaseArgs, s: &mut Connection, out: &mut impl Write) -> Result<ExitCode, RigError> {
+    s.client.release(false, 0.0)?;
+    let scale = s.time_scale();
+    let after = after_lock(&mut s.client, scale)?;
+    if a.json {
+        let report = LockReport {
+            released: false,
+            state: after.state.name(),
+            output_moving: after.output_moving,
+            coasts_after_stop: after.coasts,
+        };
+        super::print_json_line(out, &report)?;
+    } else {
+        writeln!(out, "vibration off: {}", after.verdict())?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// What a hold saw.
+#[derive(Debug, Default)]
+struct Held {
+    /// Device seconds held.
+    held_s: f64,
+    /// Supervisor states in the order seen.
+    states: Vec<&'static str>,
+    /// Sum and count of the cam frequency while vibrating.
+    hz_sum: f64,
+    hz_n: u32,
+    /// Why it ended (`for`, `fault`; None: an interrupt).
+    ended_by: Option<&'static str>,
+    /// Faults seen (active and latched).
+    faults: protocol::FaultFlags,
+}
+
+impl Held {
+    /// The report of this hold, ending in `final_state`.
+    fn report(&self, a: &ReleaseArgs, final_state: SupervisorState) -> ReleaseReport {
+        let ended_by = self.ended_by.unwrap_or("interrupt");
+        ReleaseReport {
+            freq_hz: a.freq,
+            held_s: self.held_s,
+            states: self.states.clone(),
+            mean_vibrating_hz: (self.hz_n > 0).then(|| self.hz_sum / f64::from(self.hz_n)),
+            final_state: final_state.name(),
+            ended_by,
+            faults: self.faults.names().collect(),
+            signal: (ended_by == "interrupt").then(crate::signals::interrupt_name),
+        }
+    }
+}
+
+/// Holds the release until `--for` passes, a fault or a signal, recording into `held`.
+fn hold(
+    a: &ReleaseArgs,
+    s: &mut Connection,
+    stop: &AtomicBool,
+    held: &mut Held,
+    out: &mut impl Write,
+) -> Result<(), RigError> {
+    let scale = s.time_scale();
+    let wall_start = Instant::now();
+    let mut t0 = None;
+    while !stop.load(Ordering::SeqCst) {
+        if let Some(limit) = a.hold_for {
+            // A bound in wall time too, in case telemetry stops.
+            if wall_start.elapsed().as_secs_f64() > limit / scale + 5.0 {
+                held.ended_by = Some("for");
+                break;
+            }
+        }
+        let Some(t) = s.client.next_telemetry(Duration::from_millis(100))? else {
+            continue;
+        };
+        let start = *t0.get_or_insert(t.device_time_us);
+        let since = (t.device_time_us - start) as f64 / 1e6;
+        held.held_s = since;
+        if held.states.last() != Some(&t.state.name()) {
+            held.states.push(t.state.name());
+            if !a.json {
+                writeln!(
+                    out,
+                    "{since:7.2} s  {:<10} cam {:5.1} Hz  current {:5.2} A",
+                    t.state.name(),
+                    t.cam_speed_rad_s.abs() / std::f32::consts::TAU,
+                    t.current_a
+                )?;
+            }
+        }
+        if t.state == SupervisorState::Vibrating {
+            held.hz_sum += f64::from(t.cam_speed_rad_s.abs()) / std::f64::consts::TAU;
+            held.hz_n += 1;
+        }
+        if !t.faults.is_empty() || t.state == SupervisorState::Fault {
+            let latched = s.client.faults().map(|f| f.latched).unwrap_or(t.faults);
+            held.faults = t.faults | latched;
+            held.ended_by = Some("fault");
+            break;
+        }
+        if a.hold_for.is_some_and(|limit| since >= limit) {
+            held.ended_by = Some("for");
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// Watches the cam come to rest after the lock (a few device seconds at most); the state
+/// it ends in.
+fn come_to_rest(s: &mut Connection) -> Result<SupervisorState, RigError> {
+    let scale = s.time_scale();
+    let mut final_state = SupervisorState::Stopping;
+    let deadline = Instant::now() + Duration::from_secs_f64(3.0 / scale + 1.0);
+    while Instant::now() < deadline {
+        if let Some(t) = s.client.next_telemetry(Duration::from_millis(100))? {
+            final_state = t.state;
+            if matches!(t.state, SupervisorState::Locked | SupervisorState::Fault) {
+                break;
+            }
+        }
+    }
+    let _ = s.client.stop_telemetry();
+    Ok(final_state)
 }
 
 /// What the device reports once a release ends: whether the gear holds what hangs on it.

@@ -14,7 +14,7 @@ use clap::Args;
 use serde::Serialize;
 
 use crate::RigError;
-use crate::device::{VirtualDevice, WallNoise};
+use crate::virtual_device::{VirtualDevice, WallNoise};
 use sim::{EffectSpec, Preset, SimConfig};
 
 /// Arguments of `rig sim serve`.

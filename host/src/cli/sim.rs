@@ -166,183 +166,198 @@ struct SweepJson {
 
 /// Runs `rig sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode, RigError> {
-    let mut out = std::io::stdout().lock();
     match a.scenario {
-        Scenario::Fig5(a) => {
-            let opts = fig5::Fig5Options {
-                hold_s: a.hold,
-                vibration_hz: check_freq(a.freq)?,
-                after_stop_s: a
-                    .after_stop
-                    .unwrap_or(if designs_a_gear(a.model.as_deref())? {
-                        DESIGN_AFTER_STOP_S
-                    } else {
-                        fig5::Fig5Options::default().after_stop_s
-                    }),
-                seed: a.seed,
-                sensor_supply_v: a.sensor_supply_v,
-                effects: sim::Preset::by_name(&a.preset)?.effects,
-                ..Default::default()
-            };
-            let fitted = model_or_design(a.model.as_deref())?;
-            let r = crate::experiment::paper::fig5_fitted(&opts, fitted.as_ref())?;
-            if a.json {
-                super::print_json(&mut out, &r)?;
-            } else {
-                let [z1, z2, z3, z4] = r.z;
-                writeln!(
-                    out,
-                    "fig5, Z1..Z4 = {z1}, {z2}, {z3}, {z4}, 1.0 kg on 75 mm:"
-                )?;
-                writeln!(
-                    out,
-                    "  held without vibration for {:.1} s: {}",
-                    r.hold_s, r.held_without_vibration
-                )?;
-                match r.release_to_motion_s {
-                    Some(t) => writeln!(out, "  load moved {:.3} s after the release request", t)?,
-                    None => writeln!(out, "  load did not move after the release request")?,
-                }
-                writeln!(
-                    out,
-                    "  output speed after the cam stopped: {:.3} rad/s (mu_d*Lambda = {:.3})",
-                    r.output_speed_after_stop_rad_s, r.mu_d_lambda
-                )?;
-                writeln!(
-                    out,
-                    "  after the cam stopped: {} ({:.4} rad of travel)",
-                    if r.stops_after_vibration {
-                        "the output came to rest"
-                    } else {
-                        "the output kept moving"
-                    },
-                    r.after_stop_travel_rad
-                )?;
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        Scenario::Table1(a) => {
-            let fitted = model_or_design(a.model.as_deref())?;
-            let rows = crate::experiment::paper::table1_fitted(
-                &model::TABLE1,
-                f64::from(check_freq(a.freq)?),
-                a.seed,
-                sim::Preset::by_name(&a.preset)?.effects,
-                fitted.as_ref(),
-            )?;
-            if a.json {
-                super::print_json(&mut out, &rows)?;
-            } else {
-                writeln!(
-                    out,
-                    "table1 at tau_rot = {} N m, Z1,Z2,Z3,Z4:",
-                    reporting::human(table1::TAU_ROT)
-                )?;
-                for r in &rows {
-                    writeln!(
-                        out,
-                        "  {:<12} n={} without vibration: {:<11} with vibration: {:<11} {}",
-                        r.z.map(|v| v.to_string()).join(","),
-                        r.n,
-                        if r.backdriven_without_vibration {
-                            "backdriven"
-                        } else {
-                            "held"
-                        },
-                        if r.backdriven_with_vibration {
-                            "backdriven"
-                        } else {
-                            "held"
-                        },
-                        if r.agrees_with_paper {
-                            "as in the paper"
-                        } else {
-                            "DIFFERS from the paper"
-                        }
-                    )?;
-                }
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        Scenario::TorqueSweep(a) => {
-            let opts = sweep::SweepOptions {
-                loads: crate::sweep_report::sweep_loads(a.levels),
-                repeats: a.repeats,
-                rest_s: a.rest,
-                seed: a.seed,
-                sensor_supply_v: a.sensor_supply_v,
-                effects: sim::Preset::by_name(&a.preset)?.effects,
-                ..Default::default()
-            };
-            let fitted = fitted_model(a.model.as_deref())?;
-            let (points, estimate_rms_error_nm) =
-                crate::experiment::paper::torque_sweep_with_error(&opts, fitted.as_ref())?;
-            if let Some(path) = &a.csv {
-                crate::sweep_report::write_csv(&points, path)?;
-            }
-            let summary = sweep::summarise(&points, &opts);
-            if a.json {
-                let json = SweepJson {
-                    summary,
-                    estimate_rms_error_nm,
-                };
-                super::print_json(&mut out, &json)?;
-            } else {
-                writeln!(out, "torque sweep: {} points", summary.points)?;
-                for (v, hz) in &summary.mean_hz_per_voltage {
-                    writeln!(out, "  {v:.1} V: {hz:.2} Hz mean cam frequency")?;
-                }
-                writeln!(
-                    out,
-                    "  current grows with load: {}, with speed: {}",
-                    summary.current_grows_with_load, summary.current_grows_with_speed
-                )?;
-                writeln!(
-                    out,
-                    "  tau_cam estimate grows with load: {}, with speed: {}",
-                    summary.tau_cam_grows_with_load, summary.tau_cam_grows_with_speed
-                )?;
-                writeln!(
-                    out,
-                    "  RMS(tau_cam measured - Eq. 10) = {:.2} N mm",
-                    summary.rmse_tau_cam_vs_eq10_nm * 1e3
-                )?;
-                writeln!(
-                    out,
-                    "  RMS(firmware's tau_cam estimate - plant's true cam torque) = {:.2} N mm",
-                    estimate_rms_error_nm * 1e3
-                )?;
-            }
-            Ok(ExitCode::SUCCESS)
-        }
+        Scenario::Fig5(a) => fig5(a),
+        Scenario::Table1(a) => table1(a),
+        Scenario::TorqueSweep(a) => torque_sweep(a),
         Scenario::Serve(a) => super::serve::run(a),
-        Scenario::Faults(a) => {
-            let outcomes = faults::run(&a.drills, a.seed)?;
-            if a.json {
-                super::print_json(&mut out, &outcomes)?;
+        Scenario::Faults(a) => fault_drills(a),
+    }
+}
+
+/// Runs `rig sim` with Fig. 5 on the virtual rig.
+fn fig5(a: Fig5Args) -> Result<ExitCode, RigError> {
+    let mut out = std::io::stdout().lock();
+    let opts = fig5::Fig5Options {
+        hold_s: a.hold,
+        vibration_hz: check_freq(a.freq)?,
+        after_stop_s: a
+            .after_stop
+            .unwrap_or(if designs_a_gear(a.model.as_deref())? {
+                DESIGN_AFTER_STOP_S
             } else {
-                for o in &outcomes {
-                    writeln!(
-                        out,
-                        "  {:<16} motor off: {:<5} latched: {:<5} safe after {} faults: {}",
-                        o.name,
-                        o.motor_off,
-                        o.fault_latched,
-                        o.time_to_safe_s
-                            .map(|t| format!("{t:.3} s"))
-                            .unwrap_or_else(|| "never".into()),
-                        o.faults.join(",")
-                    )?;
+                fig5::Fig5Options::default().after_stop_s
+            }),
+        seed: a.seed,
+        sensor_supply_v: a.sensor_supply_v,
+        effects: sim::Preset::by_name(&a.preset)?.effects,
+        ..Default::default()
+    };
+    let fitted = model_or_design(a.model.as_deref())?;
+    let r = crate::experiment::paper::fig5_fitted(&opts, fitted.as_ref())?;
+    if a.json {
+        super::print_json(&mut out, &r)?;
+    } else {
+        let [z1, z2, z3, z4] = r.z;
+        writeln!(
+            out,
+            "fig5, Z1..Z4 = {z1}, {z2}, {z3}, {z4}, 1.0 kg on 75 mm:"
+        )?;
+        writeln!(
+            out,
+            "  held without vibration for {:.1} s: {}",
+            r.hold_s, r.held_without_vibration
+        )?;
+        match r.release_to_motion_s {
+            Some(t) => writeln!(out, "  load moved {:.3} s after the release request", t)?,
+            None => writeln!(out, "  load did not move after the release request")?,
+        }
+        writeln!(
+            out,
+            "  output speed after the cam stopped: {:.3} rad/s (mu_d*Lambda = {:.3})",
+            r.output_speed_after_stop_rad_s, r.mu_d_lambda
+        )?;
+        writeln!(
+            out,
+            "  after the cam stopped: {} ({:.4} rad of travel)",
+            if r.stops_after_vibration {
+                "the output came to rest"
+            } else {
+                "the output kept moving"
+            },
+            r.after_stop_travel_rad
+        )?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Runs `rig sim` with Table 1 on the virtual rig.
+fn table1(a: Table1Args) -> Result<ExitCode, RigError> {
+    let mut out = std::io::stdout().lock();
+    let fitted = model_or_design(a.model.as_deref())?;
+    let rows = crate::experiment::paper::table1_fitted(
+        &model::TABLE1,
+        f64::from(check_freq(a.freq)?),
+        a.seed,
+        sim::Preset::by_name(&a.preset)?.effects,
+        fitted.as_ref(),
+    )?;
+    if a.json {
+        super::print_json(&mut out, &rows)?;
+    } else {
+        writeln!(
+            out,
+            "table1 at tau_rot = {} N m, Z1,Z2,Z3,Z4:",
+            reporting::human(table1::TAU_ROT)
+        )?;
+        for r in &rows {
+            writeln!(
+                out,
+                "  {:<12} n={} without vibration: {:<11} with vibration: {:<11} {}",
+                r.z.map(|v| v.to_string()).join(","),
+                r.n,
+                if r.backdriven_without_vibration {
+                    "backdriven"
+                } else {
+                    "held"
+                },
+                if r.backdriven_with_vibration {
+                    "backdriven"
+                } else {
+                    "held"
+                },
+                if r.agrees_with_paper {
+                    "as in the paper"
+                } else {
+                    "DIFFERS from the paper"
                 }
-            }
-            let all_safe = outcomes.iter().all(|o| o.motor_off && o.fault_latched);
-            Ok(if all_safe {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::FAILURE
-            })
+            )?;
         }
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Runs `rig sim` with the torque sweep of Figs. 8-9 on the virtual rig.
+fn torque_sweep(a: SweepArgs) -> Result<ExitCode, RigError> {
+    let mut out = std::io::stdout().lock();
+    let opts = sweep::SweepOptions {
+        loads: crate::sweep_report::sweep_loads(a.levels),
+        repeats: a.repeats,
+        rest_s: a.rest,
+        seed: a.seed,
+        sensor_supply_v: a.sensor_supply_v,
+        effects: sim::Preset::by_name(&a.preset)?.effects,
+        ..Default::default()
+    };
+    let fitted = fitted_model(a.model.as_deref())?;
+    let (points, estimate_rms_error_nm) =
+        crate::experiment::paper::torque_sweep_with_error(&opts, fitted.as_ref())?;
+    if let Some(path) = &a.csv {
+        crate::sweep_report::write_csv(&points, path)?;
+    }
+    let summary = sweep::summarise(&points, &opts);
+    if a.json {
+        let json = SweepJson {
+            summary,
+            estimate_rms_error_nm,
+        };
+        super::print_json(&mut out, &json)?;
+    } else {
+        writeln!(out, "torque sweep: {} points", summary.points)?;
+        for (v, hz) in &summary.mean_hz_per_voltage {
+            writeln!(out, "  {v:.1} V: {hz:.2} Hz mean cam frequency")?;
+        }
+        writeln!(
+            out,
+            "  current grows with load: {}, with speed: {}",
+            summary.current_grows_with_load, summary.current_grows_with_speed
+        )?;
+        writeln!(
+            out,
+            "  tau_cam estimate grows with load: {}, with speed: {}",
+            summary.tau_cam_grows_with_load, summary.tau_cam_grows_with_speed
+        )?;
+        writeln!(
+            out,
+            "  RMS(tau_cam measured - Eq. 10) = {:.2} N mm",
+            summary.rmse_tau_cam_vs_eq10_nm * 1e3
+        )?;
+        writeln!(
+            out,
+            "  RMS(firmware's tau_cam estimate - plant's true cam torque) = {:.2} N mm",
+            estimate_rms_error_nm * 1e3
+        )?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Runs `rig sim` with the fault drills.
+fn fault_drills(a: FaultArgs) -> Result<ExitCode, RigError> {
+    let mut out = std::io::stdout().lock();
+    let outcomes = faults::run(&a.drills, a.seed)?;
+    if a.json {
+        super::print_json(&mut out, &outcomes)?;
+    } else {
+        for o in &outcomes {
+            writeln!(
+                out,
+                "  {:<16} motor off: {:<5} latched: {:<5} safe after {} faults: {}",
+                o.name,
+                o.motor_off,
+                o.fault_latched,
+                o.time_to_safe_s
+                    .map(|t| format!("{t:.3} s"))
+                    .unwrap_or_else(|| "never".into()),
+                o.faults.join(",")
+            )?;
+        }
+    }
+    let all_safe = outcomes.iter().all(|o| o.motor_off && o.fault_latched);
+    Ok(if all_safe {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
 }
 
 /// The rig file of `--model`, which must have a fitted `[model]`.

@@ -295,7 +295,7 @@ mod tests {
     #[cfg(unix)]
     #[test]
     fn held_port_is_busy_not_missing() {
-        let (_master, name) = crate::device::PtyMaster::open().expect("a pseudo-terminal");
+        let (_master, name) = crate::virtual_device::PtyMaster::open().expect("a pseudo-terminal");
         let first = open_serial(&name, 921_600).expect("the first open");
         let err = open_serial(&name, 921_600).expect_err("the port is held");
         let text = err.to_string();

@@ -1,5 +1,5 @@
 //! [`Bench`]: the one interface the procedures drive a rig through, with its two
-//! implementations: [`SimBench`] (the in-process virtual rig, [`sim::SimLink`], virtual
+//! implementations: [`InProcessBench`] (the in-process virtual rig, [`sim::SimLink`], virtual
 //! time) and [`DeviceBench`] (a device over the serial client: a real rig, a served virtual
 //! rig, or `--sim`); and [`Operator`], the person at the bench (prompts on stderr, answers
 //! on stdin).
@@ -11,11 +11,13 @@ use std::time::{Duration, Instant};
 
 use protocol::{
     Capabilities, DeviceInfo, DeviceMessage, NackCode, Reply, Request, RigParameters, SimCommand,
-    TelemetrySample,
+    SupervisorState, TelemetrySample,
 };
 
+pub use sim::RigLink;
+
 use crate::RigError;
-use crate::connection::Session;
+use crate::connection::Connection;
 
 /// Output rotation that counts as "the output moved", rad: 0.1 mm of rope on the paper's
 /// 75 mm pulley (docs/plans.md).
@@ -32,19 +34,15 @@ pub fn moved(from_rad: Option<f64>, to_rad: Option<f64>) -> Option<bool> {
     }
 }
 
-/// A rig the procedures drive: requests, telemetry and time, the same on the virtual rig
-/// and on a real one.
-pub trait Bench {
+/// A rig the procedures drive, the same on the virtual rig and on a real one: the one rig
+/// link ([`RigLink`]: requests, whose refusal is [`RigError::Refused`], heartbeats and
+/// device time, as the shared scenarios use it) with what the procedures read besides
+/// (identity, telemetry samples, temperature).
+pub trait Bench: RigLink<Error = RigError> {
     /// What the device said at `Hello`.
     fn info(&self) -> &DeviceInfo;
-    /// Sends `req`; a refusal is [`RigError::Refused`].
-    fn request(&mut self, req: &Request) -> Result<Reply, RigError>;
-    /// Sends heartbeats during every wait (true) or not.
-    fn keep_alive(&mut self, on: bool);
     /// The next telemetry sample, waiting up to about 2 device seconds (`None`: none came).
     fn sample(&mut self) -> Result<Option<TelemetrySample>, RigError>;
-    /// Lets `seconds` of device time pass (heartbeats continue when kept alive).
-    fn wait(&mut self, seconds: f64) -> Result<(), RigError>;
     /// The motor temperature of the newest health sample, deg C, when sensed.
     fn motor_temp_c(&self) -> Option<f64>;
     /// The output angle as someone standing at a virtual rig sees it, rad (`None` on a
@@ -135,7 +133,7 @@ pub trait Bench {
 }
 
 /// The in-process virtual rig, in virtual time (as fast as the machine runs it).
-pub struct SimBench {
+pub struct InProcessBench {
     /// The session with the simulated rig.
     pub link: sim::SimLink,
     info: DeviceInfo,
@@ -146,7 +144,7 @@ pub struct SimBench {
     cam_torque: Vec<(f64, model::plant::CamTorqueLedger)>,
 }
 
-impl SimBench {
+impl InProcessBench {
     /// Boots `config`'s rig and opens the session (hello).
     pub fn new(mut config: sim::SimConfig) -> Result<Self, RigError> {
         virtual_release_limit(&mut config);
@@ -189,10 +187,16 @@ impl SimBench {
     }
 }
 
-impl Bench for SimBench {
-    fn info(&self) -> &DeviceInfo {
-        &self.info
-    }
+/// The newest telemetry state of `bench` (a sample taken for it).
+fn sampled_state<B: Bench + ?Sized>(bench: &mut B) -> Result<SupervisorState, RigError> {
+    bench
+        .sample()?
+        .map(|t| t.state)
+        .ok_or_else(|| RigError::Protocol("the rig sends no telemetry".into()))
+}
+
+impl RigLink for InProcessBench {
+    type Error = RigError;
 
     fn request(&mut self, req: &Request) -> Result<Reply, RigError> {
         if let Request::StartTelemetry { rate_hz } = req {
@@ -213,6 +217,21 @@ impl Bench for SimBench {
             .keep_alive(on.then_some(sim::scenarios::HEARTBEAT_S));
     }
 
+    fn wait(&mut self, seconds: f64) -> Result<(), RigError> {
+        self.link.wait(seconds);
+        Ok(())
+    }
+
+    fn state(&mut self) -> Result<SupervisorState, RigError> {
+        sampled_state(self)
+    }
+}
+
+impl Bench for InProcessBench {
+    fn info(&self) -> &DeviceInfo {
+        &self.info
+    }
+
     fn sample(&mut self) -> Result<Option<TelemetrySample>, RigError> {
         let step = 1.0 / self.rate_hz;
         let mut waited = 0.0;
@@ -228,11 +247,6 @@ impl Bench for SimBench {
             }
         }
         Ok(None)
-    }
-
-    fn wait(&mut self, seconds: f64) -> Result<(), RigError> {
-        self.link.wait(seconds);
-        Ok(())
     }
 
     fn motor_temp_c(&self) -> Option<f64> {
@@ -253,13 +267,13 @@ impl Bench for SimBench {
 /// A device over the serial client: a real rig, a served virtual rig, or `--sim`.
 pub struct DeviceBench {
     /// The session.
-    pub session: Session,
+    pub session: Connection,
     temp_c: Option<f64>,
 }
 
 impl DeviceBench {
     /// Wraps an open session.
-    pub fn new(session: Session) -> Self {
+    pub fn new(session: Connection) -> Self {
         Self {
             session,
             temp_c: None,
@@ -280,22 +294,11 @@ impl DeviceBench {
     }
 }
 
-impl Bench for DeviceBench {
-    fn info(&self) -> &DeviceInfo {
-        &self.session.info
-    }
+impl RigLink for DeviceBench {
+    type Error = RigError;
 
     fn request(&mut self, req: &Request) -> Result<Reply, RigError> {
         self.session.client.request(req)
-    }
-
-    fn start_telemetry(&mut self, rate_hz: u16) -> Result<(), RigError> {
-        self.session.client.start_telemetry(rate_hz)
-    }
-
-    fn stop_telemetry(&mut self) -> Result<(), RigError> {
-        // Also drops the samples received but not taken: the next reading is fresh.
-        self.session.client.stop_telemetry()
     }
 
     fn keep_alive(&mut self, on: bool) {
@@ -303,21 +306,6 @@ impl Bench for DeviceBench {
             self.session.client.start_keep_alive();
         } else {
             self.session.client.stop_keep_alive();
-        }
-    }
-
-    fn sample(&mut self) -> Result<Option<TelemetrySample>, RigError> {
-        let scale = self.session.time_scale().max(1e-9);
-        // Two device seconds, and at least one wall-clock second: a virtual device on a busy
-        // machine stalls for longer than its speed-up suggests.
-        let deadline = Instant::now() + Duration::from_secs_f64((2.0 / scale).max(1.0));
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            match self.session.client.recv(left)? {
-                Some(DeviceMessage::Telemetry(t)) => return Ok(Some(t)),
-                Some(other) => self.note(&other),
-                None => return Ok(None),
-            }
         }
     }
 
@@ -331,6 +319,40 @@ impl Bench for DeviceBench {
             }
             if let Some(msg) = self.session.client.recv(left)? {
                 self.note(&msg);
+            }
+        }
+    }
+
+    fn state(&mut self) -> Result<SupervisorState, RigError> {
+        sampled_state(self)
+    }
+}
+
+impl Bench for DeviceBench {
+    fn info(&self) -> &DeviceInfo {
+        &self.session.info
+    }
+
+    fn start_telemetry(&mut self, rate_hz: u16) -> Result<(), RigError> {
+        self.session.client.start_telemetry(rate_hz)
+    }
+
+    fn stop_telemetry(&mut self) -> Result<(), RigError> {
+        // Also drops the samples received but not taken: the next reading is fresh.
+        self.session.client.stop_telemetry()
+    }
+
+    fn sample(&mut self) -> Result<Option<TelemetrySample>, RigError> {
+        let scale = self.session.time_scale().max(1e-9);
+        // Two device seconds, and at least one wall-clock second: a virtual device on a busy
+        // machine stalls for longer than its speed-up suggests.
+        let deadline = Instant::now() + Duration::from_secs_f64((2.0 / scale).max(1.0));
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.session.client.recv(left)? {
+                Some(DeviceMessage::Telemetry(t)) => return Ok(Some(t)),
+                Some(other) => self.note(&other),
+                None => return Ok(None),
             }
         }
     }

@@ -18,7 +18,7 @@ pub mod paper;
 pub mod plan;
 pub mod sweep;
 
-pub use bench::{Bench, DeviceBench, Operator, SimBench};
+pub use bench::{Bench, DeviceBench, InProcessBench, Operator};
 pub use plan::Plan;
 
 /// The mass that loads the output with `tau_rot_nm` on the paper's output pulley (radius

@@ -1,13 +1,13 @@
 //! The paper's experiments on the in-process virtual rig, in virtual time, run by the
 //! procedures ([`super::sweep`], [`super::backdrive`], [`super::hold_release`]) through
-//! [`SimBench`]: one implementation behind `rig sim torque-sweep|table1|fig5`, `rig demo`
+//! [`InProcessBench`]: one implementation behind `rig sim torque-sweep|table1|fig5`, `rig demo`
 //! and the software-in-the-loop tests, with their results in the shapes those print
 //! ([`sim::scenarios`]' `SweepPoint`, `Table1Row`, `Fig5Result`).
 
 use model::plant::Load;
 use sim::scenarios::{fig5, sweep, table1};
 
-use super::{Operator, Plan, SimBench, backdrive, hold_release};
+use super::{InProcessBench, Operator, Plan, backdrive, hold_release};
 use crate::RigError;
 
 /// The virtual rig with gear set `z` and `load` hung, the sensor-noise `seed` and the
@@ -62,7 +62,7 @@ pub fn torque_sweep_with_error(
     plan.seed = opts.seed;
     plan.window_s = opts.window_s;
     let window_s = plan.window_s;
-    let mut bench = SimBench::new(config)?;
+    let mut bench = InProcessBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
     let setup = procedure::SweepSetup {
         plan,
@@ -168,7 +168,7 @@ pub fn table1_fitted(
             sim::preset::apply_model(rig, &mut config.plant)?;
         }
         let gear = config.plant.drive.gear;
-        let mut bench = SimBench::new(config)?;
+        let mut bench = InProcessBench::new(config)?;
         let mut operator = Operator::scripted(b"", false);
         let Some(v) = backdrive::run(&mut bench, &mut operator, &opts, Some(z))? else {
             continue;
@@ -221,7 +221,7 @@ pub fn fig5_history(
     let z = config.plant.drive.gear.z();
     let x = config.plant.drive.gear.shift();
     let mu_d_lambda = config.plant.mu_d * config.plant.drive.gear.big_lambda();
-    let mut bench = SimBench::new(config)?;
+    let mut bench = InProcessBench::new(config)?;
     let mut operator = Operator::scripted(b"", false);
     let procedure = hold_release::HoldRelease {
         load_nm: None,

@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use super::bench::{Bench, Go, Operator, Verdict, interrupted};
 use super::plan::{Plan, Run};
 use crate::RigError;
+use crate::provenance::{Header, Provenance};
 
 /// Telemetry rate during a point, Hz.
 pub const TELEMETRY_HZ: u16 = 100;
@@ -95,75 +96,34 @@ pub struct SweepSetup {
     pub command: String,
 }
 
-/// The provenance header: `#` lines `rig explain` skips.
+/// The provenance header of a sweep on `bench` ([`crate::provenance`]).
 pub fn provenance<B: Bench + ?Sized>(
     bench: &mut B,
     setup: &SweepSetup,
 ) -> Result<String, RigError> {
     let info = bench.info().clone();
-    let cal = bench.calibration()?;
-    let fw = info.firmware_version;
-    let date = httpdate(std::time::SystemTime::now());
-    Ok(format!(
-        "# rig experiment torque-sweep ({})\n# date: {date}\n# host: rig {}\n# firmware: {}.{}.{} build {} board {} protocol {} capabilities {}\n# calibration ({}): {}\n# window: {}\n# plan: {}\n{}",
-        setup.command,
-        env!("CARGO_PKG_VERSION"),
-        fw.major,
-        fw.minor,
-        fw.patch,
-        info.firmware_build.as_str(),
-        info.board.as_str(),
-        info.protocol_version,
-        if info.capabilities.is_empty() {
-            "none".to_string()
-        } else {
-            info.capabilities.to_string()
-        },
-        info.parameters_status.name(),
-        serde_json::to_string(&cal).unwrap_or_default(),
-        match setup.window {
+    let calibration = bench.calibration()?;
+    Ok(Provenance {
+        procedure: "rig experiment torque-sweep",
+        command: &setup.command,
+        date: std::time::SystemTime::now(),
+        info: &info,
+        calibration: &calibration,
+        window: setup.window.describe(),
+        plan: &setup.plan,
+        regenerative: model::hardware::board::REGENERATIVE_DECAY,
+    }
+    .header())
+}
+
+impl Window {
+    /// The window in words, as the provenance states it.
+    pub fn describe(self) -> &'static str {
+        match self {
             Window::Start => "start of constant cam rotation",
             Window::Revolutions => "whole cam revolutions from the start of constant rotation",
-        },
-        setup.plan.one_line(),
-        drive_line(model::hardware::board::REGENERATIVE_DECAY),
-    ))
-}
-
-/// The provenance line of the drive's decay mode (the board setting the firmware is built
-/// with and the virtual rig follows), which `rig explain` reads ([`read_drive`]).
-pub fn drive_line(regenerative: bool) -> String {
-    format!(
-        "{DRIVE_PREFIX}{regenerative} (inertia-rectification kappa = {})\n",
-        model::effects::drive_kappa(regenerative)
-    )
-}
-
-const DRIVE_PREFIX: &str = "# drive: regenerative_decay = ";
-
-/// The drive's decay mode from a measured CSV's provenance ([`drive_line`]), if the file
-/// says it (files from `rig experiment torque-sweep` do): only the leading `#` lines are
-/// read.
-pub fn read_drive(path: &Path) -> Option<bool> {
-    use std::io::BufRead;
-    let file = std::fs::File::open(path).ok()?;
-    std::io::BufReader::new(file)
-        .lines()
-        .map_while(Result::ok)
-        .take_while(|l| l.starts_with('#'))
-        .find_map(|l| {
-            let rest = l.strip_prefix(DRIVE_PREFIX)?;
-            match rest.split_whitespace().next()? {
-                "true" => Some(true),
-                "false" => Some(false),
-                _ => None,
-            }
-        })
-}
-
-/// A UTC date and time, `2026-11-22T23:55:00Z`.
-fn httpdate(t: std::time::SystemTime) -> String {
-    reporting::UtcTime::of(t).iso()
+        }
+    }
 }
 
 /// The rows already in `path` and its plan line (for `--resume`).
@@ -173,10 +133,7 @@ pub fn read_rows(path: &Path) -> Result<(Vec<Row>, Option<String>), RigError> {
         path: path.display().to_string(),
         source,
     })?;
-    let plan = text
-        .lines()
-        .find_map(|l| l.strip_prefix("# plan: "))
-        .map(str::to_string);
+    let plan = Header::parse(&text).plan_line;
     let mut reader = csv::ReaderBuilder::new()
         .comment(Some(b'#'))
         .flexible(true)
@@ -217,15 +174,41 @@ impl Row {
     }
 }
 
+impl Row {
+    /// The row as the explanation reads it (`rig explain`'s columns).
+    pub fn measured(&self) -> explain::MeasuredRow {
+        explain::MeasuredRow {
+            omega_n: self.omega_n_rad_s,
+            tau_rot: self.tau_rot_nm,
+            i_in: Some(self.i_in_a),
+            t_s: Some(self.t_s),
+            v_in: self.v_in_v,
+            temp_c: self.temp_c,
+            backdriven: self.backdriven.map(|b| b == 1),
+        }
+    }
+}
+
 fn csv_line(row: &Row) -> Result<String, RigError> {
+    csv_text([row], false)
+}
+
+/// `rows` as CSV text, numbers as people write them ([`Row::for_people`]), under the
+/// column names when `header` (and there is a row).
+pub fn csv_text<'a>(
+    rows: impl IntoIterator<Item = &'a Row>,
+    header: bool,
+) -> Result<String, RigError> {
     let mut w = csv::WriterBuilder::new()
-        .has_headers(false)
+        .has_headers(header)
         .from_writer(Vec::new());
-    w.serialize(row.for_people())
-        .map_err(|e| RigError::BadValue {
-            what: "a sweep row".into(),
-            why: e.to_string(),
-        })?;
+    for row in rows {
+        w.serialize(row.for_people())
+            .map_err(|e| RigError::BadValue {
+                what: "a sweep row".into(),
+                why: e.to_string(),
+            })?;
+    }
     let bytes = w.into_inner().map_err(|e| RigError::BadValue {
         what: "a sweep row".into(),
         why: e.to_string(),
@@ -844,26 +827,8 @@ mod tests {
         assert!(!load_protection_only(FaultFlags::empty()));
     }
 
-    #[test]
-    fn the_drive_line_is_read_back_from_the_provenance_only() {
-        let dir = tempfile::tempdir().unwrap();
-        for regenerative in [false, true] {
-            let path = dir.path().join(format!("d{regenerative}.csv"));
-            let text = format!(
-                "# plan: {{}}\n{}point,i_in_a\n0,1.0\n",
-                drive_line(regenerative)
-            );
-            std::fs::write(&path, text).unwrap();
-            assert_eq!(read_drive(&path), Some(regenerative));
-        }
-        // Not in the leading comments (or absent): unknown, the paper's Eq. (10) stays.
-        let path = dir.path().join("late.csv");
-        std::fs::write(&path, format!("point,i_in_a\n{}0,1.0\n", drive_line(true))).unwrap();
-        assert_eq!(read_drive(&path), None);
-        assert!(drive_line(false).contains("kappa = -0.5"));
-    }
     use super::*;
-    use crate::experiment::bench::SimBench;
+    use crate::experiment::bench::InProcessBench;
 
     #[test]
     fn a_plan_is_checked_whole_before_the_first_point() {
@@ -891,7 +856,7 @@ mod tests {
         // Nothing ran: the sweep refuses before its first point and writes no file.
         let dir = tempfile::tempdir().unwrap();
         let csv = dir.path().join("x.csv");
-        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut bench = InProcessBench::new(sim::SimConfig::paper()).unwrap();
         let mut op = Operator::scripted(b"", false);
         let setup = SweepSetup {
             plan,
@@ -905,16 +870,10 @@ mod tests {
     }
 
     #[test]
-    fn dates_are_iso() {
-        let t = std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_795_910_400);
-        assert_eq!(httpdate(t), "2026-11-29T00:00:00Z");
-    }
-
-    #[test]
     fn quick_sweep_on_the_virtual_rig_is_read_by_explain() {
         let dir = tempfile::tempdir().unwrap();
         let csv = dir.path().join("sweep.csv");
-        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut bench = InProcessBench::new(sim::SimConfig::paper()).unwrap();
         let mut op = Operator::scripted(b"", false);
         let setup = SweepSetup {
             plan: Plan::quick(),
@@ -970,7 +929,7 @@ mod tests {
             "cl.toml",
         )
         .unwrap();
-        let mut bench = SimBench::new(sim::SimConfig::paper()).unwrap();
+        let mut bench = InProcessBench::new(sim::SimConfig::paper()).unwrap();
         let mut op = Operator::scripted(b"", false);
         let setup = SweepSetup {
             plan,

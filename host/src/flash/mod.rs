@@ -52,3 +52,16 @@ pub fn board_map() -> Result<MemoryMap, RigError> {
         why,
     })
 }
+
+/// How programming went.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct FlashTimes {
+    /// Erasing, s.
+    pub erase_s: f64,
+    /// Programming, s.
+    pub program_s: f64,
+    /// Reading back, s.
+    pub verify_s: f64,
+    /// Everything, from the first sector erased to the reset, s.
+    pub total_s: f64,
+}

@@ -305,18 +305,7 @@ pub fn attach(probe: Probe, chip: &str, probe_name: &str) -> Result<Session, Rig
         })
 }
 
-/// How programming went.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct FlashTimes {
-    /// Erasing, s.
-    pub erase_s: f64,
-    /// Programming, s.
-    pub program_s: f64,
-    /// Reading back, s.
-    pub verify_s: f64,
-    /// Everything, from the first sector erased to the reset, s.
-    pub total_s: f64,
-}
+pub use super::FlashTimes;
 
 /// Programs `image` (only the sectors it touches, no chip erase), reads it back, and resets
 /// the chip so the new firmware runs. `show_progress` draws bars on stderr.

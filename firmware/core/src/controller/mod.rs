@@ -21,6 +21,7 @@ use crate::current::CurrentSense;
 use crate::encoder::CamEncoder;
 use crate::estimator::TorqueEstimator;
 use crate::faults::FaultMonitor;
+use crate::release::Release;
 use crate::speed_loop::SpeedLoop;
 use crate::supervisor::Supervisor;
 use crate::tx_queue::{CAPTURE_IN_FLIGHT, REPLY_RESERVE, TxQueue};
@@ -48,18 +49,8 @@ pub struct Core {
     pub(crate) tx: TxQueue,
     pub(crate) now_us: u64,
     last_step_us: Option<u64>,
-    pub(crate) host_release: bool,
-    pub(crate) host_target_hz: f32,
-    /// A live open-loop drive (`Request::OpenLoop`): the bridge voltage asked for, V.
-    pub(crate) open_loop_volts: Option<f32>,
-    /// Open-loop settle check: position and time of the last revolution start, and the
-    /// period of the revolution before it (0: none yet).
-    open_loop_rev: (i64, u64, u64),
-    open_loop_steady: bool,
-    /// When the last accepted request arrived: the release heartbeat.
-    pub(crate) last_request_us: u64,
-    pub(crate) button_held: bool,
-    button_armed: bool,
+    /// The release requests (host, open loop, button) and their heartbeat.
+    pub(crate) release: Release,
     duty: f32,
     enable: bool,
     pub(crate) persist: Persist,
@@ -113,14 +104,7 @@ impl Core {
             tx: TxQueue::new(),
             now_us: 0,
             last_step_us: None,
-            host_release: false,
-            host_target_hz: config.supervisor.default_freq_hz,
-            open_loop_volts: None,
-            open_loop_rev: (0, 0, 0),
-            open_loop_steady: false,
-            last_request_us: 0,
-            button_held: false,
-            button_armed: false,
+            release: Release::new(config.supervisor.default_freq_hz),
             duty: 0.0,
             enable: false,
             persist: Persist::Idle,
@@ -162,6 +146,22 @@ impl Core {
         self.faults.latched().contains(FaultFlags::HW_OVERCURRENT)
     }
 
+    /// The supervisor's state (as in [`Core::status`], without building the whole snapshot).
+    pub fn state(&self) -> protocol::SupervisorState {
+        self.supervisor.state()
+    }
+
+    /// The latched faults (as in [`Core::status`]).
+    pub fn latched_faults(&self) -> FaultFlags {
+        self.faults.latched()
+    }
+
+    /// The current sensor's measured zero, ADC counts, once measured (`None` while a
+    /// zeroing runs).
+    pub fn current_zero_adc(&self) -> Option<f32> {
+        (!self.current.zeroing()).then(|| self.current.zero_counts())
+    }
+
     /// The configuration.
     pub fn config(&self) -> &CoreConfig {
         &self.config
@@ -183,10 +183,7 @@ impl Core {
             return;
         }
         self.faults.raise(flags, self.now_us);
-        self.host_release = false;
-        self.open_loop_volts = None;
-        self.button_armed = false;
-        self.button_held = false;
+        self.release.drop_all();
         self.estimator.stop();
     }
 
@@ -249,9 +246,9 @@ impl Core {
             revolutions: self.estimator.revolutions(),
             keeps_moving_after_stop: self.derived.keeps_moving,
             holds_at_rest: self.derived.holds_at_rest,
-            host_release: self.host_release,
-            open_loop_volts: self.open_loop_volts,
-            button_release: self.button_held,
+            host_release: self.release.host,
+            open_loop_volts: self.release.open_loop_volts,
+            button_release: self.release.button_held,
             current_zero_adc: self.current.zero_counts(),
             zeroing: self.current.zeroing(),
             parameters: self.parameters,

@@ -118,7 +118,7 @@ impl Core {
     /// voltage.
     fn drive_duty(&mut self, speed: f32, dt: f32) -> f32 {
         let dir = self.direction();
-        let Some(volts) = self.open_loop_volts else {
+        let Some(volts) = self.release.open_loop_volts else {
             let target = TAU * self.supervisor.target_hz();
             return self.speed_loop.update(target, speed, dt) * dir;
         };
@@ -147,17 +147,12 @@ impl Core {
     /// A host release or open-loop drive lapses without an accepted request for the comms
     /// timeout; the button must be let go once before it releases.
     fn update_release(&mut self, now: u64, button: bool) {
-        let lapsed = now.saturating_sub(self.last_request_us) > self.config.comms_timeout_us;
-        if (self.host_release || self.open_loop_volts.is_some()) && lapsed {
-            self.host_release = false;
-            self.open_loop_volts = None;
+        if self
+            .release
+            .update(now, button, self.config.comms_timeout_us)
+        {
             self.raise(FaultFlags::COMMS_TIMEOUT);
         }
-        // A button already held (at boot, or through a fault) must be let go once first.
-        if !button {
-            self.button_armed = true;
-        }
-        self.button_held = button && self.button_armed;
     }
 
     fn check_hardware(&mut self, now: u64, position: i64) {
@@ -231,24 +226,20 @@ impl Core {
         }
     }
 
-    fn requested_hz(&self) -> f32 {
-        if self.host_release {
-            self.host_target_hz
-        } else {
-            self.config.supervisor.default_freq_hz
-        }
-    }
-
     fn run_supervisor(&mut self, now: u64, speed: f32, position: i64) {
         let before = self.supervisor.state();
         let open_loop_settled = self
+            .release
             .open_loop_volts
-            .map(|_| self.open_loop_settled(now, position));
+            .map(|volts| self.open_loop_settled(now, position, volts));
+        let r = &self.release;
         let mut inputs = SupervisorInputs {
             now_us: now,
             open_loop_settled,
-            release_live: self.host_release || self.button_held || open_loop_settled.is_some(),
-            requested_hz: self.requested_hz().min(self.derived.max_hz),
+            release_live: r.host || r.button_held || open_loop_settled.is_some(),
+            requested_hz: r
+                .requested_hz(self.config.supervisor.default_freq_hz)
+                .min(self.derived.max_hz),
             faulted: !self.faults.latched().is_empty(),
             zero_ready: self.current.zero_valid() && !self.current.zeroing(),
             cam_speed_rad_s: speed,
@@ -273,23 +264,15 @@ impl Core {
         }
     }
 
-    /// Open-loop drive: the voltage ramp is done and two consecutive cam revolutions took
-    /// the same time within 2 % (a revolution mean: the cam's speed ripples within a turn).
-    fn open_loop_settled(&mut self, now: u64, position: i64) -> bool {
-        let goal = self.open_loop_volts.unwrap_or(0.0) / self.bus_supply_v() * self.direction();
+    /// Open-loop drive at `volts`: the voltage ramp is done and two consecutive cam
+    /// revolutions took the same time within 2 % (`OpenLoopSettle`).
+    fn open_loop_settled(&mut self, now: u64, position: i64, volts: f32) -> bool {
+        let goal = volts / self.bus_supply_v() * self.direction();
         let ramp_done = (self.duty - goal).abs() < 1e-3;
         let per_rev = i64::from(self.config.counts_per_rev());
-        let (start_pos, start_us, last_period) = self.open_loop_rev;
-        if !ramp_done {
-            self.open_loop_rev = (position, now, 0);
-            self.open_loop_steady = false;
-        } else if (position - start_pos).abs() >= per_rev {
-            let period = now.saturating_sub(start_us);
-            let diff = period.abs_diff(last_period);
-            self.open_loop_steady = last_period > 0 && diff * 50 <= last_period;
-            self.open_loop_rev = (position, now, period);
-        }
-        self.open_loop_steady
+        self.release
+            .open_loop
+            .update(now, position, per_rev, ramp_done)
     }
 }
 

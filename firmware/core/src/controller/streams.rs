@@ -104,8 +104,8 @@ impl Core {
         let mut s = StatusFlags::empty();
         s.set(StatusFlags::COASTS_AFTER_STOP, self.derived.keeps_moving);
         s.set(StatusFlags::NOT_SELF_LOCKING, !self.derived.holds_at_rest);
-        s.set(StatusFlags::HOST_RELEASE, self.host_release);
-        s.set(StatusFlags::BUTTON_RELEASE, self.button_held);
+        s.set(StatusFlags::HOST_RELEASE, self.release.host);
+        s.set(StatusFlags::BUTTON_RELEASE, self.release.button_held);
         s.set(
             StatusFlags::CAPTURE_RUNNING,
             self.capture.phase() == CapturePhase::Recording,
@@ -114,7 +114,10 @@ impl Core {
             StatusFlags::CALIBRATION_DEFAULTS,
             self.parameters_status != ParametersStatus::Valid,
         );
-        s.set(StatusFlags::OPEN_LOOP, self.open_loop_volts.is_some());
+        s.set(
+            StatusFlags::OPEN_LOOP,
+            self.release.open_loop_volts.is_some(),
+        );
         s.set(StatusFlags::OUTPUT_MOVING, self.output_moving());
         s
     }

@@ -22,6 +22,33 @@ fn core_fits_its_ram_share() {
     assert!((40_000..48_000).contains(&size), "{size} bytes");
 }
 
+#[test]
+fn the_binary_s_three_reads_agree_with_the_status_snapshot() {
+    let mut rig = Rig::new(0.5);
+    let agree = |rig: &Rig| {
+        let s = rig.core.status();
+        assert_eq!(rig.core.state(), s.state);
+        assert_eq!(rig.core.latched_faults(), s.latched_faults);
+        let zero = (!s.zeroing).then_some(s.current_zero_adc);
+        assert_eq!(rig.core.current_zero_adc(), zero);
+    };
+    // Zeroing at boot: no zero to hand to the trip yet.
+    rig.step();
+    agree(&rig);
+    assert_eq!(rig.core.current_zero_adc(), None);
+    rig.run_ms(1_000);
+    agree(&rig);
+    assert!(rig.core.current_zero_adc().is_some_and(|z| z > 1000.0));
+    // Vibrating, then a fault latched.
+    rig.vibrate(10.0);
+    agree(&rig);
+    assert_eq!(rig.core.state(), SupervisorState::Vibrating);
+    rig.adc_offset = 2000;
+    rig.run_ms(50);
+    agree(&rig);
+    assert!(!rig.core.latched_faults().is_empty());
+}
+
 /// The paper's (49, 51, 50, 50) gear set.
 pub(crate) const PAPER_Z: [u32; 4] = model::paper::RIG_Z;
 

@@ -32,7 +32,7 @@ use std::time::{Duration, Instant};
 use model::plant::Plant;
 
 use crate::RigError;
-use sim::{PLANT_HZ, SimConfig, SimRig};
+use sim::{ADC_HZ, SimConfig, SimRig};
 
 mod pty;
 
@@ -170,8 +170,7 @@ impl VirtualDevice {
 
     /// The paper's (49, 50) rig with `preset`, reporting itself as board `virtual`.
     pub fn paper_config(preset: &sim::Preset) -> SimConfig {
-        let mut config = SimConfig::paper();
-        config.core.board_name = "virtual";
+        let mut config = SimConfig::paper().virtual_board();
         config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
         preset.apply(&mut config.plant);
         config
@@ -187,8 +186,7 @@ impl VirtualDevice {
         rig: &rigfile::RigFile,
         preset: &sim::Preset,
     ) -> Result<SimConfig, RigError> {
-        let mut config = SimConfig::from_rig_file(rig)?;
-        config.core.board_name = "virtual";
+        let mut config = SimConfig::from_rig_file(rig)?.virtual_board();
         config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
         if rig.model.is_none() {
             preset.apply(&mut config.plant);
@@ -299,7 +297,7 @@ fn run(
     // The host's last byte, in virtual and in wall time; whether time waits for it.
     let mut last_rx = (0.0f64, Instant::now());
     let mut waiting = false;
-    let tick = 1.0 / f64::from(PLANT_HZ);
+    let tick = 1.0 / f64::from(ADC_HZ);
     while !shared.stop.load(Ordering::SeqCst) {
         let received = if master.wait_readable(POLL) {
             master.read_available(&mut buf)
@@ -383,7 +381,7 @@ mod tests {
         assert!((c.plant.effects.extra_viscous - 0.2e-3).abs() < 1e-12);
         assert_eq!(c.plant.effects.axial_friction_speed, None);
         assert_eq!(c.plant.mu_ax, 0.25);
-        assert_eq!(c.core.board_name, "virtual");
+        assert_eq!(c.core.board_name, sim::VIRTUAL_BOARD);
         assert!(
             c.core.output_encoder.is_some(),
             "as the paper's virtual device"

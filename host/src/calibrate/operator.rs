@@ -1,4 +1,4 @@
-//! The two benches: a person at a real rig (prompts on the terminal, gauge readings typed
+//! The two operators of a calibration: a person at a real rig (prompts on the terminal, gauge readings typed
 //! or from a CSV file), and the virtual device's plant (cam setup switched in the
 //! simulation, the gauge read from the simulated arm).
 
@@ -11,9 +11,9 @@ use std::time::Duration;
 use indicatif::{ProgressBar, ProgressDrawTarget};
 use model::plant::CamSetup;
 
-use super::{Bench, GaugeUnit, Reading, Setup, StepMeasurement, parse_reading};
+use super::{GaugeOperator, GaugeUnit, Reading, Setup, StepMeasurement, parse_reading};
 use crate::RigError;
-use crate::device::VirtualDevice;
+use crate::virtual_device::VirtualDevice;
 
 fn cam_setup(setup: Setup) -> CamSetup {
     match setup {
@@ -25,7 +25,7 @@ fn cam_setup(setup: Setup) -> CamSetup {
 
 /// The virtual device as the bench: the operator's hands are the simulation's.
 #[derive(Debug)]
-pub struct SimBench<'a> {
+pub struct VirtualOperator<'a> {
     device: &'a VirtualDevice,
     gauge: Option<Vec<f64>>,
     held_nmm: Option<f64>,
@@ -53,7 +53,7 @@ impl WindowMean {
     }
 }
 
-impl<'a> SimBench<'a> {
+impl<'a> VirtualOperator<'a> {
     /// The bench of `device`; `gauge` readings (N mm), when given, replace the simulated
     /// gauge.
     pub fn new(device: &'a VirtualDevice, gauge: Option<Vec<f64>>) -> Self {
@@ -71,7 +71,7 @@ fn virtual_gauge_nmm(device: &VirtualDevice) -> f64 {
     device.with_plant(|p| p.state().gauge_torque) * 1e3
 }
 
-impl Bench for SimBench<'_> {
+impl GaugeOperator for VirtualOperator<'_> {
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError> {
         self.device.with_plant(|p| p.set_cam(cam_setup(setup)));
         Ok(())
@@ -120,7 +120,7 @@ fn from_file(g: &[f64], step: usize) -> Result<Reading, RigError> {
 /// the screen, so it never draws over the prompt. With a virtual device (`--sim
 /// --operator`) the set-up also happens on the simulated rig, as the person's hands.
 #[derive(Debug)]
-pub struct OperatorBench<'a> {
+pub struct TerminalOperator<'a> {
     gauge: Option<Vec<f64>>,
     unit: GaugeUnit,
     progress: ProgressBar,
@@ -131,7 +131,7 @@ pub struct OperatorBench<'a> {
     window: WindowMean,
 }
 
-impl<'a> OperatorBench<'a> {
+impl<'a> TerminalOperator<'a> {
     /// Prompts through `progress`; `gauge` readings (N mm), when given, are used instead of
     /// asking; typed readings are in `unit`; `interrupted` (Ctrl-C) ends a wait.
     pub fn new(
@@ -212,7 +212,7 @@ impl<'a> OperatorBench<'a> {
     }
 }
 
-impl Bench for OperatorBench<'_> {
+impl GaugeOperator for TerminalOperator<'_> {
     fn prepare(&mut self, setup: Setup) -> Result<(), RigError> {
         if let Some(d) = self.device {
             d.with_plant(|p| p.set_cam(cam_setup(setup)));
