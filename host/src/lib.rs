@@ -40,11 +40,10 @@ pub mod virtual_device;
 
 pub use error::RigError;
 
-/// The device verbs' `--json` reports and the monitor log's columns for library users (the
-/// Python binding `backdrive_rig`): the command line's own definitions, re-exported.
+/// The device verbs' `--json` reports for library users (the Python binding
+/// `backdrive_rig`): the command line's own definitions, re-exported.
 pub mod reports {
     pub use crate::cli::clear::ClearReport;
     pub use crate::cli::faults::FaultsReport;
     pub use crate::cli::info::InfoReport;
-    pub use crate::cli::monitor::{CSV_HEADER as TELEMETRY_CSV_HEADER, Freshness};
 }

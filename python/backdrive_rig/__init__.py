@@ -43,6 +43,7 @@ __all__ = [
     "Report",
     "design",
     "explain",
+    "compare",
     "versions",
     "TELEMETRY_COLUMNS",
     "RigError",
@@ -597,3 +598,23 @@ def explain(
         )
     finally:
         os.unlink(path)
+
+
+def compare(
+    measured: PathLike,
+    model: Optional[PathLike] = None,
+    rig: Optional[PathLike] = None,
+    seed: int = 1,
+) -> Report:
+    """The simulation-versus-measurement gap (``rig compare --json``): the measured sweep
+    (a CSV path) replayed on the virtual rig with the base model (``rig``, default the
+    paper's or ``model``'s rig) and, with ``model``, a fitted rig file (``rig explain
+    --write-model``). Keys: ``gap_rmse_base_a``, ``gap_rmse_model_a``, ``rows``, ..."""
+    return _report(
+        _native.compare(
+            os.fspath(measured),
+            None if model is None else os.fspath(model),
+            None if rig is None else os.fspath(rig),
+            int(seed),
+        )
+    )

@@ -126,4 +126,10 @@ def explain(
     stated_noise_ma: Optional[float] = None,
     propose: bool = False,
 ) -> str: ...
+def compare(
+    measured: Union[str, PathLike[str]],
+    model: Optional[Union[str, PathLike[str]]] = None,
+    rig: Optional[Union[str, PathLike[str]]] = None,
+    seed: int = 1,
+) -> str: ...
 def versions() -> Tuple[str, int, str]: ...

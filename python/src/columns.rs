@@ -4,7 +4,7 @@
 //! --csv` for telemetry, `rig capture --csv` for captures.
 
 use host::client::{Capture, cam_angle_rad, current_amps};
-use host::reports::TELEMETRY_CSV_HEADER;
+use host::monitor::{CSV_HEADER as TELEMETRY_CSV_HEADER, MonitorRow};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
 
@@ -18,49 +18,41 @@ fn f64_bytes<'py>(py: Python<'py>, values: impl Iterator<Item = f64>) -> Bound<'
     PyBytes::new(py, &bytes).into_any()
 }
 
-/// An estimate as the CSV has it: NaN (empty) when not current or not a number.
-fn estimate(fresh: bool, v: f32) -> f64 {
-    if fresh && v.is_finite() {
-        f64::from(v)
-    } else {
-        f64::NAN
-    }
+fn opt(v: Option<f32>) -> f64 {
+    v.map_or(f64::NAN, f64::from)
 }
 
-/// A count the board reports once measured (0 until then: empty in the CSV).
 fn count(v: Option<u32>) -> f64 {
-    v.filter(|c| *c > 0).map_or(f64::NAN, f64::from)
+    v.map_or(f64::NAN, f64::from)
 }
 
-/// One numeric value of the monitor CSV's column `name` (None: a text column).
-fn number(name: &str, r: &Row) -> Option<f64> {
-    let t = &r.sample;
-    let h = r.health.as_ref();
+/// One numeric value of the monitor CSV's column `name` (`rig monitor`'s own row: NaN where
+/// the CSV is empty; None: a text column).
+fn number(name: &str, r: &MonitorRow) -> Option<f64> {
     Some(match name {
-        "device_time_s" => t.device_time_us as f64 * 1e-6,
-        "cam_speed_rad_s" => f64::from(t.cam_speed_rad_s),
-        "cam_hz" => f64::from(t.cam_speed_rad_s.abs() / std::f32::consts::TAU),
-        "current_a" => f64::from(t.current_a),
-        "pwm_duty" => f64::from(t.pwm_duty),
-        "tau_cam_nm" => estimate(r.fresh, t.tau_cam_nm),
-        "tau_rot_nm" => estimate(r.fresh, t.tau_rot_nm),
-        "output_rad" => f64::from(t.output_angle_rad),
-        "output_rad_s" => f64::from(t.output_speed_rad_s),
-        "bus_v" => h.map_or(f64::NAN, |h| f64::from(h.bus_voltage_v)),
-        "motor_temp_c" => h.map_or(f64::NAN, |h| f64::from(h.motor_temp_c)),
-        "step_cycles_mean" => count(h.map(|h| h.step_cycles_mean)),
-        "step_cycles_max" => count(h.map(|h| h.step_cycles_max)),
+        "device_time_s" => r.device_time_s,
+        "cam_speed_rad_s" => f64::from(r.cam_speed_rad_s),
+        "cam_hz" => f64::from(r.cam_speed_rad_s.abs() / std::f32::consts::TAU),
+        "current_a" => f64::from(r.current_a),
+        "pwm_duty" => f64::from(r.pwm_duty),
+        "tau_cam_nm" => opt(r.tau_cam_nm),
+        "tau_rot_nm" => opt(r.tau_rot_nm),
+        "output_rad" => opt(r.output_rad),
+        "output_rad_s" => opt(r.output_rad_s),
+        "bus_v" => opt(r.bus_v),
+        "motor_temp_c" => opt(r.motor_temp_c),
+        "step_cycles_mean" => count(r.step_cycles_mean),
+        "step_cycles_max" => count(r.step_cycles_max),
         _ => return None,
     })
 }
 
 /// One text value of the monitor CSV's column `name`.
-fn text(name: &str, r: &Row) -> String {
-    let t = &r.sample;
+fn text(name: &str, r: &MonitorRow) -> String {
     match name {
-        "state" => t.state.name().to_owned(),
-        "faults" => t.faults.names().collect::<Vec<_>>().join("|"),
-        "status" => t.status.names().collect::<Vec<_>>().join("|"),
+        "state" => r.state.to_owned(),
+        "faults" => r.faults.join("|"),
+        "status" => r.status.join("|"),
         _ => String::new(),
     }
 }
@@ -68,6 +60,10 @@ fn text(name: &str, r: &Row) -> String {
 /// Telemetry rows as the monitor CSV's columns (every one, in its order), then `seq`, the
 /// device's sample counter (a gap there is a lost sample).
 pub fn telemetry<'py>(py: Python<'py>, rows: &[Row]) -> PyResult<TypedColumns<'py>> {
+    let rows: Vec<MonitorRow> = rows
+        .iter()
+        .map(|r| MonitorRow::new(&r.sample, r.fresh, r.health.as_ref()))
+        .collect();
     let mut out: TypedColumns<'py> = Vec::with_capacity(TELEMETRY_CSV_HEADER.len() + 1);
     for name in TELEMETRY_CSV_HEADER {
         if !matches!(name, "state" | "faults" | "status") {
@@ -78,10 +74,7 @@ pub fn telemetry<'py>(py: Python<'py>, rows: &[Row]) -> PyResult<TypedColumns<'p
             out.push((name, "str", list.into_any()));
         }
     }
-    let seq: Vec<u8> = rows
-        .iter()
-        .flat_map(|r| r.sample.seq.to_le_bytes())
-        .collect();
+    let seq: Vec<u8> = rows.iter().flat_map(|r| r.seq.to_le_bytes()).collect();
     out.push(("seq", "<u4", PyBytes::new(py, &seq).into_any()));
     Ok(out)
 }

@@ -165,42 +165,80 @@ fn explain_csv(
             None => rigfile::RigFile::paper(),
         };
         let data = ::explain::Dataset::read_csv(&csv)?;
-        if let Some(regenerative) = host::experiment::sweep::read_drive(&csv) {
+        if let Some(regenerative) = host::provenance::Header::read(&csv).regenerative {
             rig = rig.with_drive_decay(regenerative);
         }
         let outcome = ::explain::explain(&data, &rig, &options)?;
-        let mut value = serde_json::to_value(&outcome.explanation)?;
         // As the CLI: a proposal on request, and offered when the data cannot separate the
         // leaders or a discrepancy remains that no named effect explains.
         let offered = matches!(
             outcome.explanation.verdict,
             ::explain::Verdict::Ambiguous | ::explain::Verdict::Unexplained
         );
-        if propose || offered {
-            let space = ::explain::design::Space::for_rig(&rig, &data);
-            let proposal = ::explain::design::propose(
+        let proposal = (propose || offered).then(|| {
+            host::explanation::proposal_for(
                 &outcome,
-                &space,
+                &data,
+                &rig,
                 &::explain::design::DesignOptions::default(),
-            );
-            let mut p = serde_json::to_value(&proposal)?;
-            if let Some(m) = p.as_object_mut() {
-                m.insert("plan_written".into(), serde_json::Value::Null);
-                m.insert(
-                    "plan_toml".into(),
-                    proposal
-                        .to_plan_toml(
-                            &format!("proposed by backdrive_rig.explain for {}", csv.display()),
-                            1,
-                        )
-                        .into(),
-                );
-            }
-            if let Some(map) = value.as_object_mut() {
-                map.insert("proposal".into(), p);
-            }
+            )
+        });
+        let mut value = serde_json::to_value(host::explanation::ExplainJson {
+            explanation: &outcome.explanation,
+            proposal: proposal
+                .as_ref()
+                .map(|proposal| host::explanation::ProposalJson {
+                    proposal,
+                    plan_written: None,
+                }),
+        })?;
+        // Besides the CLI's keys: the plan's text, for `Rig.torque_sweep(plan_toml=...)`.
+        if let (Some(p), Some(json)) = (
+            &proposal,
+            value.get_mut("proposal").and_then(|v| v.as_object_mut()),
+        ) {
+            let source = format!("proposed by backdrive_rig.explain for {}", csv.display());
+            json.insert("plan_toml".into(), p.to_plan_toml(&source, 1).into());
         }
         Ok(serde_json::to_string(&value)?)
+    })
+    .map_err(to_py)
+}
+
+/// `rig compare --measured CSV [--model FITTED] [--rig BASE] --json`: the measured sweep
+/// replayed on the virtual rig with the base model and, when given, the fitted one.
+#[pyfunction(name = "compare")]
+#[pyo3(signature = (measured, model = None, rig = None, seed = 1))]
+fn compare_csv(
+    py: Python<'_>,
+    measured: PathBuf,
+    model: Option<PathBuf>,
+    rig: Option<PathBuf>,
+    seed: u64,
+) -> PyResult<String> {
+    py.detach(|| -> Result<String, RigError> {
+        // The CLI's resolution of --model and --rig, with its messages.
+        let model_rig = match &model {
+            Some(p) => {
+                let r = rigfile::RigFile::load(p)?;
+                if r.model.is_none() {
+                    return Err(RigError::BadValue {
+                        what: format!("model {}", p.display()),
+                        why: "the rig file has no fitted [model]: write one with `rig explain --measured X --write-model FILE`".into(),
+                    });
+                }
+                Some(r)
+            }
+            None => None,
+        };
+        let base_rig = match (&rig, &model_rig) {
+            (Some(p), _) => rigfile::RigFile::load(p)?,
+            (None, Some(m)) => m.clone(),
+            (None, None) => rigfile::RigFile::paper(),
+        };
+        let mut c = host::compare::compare(&measured, &base_rig, model_rig.as_ref(), seed)?;
+        c.model = model.as_ref().map(|p| p.display().to_string());
+        Ok(serde_json::to_string(&c)?)
     })
     .map_err(to_py)
 }
@@ -224,6 +262,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<rig::NativeRecording>()?;
     m.add_function(wrap_pyfunction!(design_report, m)?)?;
     m.add_function(wrap_pyfunction!(explain_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(compare_csv, m)?)?;
     m.add_function(wrap_pyfunction!(versions, m)?)?;
     m.add("DEFAULT_BAUD_RATE", protocol::DEFAULT_BAUD_RATE)?;
     // Fig. 5's procedure as `rig experiment hold-release` runs it by default.
@@ -235,9 +274,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     defaults.set_item("release_s", fig5.release_s)?;
     defaults.set_item("after_s", fig5.after_s)?;
     m.add("HOLD_RELEASE_DEFAULTS", defaults)?;
-    m.add(
-        "TELEMETRY_COLUMNS",
-        host::reports::TELEMETRY_CSV_HEADER.to_vec(),
-    )?;
+    m.add("TELEMETRY_COLUMNS", host::monitor::CSV_HEADER.to_vec())?;
     Ok(())
 }

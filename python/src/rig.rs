@@ -12,12 +12,12 @@ use std::time::{Duration, Instant};
 
 use host::RigError;
 use host::client::{Client, ClientOptions, open_serial};
-use host::connection::{DeviceOpts, Session};
-use host::device::VirtualDevice;
+use host::connection::{Connection, DeviceOpts};
 use host::experiment::bench::{Bench, DeviceBench, Operator};
 use host::experiment::sweep::{self, SweepSetup, Window};
 use host::experiment::{Plan, hold_release};
 use host::reports::{ClearReport, FaultsReport, InfoReport};
+use host::virtual_device::VirtualDevice;
 use pyo3::prelude::*;
 use serde::Serialize;
 
@@ -105,7 +105,7 @@ pub struct NativeRig {
 }
 
 impl NativeRig {
-    fn start(session: Session) -> Result<Self, RigError> {
+    fn start(session: Connection) -> Result<Self, RigError> {
         let port = session.port().to_owned();
         let in_process = session.device.is_some();
         let stop = Arc::new(AtomicBool::new(false));
@@ -210,7 +210,7 @@ impl NativeRig {
             // As `--sim`: pseudo-terminal bytes wait for a kernel worker.
             opts.reply_timeout = Duration::from_secs(1);
             let (client, info) = Client::connect(io, opts)?;
-            Self::start(Session {
+            Self::start(Connection {
                 client,
                 info,
                 device: Some(device),

@@ -15,8 +15,8 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use host::RigError;
-use host::experiment::bench::{Bench, DeviceBench};
-use host::reports::Freshness;
+use host::experiment::bench::{Bench, DeviceBench, RigLink};
+use host::monitor::Freshness;
 use protocol::{DeviceMessage, HealthSample, TelemetrySample};
 
 /// A unit of work for the port's thread.

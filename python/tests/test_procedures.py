@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from backdrive_rig import BadValueError, Rig, RigError, design, explain
+from backdrive_rig import BadValueError, Rig, RigError, compare, design, explain
 
 from conftest import rig_cli
 
@@ -41,12 +41,19 @@ def test_design_refuses_bad_input_naming_it():
         design(z=[49, 51, 50, 50], table1=True)
 
 
-def test_explain_on_a_csv_is_rig_explain_json(tmp_path):
-    csv = tmp_path / "sweep.csv"
+@pytest.fixture(scope="module")
+def sim_sweep_csv(tmp_path_factory):
+    """`rig sim torque-sweep`'s CSV (Figs. 8-9 on the virtual rig, in virtual time)."""
+    csv = tmp_path_factory.mktemp("sim") / "sweep.csv"
     sim = subprocess.run(
         [rig_cli(), "sim", "torque-sweep", "--csv", str(csv)], capture_output=True, text=True, timeout=600
     )
     assert sim.returncode == 0, sim.stderr
+    return csv
+
+
+def test_explain_on_a_csv_is_rig_explain_json(sim_sweep_csv, tmp_path):
+    csv = sim_sweep_csv
     ours = explain(csv, replicates=20)
     cli = cli_json("explain", "--measured", str(csv), "--json", "--no-report", "--replicates", "20")
     for key in ("verdict", "effects", "rmse_before_a", "rmse_after_a", "lack_of_fit"):
@@ -70,6 +77,19 @@ def test_explain_on_a_csv_is_rig_explain_json(tmp_path):
                 rig.torque_sweep(plan_toml=plan_text)
         with pytest.raises(RigError, match="plan_toml"):
             rig.torque_sweep(plan_toml="[[points]]\nload_nm = 'heavy'\n")
+
+
+def test_compare_is_rig_compare_json(sim_sweep_csv, tmp_path):
+    csv = sim_sweep_csv
+    ours = compare(csv)
+    cli = cli_json("compare", "--measured", str(csv), "--json")
+    assert set(ours) == set(cli)
+    assert ours.gap_rmse_base_a == cli["gap_rmse_base_a"]
+    assert ours.gap_rmse_model_a is None
+    plain = tmp_path / "plain.toml"
+    plain.write_text("[limits]\nmax_freq_hz = 15.0\n")
+    with pytest.raises(BadValueError, match="no fitted \\[model\\]"):
+        compare(csv, model=plain)
 
 
 def test_explain_refuses_a_frame_without_the_columns():
