@@ -47,7 +47,7 @@ pub struct CompareArgs {
 }
 
 /// What `rig compare` calls the gap.
-pub const GAP_DEFINITION: &str = "measured minus simulated mean current per test point, the measured plan replayed on the virtual rig (base: the rig file's own mu and calibration, nothing fitted); rig explain's rmse_before_a is the residual of the paper's model with mu fitted to the same data, so it is smaller";
+pub const GAP_DEFINITION: &str = "measured minus simulated mean current per test point, the measured plan replayed on the virtual rig as a prediction (over whole cam revolutions, its current zero measured over 10 s) (base: the rig file's own mu and calibration, nothing fitted); rig explain's rmse_before_a is the residual of the paper's model with mu fitted to the same data, so it is smaller";
 
 /// One test point of the comparison.
 #[derive(Debug, Clone, Serialize)]
