@@ -227,8 +227,8 @@ fn ctrl_c_locks_the_gear_and_keeps_completed_rounds() {
     assert!(err.contains("the gear is locked"), "{err}");
 }
 
-/// The served rig without a hidden effect, seeds 1-8 (slow: run with `--ignored` in
-/// release; its wall time at 5x was not measured when the speed changed from 50x).
+/// The served rig without a hidden effect, seeds 1-8 (slow: 264 s for the eight in a debug
+/// build on two shared cores, the rig keeping its 5x throughout).
 ///
 /// Served at 5x, the speed the other served tests use: a served rig keeps the board's time
 /// whatever the client does, so each request costs the client's round trip through the
