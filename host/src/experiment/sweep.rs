@@ -2,6 +2,7 @@
 //! the vibrator (open loop at a supply voltage, as the paper's bench supply, or closed
 //! loop at a frequency), average the current and the cam speed over the window that
 //! starts with constant cam rotation (as the paper: 0.5 s) or over whole revolutions,
+//! once the cam has settled ([`SETTLE_TIME_CONSTANTS`]),
 //! stop, note whether the output moved, rest. Each row is appended to the CSV (`rig
 //! explain`'s columns) as it completes, and synced, so an interruption keeps every
 //! completed row and `--resume` continues the plan.
@@ -19,6 +20,21 @@ use crate::provenance::{Header, Provenance};
 
 /// Telemetry rate during a point, Hz.
 pub const TELEMETRY_HZ: u16 = 100;
+
+/// Mechanical time constants of the vibrator ([`model::plant::MotorParams`]) waited after
+/// the firmware reports constant rotation (`Vibrating`) before the window opens. The
+/// firmware judges it from whole revolutions (within 2 % for 100 ms), while the speed still
+/// creeps towards its final value as exp(-t / tau); until it arrives the current carries
+/// the accelerating torque J dw/dt, which no steady-state model (Eq. 10 with Eqs. 15-17)
+/// contains: on the paper's rig +3 mA at 8.8 V, enough to bias a fitted kappa by +0.025.
+/// Four time constants leave 2 % of it.
+pub const SETTLE_TIME_CONSTANTS: f64 = 4.0;
+
+/// Device time waited after `Vibrating` before the window opens, s (see
+/// [`SETTLE_TIME_CONSTANTS`]; about 0.3 s for the RS-735 and its cam).
+pub fn settle_s() -> f64 {
+    SETTLE_TIME_CONSTANTS * model::plant::MotorParams::default().mechanical_time_constant_s()
+}
 
 /// Longest wait for constant cam rotation, device s.
 const SPIN_UP_LIMIT_S: f64 = 8.0;
@@ -725,6 +741,23 @@ fn average<B: Bench + ?Sized>(
     run: &Run,
     first: TelemetrySample,
 ) -> Result<(Row, Option<TelemetrySample>), RigError> {
+    // The cam settles first (see `SETTLE_TIME_CONSTANTS`).
+    let mut first = first;
+    let settled_at = first.device_time_us + (settle_s() * 1e6).round() as u64;
+    while first.device_time_us < settled_at {
+        if operator.interrupted() {
+            return Err(interrupted());
+        }
+        let Some(t) = bench.sample()? else {
+            return Err(RigError::Protocol(
+                "telemetry stopped during the sweep: check the link".into(),
+            ));
+        };
+        if !t.faults.is_empty() || t.state == SupervisorState::Fault {
+            return Err(fault_error(&t, run));
+        }
+        first = t;
+    }
     let t0 = first.device_time_us;
     let temp_c = bench.motor_temp_c();
     let (mut sum_i, mut sum_w, mut n) = (0.0, 0.0, 0u32);

@@ -70,6 +70,15 @@ impl MotorParams {
         self.ke_motor * self.gear_ratio
     }
 
+    /// Mechanical time constant of the vibrator driven from a voltage source, s: the cam
+    /// shaft's inertia over the damping the back-EMF and the viscous loss give it,
+    /// J / (C1 ke / R + C3) (about 74 ms for the RS-735 with its cam). After a change of
+    /// drive the cam speed approaches its new value as exp(-t / tau), and until it has, the
+    /// current carries the accelerating torque J dw/dt on top of the steady-state one.
+    pub fn mechanical_time_constant_s(&self) -> f64 {
+        self.inertia / (self.torque_per_amp * self.ke_cam() / self.resistance + self.viscous)
+    }
+
     /// Lowest voltage that starts the motor from rest (no cam load), V.
     pub fn breakaway_voltage(&self) -> f64 {
         self.resistance * self.coulomb / self.torque_per_amp
@@ -109,6 +118,8 @@ mod tests {
                 k + 1
             );
         }
+        let tau = m.mechanical_time_constant_s();
+        assert!((tau - 0.074).abs() < 0.002, "{tau}");
         let v = m.breakaway_voltage();
         assert!(v < 1.0 && v > 0.9, "{v}");
         assert!((v - rs735::BREAKAWAY_V).abs() < 1e-12);

@@ -523,3 +523,25 @@ fn a_braking_drive_fed_forward_on_its_pumped_bus_still_returns_the_inertia_term(
         }
     }
 }
+
+#[test]
+fn the_cam_speed_settles_with_the_motors_mechanical_time_constant() {
+    // A step of supply voltage on the uncoupled vibrator (no carrier, no load): the speed's
+    // gap to its final value shrinks as exp(-t / tau), tau = J / (C1 ke / R + C3).
+    let mut params = PlantParams::paper(GearSet::paper(paper::RIG_Z).unwrap(), Load::Torque(0.0));
+    params.cam = CamSetup::Uncoupled;
+    let mut p = Plant::new(params, 42);
+    run(&mut p, 3.0, 1.0);
+    let w0 = p.state().cam_speed;
+    let tau = p.params().motor.mechanical_time_constant_s();
+    run(&mut p, 4.0, tau);
+    let w_tau = p.state().cam_speed;
+    run(&mut p, 4.0, 10.0 * tau);
+    let w_end = p.state().cam_speed;
+    let left = (w_end - w_tau) / (w_end - w0);
+    // The winding's own lag (L / R = 0.45 ms) and heating shift it by well under 5 %.
+    assert!(
+        (left - (-1.0f64).exp()).abs() < 0.05 * (-1.0f64).exp(),
+        "after one time constant {left:.4} of the step is left"
+    );
+}
