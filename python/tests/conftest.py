@@ -28,8 +28,8 @@ def rig_cli() -> str:
 class Served:
     """`rig sim serve --json` in a child process, stopped with SIGINT."""
 
-    def __init__(self, *args: str):
-        self.args = [rig_cli(), "sim", "serve", "--json", "--speed", str(SPEED), *args]
+    def __init__(self, *args: str, speed: float = SPEED):
+        self.args = [rig_cli(), "sim", "serve", "--json", "--speed", str(speed), *args]
         self.proc = subprocess.Popen(
             self.args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
         )
@@ -59,6 +59,15 @@ class Served:
 @pytest.fixture
 def served():
     s = Served("--preset", "ideal")
+    yield s
+    s.stop()
+
+
+@pytest.fixture
+def served_realtime():
+    """A served rig at real time: the board's 500 ms comms timeout in wall time, so a test
+    whose host must keep heartbeats going on a loaded machine has the board's slack."""
+    s = Served("--preset", "ideal", speed=1.0)
     yield s
     s.stop()
 
