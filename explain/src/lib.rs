@@ -951,7 +951,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             best: s.best().map(|c| name_of(&c.cand)),
             accepted: s.accepted,
             p_value: s.p_value,
-            reason: s.reason.clone(),
+            reason: s.decision.to_string(),
             ambiguous_with: match s.best() {
                 Some(b) if s.accepted => rivals_of(b.cand.name(&points)),
                 _ => Vec::new(),

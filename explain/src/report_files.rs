@@ -210,7 +210,7 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                 );
             }
             if let Some(step) = selection.steps.first() {
-                let _ = write!(s, " Closest candidate: {}.", step.reason);
+                let _ = write!(s, " Closest candidate: {}.", step.decision);
             }
             let w = &e.gap_after.whiteness;
             let _ = write!(
