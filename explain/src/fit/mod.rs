@@ -4,9 +4,10 @@
 //! variance parameter for the mesh ripple, a threshold fit for the linear bush's holding, the
 //! Gaussian (and backdrive) likelihood with BIC, and blocked held-out validation.
 //!
-//! One module per concept: the model spec ([`spec`]), the solver ([`solver`]), the
-//! likelihood's other parts ([`likelihood`]), held-out validation ([`holdout`]) and the
-//! score statistics ([`scores`]); this module fits a spec and holds the fitted model.
+//! One module per concept: the model spec (`spec`: [`ModelSpec`]), the solver (`solver`),
+//! the likelihood's other parts (`likelihood`), held-out validation (`holdout`:
+//! [`held_out`]) and the score statistics (`scores`: [`scores()`]); this module fits a spec
+//! and holds the fitted model.
 
 mod holdout;
 mod likelihood;

@@ -11,7 +11,7 @@ use crate::terms::Term;
 pub struct ModelSpec {
     /// The library effects in their own laws, in the order they were added.
     pub effects: Vec<Effect>,
-    /// The terms ([`TestPoints::terms`] indices), in the order they were added.
+    /// The terms ([`crate::points::TestPoints::terms`] indices), in the order they were added.
     pub terms: Vec<usize>,
 }
 
