@@ -1189,6 +1189,75 @@ mod tests {
     use super::*;
 
     #[test]
+    fn each_decision_reads_as_the_reason_text_of_before() {
+        let name = || "thermal-drift".to_string();
+        let cases = [
+            (
+                Decision::NoImprovement {
+                    best: name(),
+                    improvement: -1.25,
+                },
+                "no candidate improves the BIC (best: thermal-drift by -1.2)",
+            ),
+            (
+                Decision::BelowGuard {
+                    best: name(),
+                    improvement: 12.345,
+                    p_value: 0.0123,
+                    alpha: 0.002,
+                },
+                "thermal-drift improves the BIC by 12.3, but effect-free data does that with probability 0.012 (guard 0.002)",
+            ),
+            (
+                Decision::NotConfirmed {
+                    best: name(),
+                    improvement: 40.0,
+                    p_value: 0.0004,
+                    held_out: "held-out RMSE 10.0 -> 10.2 mA".into(),
+                },
+                "thermal-drift improves the BIC by 40.0 (p < 0.001) but does not predict held-out points better (held-out RMSE 10.0 -> 10.2 mA)",
+            ),
+            (
+                Decision::Implausible {
+                    best: name(),
+                    improvement: 40.0,
+                    p_value: 0.0015,
+                    limits: "k_per_c = -0.01 /K beyond 0..0.005".into(),
+                },
+                "thermal-drift improves the BIC by 40.0 (p 0.002), but only with values no rig can have: k_per_c = -0.01 /K beyond 0..0.005; it is not named",
+            ),
+            (
+                Decision::CarriedByOnePoint {
+                    best: name(),
+                    improvement: 40.0,
+                    p_value: 0.0001,
+                    row: 17,
+                    without: 3.21,
+                    critical: 7.89,
+                    level: 0.05,
+                },
+                "thermal-drift improves the BIC by 40.0 (p < 0.001), but without the single test point at data row 17 (the one that contributes most) only by 3.2, below the 7.9 that effect-free data reaches with probability 0.05: one point does not make a finding",
+            ),
+            (
+                Decision::Added {
+                    best: name(),
+                    improvement: 40.0,
+                    p_value: 0.0001,
+                    held_out: "held-out RMSE 12.0 -> 10.0 mA".into(),
+                },
+                "thermal-drift improves the BIC by 40.0 (p < 0.001); held-out RMSE 12.0 -> 10.0 mA",
+            ),
+        ];
+        for (decision, text) in cases {
+            assert_eq!(decision.to_string(), text);
+            assert_eq!(
+                decision.accepted(),
+                matches!(decision, Decision::Added { .. })
+            );
+        }
+    }
+
+    #[test]
     fn critical_value_matches_the_p_value_rule() {
         let null: Vec<f64> = (0..999).map(|k| k as f64).collect();
         // alpha 0.01 of 1000: fewer than 9 draws may reach it: above the 9th largest (990).
