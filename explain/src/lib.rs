@@ -25,6 +25,7 @@
 //! The entry point for plain rows (files, the simulator, tests) is [`explain`].
 
 pub mod bootstrap;
+pub mod calibration;
 pub mod data;
 pub mod design;
 pub mod extrapolation;
@@ -249,9 +250,14 @@ pub struct Explanation {
     pub ambiguous: Vec<String>,
     /// The same with their bootstrap inclusion probabilities.
     pub ambiguous_candidates: Vec<AmbiguousCandidate>,
+    /// For `explained`: the probability that the named set of effects is exactly right,
+    /// calibrated on generated batches with truths outside the library
+    /// ([`calibration::calibrated`] of `confidence_raw`). For the other verdicts: the
+    /// bootstrap share (`confidence_raw`). Null without a bootstrap.
+    pub confidence: Option<f64>,
     /// Share of the block-bootstrap replicates of the whole selection that reach the same set
     /// of effects (none, for `no-missing-effect`); null without a bootstrap.
-    pub confidence: Option<f64>,
+    pub confidence_raw: Option<f64>,
     /// Every applicable effect's bootstrap inclusion probability.
     pub inclusion_probabilities: BTreeMap<String, f64>,
     /// The models fitted along the selection with their BIC weights, heaviest first (up to
@@ -951,7 +957,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             best: s.best().map(|c| name_of(&c.cand)),
             accepted: s.accepted,
             p_value: s.p_value,
-            reason: s.reason.clone(),
+            reason: s.decision.to_string(),
             ambiguous_with: match s.best() {
                 Some(b) if s.accepted => rivals_of(b.cand.name(&points)),
                 _ => Vec::new(),
@@ -990,7 +996,15 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         effects,
         ambiguous,
         ambiguous_candidates,
-        confidence: boot.as_ref().map(|b| b.set_share(&named)),
+        confidence: boot.as_ref().map(|b| {
+            let share = b.set_share(&named);
+            if verdict == Verdict::Explained {
+                calibration::calibrated(share)
+            } else {
+                share
+            }
+        }),
+        confidence_raw: boot.as_ref().map(|b| b.set_share(&named)),
         inclusion_probabilities,
         model_weights,
         bootstrap,

@@ -129,6 +129,13 @@ fn outliers_text(e: &Explanation) -> String {
 /// The bootstrap's confidence in a sentence (empty without a bootstrap).
 fn confidence_text(e: &Explanation) -> String {
     match (e.confidence, &e.bootstrap) {
+        (Some(c), Some(b)) if e.verdict == Verdict::Explained => format!(
+            " Confidence {:.0} %: the probability that this finding is right, calibrated on generated batches with truths outside the library ({:.0} % of {} resamples of {} blocks of consecutive test points reach it).",
+            100.0 * c,
+            100.0 * e.confidence_raw.unwrap_or(c),
+            b.replicates,
+            b.blocks
+        ),
         (Some(c), Some(b)) => format!(
             " Confidence {:.0} %: the share of {} resamples of {} blocks of consecutive test points that reach the same finding.",
             100.0 * c,
@@ -210,7 +217,7 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                 );
             }
             if let Some(step) = selection.steps.first() {
-                let _ = write!(s, " Closest candidate: {}.", step.reason);
+                let _ = write!(s, " Closest candidate: {}.", step.decision);
             }
             let w = &e.gap_after.whiteness;
             let _ = write!(

@@ -219,7 +219,151 @@ pub struct Step {
     /// Whether the best candidate was added.
     pub accepted: bool,
     /// Why the best was or was not added.
-    pub reason: String,
+    pub decision: Decision,
+}
+
+/// What a step decided about its best candidate, by the first rule that turned it down (in
+/// the order they are tried), or that it was added. Printed as the step's `reason`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Decision {
+    /// No candidate improves the BIC.
+    NoImprovement {
+        /// The best candidate's name.
+        best: String,
+        /// Its BIC improvement (not positive).
+        improvement: f64,
+    },
+    /// Effect-free data reaches the improvement too often (the false-discovery guard).
+    BelowGuard {
+        /// The best candidate's name.
+        best: String,
+        /// Its BIC improvement.
+        improvement: f64,
+        /// The guard's p-value.
+        p_value: f64,
+        /// The guard's level.
+        alpha: f64,
+    },
+    /// It does not predict held-out points better.
+    NotConfirmed {
+        /// The best candidate's name.
+        best: String,
+        /// Its BIC improvement.
+        improvement: f64,
+        /// The guard's p-value.
+        p_value: f64,
+        /// The held-out scores before and after, in words.
+        held_out: String,
+    },
+    /// Its fit needs values no rig can have.
+    Implausible {
+        /// The best candidate's name.
+        best: String,
+        /// Its BIC improvement.
+        improvement: f64,
+        /// The guard's p-value.
+        p_value: f64,
+        /// The limits broken, each with its reason.
+        limits: String,
+    },
+    /// The improvement rests on a single test point.
+    CarriedByOnePoint {
+        /// The best candidate's name.
+        best: String,
+        /// Its BIC improvement.
+        improvement: f64,
+        /// The guard's p-value.
+        p_value: f64,
+        /// The data row (1-based) of the point that contributes most.
+        row: usize,
+        /// The improvement without that point.
+        without: f64,
+        /// The guard's critical value at `level`.
+        critical: f64,
+        /// The level of that guard.
+        level: f64,
+    },
+    /// Added to the model.
+    Added {
+        /// The candidate's name.
+        best: String,
+        /// Its BIC improvement.
+        improvement: f64,
+        /// The guard's p-value.
+        p_value: f64,
+        /// The held-out scores before and after, in words.
+        held_out: String,
+    },
+}
+
+impl Decision {
+    /// Whether the best candidate was added.
+    pub fn accepted(&self) -> bool {
+        matches!(self, Decision::Added { .. })
+    }
+}
+
+impl std::fmt::Display for Decision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Decision::NoImprovement { best, improvement } => write!(
+                f,
+                "no candidate improves the BIC (best: {best} by {improvement:.1})"
+            ),
+            Decision::BelowGuard {
+                best,
+                improvement,
+                p_value,
+                alpha,
+            } => write!(
+                f,
+                "{best} improves the BIC by {improvement:.1}, but effect-free data does that with probability {p_value:.3} (guard {alpha})"
+            ),
+            Decision::NotConfirmed {
+                best,
+                improvement,
+                p_value,
+                held_out,
+            } => write!(
+                f,
+                "{best} improves the BIC by {improvement:.1} ({}) but does not predict held-out points better ({held_out})",
+                p_text(*p_value)
+            ),
+            Decision::Implausible {
+                best,
+                improvement,
+                p_value,
+                limits,
+            } => write!(
+                f,
+                "{best} improves the BIC by {improvement:.1} ({}), but only with values no rig can have: {limits}; it is not named",
+                p_text(*p_value)
+            ),
+            Decision::CarriedByOnePoint {
+                best,
+                improvement,
+                p_value,
+                row,
+                without,
+                critical,
+                level,
+            } => write!(
+                f,
+                "{best} improves the BIC by {improvement:.1} ({}), but without the single test point at data row {row} (the one that contributes most) only by {without:.1}, below the {critical:.1} that effect-free data reaches with probability {level}: one point does not make a finding",
+                p_text(*p_value)
+            ),
+            Decision::Added {
+                best,
+                improvement,
+                p_value,
+                held_out,
+            } => write!(
+                f,
+                "{best} improves the BIC by {improvement:.1} ({}); {held_out}",
+                p_text(*p_value)
+            ),
+        }
+    }
 }
 
 impl Step {
@@ -946,77 +1090,58 @@ pub fn select_from(
             best.held_out,
             hold_gain,
         );
-        let (accepted, reason) = if best_improvement <= 0.0 {
-            (
-                false,
-                format!(
-                    "no candidate improves the BIC (best: {} by {:.1})",
-                    best.cand.name(points),
-                    best_improvement
-                ),
-            )
+        let best_name = best.cand.name(points).to_string();
+        let decision = if best_improvement <= 0.0 {
+            Decision::NoImprovement {
+                best: best_name,
+                improvement: best_improvement,
+            }
         } else if p_value >= opts.alpha {
-            (
-                false,
-                format!(
-                    "{} improves the BIC by {:.1}, but effect-free data does that with probability {:.3} (guard {})",
-                    best.cand.name(points),
-                    best_improvement,
-                    p_value,
-                    opts.alpha
-                ),
-            )
+            Decision::BelowGuard {
+                best: best_name,
+                improvement: best_improvement,
+                p_value,
+                alpha: opts.alpha,
+            }
         } else if !ok_held_out {
-            (
-                false,
-                format!(
-                    "{} improves the BIC by {:.1} ({}) but does not predict held-out points better ({held_note})",
-                    best.cand.name(points),
-                    best_improvement,
-                    p_text(p_value)
-                ),
-            )
+            Decision::NotConfirmed {
+                best: best_name,
+                improvement: best_improvement,
+                p_value,
+                held_out: held_note,
+            }
         } else if let Some(why) = Some(crate::plausibility::check_model(points, best_fit))
             .filter(|p| !p.plausible)
             .map(|p| p.failures())
         {
-            (
-                false,
-                format!(
-                    "{} improves the BIC by {:.1} ({}), but only with values no rig can have: {why}; it is not named",
-                    best.cand.name(points),
-                    best_improvement,
-                    p_text(p_value)
-                ),
-            )
+            Decision::Implausible {
+                best: best_name,
+                improvement: best_improvement,
+                p_value,
+                limits: why,
+            }
         } else {
             let (without, k) = improvement_without_top_point(points, &current, best_fit);
             if without <= critical_influence {
-                (
-                    false,
-                    format!(
-                        "{} improves the BIC by {:.1} ({}), but without the single test point at data row {} (the one that contributes most) only by {:.1}, below the {:.1} that effect-free data reaches with probability {}: one point does not make a finding",
-                        best.cand.name(points),
-                        best_improvement,
-                        p_text(p_value),
-                        points.rows[k] + 1,
-                        without,
-                        critical_influence,
-                        INFLUENCE_ALPHA.max(opts.alpha)
-                    ),
-                )
+                Decision::CarriedByOnePoint {
+                    best: best_name,
+                    improvement: best_improvement,
+                    p_value,
+                    row: points.rows[k] + 1,
+                    without,
+                    critical: critical_influence,
+                    level: INFLUENCE_ALPHA.max(opts.alpha),
+                }
             } else {
-                (
-                    true,
-                    format!(
-                        "{} improves the BIC by {:.1} ({}); {held_note}",
-                        best.cand.name(points),
-                        best_improvement,
-                        p_text(p_value)
-                    ),
-                )
+                Decision::Added {
+                    best: best_name,
+                    improvement: best_improvement,
+                    p_value,
+                    held_out: held_note,
+                }
             }
         };
+        let accepted = decision.accepted();
         // The inapplicable candidates close the table.
         for c in pending {
             if let Some(why) = c.not_applicable(points, &traits) {
@@ -1037,7 +1162,7 @@ pub fn select_from(
             critical,
             held_out_before: current_held_out,
             accepted,
-            reason,
+            decision,
         });
         match next {
             Some((Some(f), h)) => {
@@ -1062,6 +1187,75 @@ pub fn select_from(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_decision_reads_as_the_reason_text_of_before() {
+        let name = || "thermal-drift".to_string();
+        let cases = [
+            (
+                Decision::NoImprovement {
+                    best: name(),
+                    improvement: -1.25,
+                },
+                "no candidate improves the BIC (best: thermal-drift by -1.2)",
+            ),
+            (
+                Decision::BelowGuard {
+                    best: name(),
+                    improvement: 12.345,
+                    p_value: 0.0123,
+                    alpha: 0.002,
+                },
+                "thermal-drift improves the BIC by 12.3, but effect-free data does that with probability 0.012 (guard 0.002)",
+            ),
+            (
+                Decision::NotConfirmed {
+                    best: name(),
+                    improvement: 40.0,
+                    p_value: 0.0004,
+                    held_out: "held-out RMSE 10.0 -> 10.2 mA".into(),
+                },
+                "thermal-drift improves the BIC by 40.0 (p < 0.001) but does not predict held-out points better (held-out RMSE 10.0 -> 10.2 mA)",
+            ),
+            (
+                Decision::Implausible {
+                    best: name(),
+                    improvement: 40.0,
+                    p_value: 0.0015,
+                    limits: "k_per_c = -0.01 /K beyond 0..0.005".into(),
+                },
+                "thermal-drift improves the BIC by 40.0 (p 0.002), but only with values no rig can have: k_per_c = -0.01 /K beyond 0..0.005; it is not named",
+            ),
+            (
+                Decision::CarriedByOnePoint {
+                    best: name(),
+                    improvement: 40.0,
+                    p_value: 0.0001,
+                    row: 17,
+                    without: 3.21,
+                    critical: 7.89,
+                    level: 0.05,
+                },
+                "thermal-drift improves the BIC by 40.0 (p < 0.001), but without the single test point at data row 17 (the one that contributes most) only by 3.2, below the 7.9 that effect-free data reaches with probability 0.05: one point does not make a finding",
+            ),
+            (
+                Decision::Added {
+                    best: name(),
+                    improvement: 40.0,
+                    p_value: 0.0001,
+                    held_out: "held-out RMSE 12.0 -> 10.0 mA".into(),
+                },
+                "thermal-drift improves the BIC by 40.0 (p < 0.001); held-out RMSE 12.0 -> 10.0 mA",
+            ),
+        ];
+        for (decision, text) in cases {
+            assert_eq!(decision.to_string(), text);
+            assert_eq!(
+                decision.accepted(),
+                matches!(decision, Decision::Added { .. })
+            );
+        }
+    }
 
     #[test]
     fn critical_value_matches_the_p_value_rule() {

@@ -50,6 +50,203 @@ pub enum Form {
     LoadDependentReturn,
 }
 
+/// A parameter of a family form, as its row of [`FORMS`] gives it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FormParam {
+    /// Name in reports and rig files.
+    pub key: &'static str,
+    /// Unit of the value.
+    pub unit: &'static str,
+    /// The range the fit keeps it in.
+    pub bounds: (f64, f64),
+    /// The value at which the form reduces to its null (for a shape: the start).
+    pub null: f64,
+    /// The fit's first start.
+    pub start: f64,
+    /// Fitted in ln (a positive scale: a shape).
+    pub log: bool,
+}
+
+/// What the data must offer for a family form to show.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FormNeeds {
+    /// Only the time is logged (no temperature column).
+    pub time_only: bool,
+    /// Fewest cam-speed levels.
+    pub speed_levels: usize,
+    /// Fewest load levels.
+    pub load_levels: usize,
+    /// What to say when the data lack them.
+    pub why: &'static str,
+}
+
+/// A family form's row: everything about it but the law's code ([`Term::add_at`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FormInfo {
+    /// The form.
+    pub form: Form,
+    /// Its name, as in reports and rig files (`form = "..."`).
+    pub name: &'static str,
+    /// The library effect whose family it is.
+    pub effect: Effect,
+    /// The law, in words.
+    pub law: &'static str,
+    /// Its parameters, in fit order.
+    pub params: &'static [FormParam],
+    /// The model quantities its law reads.
+    pub reads: Needs,
+    /// What the data must offer.
+    pub needs: FormNeeds,
+}
+
+/// Every family form, one row each (the order of [`Form::ALL`]).
+pub const FORMS: [FormInfo; 4] = [
+    FormInfo {
+        form: Form::WarmUpInTime,
+        name: "warm-up-in-time",
+        effect: Effect::ThermalDrift,
+        law: "C1 -> C1 (1 - k x), x = tau_th h(t): the motor's heated share h rising while testing and falling in rests",
+        params: &[
+            FormParam {
+                key: "k_per_s",
+                unit: "1/s",
+                bounds: (-1e-3, 1e-3),
+                null: 0.0,
+                start: 0.0,
+                log: false,
+            },
+            FormParam {
+                key: "tau_s",
+                unit: "s",
+                bounds: (60.0, 1.0e5),
+                null: 1200.0,
+                start: 1200.0,
+                log: true,
+            },
+        ],
+        reads: Needs {
+            current: true,
+            friction: false,
+            inertia: false,
+            axial: false,
+        },
+        needs: FormNeeds {
+            time_only: true,
+            speed_levels: 0,
+            load_levels: 0,
+            why: "needs a t_s column without temp_c (with the temperature the law is linear in it)",
+        },
+    },
+    FormInfo {
+        form: Form::LightLoad,
+        name: "light-load",
+        effect: Effect::LoadDependentFriction,
+        law: "mu -> mu (1 + a exp(-tau_rot / tau_0)): friction that changes at light load only",
+        params: &[
+            FormParam {
+                key: "a",
+                unit: "1",
+                bounds: (-0.95, 5.0),
+                null: 0.0,
+                start: 0.0,
+                log: false,
+            },
+            FormParam {
+                key: "tau_0_nm",
+                unit: "N m",
+                bounds: (0.05, 10.0),
+                null: 0.5,
+                start: 0.5,
+                log: true,
+            },
+        ],
+        reads: Needs {
+            current: false,
+            friction: true,
+            inertia: false,
+            axial: false,
+        },
+        needs: FormNeeds {
+            time_only: false,
+            speed_levels: 0,
+            load_levels: 3,
+            why: "needs tests at three or more loads",
+        },
+    },
+    FormInfo {
+        form: Form::SaturatingCompliance,
+        name: "saturating",
+        effect: Effect::ToothCompliance,
+        law: "stroke e - c F_s tanh(F_ax / F_s): the teeth yield c F_ax at first, at most c F_s",
+        params: &[
+            FormParam {
+                key: "compliance_um_per_n",
+                unit: "um/N",
+                bounds: (0.0, 1.0e3),
+                null: 0.0,
+                start: 0.0,
+                log: false,
+            },
+            FormParam {
+                key: "f_s_n",
+                unit: "N",
+                bounds: (1.0, 1.0e5),
+                null: 100.0,
+                start: 100.0,
+                log: true,
+            },
+        ],
+        reads: Needs {
+            current: false,
+            friction: true,
+            inertia: false,
+            axial: true,
+        },
+        needs: FormNeeds {
+            time_only: false,
+            speed_levels: 0,
+            load_levels: 3,
+            why: "needs tests at three or more loads",
+        },
+    },
+    FormInfo {
+        form: Form::LoadDependentReturn,
+        name: "load-dependent",
+        effect: Effect::InertiaRectification,
+        law: "inertia term (1 + kappa + kappa_tau tau_rot) M_hat w_n^2 e^2 / pi: the share of the carrier's inertial power the drive returns changes with load",
+        params: &[
+            FormParam {
+                key: "kappa",
+                unit: "1",
+                bounds: (-1.0, 20.0),
+                null: 0.0,
+                start: 0.0,
+                log: false,
+            },
+            FormParam {
+                key: "kappa_per_nm",
+                unit: "1/(N m)",
+                bounds: (-5.0, 5.0),
+                null: 0.0,
+                start: 0.0,
+                log: false,
+            },
+        ],
+        reads: Needs {
+            current: false,
+            friction: false,
+            inertia: true,
+            axial: false,
+        },
+        needs: FormNeeds {
+            time_only: false,
+            speed_levels: 2,
+            load_levels: 3,
+            why: "needs tests at two or more speeds and three or more loads",
+        },
+    },
+];
+
 impl Form {
     /// Every family member.
     pub const ALL: [Form; 4] = [
@@ -59,74 +256,54 @@ impl Form {
         Form::LoadDependentReturn,
     ];
 
+    /// Its row of [`FORMS`].
+    pub fn info(self) -> &'static FormInfo {
+        FORMS
+            .iter()
+            .find(|row| row.form == self)
+            .expect("every form has its row in FORMS")
+    }
+
     /// The library effect whose family it is.
     pub fn effect(self) -> Effect {
-        match self {
-            Form::WarmUpInTime => Effect::ThermalDrift,
-            Form::LightLoad => Effect::LoadDependentFriction,
-            Form::SaturatingCompliance => Effect::ToothCompliance,
-            Form::LoadDependentReturn => Effect::InertiaRectification,
-        }
+        self.info().effect
     }
 
     /// Its name, as in reports and rig files (`form = "..."`).
     pub fn name(self) -> &'static str {
-        match self {
-            Form::WarmUpInTime => "warm-up-in-time",
-            Form::LightLoad => "light-load",
-            Form::SaturatingCompliance => "saturating",
-            Form::LoadDependentReturn => "load-dependent",
-        }
+        self.info().name
     }
 
     /// The form called `name`.
     pub fn from_name(name: &str) -> Option<Form> {
-        Form::ALL.into_iter().find(|f| f.name() == name)
+        FORMS
+            .iter()
+            .find(|row| row.name == name)
+            .map(|row| row.form)
     }
 
     fn params(self) -> Vec<TermParam> {
-        let p = |key: &str, unit: &str, bounds, null, start, log| TermParam {
-            key: key.into(),
-            unit: unit.into(),
-            bounds,
-            null,
-            start,
-            log,
-        };
-        match self {
-            Form::WarmUpInTime => vec![
-                p("k_per_s", "1/s", (-1e-3, 1e-3), 0.0, 0.0, false),
-                p("tau_s", "s", (60.0, 1.0e5), 1200.0, 1200.0, true),
-            ],
-            Form::LightLoad => vec![
-                p("a", "1", (-0.95, 5.0), 0.0, 0.0, false),
-                p("tau_0_nm", "N m", (0.05, 10.0), 0.5, 0.5, true),
-            ],
-            Form::SaturatingCompliance => vec![
-                p("compliance_um_per_n", "um/N", (0.0, 1.0e3), 0.0, 0.0, false),
-                p("f_s_n", "N", (1.0, 1.0e5), 100.0, 100.0, true),
-            ],
-            Form::LoadDependentReturn => vec![
-                p("kappa", "1", (-1.0, 20.0), 0.0, 0.0, false),
-                p("kappa_per_nm", "1/(N m)", (-5.0, 5.0), 0.0, 0.0, false),
-            ],
-        }
+        self.info()
+            .params
+            .iter()
+            .map(|p| TermParam {
+                key: p.key.into(),
+                unit: p.unit.into(),
+                bounds: p.bounds,
+                null: p.null,
+                start: p.start,
+                log: p.log,
+            })
+            .collect()
     }
 
     /// Why the data cannot show this form, or `None`.
     fn not_applicable(self, data: &DataTraits) -> Option<&'static str> {
-        match self {
-            Form::WarmUpInTime if data.thermal != ThermalDriver::Time => Some(
-                "needs a t_s column without temp_c (with the temperature the law is linear in it)",
-            ),
-            Form::LightLoad | Form::SaturatingCompliance if data.load_levels < 3 => {
-                Some("needs tests at three or more loads")
-            }
-            Form::LoadDependentReturn if data.speed_levels < 2 || data.load_levels < 3 => {
-                Some("needs tests at two or more speeds and three or more loads")
-            }
-            _ => None,
-        }
+        let needs = self.info().needs;
+        let lacking = (needs.time_only && data.thermal != ThermalDriver::Time)
+            || data.speed_levels < needs.speed_levels
+            || data.load_levels < needs.load_levels;
+        lacking.then_some(needs.why)
     }
 }
 
@@ -482,23 +659,7 @@ impl Term {
     /// The model quantities the term's law uses.
     pub fn needs(&self) -> Needs {
         match &self.kind {
-            TermKind::Family(Form::WarmUpInTime) => Needs {
-                current: true,
-                ..Needs::default()
-            },
-            TermKind::Family(Form::LightLoad) => Needs {
-                friction: true,
-                ..Needs::default()
-            },
-            TermKind::Family(Form::SaturatingCompliance) => Needs {
-                friction: true,
-                axial: true,
-                ..Needs::default()
-            },
-            TermKind::Family(Form::LoadDependentReturn) => Needs {
-                inertia: true,
-                ..Needs::default()
-            },
+            TermKind::Family(f) => f.info().reads,
             TermKind::User(_) => Needs {
                 current: true,
                 friction: true,
@@ -728,6 +889,29 @@ mod tests {
         // A long time constant gives the time itself: tau h -> t.
         let h = heated_share(&time[..20], &order[..20], 1e7);
         assert!((1e7 * h[19] - 380.0).abs() < 0.1, "{}", 1e7 * h[19]);
+    }
+
+    #[test]
+    fn the_form_table_has_one_row_per_form_in_order() {
+        assert_eq!(FORMS.map(|row| row.form), Form::ALL);
+        for (k, row) in FORMS.iter().enumerate() {
+            assert_eq!(Form::from_name(row.name), Some(row.form));
+            assert!(FORMS[..k].iter().all(|r| r.name != row.name));
+            // A linear amplitude that vanishes at its null, then at most one shape.
+            assert!(
+                !row.params[0].log && row.params[0].null == 0.0,
+                "{}",
+                row.name
+            );
+            assert!(row.params.iter().filter(|p| p.log).count() <= 1);
+            for p in row.params {
+                assert!(p.bounds.0 < p.bounds.1, "{} {}", row.name, p.key);
+                assert!((p.bounds.0..=p.bounds.1).contains(&p.start));
+            }
+            let term = Term::family(row.form);
+            assert_eq!(term.needs(), row.reads);
+            assert_eq!(term.effect(), Some(row.effect));
+        }
     }
 
     #[test]
