@@ -229,10 +229,10 @@ pub mod board {
     /// into its bus capacitor as the G2 would.
     ///
     /// The board ships braking decay (the G2), so [`Decay::Brake`] is the default this
-    /// setting should have. It stays [`Decay::Coast`] while `rig discover` names
-    /// vibrator-viscous-loss (2 % of C3) on an effect-free braking virtual rig, an excess the
-    /// plant itself does not make (`a_braking_drive_returns_the_inertia_term_over_a_turn`);
-    /// the README's Pins section has the evidence.
+    /// setting should have. It stays [`Decay::Coast`] while `rig explain` has no base model
+    /// for a braking drive's return through the gearhead (on a braking virtual rig a hidden
+    /// speed-dependent friction stays `partly-explained` and `rig compare` leaves more than
+    /// 1.5x explain's gap); the README's Pins section has the evidence.
     pub const DECAY: Decay = if cfg!(feature = "bridge-brake-decay") {
         Decay::Brake
     } else {
