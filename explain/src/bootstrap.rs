@@ -24,8 +24,9 @@ use model::effects::Effect;
 use model::plant::NoiseSource;
 
 use crate::fit::{self, Fit};
+use crate::mechanism::Mechanism;
 use crate::points::TestPoints;
-use crate::select::{self, Cand, Options, Selection};
+use crate::select::{self, Options, Selection};
 use crate::stats;
 
 /// Seed of the block draws, fixed so a run repeats exactly.
@@ -322,7 +323,7 @@ fn bounded_step(a: &[f64], u: &[f64], p: usize, theta: &[f64], lo: &[f64], hi: &
 #[derive(Debug, Clone)]
 struct StepNode {
     critical: f64,
-    children: Vec<Cand>,
+    children: Vec<Mechanism>,
 }
 
 /// What the bootstrap found.
@@ -337,17 +338,17 @@ pub struct Bootstrap {
     /// The seed of the draws.
     pub seed: u64,
     /// The effects each replicate selected (beyond the loaded ones), sorted.
-    pub selected: Vec<Vec<Cand>>,
+    pub selected: Vec<Vec<Mechanism>>,
 }
 
 impl Bootstrap {
     /// Share of replicates that select `cand`.
-    pub fn inclusion(&self, cand: Cand) -> f64 {
+    pub fn inclusion(&self, cand: Mechanism) -> f64 {
         self.share(|s| s.contains(&cand))
     }
 
     /// Share of replicates whose selection satisfies `pred`.
-    pub fn share(&self, pred: impl Fn(&[Cand]) -> bool) -> f64 {
+    pub fn share(&self, pred: impl Fn(&[Mechanism]) -> bool) -> f64 {
         if self.selected.is_empty() {
             return 0.0;
         }
@@ -355,19 +356,19 @@ impl Bootstrap {
     }
 
     /// Share of replicates that select exactly `set` (any order).
-    pub fn set_share(&self, set: &[Cand]) -> f64 {
+    pub fn set_share(&self, set: &[Mechanism]) -> f64 {
         let mut want = set.to_vec();
         want.sort();
         self.share(|s| s == want.as_slice())
     }
 
     /// The distinct selections with their shares, most frequent first.
-    pub fn sets(&self) -> Vec<(Vec<Cand>, f64)> {
-        let mut counts: BTreeMap<&Vec<Cand>, usize> = BTreeMap::new();
+    pub fn sets(&self) -> Vec<(Vec<Mechanism>, f64)> {
+        let mut counts: BTreeMap<&Vec<Mechanism>, usize> = BTreeMap::new();
         for s in &self.selected {
             *counts.entry(s).or_default() += 1;
         }
-        let mut out: Vec<(Vec<Cand>, f64)> = counts
+        let mut out: Vec<(Vec<Mechanism>, f64)> = counts
             .into_iter()
             .map(|(s, c)| (s.clone(), c as f64 / self.selected.len() as f64))
             .collect();
@@ -400,11 +401,11 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         .max_effects
         .saturating_sub(selection.start.spec.effects.len());
     // Fits and steps by path (the effects added, in order), seeded from the real selection.
-    let mut fits: BTreeMap<Vec<Cand>, Fit> = BTreeMap::new();
+    let mut fits: BTreeMap<Vec<Mechanism>, Fit> = BTreeMap::new();
     // Paths whose last effect's full-data fit breaks a physical limit: as in the selection,
     // a replicate that reaches one names nothing more.
-    let mut implausible: BTreeSet<Vec<Cand>> = BTreeSet::new();
-    let mut steps: BTreeMap<Vec<Cand>, StepNode> = BTreeMap::new();
+    let mut implausible: BTreeSet<Vec<Mechanism>> = BTreeSet::new();
+    let mut steps: BTreeMap<Vec<Mechanism>, StepNode> = BTreeMap::new();
     let mut path = Vec::new();
     fits.insert(path.clone(), selection.start.clone());
     for step in &selection.steps {
@@ -432,13 +433,13 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             _ => break,
         }
     }
-    let mut lins: BTreeMap<Vec<Cand>, Lin> = BTreeMap::new();
+    let mut lins: BTreeMap<Vec<Mechanism>, Lin> = BTreeMap::new();
     let m = draws(opts.replicates, points.blocks);
-    let mut paths: Vec<Vec<Cand>> = vec![Vec::new(); opts.replicates];
+    let mut paths: Vec<Vec<Mechanism>> = vec![Vec::new(); opts.replicates];
     let mut active = vec![true; opts.replicates];
     for _level in 0..depth {
         // Explore the paths the replicates reached that the real selection did not.
-        let mut reached: BTreeMap<&Vec<Cand>, usize> = BTreeMap::new();
+        let mut reached: BTreeMap<&Vec<Mechanism>, usize> = BTreeMap::new();
         for (p, _) in paths
             .iter()
             .zip(&active)
@@ -447,12 +448,12 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             *reached.entry(p).or_default() += 1;
         }
         let min_count = (MIN_PATH_SHARE * opts.replicates as f64).ceil() as usize;
-        let wanted: Vec<Vec<Cand>> = reached
+        let wanted: Vec<Vec<Mechanism>> = reached
             .iter()
             .filter(|&(_, &c)| c >= min_count)
             .map(|(p, _)| (*p).clone())
             .collect();
-        let rare: Vec<Vec<Cand>> = reached
+        let rare: Vec<Vec<Mechanism>> = reached
             .iter()
             .filter(|&(_, &c)| c < min_count)
             .map(|(p, _)| (*p).clone())
@@ -464,7 +465,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         let explored = fit::par_map(&wanted, |p| {
             let current = &fits[p];
             select::explore(points, current, &alt_opts).map(|ex| {
-                let children: Vec<(Cand, Fit)> = ex
+                let children: Vec<(Mechanism, Fit)> = ex
                     .candidates
                     .into_iter()
                     .filter_map(|c| c.fit.map(|f| (c.cand, f)))
@@ -506,7 +507,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             );
         }
         // Linearise every model the replicates compare at this level.
-        let mut needed: Vec<Vec<Cand>> = Vec::new();
+        let mut needed: Vec<Vec<Mechanism>> = Vec::new();
         for (p, _) in paths.iter().zip(&active).filter(|(_, a)| **a) {
             needed.push(p.clone());
             for &c in &steps[p].children {
@@ -530,7 +531,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             let p = &paths[r];
             let node = &steps[p];
             let here = lins[p].score(&m[r]);
-            let mut best: Option<(Cand, f64, Score)> = None;
+            let mut best: Option<(Mechanism, f64, Score)> = None;
             for &c in &node.children {
                 let mut child = p.clone();
                 child.push(c);
@@ -547,11 +548,11 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 return None;
             }
             let confirmed = match (here.held_out, s.held_out) {
-                (Some(b), Some(a)) if e == Cand::Effect(Effect::MeshLoadSharingRipple) => {
+                (Some(b), Some(a)) if e == Mechanism::Effect(Effect::MeshLoadSharingRipple) => {
                     a.nlpd < b.nlpd
                 }
                 // The bush's evidence is the backdrive observations (as the selection's rule).
-                (Some(b), Some(a)) if e == Cand::Effect(Effect::LinearBushFriction) => {
+                (Some(b), Some(a)) if e == Mechanism::Effect(Effect::LinearBushFriction) => {
                     a.rmse <= 1.01 * b.rmse
                 }
                 (Some(b), Some(a)) => a.rmse < b.rmse,

@@ -44,8 +44,9 @@ use rigfile::plan::{Order, Plan, PlanPoint};
 use serde::Serialize;
 
 use crate::fit::{self, Fit};
+use crate::mechanism::Mechanism;
 use crate::points::TestPoints;
-use crate::select::{self, Cand};
+use crate::select;
 use crate::terms::{Form, Inputs};
 use crate::{Dataset, Outcome, Verdict};
 
@@ -489,7 +490,7 @@ impl Compared {
 /// A leading candidate: the law the selection fitted it in, and its label.
 #[derive(Debug, Clone)]
 struct Leader {
-    cand: Cand,
+    cand: Mechanism,
     /// Its name (the effect's; a family form's is its library effect's).
     name: String,
     /// Its name with its family form, e.g. `load-dependent-friction (light-load)`.
@@ -497,20 +498,20 @@ struct Leader {
 }
 
 /// The candidate named `name` in law `form` (its library law without one).
-fn cand_of(points: &TestPoints, name: &str, form: Option<&str>) -> Option<Cand> {
+fn cand_of(points: &TestPoints, name: &str, form: Option<&str>) -> Option<Mechanism> {
     let term = |want: Option<&str>| {
         points
             .terms
             .iter()
             .position(|t| t.name == name && t.form().map(Form::name) == want)
-            .map(Cand::Term)
+            .map(Mechanism::Term)
     };
     match form {
         Some(f) => term(Some(f)),
         None => match Effect::from_name(name) {
             // Only laws that move the mean current can be told apart by it.
             Some(e) if e.mean_param().is_some() || e == Effect::CurrentSensorOffset => {
-                Some(Cand::Effect(e))
+                Some(Mechanism::Effect(e))
             }
             Some(_) => None,
             // A user effect.
@@ -600,11 +601,11 @@ fn median(values: &[f64]) -> f64 {
 
 /// The final model with the pinned candidate's main parameter moved by one standard error,
 /// when it has one.
-fn moved_by_one_se(outcome: &Outcome, cand: Cand) -> Option<Compared> {
+fn moved_by_one_se(outcome: &Outcome, cand: Mechanism) -> Option<Compared> {
     let after = &outcome.after;
     let mut moved = Compared::of(String::new(), after);
     match cand {
-        Cand::Effect(e) => {
+        Mechanism::Effect(e) => {
             let q = e.mean_param()?;
             let mut p = moved.model.params();
             let v = p[q.index()];
@@ -615,7 +616,7 @@ fn moved_by_one_se(outcome: &Outcome, cand: Cand) -> Option<Compared> {
             p[q.index()] = v + step;
             moved.model.set_params(&p);
         }
-        Cand::Term(t) => {
+        Mechanism::Term(t) => {
             let pos = after.spec.terms.iter().position(|&x| x == t)?;
             let term = &outcome.points.terms[t];
             // Its first linear parameter (its size); shapes are fitted in ln.
@@ -965,7 +966,7 @@ mod separation_tests {
             .iter()
             .find(|l| l.label == "load-dependent-friction (light-load)")
             .unwrap_or_else(|| panic!("{:?}", before.explanation.ambiguous));
-        assert!(matches!(light.cand, Cand::Term(_)), "{light:?}");
+        assert!(matches!(light.cand, Mechanism::Term(_)), "{light:?}");
         assert!(
             proposal
                 .reason

@@ -7,8 +7,8 @@
 use serde::Serialize;
 
 use super::fit::{self, Fit, ModelSpec};
+use super::mechanism::Mechanism;
 use super::points::TestPoints;
-use super::select::Cand;
 
 /// Fewest speed levels for a speed hold-out (two must remain to fit speed laws).
 const MIN_SPEED_LEVELS: usize = 3;
@@ -48,11 +48,11 @@ pub struct Extrapolation {
 }
 
 /// The model `spec` without `cand`.
-fn without(spec: &ModelSpec, cand: Cand) -> ModelSpec {
+fn without(spec: &ModelSpec, cand: Mechanism) -> ModelSpec {
     let mut s = spec.clone();
     match cand {
-        Cand::Effect(e) => s.effects.retain(|&x| x != e),
-        Cand::Term(t) => s.terms.retain(|&x| x != t),
+        Mechanism::Effect(e) => s.effects.retain(|&x| x != e),
+        Mechanism::Term(t) => s.terms.retain(|&x| x != t),
     }
     s
 }
@@ -143,7 +143,7 @@ fn edges(points: &TestPoints) -> Vec<(String, Vec<usize>)> {
 }
 
 /// The extrapolation test of `cand`, an effect of the final model `after`.
-pub fn extrapolation(points: &TestPoints, after: &Fit, cand: Cand) -> Extrapolation {
+pub fn extrapolation(points: &TestPoints, after: &Fit, cand: Mechanism) -> Extrapolation {
     let with = after.spec.clone();
     let less = without(&with, cand);
     let cases: Vec<(String, Vec<usize>, Vec<usize>)> = edges(points)

@@ -33,6 +33,7 @@ pub mod fit;
 pub mod gap;
 pub mod lack_of_fit;
 pub mod library;
+pub mod mechanism;
 
 pub mod plausibility;
 pub mod points;
@@ -59,9 +60,9 @@ pub use select::Options;
 use fit::{Fit, ModelSpec};
 use gap::Gap;
 use library::ThermalDriver;
+use mechanism::Mechanism;
 use points::TestPoints;
 use rigfile::{EffectEntry, RigFile, TermEntry};
-use select::Cand;
 use terms::{Form, Term, TermParam};
 
 /// What `rig explain` concludes.
@@ -538,13 +539,13 @@ fn term_intervals(points: &TestPoints, t: usize, fit: &Fit) -> BTreeMap<String, 
 /// The reported parameters of `cand` in `fit`.
 pub(crate) fn cand_params(
     points: &TestPoints,
-    cand: Cand,
+    cand: Mechanism,
     fit: &Fit,
     thermal: ThermalDriver,
 ) -> BTreeMap<String, f64> {
     match cand {
-        Cand::Effect(e) => library::report_params(e, &fit.model.effects, thermal),
-        Cand::Term(t) => fit
+        Mechanism::Effect(e) => library::report_params(e, &fit.model.effects, thermal),
+        Mechanism::Term(t) => fit
             .spec
             .terms
             .iter()
@@ -557,21 +558,26 @@ pub(crate) fn cand_params(
 /// The intervals of `cand`'s parameters in `fit`.
 pub(crate) fn cand_intervals(
     points: &TestPoints,
-    cand: Cand,
+    cand: Mechanism,
     fit: &Fit,
     thermal: ThermalDriver,
 ) -> BTreeMap<String, [f64; 2]> {
     match cand {
-        Cand::Effect(e) => intervals(e, fit, thermal),
-        Cand::Term(t) => term_intervals(points, t, fit),
+        Mechanism::Effect(e) => intervals(e, fit, thermal),
+        Mechanism::Term(t) => term_intervals(points, t, fit),
     }
 }
 
 /// What `cand` means in `fit`.
-fn cand_description(points: &TestPoints, cand: Cand, fit: &Fit, thermal: ThermalDriver) -> String {
+fn cand_description(
+    points: &TestPoints,
+    cand: Mechanism,
+    fit: &Fit,
+    thermal: ThermalDriver,
+) -> String {
     match cand {
-        Cand::Effect(e) => library::describe(e, &fit.model.effects, thermal),
-        Cand::Term(t) => fit
+        Mechanism::Effect(e) => library::describe(e, &fit.model.effects, thermal),
+        Mechanism::Term(t) => fit
             .spec
             .terms
             .iter()
@@ -599,7 +605,7 @@ fn merge_by_name(rows: Vec<CandidateReport>) -> Vec<CandidateReport> {
 }
 
 /// A label of `cand` with its form, for lists of models.
-fn cand_label(points: &TestPoints, cand: Cand) -> String {
+fn cand_label(points: &TestPoints, cand: Mechanism) -> String {
     match cand.form(points) {
         Some(f) => format!("{} ({f})", cand.name(points)),
         None => cand.name(points).to_string(),
@@ -788,7 +794,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             model::effects::MU_PHYSICAL.why
         ));
     }
-    let name_of = |c: &Cand| c.name(&points).to_string();
+    let name_of = |c: &Mechanism| c.name(&points).to_string();
     // Inclusion of an effect by name: in any of its laws.
     let inclusion_of = |name: &str| {
         boot.as_ref()
@@ -886,7 +892,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         let Some(b) = &boot else {
             return Vec::new();
         };
-        let has = |s: &[Cand], n: &str| s.iter().any(|c| c.name(&points) == n);
+        let has = |s: &[Mechanism], n: &str| s.iter().any(|c| c.name(&points) == n);
         let mut r: Vec<(String, f64)> = competitors
             .iter()
             .map(|c| (c.clone(), b.share(|s| has(s, c) && !has(s, name))))

@@ -9,8 +9,8 @@ use model::effects::{Effect, LimitContext, LimitKind, MU_PHYSICAL, PhysicalLimit
 use serde::Serialize;
 
 use super::fit::Fit;
+use super::mechanism::Mechanism;
 use super::points::TestPoints;
-use super::select::Cand;
 
 /// A shape coordinate this close to an edge of its search (share of the search's width, in
 /// the fit's coordinate) sits on it.
@@ -115,7 +115,7 @@ fn check_limit(
 }
 
 /// The plausibility of `cand` as fitted in `fit` (a fit that carries it) on `points`.
-pub fn check(points: &TestPoints, cand: Cand, fit: &Fit) -> Plausibility {
+pub fn check(points: &TestPoints, cand: Mechanism, fit: &Fit) -> Plausibility {
     let ctx = context(points, fit);
     let params = crate::cand_params(points, cand, fit, points.thermal);
     let intervals = crate::cand_intervals(points, cand, fit, points.thermal);
@@ -136,7 +136,7 @@ pub fn check(points: &TestPoints, cand: Cand, fit: &Fit) -> Plausibility {
     checks.push(check_limit(&MU_PHYSICAL, fit.model.mu, None, &ctx));
     // A load-dependent power return must keep kappa(tau) = kappa + kappa_per_nm |tau| within
     // the library's kappa limits at every tested load, not only at zero load.
-    if let (Cand::Term(t), Some(&k0), Some(&k1)) =
+    if let (Mechanism::Term(t), Some(&k0), Some(&k1)) =
         (cand, params.get("kappa"), params.get("kappa_per_nm"))
         && points.terms[t].form() == Some(crate::terms::Form::LoadDependentReturn)
         && let Some(limit) = Effect::InertiaRectification
@@ -153,7 +153,7 @@ pub fn check(points: &TestPoints, cand: Cand, fit: &Fit) -> Plausibility {
         at_max.param = format!("kappa at {} N m", reporting::human(tau_max));
         checks.push(at_max);
     }
-    if let Cand::Term(t) = cand
+    if let Mechanism::Term(t) = cand
         && let Some(pos) = fit.spec.terms.iter().position(|&x| x == t)
     {
         let term = &points.terms[t];
@@ -194,8 +194,8 @@ pub fn check_model(points: &TestPoints, fit: &Fit) -> Plausibility {
         .spec
         .effects
         .iter()
-        .map(|&e| Cand::Effect(e))
-        .chain(fit.spec.terms.iter().map(|&t| Cand::Term(t)));
+        .map(|&e| Mechanism::Effect(e))
+        .chain(fit.spec.terms.iter().map(|&t| Mechanism::Term(t)));
     let mut checks: Vec<LimitCheck> = Vec::new();
     for c in cands {
         for mut k in check(points, c, fit).checks {

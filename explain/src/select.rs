@@ -1,7 +1,7 @@
 //! Forward selection of missing effects.
 //!
 //! Each step fits every applicable candidate (a library effect in its own law, a family form
-//! of one, or a user effect: [`Cand`]) jointly with the current model and ranks them by the
+//! of one, or a user effect: [`Mechanism`]) jointly with the current model and ranks them by the
 //! BIC improvement. The best is added only when
 //! 1. its BIC improvement is positive,
 //! 2. it beats the null distribution of the best improvement over all candidates (a guard
@@ -23,7 +23,8 @@ use model::effects::{CurrentModel, Effect};
 use model::plant::NoiseSource;
 
 use super::fit::{self, Column, Fit, HeldOut, ModelSpec};
-use super::library::{self, DataTraits};
+use super::library;
+use super::mechanism::Mechanism;
 use super::points::TestPoints;
 use super::stats;
 
@@ -81,82 +82,6 @@ impl Default for Options {
     }
 }
 
-/// A candidate effect: a library effect in its own law, or a term ([`TestPoints::terms`]: a
-/// family form of a library effect or a user effect).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Cand {
-    /// A library effect in its own law.
-    Effect(Effect),
-    /// A term.
-    Term(usize),
-}
-
-impl Cand {
-    /// The name reports give it (a family form has its library effect's).
-    pub fn name<'a>(&self, points: &'a TestPoints) -> &'a str {
-        match *self {
-            Cand::Effect(e) => e.name(),
-            Cand::Term(t) => &points.terms[t].name,
-        }
-    }
-
-    /// The library effect it is a law of, if any.
-    pub fn effect(&self, points: &TestPoints) -> Option<Effect> {
-        match *self {
-            Cand::Effect(e) => Some(e),
-            Cand::Term(t) => points.terms[t].effect(),
-        }
-    }
-
-    /// The family form's name, for a family member.
-    pub fn form(&self, points: &TestPoints) -> Option<&'static str> {
-        match *self {
-            Cand::Effect(_) => None,
-            Cand::Term(t) => points.terms[t].form().map(|f| f.name()),
-        }
-    }
-
-    /// Why the data cannot show it, or `None`.
-    pub fn not_applicable(&self, points: &TestPoints, traits: &DataTraits) -> Option<&'static str> {
-        match *self {
-            Cand::Effect(e) => library::not_applicable(e, traits),
-            Cand::Term(t) => points.terms[t].not_applicable(traits),
-        }
-    }
-
-    /// Parameters it adds to the likelihood.
-    pub fn parameter_count(&self, points: &TestPoints) -> usize {
-        match *self {
-            Cand::Effect(e) => library::parameter_count(e),
-            Cand::Term(t) => points.terms[t].parameter_count(),
-        }
-    }
-
-    /// Its BIC penalty for `n` rows.
-    pub fn penalty(&self, points: &TestPoints, n: f64) -> f64 {
-        match *self {
-            Cand::Effect(e) => library::parameter_count(e) as f64 * n.ln(),
-            Cand::Term(t) => points.terms[t].penalty(n),
-        }
-    }
-
-    /// Whether `spec` carries it.
-    pub fn in_spec(&self, spec: &ModelSpec) -> bool {
-        match *self {
-            Cand::Effect(e) => spec.has(e),
-            Cand::Term(t) => spec.terms.contains(&t),
-        }
-    }
-
-    /// `spec` with it added.
-    pub fn added_to(&self, spec: &ModelSpec) -> ModelSpec {
-        match *self {
-            Cand::Effect(e) => spec.with(e),
-            Cand::Term(t) => spec.with_term(t),
-        }
-    }
-}
-
 /// Whether `spec` already carries library effect `e` in some law (its own or a form).
 fn carries(points: &TestPoints, spec: &ModelSpec, e: Effect) -> bool {
     spec.has(e)
@@ -168,11 +93,11 @@ fn carries(points: &TestPoints, spec: &ModelSpec, e: Effect) -> bool {
 
 /// The candidates `spec` does not carry yet (applicable or not): every library effect not in
 /// it in any law, every family form of those, every user effect not in it.
-pub fn pending(points: &TestPoints, spec: &ModelSpec) -> Vec<Cand> {
-    let mut out: Vec<Cand> = Effect::ALL
+pub fn pending(points: &TestPoints, spec: &ModelSpec) -> Vec<Mechanism> {
+    let mut out: Vec<Mechanism> = Effect::ALL
         .into_iter()
         .filter(|&e| !carries(points, spec, e))
-        .map(Cand::Effect)
+        .map(Mechanism::Effect)
         .collect();
     for (t, term) in points.terms.iter().enumerate() {
         let free = match term.effect() {
@@ -180,7 +105,7 @@ pub fn pending(points: &TestPoints, spec: &ModelSpec) -> Vec<Cand> {
             None => !spec.terms.contains(&t),
         };
         if free {
-            out.push(Cand::Term(t));
+            out.push(Mechanism::Term(t));
         }
     }
     out
@@ -190,7 +115,7 @@ pub fn pending(points: &TestPoints, spec: &ModelSpec) -> Vec<Cand> {
 #[derive(Debug, Clone)]
 pub struct Candidate {
     /// The candidate.
-    pub cand: Cand,
+    pub cand: Mechanism,
     /// Why it cannot show in this data, if it cannot.
     pub not_applicable: Option<&'static str>,
     /// Its joint fit with the current model.
@@ -390,7 +315,7 @@ pub struct Selection {
 
 impl Selection {
     /// Candidates added, strongest (first added) first.
-    pub fn added(&self) -> Vec<Cand> {
+    pub fn added(&self) -> Vec<Mechanism> {
         self.steps
             .iter()
             .filter(|s| s.accepted)
@@ -502,10 +427,10 @@ fn fit_term(points: &TestPoints, current: &Fit, t: usize) -> Fit {
 const SHAPE_LOOK_ITERATIONS: usize = 4;
 
 /// Fits `cand` jointly with `current`.
-pub(crate) fn fit_candidate(points: &TestPoints, current: &Fit, cand: Cand) -> Fit {
+pub(crate) fn fit_candidate(points: &TestPoints, current: &Fit, cand: Mechanism) -> Fit {
     match cand {
-        Cand::Effect(e) => fit_effect(points, current, e),
-        Cand::Term(t) => fit_term(points, current, t),
+        Mechanism::Effect(e) => fit_effect(points, current, e),
+        Mechanism::Term(t) => fit_term(points, current, t),
     }
 }
 
@@ -555,13 +480,13 @@ struct ScoreTests {
 }
 
 /// The score columns of a mean candidate: blocks of (column, one-sided) lists.
-fn columns_of(points: &TestPoints, cand: Cand) -> Vec<Vec<(Column, bool)>> {
+fn columns_of(points: &TestPoints, cand: Mechanism) -> Vec<Vec<(Column, bool)>> {
     match cand {
-        Cand::Effect(e) => match e.mean_param() {
+        Mechanism::Effect(e) => match e.mean_param() {
             Some(q) => vec![vec![(Column::Param(q), library::one_sided(e))]],
             None => Vec::new(),
         },
-        Cand::Term(t) => {
+        Mechanism::Term(t) => {
             let term = &points.terms[t];
             let linear: Vec<usize> = (0..term.params.len())
                 .filter(|&c| !term.params[c].log)
@@ -595,7 +520,7 @@ fn columns_of(points: &TestPoints, cand: Cand) -> Vec<Vec<(Column, bool)>> {
     }
 }
 
-fn score_tests(points: &TestPoints, current: &Fit, mean: &[Cand]) -> ScoreTests {
+fn score_tests(points: &TestPoints, current: &Fit, mean: &[Mechanism]) -> ScoreTests {
     let layout: Vec<Vec<Vec<(Column, bool)>>> =
         mean.iter().map(|&c| columns_of(points, c)).collect();
     let mut extra: Vec<Column> = Vec::new();
@@ -726,7 +651,7 @@ fn score_tests(points: &TestPoints, current: &Fit, mean: &[Cand]) -> ScoreTests 
 fn null_best_improvements(
     points: &TestPoints,
     tests: &ScoreTests,
-    mean: &[Cand],
+    mean: &[Mechanism],
     ripple: bool,
     n: usize,
     draws: usize,
@@ -841,15 +766,15 @@ fn critical_value(null: &[f64], alpha: f64) -> f64 {
 pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Explored> {
     let traits = points.traits();
     let full_table = points.len() <= FULL_TABLE_POINTS;
-    let applicable: Vec<Cand> = pending(points, &current.spec)
+    let applicable: Vec<Mechanism> = pending(points, &current.spec)
         .into_iter()
         .filter(|c| c.not_applicable(points, &traits).is_none())
         .collect();
     if applicable.is_empty() {
         return None;
     }
-    let ripple_cand = Cand::Effect(Effect::MeshLoadSharingRipple);
-    let mean: Vec<Cand> = applicable
+    let ripple_cand = Mechanism::Effect(Effect::MeshLoadSharingRipple);
+    let mean: Vec<Mechanism> = applicable
         .iter()
         .copied()
         .filter(|c| *c != ripple_cand)
@@ -857,14 +782,14 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
     let ripple = applicable.contains(&ripple_cand);
     let tests = score_tests(points, current, &mean);
     // Score-test estimate of each candidate's BIC improvement, for screening.
-    let estimate = |c: Cand| -> f64 {
+    let estimate = |c: Mechanism| -> f64 {
         let k = c.penalty(points, current.n as f64);
         if c == ripple_cand {
             return tests.ripple_lr - k;
         }
         let a = mean.iter().position(|&m| m == c).expect("a mean candidate");
         let mut lr = tests.lr[a].unwrap_or(0.0);
-        if c == Cand::Effect(Effect::LinearBushFriction) && !points.holds.is_empty() {
+        if c == Mechanism::Effect(Effect::LinearBushFriction) && !points.holds.is_empty() {
             let (_, _, errors) = fit::fit_hold(&points.holds);
             let before = current.hold_errors as f64;
             lr += 2.0
@@ -873,7 +798,7 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
         }
         lr - k
     };
-    let mut ranked: Vec<(Cand, f64)> = applicable.iter().map(|&c| (c, estimate(c))).collect();
+    let mut ranked: Vec<(Mechanism, f64)> = applicable.iter().map(|&c| (c, estimate(c))).collect();
     ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
     let null = null_best_improvements(points, &tests, &mean, ripple, current.n, opts.null_draws);
     let critical = critical_value(&null, opts.alpha);
@@ -882,16 +807,16 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
     // reach the guard's critical value (its fit improving the BIC by up to
     // `TERM_SCREEN_FACTOR` times the estimate plus `TERM_SCREEN_SLACK`); the others keep
     // their estimates.
-    let could_pass = |c: Cand, est: f64| {
+    let could_pass = |c: Mechanism, est: f64| {
         !points.pooled
-            || matches!(c, Cand::Effect(_))
+            || matches!(c, Mechanism::Effect(_))
             || TERM_SCREEN_FACTOR * est + TERM_SCREEN_SLACK >= critical
     };
-    let to_fit: Vec<Cand> = ranked
+    let to_fit: Vec<Mechanism> = ranked
         .iter()
         .enumerate()
         .filter(|(i, (c, _))| {
-            full_table || *i < SCREEN_KEEP || *c == Cand::Effect(Effect::LinearBushFriction)
+            full_table || *i < SCREEN_KEEP || *c == Mechanism::Effect(Effect::LinearBushFriction)
         })
         .filter(|(_, (c, est))| could_pass(*c, *est))
         .map(|(_, (c, _))| *c)
@@ -1083,8 +1008,8 @@ pub fn select_from(
         let hold_gain = best_fit.hold_errors + 2 <= current.hold_errors;
         let (ok_held_out, held_note) = confirmed(
             match best.cand {
-                Cand::Effect(e) => Some(e),
-                Cand::Term(_) => None,
+                Mechanism::Effect(e) => Some(e),
+                Mechanism::Term(_) => None,
             },
             current_held_out,
             best.held_out,
