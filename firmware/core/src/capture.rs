@@ -6,6 +6,16 @@
 //! per control step; the samples in between get a linear interpolation of it. Sample
 //! rates below [`MIN_SAMPLE_RATE_HZ`] are refused so that the 16-bit encoder difference
 //! between two samples cannot wrap (150 rad/s moves ~2000 counts in 10 ms).
+//!
+//! The output encoder (when fitted) would cost 20 000 more bytes per sample, so it has its
+//! own buffer of [`OUTPUT_CAPACITY`] readings (low 16 bits, 2 000 bytes): one reading per
+//! group of `ceil(samples / OUTPUT_CAPACITY)` samples, taken at the control step that
+//! records the group's first sample and held (never interpolated) for the group. So the
+//! output is read at `rate / ceil(samples / 1000)`, never more often than the control
+//! step: every step (1 kHz) in a full 1 s capture at 10 kHz, every 10 ms in 10 000 samples
+//! at 1 kHz, every 100 ms in the longest (10 000 samples at 100 Hz). Between two readings
+//! the output turns at most a few thousand counts (20 rad/s, the overspeed limit, is
+//! 2 600 counts in 0.1 s), so the 16-bit difference cannot wrap either.
 
 use protocol::{CAPTURE_CHUNK_SAMPLES, CaptureChunk, CaptureSample, DeviceMessage, NackCode};
 
@@ -19,6 +29,8 @@ const _: () = assert!(UPLOAD_CHUNK_SAMPLES <= CAPTURE_CHUNK_SAMPLES);
 pub const CAPTURE_CAPACITY: usize = 10_000;
 /// Lowest capture sample rate, Hz.
 pub const MIN_SAMPLE_RATE_HZ: u16 = 100;
+/// Output-encoder readings the capture holds (one per control step of a 1 s capture).
+pub const OUTPUT_CAPACITY: usize = 1_000;
 
 /// One stored sample.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -63,6 +75,13 @@ pub struct Capture {
     upload_position: i32,
     upload_last_raw: u16,
     buf: [RawSample; CAPTURE_CAPACITY],
+    /// Samples per output reading (`ceil(total / OUTPUT_CAPACITY)`).
+    output_group: u32,
+    /// Whether an output encoder was read at the capture's first sample.
+    output_fitted: bool,
+    upload_output_position: i32,
+    upload_output_last_raw: u16,
+    output: [u16; OUTPUT_CAPACITY],
 }
 
 impl Capture {
@@ -80,6 +99,11 @@ impl Capture {
             upload_position: 0,
             upload_last_raw: 0,
             buf: [RawSample::default(); CAPTURE_CAPACITY],
+            output_group: 1,
+            output_fitted: false,
+            upload_output_position: 0,
+            upload_output_last_raw: 0,
+            output: [0; OUTPUT_CAPACITY],
         }
     }
 
@@ -118,6 +142,8 @@ impl Capture {
         self.recorded = 0;
         self.sent = 0;
         self.countdown = 0;
+        self.output_group = samples.div_ceil(u32::try_from(OUTPUT_CAPACITY).unwrap_or(u32::MAX));
+        self.output_fitted = false;
         self.phase = CapturePhase::Recording;
         Ok(CapturePlan {
             id: self.id,
@@ -126,9 +152,16 @@ impl Capture {
         })
     }
 
-    /// Records one control step: its ADC samples and the encoder position (low 16 bits of
-    /// the unwrapped count) at the previous and at this step.
-    pub fn record_step(&mut self, adc: &[u16], encoder_prev: u16, encoder_now: u16) {
+    /// Records one control step: its ADC samples, the encoder position (low 16 bits of
+    /// the unwrapped count) at the previous and at this step, and the output encoder's
+    /// position at this step (low 16 bits; `None` without an output encoder).
+    pub fn record_step(
+        &mut self,
+        adc: &[u16],
+        encoder_prev: u16,
+        encoder_now: u16,
+        output_now: Option<u16>,
+    ) {
         if self.phase != CapturePhase::Recording || adc.is_empty() {
             return;
         }
@@ -141,6 +174,13 @@ impl Capture {
             }
             self.countdown = self.decimation - 1;
             let step = delta * i32::try_from(j + 1).unwrap_or(n) / n;
+            if self.recorded == 0 {
+                self.output_fitted = output_now.is_some();
+            }
+            if self.recorded.is_multiple_of(self.output_group) {
+                // Index < ceil(total / group) <= OUTPUT_CAPACITY.
+                self.output[(self.recorded / self.output_group) as usize] = output_now.unwrap_or(0);
+            }
             self.buf[self.recorded as usize] = RawSample {
                 adc: code,
                 // |step| <= |delta|, an i16.
@@ -151,6 +191,8 @@ impl Capture {
                 self.phase = CapturePhase::Uploading;
                 self.upload_position = 0;
                 self.upload_last_raw = self.buf[0].encoder;
+                self.upload_output_position = 0;
+                self.upload_output_last_raw = self.output[0];
                 return;
             }
         }
@@ -176,14 +218,23 @@ impl Capture {
             samples: heapless::Vec::new(),
         };
         let end = (self.sent as usize + UPLOAD_CHUNK_SAMPLES).min(self.total as usize);
-        for raw in &self.buf[self.sent as usize..end] {
+        for (index, raw) in (self.sent..).zip(&self.buf[self.sent as usize..end]) {
             let delta = raw.encoder.wrapping_sub(self.upload_last_raw).cast_signed();
             self.upload_last_raw = raw.encoder;
             self.upload_position = self.upload_position.wrapping_add(i32::from(delta));
+            let output_count = self.output_fitted.then(|| {
+                let now = self.output[(index / self.output_group) as usize];
+                let delta = now.wrapping_sub(self.upload_output_last_raw).cast_signed();
+                self.upload_output_last_raw = now;
+                self.upload_output_position =
+                    self.upload_output_position.wrapping_add(i32::from(delta));
+                self.upload_output_position
+            });
             // Cannot fail: the chunk holds CAPTURE_CHUNK_SAMPLES and `end` bounds the run.
             let _ = chunk.samples.push(CaptureSample {
                 current_adc: raw.adc,
                 encoder_count: self.upload_position,
+                output_count,
             });
         }
         self.sent = u32::try_from(end).unwrap_or(self.total);
@@ -229,7 +280,7 @@ mod tests {
         let mut enc = 65_500u16;
         for k in 0..10u16 {
             let next = enc.wrapping_add(20);
-            c.record_step(&[k; 10], enc, next);
+            c.record_step(&[k; 10], enc, next, None);
             enc = next;
         }
         assert_eq!(c.phase(), CapturePhase::Uploading);
@@ -239,6 +290,10 @@ mod tests {
         // 20 counts per 10 samples: 2 per sample, across the 16-bit wrap.
         assert_eq!(samples[99].encoder_count, 198);
         assert_eq!(samples[55].current_adc, 5);
+        assert!(
+            samples.iter().all(|s| s.output_count.is_none()),
+            "no output encoder"
+        );
         assert_eq!(
             done,
             Some(DeviceMessage::CaptureDone {
@@ -267,10 +322,64 @@ mod tests {
         let mut c = Capture::new();
         c.start(1000, 5, 10_000).unwrap();
         for k in 0..5u16 {
-            c.record_step(&[k * 10, 1, 2, 3, 4, 5, 6, 7, 8, 9], 0, 0);
+            c.record_step(&[k * 10, 1, 2, 3, 4, 5, 6, 7, 8, 9], 0, 0, None);
         }
         let (samples, _) = upload(&mut c);
         let adc: Vec<u16> = samples.iter().map(|s| s.current_adc).collect();
         assert_eq!(adc, [0, 10, 20, 30, 40]);
+    }
+
+    /// Output counts of `k` steps at `per_step` counts per step from `start`, 16-bit.
+    fn output_at(start: u16, per_step: i32, k: u32) -> u16 {
+        start.wrapping_add_signed((per_step * k as i32) as i16)
+    }
+
+    #[test]
+    fn output_is_read_every_step_of_a_full_10_khz_capture_and_held_between() {
+        let mut c = Capture::new();
+        c.start(10_000, CAPTURE_CAPACITY as u32, 10_000).unwrap();
+        // The output turns 3 counts per step backwards, from just above the 16-bit wrap.
+        let start = 40u16;
+        for k in 0..1000u32 {
+            c.record_step(&[7; 10], 0, 0, Some(output_at(start, -3, k)));
+        }
+        let (samples, _) = upload(&mut c);
+        assert_eq!(samples.len(), CAPTURE_CAPACITY);
+        for (i, s) in samples.iter().enumerate() {
+            // Held over the step's ten samples, counted from the capture's start.
+            assert_eq!(s.output_count, Some(-3 * (i as i32 / 10)), "sample {i}");
+        }
+    }
+
+    #[test]
+    fn a_long_capture_reads_the_output_once_per_group_and_a_still_output_is_constant() {
+        let mut c = Capture::new();
+        // 10 000 samples at 100 Hz: 100 s, one sample per 10 steps, one reading per 10
+        // samples (100 steps).
+        c.start(100, CAPTURE_CAPACITY as u32, 10_000).unwrap();
+        let mut k = 0u32;
+        while c.phase() == CapturePhase::Recording {
+            c.record_step(&[1; 10], 0, 0, Some(output_at(65_000, 5, k)));
+            k += 1;
+        }
+        // The last sample is taken at step 99 990.
+        assert_eq!(k, 99_991);
+        let (samples, _) = upload(&mut c);
+        for (i, s) in samples.iter().enumerate() {
+            // Sample i is taken at step 10 i; its group's reading at step 100 (i / 10).
+            assert_eq!(
+                s.output_count,
+                Some(5 * 100 * (i as i32 / 10)),
+                "sample {i}"
+            );
+        }
+        let mut c = Capture::new();
+        c.start(1000, 500, 10_000).unwrap();
+        for _ in 0..500 {
+            c.record_step(&[1; 10], 0, 0, Some(12_345));
+        }
+        let (samples, _) = upload(&mut c);
+        assert_eq!(samples.len(), 500);
+        assert!(samples.iter().all(|s| s.output_count == Some(0)));
     }
 }
