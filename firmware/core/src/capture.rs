@@ -86,6 +86,10 @@ pub struct Capture {
 
 impl Capture {
     /// An idle capture with an empty buffer.
+    // Inlined so that `Core::new`, written into the binary's static slot, builds the
+    // 42 KB of buffers in place: out of line they went through a 46 KB stack temporary,
+    // which overran the stack at boot (target bench boot trace).
+    #[inline(always)]
     pub fn new() -> Self {
         Self {
             phase: CapturePhase::Idle,
