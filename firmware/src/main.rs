@@ -288,7 +288,7 @@ mod app {
             parameters: loaded.calibration,
             parameters_status: loaded.status,
         };
-        // The core (~45 KiB, mostly the capture buffers) is built straight into its static
+        // The core (~43 KiB, mostly the capture buffer) is built straight into its static
         // slot (no stack temporary); the tasks share a reference to it through the mutex.
         let slot = unwrap!(cortex_m::singleton!(: MaybeUninit<Core> = MaybeUninit::uninit()));
         let core_ref: &'static mut Core = slot.write(Core::new(config, boot));

@@ -7,15 +7,17 @@
 //! rates below [`MIN_SAMPLE_RATE_HZ`] are refused so that the 16-bit encoder difference
 //! between two samples cannot wrap (150 rad/s moves ~2000 counts in 10 ms).
 //!
-//! The output encoder (when fitted) would cost 20 000 more bytes per sample, so it has its
-//! own buffer of [`OUTPUT_CAPACITY`] readings (low 16 bits, 2 000 bytes): one reading per
-//! group of `ceil(samples / OUTPUT_CAPACITY)` samples, taken at the control step that
-//! records the group's first sample and held (never interpolated) for the group. So the
-//! output is read at `rate / ceil(samples / 1000)`, never more often than the control
-//! step: every step (1 kHz) in a full 1 s capture at 10 kHz, every 10 ms in 10 000 samples
-//! at 1 kHz, every 100 ms in the longest (10 000 samples at 100 Hz). Between two readings
-//! the output turns at most a few thousand counts (20 rad/s, the overspeed limit, is
-//! 2 600 counts in 0.1 s), so the 16-bit difference cannot wrap either.
+//! The output encoder (when fitted) costs no memory: a per-sample count would need 20 000
+//! more bytes, and even 1 000 readings grew the core's boot-time stack temporary past the
+//! stack. It rides in the 4 bits the 12-bit ADC code leaves free: the output is read at a
+//! control step and held for a group of samples; the group's first sample has the top bit
+//! set and its first [`OUTPUT_GROUP_MIN`] samples carry the 16-bit reading, 3 bits each.
+//! A new group starts at the first sample of a control step once the group has
+//! [`OUTPUT_GROUP_MIN`] samples: at 10 kHz (ten samples a step) every step, at 1 kHz
+//! and below every 6 samples. The last group's reading, which may have fewer samples,
+//! is also kept whole. Between two readings the output turns far less than 32 768 counts
+//! (20 rad/s, the overspeed limit, is 1 565 counts in the 60 ms of 6 samples at the lowest
+//! rate, 100 Hz), so the 16-bit difference cannot wrap.
 
 use protocol::{CAPTURE_CHUNK_SAMPLES, CaptureChunk, CaptureSample, DeviceMessage, NackCode};
 
@@ -29,8 +31,12 @@ const _: () = assert!(UPLOAD_CHUNK_SAMPLES <= CAPTURE_CHUNK_SAMPLES);
 pub const CAPTURE_CAPACITY: usize = 10_000;
 /// Lowest capture sample rate, Hz.
 pub const MIN_SAMPLE_RATE_HZ: u16 = 100;
-/// Output-encoder readings the capture holds (one per control step of a 1 s capture).
-pub const OUTPUT_CAPACITY: usize = 1_000;
+/// Fewest samples per output reading (its 16 bits, 3 per sample).
+pub const OUTPUT_GROUP_MIN: u32 = 6;
+/// ADC code bits of a stored sample (the ADC is 12-bit); the rest carry the output.
+const ADC_MASK: u16 = 0x0FFF;
+/// Set on the first sample of an output group.
+const GROUP_START: u16 = 0x8000;
 
 /// One stored sample.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -75,13 +81,13 @@ pub struct Capture {
     upload_position: i32,
     upload_last_raw: u16,
     buf: [RawSample; CAPTURE_CAPACITY],
-    /// Samples per output reading (`ceil(total / OUTPUT_CAPACITY)`).
-    output_group: u32,
+    /// First sample of the current output group, and its reading.
+    group_start: u32,
+    output_hold: u16,
     /// Whether an output encoder was read at the capture's first sample.
     output_fitted: bool,
     upload_output_position: i32,
     upload_output_last_raw: u16,
-    output: [u16; OUTPUT_CAPACITY],
 }
 
 impl Capture {
@@ -103,11 +109,11 @@ impl Capture {
             upload_position: 0,
             upload_last_raw: 0,
             buf: [RawSample::default(); CAPTURE_CAPACITY],
-            output_group: 1,
+            group_start: 0,
+            output_hold: 0,
             output_fitted: false,
             upload_output_position: 0,
             upload_output_last_raw: 0,
-            output: [0; OUTPUT_CAPACITY],
         }
     }
 
@@ -146,7 +152,7 @@ impl Capture {
         self.recorded = 0;
         self.sent = 0;
         self.countdown = 0;
-        self.output_group = samples.div_ceil(u32::try_from(OUTPUT_CAPACITY).unwrap_or(u32::MAX));
+        self.group_start = 0;
         self.output_fitted = false;
         self.phase = CapturePhase::Recording;
         Ok(CapturePlan {
@@ -171,6 +177,7 @@ impl Capture {
         }
         let delta = i32::from(encoder_now.wrapping_sub(encoder_prev).cast_signed());
         let n = i32::try_from(adc.len()).unwrap_or(i32::MAX);
+        let mut first_in_step = true;
         for (j, &code) in adc.iter().enumerate() {
             if self.countdown > 0 {
                 self.countdown -= 1;
@@ -178,15 +185,24 @@ impl Capture {
             }
             self.countdown = self.decimation - 1;
             let step = delta * i32::try_from(j + 1).unwrap_or(n) / n;
-            if self.recorded == 0 {
-                self.output_fitted = output_now.is_some();
+            let i = self.recorded;
+            let starts = i == 0 || (first_in_step && i - self.group_start >= OUTPUT_GROUP_MIN);
+            first_in_step = false;
+            if starts {
+                if i == 0 {
+                    self.output_fitted = output_now.is_some();
+                }
+                self.group_start = i;
+                self.output_hold = output_now.unwrap_or(0);
             }
-            if self.recorded.is_multiple_of(self.output_group) {
-                // Index < ceil(total / group) <= OUTPUT_CAPACITY.
-                self.output[(self.recorded / self.output_group) as usize] = output_now.unwrap_or(0);
-            }
-            self.buf[self.recorded as usize] = RawSample {
-                adc: code,
+            let k = i - self.group_start;
+            let bits = if k < OUTPUT_GROUP_MIN {
+                ((self.output_hold >> (3 * k)) & 0x7) << 12
+            } else {
+                0
+            };
+            self.buf[i as usize] = RawSample {
+                adc: (code & ADC_MASK) | bits | if starts { GROUP_START } else { 0 },
                 // |step| <= |delta|, an i16.
                 encoder: encoder_prev.wrapping_add_signed(i16::try_from(step).unwrap_or(0)),
             };
@@ -196,10 +212,23 @@ impl Capture {
                 self.upload_position = 0;
                 self.upload_last_raw = self.buf[0].encoder;
                 self.upload_output_position = 0;
-                self.upload_output_last_raw = self.output[0];
+                self.upload_output_last_raw = self.reading_at(0);
                 return;
             }
         }
+    }
+
+    /// The output reading of the group starting at sample `start`: from its samples, or
+    /// kept whole for the last group (which may be shorter).
+    fn reading_at(&self, start: u32) -> u16 {
+        let end = start + OUTPUT_GROUP_MIN;
+        if end > self.total {
+            return self.output_hold;
+        }
+        (0..OUTPUT_GROUP_MIN).fold(0u16, |acc, k| {
+            let bits = (self.buf[(start + k) as usize].adc >> 12) & 0x7;
+            acc | (bits << (3 * k))
+        })
     }
 
     /// The next upload message (chunks, then `CaptureDone`), or `None` when not uploading.
@@ -226,17 +255,17 @@ impl Capture {
             let delta = raw.encoder.wrapping_sub(self.upload_last_raw).cast_signed();
             self.upload_last_raw = raw.encoder;
             self.upload_position = self.upload_position.wrapping_add(i32::from(delta));
-            let output_count = self.output_fitted.then(|| {
-                let now = self.output[(index / self.output_group) as usize];
+            if raw.adc & GROUP_START != 0 {
+                let now = self.reading_at(index);
                 let delta = now.wrapping_sub(self.upload_output_last_raw).cast_signed();
                 self.upload_output_last_raw = now;
                 self.upload_output_position =
                     self.upload_output_position.wrapping_add(i32::from(delta));
-                self.upload_output_position
-            });
+            }
+            let output_count = self.output_fitted.then_some(self.upload_output_position);
             // Cannot fail: the chunk holds CAPTURE_CHUNK_SAMPLES and `end` bounds the run.
             let _ = chunk.samples.push(CaptureSample {
-                current_adc: raw.adc,
+                current_adc: raw.adc & ADC_MASK,
                 encoder_count: self.upload_position,
                 output_count,
             });
@@ -358,8 +387,8 @@ mod tests {
     #[test]
     fn a_long_capture_reads_the_output_once_per_group_and_a_still_output_is_constant() {
         let mut c = Capture::new();
-        // 10 000 samples at 100 Hz: 100 s, one sample per 10 steps, one reading per 10
-        // samples (100 steps).
+        // 10 000 samples at 100 Hz: 100 s, one sample per 10 steps, one reading per 6
+        // samples (60 steps); the last group (10 000 = 6 x 1666 + 4) is short.
         c.start(100, CAPTURE_CAPACITY as u32, 10_000).unwrap();
         let mut k = 0u32;
         while c.phase() == CapturePhase::Recording {
@@ -370,12 +399,8 @@ mod tests {
         assert_eq!(k, 99_991);
         let (samples, _) = upload(&mut c);
         for (i, s) in samples.iter().enumerate() {
-            // Sample i is taken at step 10 i; its group's reading at step 100 (i / 10).
-            assert_eq!(
-                s.output_count,
-                Some(5 * 100 * (i as i32 / 10)),
-                "sample {i}"
-            );
+            // Sample i is taken at step 10 i; its group's reading at step 60 (i / 6).
+            assert_eq!(s.output_count, Some(5 * 60 * (i as i32 / 6)), "sample {i}");
         }
         let mut c = Capture::new();
         c.start(1000, 500, 10_000).unwrap();
