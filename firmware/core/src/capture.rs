@@ -24,7 +24,7 @@ use protocol::{CAPTURE_CHUNK_SAMPLES, CaptureChunk, CaptureSample, DeviceMessage
 /// Samples per uploaded chunk: fewer than the protocol's [`CAPTURE_CHUNK_SAMPLES`] so that
 /// framing one chunk (in `Core::transmit`, under the binary's core lock) stays short on the
 /// Cortex-M4 (`cargo xtask target-bench`); the host takes chunks of any length.
-pub const UPLOAD_CHUNK_SAMPLES: usize = 12;
+pub const UPLOAD_CHUNK_SAMPLES: usize = 10;
 const _: () = assert!(UPLOAD_CHUNK_SAMPLES <= CAPTURE_CHUNK_SAMPLES);
 
 /// Samples the capture buffer holds (1.0 s at 10 kHz).
@@ -92,10 +92,6 @@ pub struct Capture {
 
 impl Capture {
     /// An idle capture with an empty buffer.
-    // Inlined so that `Core::new`, written into the binary's static slot, builds the
-    // 42 KB of buffers in place: out of line they went through a 46 KB stack temporary,
-    // which overran the stack at boot (target bench boot trace).
-    #[inline(always)]
     pub fn new() -> Self {
         Self {
             phase: CapturePhase::Idle,

@@ -69,9 +69,6 @@ pub struct Core {
 impl Core {
     /// A core in `Locked`, measuring the current zero. A watchdog reset or an invalid
     /// parameter record latches its fault from the start.
-    // Inlined (with `Capture::new`) so the binary's `slot.write(Core::new(..))` builds the
-    // 45 KB core in its static slot, not in a stack temporary that overruns the stack.
-    #[inline(always)]
     pub fn new(config: CoreConfig, boot: BootInfo) -> Self {
         let (parameters, status, derived) = match Derived::new(&boot.parameters, &config) {
             Ok(d) if boot.parameters_status != ParametersStatus::Invalid => {
