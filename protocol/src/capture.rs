@@ -19,9 +19,9 @@ pub struct CaptureSample {
     /// Vibrator encoder position, quadrature counts since the capture started.
     pub encoder_count: i32,
     /// Output-shaft encoder position, quadrature counts since the capture started; `None`
-    /// when the device has no output encoder. Read once per control step (or more
-    /// rarely in a capture longer than the device's output buffer, see `LAYOUT.md`) and
-    /// held until the next reading, never interpolated.
+    /// when the device has no output encoder. Read at a control step and held, never
+    /// interpolated: every step at 10 kHz, every 6 samples at 1 kHz and below
+    /// (`LAYOUT.md`).
     pub output_count: Option<i32>,
 }
 

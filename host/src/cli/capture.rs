@@ -1,6 +1,6 @@
 //! `rig capture`: a 10 kHz burst of raw current and encoder samples from the device's
 //! buffer, checked for continuity, converted to amps and radians and written as CSV; the
-//! output encoder, when fitted, rides along once per control step.
+//! output encoder, when fitted, rides along (read at a control step and held).
 
 use std::fs::File;
 use std::io::{IsTerminal, Write};

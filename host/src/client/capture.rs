@@ -117,8 +117,8 @@ impl Capture {
 
     /// Writes the samples as CSV:
     /// `index,t_s,current_adc,current_a,encoder_count,cam_angle_rad,output_count,output_angle_rad`.
-    /// The output columns (counts and rad since the capture started, read once per
-    /// control step and held) are empty when the device has no output encoder.
+    /// The output columns (counts and rad since the capture started, read at a control
+    /// step and held) are empty when the device has no output encoder.
     pub fn write_csv<W: Write>(&self, out: W) -> Result<(), csv::Error> {
         let mut w = csv::Writer::from_writer(out);
         w.write_record([
