@@ -22,6 +22,8 @@ pub struct DeviceOpts {
     pub sim: bool,
     /// With `sim`: virtual seconds per wall-clock second.
     pub speed: f64,
+    /// With `sim`: the virtual rig's sensor-noise seed (`None`: its default, 1).
+    pub seed: Option<u64>,
     /// With `sim`: a rig file (a fitted `[model]`, or a plain rig); the virtual device is
     /// built from it and its plant runs the model's effects ([`VirtualDevice::fitted_config`]).
     pub model: Option<PathBuf>,
@@ -35,6 +37,7 @@ impl Default for DeviceOpts {
             baud: protocol::DEFAULT_BAUD_RATE,
             sim: false,
             speed: 1.0,
+            seed: None,
             model: None,
         }
     }
@@ -104,13 +107,21 @@ impl DeviceOpts {
                 why: "only the virtual device runs a fitted model (a real rig runs its own physics): add --sim, or leave --model out".into(),
             });
         }
+        if let (false, Some(seed)) = (self.sim, self.seed) {
+            return Err(RigError::BadValue {
+                what: format!("--seed {seed}"),
+                why: "only the virtual device has a noise seed (a real rig's noise is its own): add --sim, or leave --seed out".into(),
+            });
+        }
         let (device, port, name) = if self.sim {
-            let dev = match &self.model {
-                Some(path) => {
-                    VirtualDevice::start(VirtualDevice::fitted_config(path)?, self.speed)?
-                }
-                None => VirtualDevice::paper(self.speed)?,
+            let mut config = match &self.model {
+                Some(path) => VirtualDevice::fitted_config(path)?,
+                None => VirtualDevice::paper_config(&sim::Preset::paper()),
             };
+            if let Some(seed) = self.seed {
+                config.seed = seed;
+            }
+            let dev = VirtualDevice::start(config, self.speed)?;
             let port = dev.port_name().to_owned();
             let name = format!("the virtual device ({port})");
             (Some(dev), port, name)

@@ -250,7 +250,9 @@ fn capture_burst_is_complete_and_converted() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("index,t_s,current_adc,current_a,encoder_count,cam_angle_rad")
+        Some(
+            "index,t_s,current_adc,current_a,encoder_count,cam_angle_rad,output_count,output_angle_rad"
+        )
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 3000);
@@ -258,7 +260,10 @@ fn capture_burst_is_complete_and_converted() {
         assert_eq!(r[0], k.to_string());
         // Motor off: the current reads near zero.
         assert!(r[3].parse::<f64>().unwrap().abs() < 0.2, "{r:?}");
+        // The virtual rig has an output encoder; the locked gear holds it still.
+        assert_eq!((r[6], r[7]), ("0", "0.000000"), "{r:?}");
     }
+    assert_eq!(v["mean_output_speed_rad_s"], 0.0);
     // During vibration at 10 Hz: the encoder turns 10 revolutions a second.
     let v = json_of(sim(&[
         "capture",

@@ -32,6 +32,7 @@ fn chunk() -> DeviceMessage {
         .map(|i| CaptureSample {
             current_adc: 2048 + i as u16,
             encoder_count: i * 7,
+            output_count: Some(-i * 3),
         })
         .collect::<Vec<_, CAPTURE_CHUNK_SAMPLES>>();
     DeviceMessage::CaptureChunk(CaptureChunk {

@@ -6,8 +6,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::sizes::{I32, TAG, U16, U32};
 
-/// Samples per [`CaptureChunk`]; sets the largest frame of the protocol.
-pub const CAPTURE_CHUNK_SAMPLES: usize = 32;
+/// Samples per [`CaptureChunk`]; sets the largest frame of the protocol (18 samples with
+/// the output count keep that frame within v3's 32 samples without it, so no frame
+/// buffer grows).
+pub const CAPTURE_CHUNK_SAMPLES: usize = 18;
 
 /// One raw capture sample; the host converts with the board's scale factors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -16,11 +18,16 @@ pub struct CaptureSample {
     pub current_adc: u16,
     /// Vibrator encoder position, quadrature counts since the capture started.
     pub encoder_count: i32,
+    /// Output-shaft encoder position, quadrature counts since the capture started; `None`
+    /// when the device has no output encoder. Read at a control step and held, never
+    /// interpolated: every step at 10 kHz, every 6 samples at 1 kHz and below
+    /// (`LAYOUT.md`).
+    pub output_count: Option<i32>,
 }
 
 impl CaptureSample {
     /// Largest serialised size, bytes.
-    pub const MAX_WIRE_SIZE: usize = U16 + I32;
+    pub const MAX_WIRE_SIZE: usize = U16 + I32 + TAG + I32;
 }
 
 /// A run of consecutive capture samples.

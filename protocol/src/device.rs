@@ -18,6 +18,9 @@ use crate::{
 
 /// Device-to-host messages.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+// The device has no heap: a capture chunk (18 samples, 312 bytes in memory) is built in
+// place like every message.
+#[allow(clippy::large_enum_variant)]
 #[non_exhaustive]
 pub enum DeviceMessage {
     /// The answer to the request whose frame carried `request_seq`. Every request gets

@@ -326,6 +326,7 @@ mod tests {
                 .map(|c| crate::CaptureSample {
                     current_adc: u16::from(c[0]) << 4,
                     encoder_count: i32::from(*c.last().unwrap_or(&0)) * 1000 - 9,
+                    output_count: (c[0] % 2 == 0).then(|| i32::from(c[0]) * -77),
                 })
                 .take(crate::CAPTURE_CHUNK_SAMPLES)
                 .collect();

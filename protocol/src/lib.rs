@@ -160,5 +160,6 @@ pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 /// open with a delimiter, rig parameters name a refused field, and identity, output-shaft,
 /// supply, temperature and timing fields. v3: `DeviceInfo::time_scale`, the request window
 /// ([`REQUEST_WINDOW`]), and a device that refuses
-/// (never silently replaces) a value it cannot use.
-pub const PROTOCOL_VERSION: u16 = 3;
+/// (never silently replaces) a value it cannot use. v4: capture samples carry the output
+/// encoder (`CaptureSample::output_count`), 20 samples per chunk.
+pub const PROTOCOL_VERSION: u16 = 4;

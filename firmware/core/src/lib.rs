@@ -51,7 +51,8 @@
 //!
 //! # Memory
 //! [`Core`] holds the capture buffer ([`CAPTURE_CAPACITY`] samples of 4 bytes, 40 000
-//! bytes, 1.0 s at 10 kHz) and is 43 000 bytes in all on the target; the release image
+//! bytes, 1.0 s at 10 kHz; the output encoder rides in the ADC codes' spare bits, see
+//! [`OUTPUT_GROUP_MIN`]) and is 43 000 bytes in all on the target; the release image
 //! uses ~45 KiB of static RAM and ~63.2 KiB of flash (`cargo xtask firmware`). Build it
 //! in place (`MaybeUninit::write(Core::new(..))` into a static slot, as the binary does)
 //! rather than on the stack.
@@ -90,7 +91,7 @@ mod tx_queue;
 )]
 mod tests;
 
-pub use capture::{CAPTURE_CAPACITY, MIN_SAMPLE_RATE_HZ};
+pub use capture::{CAPTURE_CAPACITY, MIN_SAMPLE_RATE_HZ, OUTPUT_GROUP_MIN};
 pub use config::{
     CoreConfig, CurrentSensorConfig, EstimatorConfig, FaultConfig, MotorConfig, MotorRules,
     SpeedLoopConfig, SupervisorConfig,

@@ -82,6 +82,12 @@ impl OutputEncoder {
         self.position as f32 / self.config.counts_per_rev.max(1) as f32 * TAU
     }
 
+    /// Output position since boot, quadrature counts (not wrapped); `None` before the
+    /// first reading.
+    pub fn position_counts(&self) -> Option<i64> {
+        self.last_count.map(|_| self.position)
+    }
+
     /// Output speed over the last window, rad/s.
     pub fn speed_rad_s(&self) -> f32 {
         self.speed
@@ -108,6 +114,15 @@ impl crate::Core {
     /// The output turns by the output encoder (false without one).
     pub fn output_moving(&self) -> bool {
         cfg!(feature = "output-encoder") && self.output_encoder.is_some_and(|e| e.moving())
+    }
+
+    /// Output position by the output encoder, counts since boot (`None` without one, or
+    /// before its first reading).
+    pub(crate) fn output_position_counts(&self) -> Option<i64> {
+        if !cfg!(feature = "output-encoder") {
+            return None;
+        }
+        self.output_encoder.and_then(|e| e.position_counts())
     }
 
     /// Output angle and speed by the output encoder, rad and rad/s (`None` without one).

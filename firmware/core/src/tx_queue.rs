@@ -266,6 +266,7 @@ mod tests {
                 &[protocol::CaptureSample {
                     current_adc: u16::MAX,
                     encoder_count: i32::MIN,
+                    output_count: Some(i32::MIN),
                 }; protocol::CAPTURE_CHUNK_SAMPLES],
             )
             .unwrap(),

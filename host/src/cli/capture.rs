@@ -1,5 +1,6 @@
 //! `rig capture`: a 10 kHz burst of raw current and encoder samples from the device's
-//! buffer, checked for continuity, converted to amps and radians and written as CSV.
+//! buffer, checked for continuity, converted to amps and radians and written as CSV; the
+//! output encoder, when fitted, rides along (read at a control step and held).
 
 use std::fs::File;
 use std::io::{IsTerminal, Write};
@@ -51,6 +52,8 @@ pub struct CaptureReport {
     pub mean_current_a: Option<f64>,
     /// Mean cam speed, rad/s.
     pub mean_cam_speed_rad_s: Option<f64>,
+    /// Mean output-shaft speed, rad/s (`null` without an output encoder).
+    pub mean_output_speed_rad_s: Option<f64>,
     /// The CSV written.
     pub csv: Option<String>,
     /// What the device did differently from what was asked (fewer samples than
@@ -197,6 +200,7 @@ pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         duration_s: capture.duration_s(),
         mean_current_a: capture.mean_current_a(),
         mean_cam_speed_rad_s: capture.mean_cam_speed_rad_s(),
+        mean_output_speed_rad_s: capture.mean_output_speed_rad_s(),
         csv: a.csv.as_ref().map(|p| p.display().to_string()),
         warnings: warnings(&a, &capture),
         capture,
@@ -220,6 +224,9 @@ pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         }
         if let (Some(i), Some(w)) = (report.mean_current_a, report.mean_cam_speed_rad_s) {
             writeln!(out, "  mean current {i:.3} A, mean cam speed {w:.2} rad/s")?;
+        }
+        if let Some(w) = report.mean_output_speed_rad_s {
+            writeln!(out, "  mean output speed {w:.4} rad/s")?;
         }
         if let Some(p) = &report.csv {
             writeln!(out, "  written to {p}")?;

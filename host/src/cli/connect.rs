@@ -1,4 +1,4 @@
-//! The device options (`--port`, `--baud`, `--sim`, `--speed`, `--model`) as the command
+//! The device options (`--port`, `--baud`, `--sim`, `--speed`, `--seed`, `--model`) as the command
 //! line takes them: before the verb ([`DeviceArgs`]) or after a device verb
 //! ([`VerbDeviceArgs`]; [`DiscoverDeviceArgs`] after `discover`, whose own `--model` is a
 //! rig file its explanations start from).
@@ -38,6 +38,10 @@ macro_rules! device_args {
             /// With --sim: run the virtual device this many times faster than real time [default: 1].
             #[arg(long, global = $global, value_name = "FACTOR", value_parser = parse_speed)]
             pub speed: Option<f64>,
+            /// With --sim: the virtual rig's sensor-noise seed, as `rig sim serve --seed`
+            /// [default: 1]; the same seed gives the same noise draws.
+            #[arg(long, global = $global, value_name = "SEED")]
+            pub seed: Option<u64>,
             $(
             /// With --sim: build the virtual device from this rig file (gear, friction,
             /// calibration), its plant running a fitted [model]'s effects when it has one
@@ -55,6 +59,7 @@ macro_rules! device_args {
                     ("--baud", self.baud.is_some()),
                     ("--sim", self.sim),
                     ("--speed", self.speed.is_some()),
+                    ("--seed", self.seed.is_some()),
                     $(("--model", self.$model.is_some()),)?
                 ]
                 .into_iter()
@@ -94,6 +99,7 @@ impl From<DiscoverDeviceArgs> for VerbDeviceArgs {
             baud: d.baud,
             sim: d.sim,
             speed: d.speed,
+            seed: d.seed,
             model: None,
         }
     }
@@ -108,7 +114,7 @@ impl DeviceArgs {
             Some(option) => Err(RigError::BadValue {
                 what: (*option).into(),
                 why: format!(
-                    "`rig {verb}` uses no device, so it takes no device options (--port, --baud, --sim, --speed, --model); they go with {DEVICE_VERBS}{}",
+                    "`rig {verb}` uses no device, so it takes no device options (--port, --baud, --sim, --speed, --seed, --model); they go with {DEVICE_VERBS}{}",
                     if *option == "--model" && matches!(verb, "sim" | "compare") {
                         format!(" (`rig {verb}` takes its own --model after its verb)")
                     } else {
@@ -135,6 +141,7 @@ impl DeviceArgs {
             baud: after.baud.or(self.baud).unwrap_or(defaults.baud),
             sim,
             speed: after.speed.or(self.speed).unwrap_or(defaults.speed),
+            seed: after.seed.or(self.seed),
             model: after.model.clone().or_else(|| self.model.clone()),
         })
     }
@@ -255,5 +262,26 @@ mod tests {
             )
             .unwrap();
         assert!(d.sim && d.model.is_none());
+        // --seed goes before or after the verb (after wins); not given, the virtual rig's own.
+        let before = DeviceArgs {
+            sim: true,
+            seed: Some(7),
+            ..Default::default()
+        };
+        assert_eq!(before.given(), ["--sim", "--seed"]);
+        assert_eq!(
+            before.resolve(&VerbDeviceArgs::default()).unwrap().seed,
+            Some(7)
+        );
+        let after = VerbDeviceArgs {
+            seed: Some(9),
+            ..Default::default()
+        };
+        assert_eq!(before.resolve(&after).unwrap().seed, Some(9));
+        assert_eq!(
+            DeviceArgs::default().resolve(&after).unwrap().seed,
+            Some(9),
+            "refused at connect without --sim, naming --seed"
+        );
     }
 }

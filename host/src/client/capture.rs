@@ -34,6 +34,14 @@ pub fn cam_angle_rad(counts: i32) -> f64 {
     f64::from(counts) / f64::from(board_sensors().counts_per_rev()) * std::f64::consts::TAU
 }
 
+/// Output-shaft angle for an output-encoder count, rad: the board's output encoder is an
+/// AMT102-V at 2048 pulses per revolution as on the cam (`firmware::board::OUTPUT_ENCODER`,
+/// and the virtual rig's), so the same counts per revolution; the monitor's `output_rad`
+/// has the same unit.
+pub fn output_angle_rad(counts: i32) -> f64 {
+    f64::from(counts) / f64::from(model::hardware::amt102::COUNTS_PER_REV) * std::f64::consts::TAU
+}
+
 /// Upload progress of a capture.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CaptureProgress {
@@ -95,7 +103,22 @@ impl Capture {
         })
     }
 
-    /// Writes the samples as CSV: `index,t_s,current_adc,current_a,encoder_count,cam_angle_rad`.
+    /// Mean output-shaft speed from the first and last received output counts, rad/s
+    /// (`None` without an output encoder).
+    pub fn mean_output_speed_rad_s(&self) -> Option<f64> {
+        let (i0, first) = self.samples.first()?;
+        let (i1, last) = self.samples.last()?;
+        let (c0, c1) = (first.output_count?, last.output_count?);
+        (i1 > i0).then(|| {
+            let dt = f64::from(i1 - i0) / f64::from(self.sample_rate_hz.max(1));
+            (output_angle_rad(c1) - output_angle_rad(c0)) / dt
+        })
+    }
+
+    /// Writes the samples as CSV:
+    /// `index,t_s,current_adc,current_a,encoder_count,cam_angle_rad,output_count,output_angle_rad`.
+    /// The output columns (counts and rad since the capture started, read at a control
+    /// step and held) are empty when the device has no output encoder.
     pub fn write_csv<W: Write>(&self, out: W) -> Result<(), csv::Error> {
         let mut w = csv::Writer::from_writer(out);
         w.write_record([
@@ -105,6 +128,8 @@ impl Capture {
             "current_a",
             "encoder_count",
             "cam_angle_rad",
+            "output_count",
+            "output_angle_rad",
         ])?;
         let rate = f64::from(self.sample_rate_hz.max(1));
         for (i, s) in &self.samples {
@@ -115,6 +140,10 @@ impl Capture {
                 format!("{:.5}", current_amps(s.current_adc)),
                 s.encoder_count.to_string(),
                 format!("{:.6}", cam_angle_rad(s.encoder_count)),
+                s.output_count.map(|c| c.to_string()).unwrap_or_default(),
+                s.output_count
+                    .map(|c| format!("{:.6}", output_angle_rad(c)))
+                    .unwrap_or_default(),
             ])?;
         }
         w.flush()?;
@@ -254,6 +283,7 @@ mod tests {
                 .map(|i| CaptureSample {
                     current_adc: 2068,
                     encoder_count: (first + i) as i32,
+                    output_count: (first < 40).then_some(-((first + i) as i32)),
                 })
                 .collect(),
         }
@@ -276,8 +306,10 @@ mod tests {
             next: 0,
             id: None,
         };
-        a.add(chunk(0, 32, 100));
-        a.add(chunk(40, 32, 100)); // 8 lost
+        a.add(chunk(0, 18, 100));
+        a.add(chunk(18, 14, 100));
+        a.add(chunk(40, 18, 100)); // 8 lost
+        a.add(chunk(58, 14, 100));
         a.add(chunk(70, 10, 100)); // 2 overlap
         let c = a.finish(Some(100), Some(10_000));
         assert_eq!(c.samples.len(), 32 + 32 + 8);
@@ -289,6 +321,49 @@ mod tests {
         let w = c.mean_cam_speed_rad_s().unwrap();
         assert!((w - std::f64::consts::TAU / 8192.0 * 10_000.0).abs() < 1e-9);
         assert!(c.mean_current_a().unwrap().abs() < 0.01);
+        // The last chunks have no output count: no output speed rather than a made-up one.
+        assert_eq!(c.mean_output_speed_rad_s(), None);
+    }
+
+    #[test]
+    fn output_columns_come_last_and_are_empty_without_an_encoder() {
+        let mut c = Capture {
+            capture_id: 1,
+            sample_rate_hz: 1000,
+            requested: 3,
+            total_samples: 3,
+            samples: Vec::new(),
+            dropped: 0,
+            gaps: 0,
+            duplicates: 0,
+            completed: true,
+        };
+        for (i, output_count) in [Some(0), Some(-2048), None].into_iter().enumerate() {
+            let s = CaptureSample {
+                current_adc: 2068,
+                encoder_count: 0,
+                output_count,
+            };
+            c.samples.push((i as u32, s));
+        }
+        let mut out = Vec::new();
+        c.write_csv(&mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines[0],
+            "index,t_s,current_adc,current_a,encoder_count,cam_angle_rad,output_count,output_angle_rad"
+        );
+        // A quarter turn back: -2048 of 8192 counts is -pi/2.
+        assert!(lines[2].ends_with(",-2048,-1.570796"), "{}", lines[2]);
+        assert!(lines[3].ends_with(",0.000000,,"), "{}", lines[3]);
+        c.samples.truncate(2);
+        // -pi/2 in 1 ms.
+        let w = c.mean_output_speed_rad_s().unwrap();
+        assert!(
+            (w + std::f64::consts::FRAC_PI_2 * 1000.0).abs() < 1e-9,
+            "{w}"
+        );
     }
 
     #[test]

@@ -37,6 +37,7 @@ use protocol::{DeviceInfo, DeviceMessage, FaultFlags, PeerIdentity, Reply, Reque
 pub use advice::nack_advice;
 pub use capture::{
     CAPTURE_RATE_HZ, Capture, CaptureProgress, board_sensors, cam_angle_rad, current_amps,
+    output_angle_rad,
 };
 pub use options::{ClientOptions, FaultStatus, LinkStats};
 pub use transport::{PipeEnd, SERIAL_READ_TIMEOUT, SerialTransport, memory_pipe, open_serial};

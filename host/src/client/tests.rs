@@ -349,17 +349,18 @@ fn capture_is_assembled_and_drops_reported() {
                     capture_id: 9,
                     first_sample: first,
                     total_samples: samples,
-                    samples: (first..first + 32)
+                    samples: (first..first + 18)
                         .map(|i| CaptureSample {
                             current_adc: 2068 + 28,
                             encoder_count: i as i32,
+                            output_count: Some(-(i as i32)),
                         })
                         .collect(),
                 })
             };
             out.push((2, chunk(0)));
-            // Chunk 32..64 is lost on the way.
-            out.push((4, chunk(64)));
+            // Chunk 18..36 is lost on the way.
+            out.push((4, chunk(36)));
             out.push((
                 5,
                 DeviceMessage::CaptureDone {
@@ -372,11 +373,11 @@ fn capture_is_assembled_and_drops_reported() {
         out
     });
     let mut updates = 0;
-    let cap = c.capture(10_000, 96, |_| updates += 1).unwrap();
+    let cap = c.capture(10_000, 54, |_| updates += 1).unwrap();
     assert_eq!(updates, 2);
     assert!(cap.completed);
-    assert_eq!(cap.samples.len(), 64);
-    assert_eq!(cap.dropped, 32);
+    assert_eq!(cap.samples.len(), 36);
+    assert_eq!(cap.dropped, 18);
     assert_eq!(cap.gaps, 1);
     // 28 LSB of 6.5 mA above the zero: about 0.18 A.
     let i = cap.mean_current_a().unwrap();

@@ -44,6 +44,7 @@ pub(crate) fn worst_case_chunk() -> CaptureChunk {
     let sample = CaptureSample {
         current_adc: u16::MAX,
         encoder_count: i32::MIN,
+        output_count: Some(i32::MIN),
     };
     CaptureChunk {
         capture_id: u16::MAX,
@@ -55,7 +56,7 @@ pub(crate) fn worst_case_chunk() -> CaptureChunk {
 
 pub(crate) fn device_info() -> DeviceInfo {
     DeviceInfo {
-        protocol_version: 3,
+        protocol_version: 4,
         schema_hash: 0xDEAD_BEEF,
         firmware_version: FirmwareVersion {
             major: 0,
@@ -225,9 +226,10 @@ pub(crate) fn reply_index(r: &Reply) -> usize {
 /// One example of each device message (every reply inside `Reply`), in variant order.
 pub(crate) fn device_messages() -> std::vec::Vec<(std::string::String, DeviceMessage)> {
     use DeviceMessage::*;
-    let sample = |current_adc, encoder_count| CaptureSample {
+    let sample = |current_adc, encoder_count, output_count| CaptureSample {
         current_adc,
         encoder_count,
+        output_count,
     };
     let mut out: std::vec::Vec<_> = replies()
         .into_iter()
@@ -246,7 +248,12 @@ pub(crate) fn device_messages() -> std::vec::Vec<(std::string::String, DeviceMes
                 capture_id: 3,
                 first_sample: 64,
                 total_samples: 100,
-                samples: Vec::from_slice(&[sample(2048, 0), sample(2100, -1)]).unwrap(),
+                samples: Vec::from_slice(&[
+                    sample(2048, 0, Some(0)),
+                    sample(2100, -1, Some(-3)),
+                    sample(2090, -2, Some(70_000)),
+                ])
+                .unwrap(),
             }),
         ),
         (

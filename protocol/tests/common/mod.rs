@@ -88,11 +88,13 @@ fn health() -> impl Strategy<Value = HealthSample> {
 }
 
 fn capture_chunk() -> impl Strategy<Value = CaptureChunk> {
-    let sample =
-        (any::<u16>(), any::<i32>()).prop_map(|(current_adc, encoder_count)| CaptureSample {
+    let sample = (any::<u16>(), any::<i32>(), any::<Option<i32>>()).prop_map(
+        |(current_adc, encoder_count, output_count)| CaptureSample {
             current_adc,
             encoder_count,
-        });
+            output_count,
+        },
+    );
     (
         any::<u16>(),
         any::<u32>(),

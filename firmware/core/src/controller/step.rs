@@ -1,5 +1,5 @@
 //! One control period: sensor readings in, a bridge command out. In order: timing
-//! (overrun), current and encoder, capture recording, release inputs (heartbeat, button),
+//! (overrun), current and encoders, capture recording, release inputs (heartbeat, button),
 //! hardware faults, the revolution estimate, the supervisor, the drive (speed loop or open
 //! loop), then fault events, the streams and a pending flash write.
 
@@ -38,12 +38,18 @@ impl Core {
         let position = self.encoder.position();
         let dir = self.direction();
         let speed = self.encoder.speed_rad_s() * dir;
-        self.capture
-            .record_step(inputs.current_adc, low16(prev_position), low16(position));
+        // The output encoder before the capture: the capture holds its reading of this step.
+        self.update_output_encoder(now);
+        let output = self.output_position_counts().map(low16);
+        self.capture.record_step(
+            inputs.current_adc,
+            low16(prev_position),
+            low16(position),
+            output,
+        );
 
         let supply = self.bus_supply_v();
         self.speed_loop.set_supply_v(supply);
-        self.update_output_encoder(now);
         self.update_release(now, inputs.release_button);
         self.check_hardware(now, position);
 

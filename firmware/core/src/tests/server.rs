@@ -503,8 +503,11 @@ fn capture_uploads_while_telemetry_and_replies_continue() {
         }
     }
     assert_eq!(samples.len(), 10_000);
-    // One second of recording plus the upload (~70 kB) sharing the link with telemetry.
-    assert!(done_at < 2500, "{done_at} ms");
+    // This core has no output encoder: the samples say so rather than carry a made-up 0.
+    assert!(samples.iter().all(|s| s.output_count.is_none()));
+    // One second of recording plus the upload (~80 kB: v4's output field is one byte
+    // without an output encoder) sharing the link with telemetry.
+    assert!(done_at < 2700, "{done_at} ms");
     assert!(
         telemetry_during > 500,
         "{telemetry_during} telemetry samples during upload"
