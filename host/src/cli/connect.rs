@@ -20,7 +20,7 @@ pub const DEVICE_VERBS: &str = "info, faults, clear, release, bringup, monitor, 
 /// before the verb (not global, so a verb without a device does not take them after its
 /// name) and on each device verb (global below it, so `rig calibration get --sim` works).
 macro_rules! device_args {
-    ($(#[$meta:meta])* $name:ident, global = $global:literal, heading = $heading:literal $(, $model:ident)?) => {
+    ($(#[$meta:meta])* $name:ident, global = $global:literal, heading = $heading:literal $(, model = $model:ident)? $(, seed = $seed:ident)?) => {
         $(#[$meta])*
         #[derive(Debug, Clone, Default, Args)]
         #[command(next_help_heading = $heading)]
@@ -38,10 +38,12 @@ macro_rules! device_args {
             /// With --sim: run the virtual device this many times faster than real time [default: 1].
             #[arg(long, global = $global, value_name = "FACTOR", value_parser = parse_speed)]
             pub speed: Option<f64>,
+            $(
             /// With --sim: the virtual rig's sensor-noise seed, as `rig sim serve --seed`
             /// [default: 1]; the same seed gives the same noise draws.
             #[arg(long, global = $global, value_name = "SEED")]
-            pub seed: Option<u64>,
+            pub $seed: Option<u64>,
+            )?
             $(
             /// With --sim: build the virtual device from this rig file (gear, friction,
             /// calibration), its plant running a fitted [model]'s effects when it has one
@@ -59,7 +61,7 @@ macro_rules! device_args {
                     ("--baud", self.baud.is_some()),
                     ("--sim", self.sim),
                     ("--speed", self.speed.is_some()),
-                    ("--seed", self.seed.is_some()),
+                    $(("--seed", self.$seed.is_some()),)?
                     $(("--model", self.$model.is_some()),)?
                 ]
                 .into_iter()
@@ -75,21 +77,32 @@ device_args!(
     DeviceArgs,
     global = false,
     heading = "Device options (for info, faults, clear, release, bringup, monitor, capture, calibrate, calibration, experiment, discover, demo; also after the verb)",
-    model
+    model = model,
+    seed = seed
 );
 device_args!(
     /// Device options after a device verb: `rig info --sim`.
     VerbDeviceArgs,
     global = true,
     heading = "Device options",
-    model
+    model = model,
+    seed = seed
 );
 device_args!(
     /// Device options after `rig discover`: all but `--model`, which is `discover`'s own
-    /// (the rig file its explanations start from).
+    /// (the rig file its explanations start from), and `--seed`, also its own (the
+    /// rounds' order and, with --sim, the virtual rig's noise).
     DiscoverDeviceArgs,
     global = true,
     heading = "Device options"
+);
+device_args!(
+    /// Device options after `rig demo`: all but `--seed`, which is `demo`'s own (the
+    /// simulated noise and the test order).
+    DemoDeviceArgs,
+    global = true,
+    heading = "Device options",
+    model = model
 );
 
 impl From<DiscoverDeviceArgs> for VerbDeviceArgs {
@@ -99,9 +112,38 @@ impl From<DiscoverDeviceArgs> for VerbDeviceArgs {
             baud: d.baud,
             sim: d.sim,
             speed: d.speed,
-            seed: d.seed,
+            seed: None,
             model: None,
         }
+    }
+}
+
+impl From<DemoDeviceArgs> for VerbDeviceArgs {
+    fn from(d: DemoDeviceArgs) -> Self {
+        Self {
+            port: d.port,
+            baud: d.baud,
+            sim: d.sim,
+            speed: d.speed,
+            seed: None,
+            model: d.model,
+        }
+    }
+}
+
+impl DeviceArgs {
+    /// The error for `--seed` before `verb`, which has a `--seed` of its own (`demo`,
+    /// `discover`): given there, it would be read as two seeds.
+    pub fn refuse_seed_for(&self, verb: &str) -> Result<(), RigError> {
+        if self.seed.is_some() {
+            return Err(RigError::BadValue {
+                what: "--seed".into(),
+                why: format!(
+                    "`rig {verb}` has a --seed of its own (it seeds the virtual rig's noise too): give it after the verb, `rig {verb} --seed N`"
+                ),
+            });
+        }
+        Ok(())
     }
 }
 

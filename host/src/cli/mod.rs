@@ -32,7 +32,7 @@ pub mod release;
 pub mod serve;
 pub mod sim;
 
-use connect::{DeviceArgs, DiscoverDeviceArgs, VerbDeviceArgs};
+use connect::{DemoDeviceArgs, DeviceArgs, DiscoverDeviceArgs, VerbDeviceArgs};
 
 /// Tools for the vibration-switched 2K-H planetary gear rig.
 #[derive(Debug, Parser)]
@@ -58,9 +58,9 @@ pub enum Command {
         /// The verb's arguments.
         #[command(flatten)]
         args: demo::DemoArgs,
-        /// Device options after the verb.
+        /// Device options after the verb (its own `--seed` seeds the simulated rig).
         #[command(flatten)]
-        device: VerbDeviceArgs,
+        device: DemoDeviceArgs,
     },
     /// The paper's experiments on a rig: torque-sweep (Figs. 8-9), hold-release (Fig. 5), backdrive (Table 1).
     Experiment {
@@ -231,6 +231,7 @@ impl Cli {
                         why: "`rig discover` takes --model after its name, as the rig file its explanations start from; its virtual rig (--sim) is set with --preset and --effect".into(),
                     });
                 }
+                before.refuse_seed_for("discover")?;
                 discover::run(args, &before.resolve(&device.into())?)
             }
             Command::Ports(a) => {
@@ -238,8 +239,10 @@ impl Cli {
                 ports::run(a)
             }
             Command::Demo { args, device } => {
+                before.refuse_seed_for("demo")?;
                 let mut given = before.given();
                 given.extend(device.given());
+                let device: VerbDeviceArgs = device.into();
                 if given.contains(&"--model") {
                     return Err(crate::RigError::BadValue {
                         what: "--model".into(),
@@ -289,4 +292,18 @@ pub fn print_json_line<T: Serialize + ?Sized>(
 ) -> Result<(), crate::RigError> {
     writeln!(out, "{}", reporting::json_line(value)?)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// clap's own checks of the whole command tree (unique argument names per verb,
+    /// including the device options flattened into each device verb, valid defaults and
+    /// conflicts): a clash such as a verb's own `--seed` beside the device options' fails
+    /// here rather than as a panic when a user runs that verb.
+    #[test]
+    fn the_command_tree_passes_claps_checks() {
+        super::Cli::command().debug_assert();
+    }
 }
