@@ -44,6 +44,7 @@ __all__ = [
     "design",
     "explain",
     "compare",
+    "discover",
     "versions",
     "TELEMETRY_COLUMNS",
     "RigError",
@@ -378,7 +379,8 @@ class Rig:
     def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True):
         """The raw burst (``rig capture``): ``seconds`` at ``rate_hz`` recorded on the device
         and uploaded; ``rig capture --csv``'s columns (index, t_s, current_adc, current_a,
-        encoder_count, cam_angle_rad). ``attrs`` (or the dict's ``"summary"``) has the
+        encoder_count, cam_angle_rad, output_count, output_angle_rad; the output's are NaN
+        on a device without an output encoder). ``attrs`` (or the dict's ``"summary"``) has the
         counters: ``dropped``, ``gaps``, ``completed``."""
         summary, columns = self._native.capture(float(seconds), int(rate_hz))
         out = _frame(columns, pandas)
@@ -434,6 +436,33 @@ class Rig:
         df.attrs.update(outcome)
         df.attrs["provenance"] = provenance
         return df
+
+    def discover(
+        self,
+        csv: PathLike,
+        max_points: int = 60,
+        seed: int = 1,
+        replicates: int = 200,
+        model: Optional[PathLike] = None,
+        force: bool = False,
+    ) -> Report:
+        """The closed discovery loop on this rig (``rig discover --json``, the same code):
+        a quick sweep, ``explain``, the test points its proposal names, repeated until the
+        verdict settles or ``max_points`` test points are spent. Every round's rows are
+        appended to ``csv`` (a new file; an existing one is refused, and left as it is,
+        unless ``force``). ``model``: a rig file (the paper's rig by default). Keys: the
+        explanation's (``verdict``, ``effects``, ...) and ``points_used``, ``max_points``,
+        ``settled``, ``csv``, ``rounds``."""
+        return _report(
+            self._native.discover(
+                os.fspath(csv),
+                int(max_points),
+                int(seed),
+                int(replicates),
+                None if model is None else os.fspath(model),
+                bool(force),
+            )
+        )
 
     def hold_release(
         self,
@@ -598,6 +627,12 @@ def explain(
         )
     finally:
         os.unlink(path)
+
+
+def discover(rig: "Rig", csv: PathLike, **options: Any) -> Report:
+    """``rig discover`` on ``rig`` (a :class:`Rig`): the same as ``rig.discover(csv,
+    **options)``; see :meth:`Rig.discover`."""
+    return rig.discover(csv, **options)
 
 
 def compare(

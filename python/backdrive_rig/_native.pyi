@@ -91,6 +91,15 @@ class NativeRig:
     def torque_sweep(
         self, plan: str, plan_name: str, window_revolutions: bool = False
     ) -> Tuple[str, str]: ...
+    def discover(
+        self,
+        csv: str,
+        max_points: int = 60,
+        seed: int = 1,
+        replicates: int = 200,
+        model: Optional[str] = None,
+        force: bool = False,
+    ) -> str: ...
     def hold_release(
         self,
         load_nm: Optional[float],

@@ -3,7 +3,7 @@
 //! of strings (dtype `str`). Names and units are the CLI's CSV columns: `rig monitor
 //! --csv` for telemetry, `rig capture --csv` for captures.
 
-use host::client::{Capture, cam_angle_rad, current_amps};
+use host::client::{Capture, cam_angle_rad, current_amps, output_angle_rad};
 use host::monitor::{CSV_HEADER as TELEMETRY_CSV_HEADER, MonitorRow};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
@@ -111,6 +111,25 @@ pub fn capture<'py>(py: Python<'py>, cap: &Capture) -> PyResult<TypedColumns<'py
             "cam_angle_rad",
             "<f8",
             f64_bytes(py, s.iter().map(|(_, x)| cam_angle_rad(x.encoder_count))),
+        ),
+        // The output encoder, held from the latest control step (empty cells in the CSV,
+        // NaN here, on a device without one).
+        (
+            "output_count",
+            "<f8",
+            f64_bytes(
+                py,
+                s.iter().map(|(_, x)| x.output_count.map_or(f64::NAN, f64::from)),
+            ),
+        ),
+        (
+            "output_angle_rad",
+            "<f8",
+            f64_bytes(
+                py,
+                s.iter()
+                    .map(|(_, x)| x.output_count.map_or(f64::NAN, output_angle_rad)),
+            ),
         ),
     ])
 }

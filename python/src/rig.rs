@@ -465,6 +465,71 @@ impl NativeRig {
         })
     }
 
+    /// `rig discover` on this rig: the closed loop of sweeps and explanations
+    /// ([`host::discover::discover`], the CLI's own), every round's rows appended to `csv`
+    /// (a new file; an existing one only with `force`). Returns the CLI's `--json`.
+    #[pyo3(signature = (csv, max_points = 60, seed = 1, replicates = 200, model = None, force = false))]
+    #[allow(clippy::too_many_arguments)]
+    fn discover(
+        &self,
+        py: Python<'_>,
+        csv: PathBuf,
+        max_points: u32,
+        seed: u64,
+        replicates: u32,
+        model: Option<PathBuf>,
+        force: bool,
+    ) -> PyResult<String> {
+        self.call(py, move |w| {
+            // The CLI's ranges (`--max-points`, `--replicates`), with its field names.
+            if !(12..=10_000).contains(&max_points) {
+                return Err(bad(
+                    format!("max_points {max_points}"),
+                    "give 12 to 10000 test points",
+                ));
+            }
+            if !(20..=10_000).contains(&replicates) {
+                return Err(bad(
+                    format!("replicates {replicates}"),
+                    "give 20 to 10000 bootstrap replicates",
+                ));
+            }
+            let rig = match &model {
+                Some(p) => rigfile::RigFile::load(p)?,
+                None => rigfile::RigFile::paper(),
+            }
+            .with_drive_decay(::model::hardware::board::REGENERATIVE_DECAY);
+            // An existing CSV is refused before the rig moves, and never truncated.
+            sweep::check_output(&csv, false, force)?;
+            idle(w, "discover", false)?;
+            let setup = host::discover::DiscoverySetup {
+                csv: csv.clone(),
+                force,
+                max_points: max_points as usize,
+                seed,
+                options: ::explain::Options {
+                    replicates: replicates as usize,
+                    ..::explain::Options::default()
+                },
+                command: "backdrive_rig Rig.discover".into(),
+            };
+            let mut operator = Operator::scripted(b"", false);
+            operator.stop = w.stop.clone();
+            let found =
+                host::discover::discover(&mut w.bench, &mut operator, &rig, &setup, &|_| {})
+                    .map_err(|stopped| stopped.error)?;
+            let out = host::discover::DiscoverJson {
+                explanation: &found.outcome.explanation,
+                points_used: found.points_used,
+                max_points: max_points as usize,
+                settled: found.settled,
+                csv: csv.display().to_string(),
+                rounds: &found.rounds,
+            };
+            json(&out)
+        })
+    }
+
     /// `rig experiment hold-release` (Fig. 5): returns the samples as JSON (the CSV's
     /// columns) and the verdict numbers.
     fn hold_release(

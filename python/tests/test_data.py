@@ -88,8 +88,14 @@ def test_capture_has_the_cli_csv_columns(rig):
     with rig.release(freq_hz=10, seconds=10):
         time.sleep(1.5 / SPEED + 0.2)
         df = rig.capture(seconds=0.2, rate_hz=10000)
-    assert list(df.columns) == ["index", "t_s", "current_adc", "current_a", "encoder_count", "cam_angle_rad"]
+    assert list(df.columns) == [
+        "index", "t_s", "current_adc", "current_a", "encoder_count", "cam_angle_rad",
+        "output_count", "output_angle_rad",
+    ]
     assert len(df) == 2000
+    # The virtual rig has the output encoder: a reading held from every control step.
+    assert df["output_count"].notna().all()
+    assert np.allclose(df["output_angle_rad"], df["output_count"] * 2 * np.pi / 8192)
     assert df.attrs["dropped"] == 0 and df.attrs["completed"] is True
     assert df["t_s"].iloc[1] == pytest.approx(1e-4)
     # A turning cam at about 10 Hz: the angle advances about 2 pi * 10 * 0.2 rad.

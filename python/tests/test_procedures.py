@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from backdrive_rig import BadValueError, Rig, RigError, compare, design, explain
+from backdrive_rig import BadValueError, Rig, RigError, compare, design, discover, explain
 
 from conftest import rig_cli
 
@@ -134,3 +134,23 @@ def test_procedure_inputs_are_checked(rig):
     with rig.release(freq_hz=10, seconds=30):
         with pytest.raises(BadValueError, match="release is live"):
             rig.torque_sweep(quick=True)
+
+
+def test_discover_names_the_hidden_effect_and_keeps_an_existing_csv(tmp_path):
+    # `rig discover`'s own loop on the in-process virtual rig with a hidden effect: the
+    # effect is named first, the CLI's JSON keys, every round's rows in the CSV.
+    csv = tmp_path / "loop.csv"
+    with Rig.virtual(preset="ideal", effects=["speed-dependent-axial-friction"], speed=10) as rig:
+        r = discover(rig, csv, replicates=20, max_points=60)
+        assert {"verdict", "effects", "points_used", "max_points", "settled", "csv", "rounds"} <= set(r)
+        assert r.effects and r.effects[0]["name"] == "speed-dependent-axial-friction", (r.verdict, r.effects)
+        assert 30 <= r.points_used <= 60 and r.rounds[0]["plan"] == "initial"
+        rows = [l for l in csv.read_text().splitlines() if l and not l.startswith("#") and not l.startswith("point")]
+        assert len(rows) == r.points_used
+        # An existing CSV is refused before the rig moves, and left as it was.
+        before = csv.read_bytes()
+        with pytest.raises(RigError, match="loop.csv"):
+            rig.discover(csv, replicates=20)
+        assert csv.read_bytes() == before
+        with pytest.raises(BadValueError, match="max_points 5"):
+            rig.discover(tmp_path / "other.csv", max_points=5)
