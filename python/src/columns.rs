@@ -119,7 +119,8 @@ pub fn capture<'py>(py: Python<'py>, cap: &Capture) -> PyResult<TypedColumns<'py
             "<f8",
             f64_bytes(
                 py,
-                s.iter().map(|(_, x)| x.output_count.map_or(f64::NAN, f64::from)),
+                s.iter()
+                    .map(|(_, x)| x.output_count.map_or(f64::NAN, f64::from)),
             ),
         ),
         (
