@@ -654,17 +654,7 @@ fn measure<B: Bench + ?Sized>(
         let mut waited = 0.0;
         let mut last = None;
         loop {
-            if operator.interrupted() {
-                return Err(interrupted());
-            }
-            let Some(t) = bench.sample()? else {
-                return Err(RigError::Protocol(
-                    "telemetry stopped during the sweep: check the link".into(),
-                ));
-            };
-            if !t.faults.is_empty() || t.state == SupervisorState::Fault {
-                return Err(fault_error(&t, run));
-            }
+            let t = next_sample(bench, operator, run)?;
             if let Some(prev) = last {
                 waited += (t.device_time_us.saturating_sub(prev)) as f64 / 1e6;
             }
@@ -733,6 +723,27 @@ fn output_angle<B: Bench + ?Sized>(bench: &mut B, t: Option<&TelemetrySample>) -
     from_encoder.or_else(|| bench.peek_output())
 }
 
+/// The next telemetry sample of a run: an error when the operator interrupted, the
+/// telemetry stopped, or the device reports a fault.
+fn next_sample<B: Bench + ?Sized>(
+    bench: &mut B,
+    operator: &Operator,
+    run: &Run,
+) -> Result<TelemetrySample, RigError> {
+    if operator.interrupted() {
+        return Err(interrupted());
+    }
+    let Some(t) = bench.sample()? else {
+        return Err(RigError::Protocol(
+            "telemetry stopped during the sweep: check the link".into(),
+        ));
+    };
+    if !t.faults.is_empty() || t.state == SupervisorState::Fault {
+        return Err(fault_error(&t, run));
+    }
+    Ok(t)
+}
+
 /// Averages over the window; returns the row (without `backdriven`) and the last sample.
 fn average<B: Bench + ?Sized>(
     bench: &mut B,
@@ -745,18 +756,7 @@ fn average<B: Bench + ?Sized>(
     let mut first = first;
     let settled_at = first.device_time_us + (settle_s() * 1e6).round() as u64;
     while first.device_time_us < settled_at {
-        if operator.interrupted() {
-            return Err(interrupted());
-        }
-        let Some(t) = bench.sample()? else {
-            return Err(RigError::Protocol(
-                "telemetry stopped during the sweep: check the link".into(),
-            ));
-        };
-        if !t.faults.is_empty() || t.state == SupervisorState::Fault {
-            return Err(fault_error(&t, run));
-        }
-        first = t;
+        first = next_sample(bench, operator, run)?;
     }
     let t0 = first.device_time_us;
     let temp_c = bench.motor_temp_c();
@@ -769,17 +769,7 @@ fn average<B: Bench + ?Sized>(
     let mut last;
     let window = setup.plan.window_s;
     loop {
-        if operator.interrupted() {
-            return Err(interrupted());
-        }
-        let Some(t) = bench.sample()? else {
-            return Err(RigError::Protocol(
-                "telemetry stopped during the sweep: check the link".into(),
-            ));
-        };
-        if !t.faults.is_empty() || t.state == SupervisorState::Fault {
-            return Err(fault_error(&t, run));
-        }
+        let t = next_sample(bench, operator, run)?;
         let dt = t.device_time_us.saturating_sub(prev.device_time_us) as f64 / 1e6;
         angle += 0.5 * f64::from(t.cam_speed_rad_s + prev.cam_speed_rad_s).abs() * dt;
         prev = t;
