@@ -375,3 +375,29 @@ pub struct DiscoverJson<'a> {
     /// Every round.
     pub rounds: &'a [Round],
 }
+
+impl Discovery {
+    /// What `rig discover --json` prints for this discovery, with the budget and the CSV
+    /// it was run with.
+    pub fn json<'a>(&'a self, setup: &DiscoverySetup) -> DiscoverJson<'a> {
+        DiscoverJson {
+            explanation: &self.outcome.explanation,
+            points_used: self.points_used,
+            max_points: setup.max_points,
+            settled: self.settled,
+            csv: setup.csv.display().to_string(),
+            rounds: &self.rounds,
+        }
+    }
+}
+
+/// The rig file a discovery's explanations start from: `model` or the paper's rig, with
+/// this project's firmware's drive decay (the rows come from it, real or virtual, as the
+/// CSV's provenance says).
+pub fn starting_rig(model: Option<&Path>) -> Result<RigFile, RigError> {
+    Ok(match model {
+        Some(p) => RigFile::load(p)?,
+        None => RigFile::paper(),
+    }
+    .with_drive_decay(model::hardware::board::REGENERATIVE_DECAY))
+}

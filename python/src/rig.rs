@@ -494,11 +494,7 @@ impl NativeRig {
                     "give 20 to 10000 bootstrap replicates",
                 ));
             }
-            let rig = match &model {
-                Some(p) => rigfile::RigFile::load(p)?,
-                None => rigfile::RigFile::paper(),
-            }
-            .with_drive_decay(::model::hardware::board::REGENERATIVE_DECAY);
+            let rig = host::discover::starting_rig(model.as_deref())?;
             // An existing CSV is refused before the rig moves, and never truncated.
             sweep::check_output(&csv, false, force)?;
             idle(w, "discover", false)?;
@@ -518,15 +514,7 @@ impl NativeRig {
             let found =
                 host::discover::discover(&mut w.bench, &mut operator, &rig, &setup, &|_| {})
                     .map_err(|stopped| stopped.error)?;
-            let out = host::discover::DiscoverJson {
-                explanation: &found.outcome.explanation,
-                points_used: found.points_used,
-                max_points: max_points as usize,
-                settled: found.settled,
-                csv: csv.display().to_string(),
-                rounds: &found.rounds,
-            };
-            json(&out)
+            json(&found.json(&setup))
         })
     }
 

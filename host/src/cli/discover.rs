@@ -21,7 +21,7 @@ use clap::Args;
 
 use super::connect::{DeviceOpts, interrupt_flag};
 use crate::RigError;
-use crate::discover::{DiscoverJson, Discovery, DiscoverySetup, Stopped, discover};
+use crate::discover::{Discovery, DiscoverySetup, Stopped, discover, starting_rig};
 pub use crate::discover::{
     MIN_POINTS_FOR_NONE, ROUND_POINTS, Round, SETTLED_CONFIDENCE, VIRTUAL_FAULT_RETRIES, plan_of,
     unseen_effect_note,
@@ -31,7 +31,6 @@ use crate::experiment::bench::{Bench, DeviceBench, Operator};
 use crate::experiment::sweep;
 use crate::explanation::default_report_dir;
 use explain::{Options, report_files};
-use rigfile::RigFile;
 
 /// The virtual rig's preset without --preset: the same as every other verb's (`rig sim`,
 /// `rig sim serve`).
@@ -108,13 +107,7 @@ fn bench_for(a: &DiscoverArgs, dev: &DeviceOpts) -> Result<Box<dyn Bench>, RigEr
 
 /// Runs `rig discover`.
 pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
-    // The rows come from this project's firmware (real or virtual): its drive's decay mode
-    // is known, as the CSV's provenance says (`rig explain` reads it from there).
-    let rig = match &a.model {
-        Some(p) => RigFile::load(p)?,
-        None => RigFile::paper(),
-    }
-    .with_drive_decay(model::hardware::board::REGENERATIVE_DECAY);
+    let rig = starting_rig(a.model.as_deref())?;
     // An existing CSV is refused before the rig moves, and never truncated.
     sweep::check_output(&a.csv, false, a.force)?;
     let mut operator = Operator::stdin(false, interrupt_flag());
@@ -155,7 +148,7 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     };
     found.outcome.explanation.warnings.extend(notes);
     write_outputs(&a, &mut found.outcome, &source)?;
-    print(&a, &found, &source)?;
+    print(&a, &found, &setup, &source)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -190,20 +183,17 @@ fn write_outputs(
 }
 
 /// Prints the final explanation and the loop's summary, as JSON or text.
-fn print(a: &DiscoverArgs, found: &Discovery, source: &str) -> Result<(), RigError> {
+fn print(
+    a: &DiscoverArgs,
+    found: &Discovery,
+    setup: &DiscoverySetup,
+    source: &str,
+) -> Result<(), RigError> {
     let mut out = std::io::stdout().lock();
     let explanation = &found.outcome.explanation;
     let (used, budget) = (found.points_used, a.max_points as usize);
     if a.json {
-        let json = DiscoverJson {
-            explanation,
-            points_used: used,
-            max_points: budget,
-            settled: found.settled,
-            csv: source.to_string(),
-            rounds: &found.rounds,
-        };
-        serde_json::to_writer_pretty(&mut out, &json)?;
+        serde_json::to_writer_pretty(&mut out, &found.json(setup))?;
         writeln!(out)?;
     } else {
         write!(out, "{}", report_files::render_text(explanation, source))?;
