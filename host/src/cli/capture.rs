@@ -167,34 +167,64 @@ fn warnings(a: &CaptureArgs, c: &Capture) -> Vec<String> {
     w
 }
 
+/// Records the capture; with `--csv`, atomically: the file is created (beside the target)
+/// before the device records, so a bad path fails first, and an existing file is replaced
+/// only by a full capture.
+fn record_to_file(a: &CaptureArgs, dev: &DeviceOpts, samples: u32) -> Result<Capture, RigError> {
+    let Some(path) = &a.csv else {
+        return record(a, dev, samples);
+    };
+    let mut recorded = None;
+    reporting::write_atomic_with(path, |tmp| -> Result<(), RigError> {
+        let file = File::create(tmp).map_err(|source| RigError::File {
+            action: "create",
+            path: path.display().to_string(),
+            source,
+        })?;
+        let capture = record(a, dev, samples)?;
+        capture
+            .write_csv(std::io::BufWriter::new(file))
+            .map_err(|e| RigError::MeasuredFile {
+                file: path.display().to_string(),
+                why: format!("cannot write the capture: {e}"),
+            })?;
+        recorded = Some(capture);
+        Ok(())
+    })?;
+    recorded.ok_or_else(|| RigError::Protocol("the capture was not recorded".into()))
+}
+
+/// Prints the capture's summary as text.
+fn print_text(out: &mut impl Write, report: &CaptureReport) -> Result<(), RigError> {
+    let c = &report.capture;
+    writeln!(
+        out,
+        "capture {}: {} samples at {} Hz ({} s), {} received",
+        c.capture_id,
+        c.total_samples,
+        c.sample_rate_hz,
+        reporting::human(report.duration_s),
+        report.received
+    )?;
+    for w in &report.warnings {
+        writeln!(out, "  warning: {w}")?;
+    }
+    if let (Some(i), Some(w)) = (report.mean_current_a, report.mean_cam_speed_rad_s) {
+        writeln!(out, "  mean current {i:.3} A, mean cam speed {w:.2} rad/s")?;
+    }
+    if let Some(w) = report.mean_output_speed_rad_s {
+        writeln!(out, "  mean output speed {w:.4} rad/s")?;
+    }
+    if let Some(p) = &report.csv {
+        writeln!(out, "  written to {p}")?;
+    }
+    Ok(())
+}
+
 /// Runs `rig capture`.
 pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let samples = samples_asked(&a)?;
-    let capture = match &a.csv {
-        // Atomically: the file is created (beside the target) before the device records,
-        // so a bad path fails first, and an existing file is replaced only by a full capture.
-        Some(path) => {
-            let mut recorded = None;
-            reporting::write_atomic_with(path, |tmp| -> Result<(), RigError> {
-                let file = File::create(tmp).map_err(|source| RigError::File {
-                    action: "create",
-                    path: path.display().to_string(),
-                    source,
-                })?;
-                let capture = record(&a, dev, samples)?;
-                capture
-                    .write_csv(std::io::BufWriter::new(file))
-                    .map_err(|e| RigError::MeasuredFile {
-                        file: path.display().to_string(),
-                        why: format!("cannot write the capture: {e}"),
-                    })?;
-                recorded = Some(capture);
-                Ok(())
-            })?;
-            recorded.ok_or_else(|| RigError::Protocol("the capture was not recorded".into()))?
-        }
-        None => record(&a, dev, samples)?,
-    };
+    let capture = record_to_file(&a, dev, samples)?;
     let report = CaptureReport {
         received: capture.samples.len(),
         duration_s: capture.duration_s(),
@@ -210,27 +240,7 @@ pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     if a.json {
         super::print_json(&mut out, &report)?;
     } else {
-        writeln!(
-            out,
-            "capture {}: {} samples at {} Hz ({} s), {} received",
-            c.capture_id,
-            c.total_samples,
-            c.sample_rate_hz,
-            reporting::human(report.duration_s),
-            report.received
-        )?;
-        for w in &report.warnings {
-            writeln!(out, "  warning: {w}")?;
-        }
-        if let (Some(i), Some(w)) = (report.mean_current_a, report.mean_cam_speed_rad_s) {
-            writeln!(out, "  mean current {i:.3} A, mean cam speed {w:.2} rad/s")?;
-        }
-        if let Some(w) = report.mean_output_speed_rad_s {
-            writeln!(out, "  mean output speed {w:.4} rad/s")?;
-        }
-        if let Some(p) = &report.csv {
-            writeln!(out, "  written to {p}")?;
-        }
+        print_text(&mut out, &report)?;
     }
     if c.dropped > 0 || c.duplicates > 0 || !c.completed {
         eprintln!(
