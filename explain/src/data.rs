@@ -760,4 +760,28 @@ mod tests {
         let back = Dataset::parse_csv(out.as_slice(), "measured.csv").unwrap();
         assert_eq!(back, d);
     }
+
+    #[test]
+    fn saved_csv_keeps_its_bytes() {
+        // Numbers as Rust prints them (`1`, not `1.0`; no exponent), a held row's current
+        // empty, the optional columns only when present, in their fixed order.
+        let mut text = String::from("backdriven,tau_rot_nm,omega_n_rad_s,i_in_a,v_in_v\n");
+        for k in 0..11 {
+            text.push_str(&format!("1,{},31.4,2.5,{}\n", 0.1 + 0.2 * k as f64, 3.6));
+        }
+        text.push_str("0,0.0000001,1e2,,8.8\n");
+        let d = parse(&text).unwrap();
+        let mut out = Vec::new();
+        d.write_csv(&mut out).unwrap();
+        let out = String::from_utf8(out).unwrap();
+        let mut lines = out.lines();
+        assert_eq!(
+            lines.next(),
+            Some("omega_n_rad_s,tau_rot_nm,i_in_a,v_in_v,backdriven")
+        );
+        assert_eq!(lines.next(), Some("31.4,0.1,2.5,3.6,1"));
+        assert_eq!(lines.next(), Some("31.4,0.30000000000000004,2.5,3.6,1"));
+        assert_eq!(lines.last(), Some("100,0.0000001,,8.8,0"));
+        assert!(out.ends_with('\n') && !out.contains('\r'));
+    }
 }

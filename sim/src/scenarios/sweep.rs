@@ -169,3 +169,35 @@ pub fn write_csv<W: std::io::Write>(points: &[SweepPoint], out: W) -> Result<(),
     w.flush()?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_columns_and_number_format_are_fixed() {
+        // Numbers as the csv crate's serializer writes them (shortest round trip, `5.0`,
+        // `1e-7`), under the column names, in this order.
+        let p = SweepPoint {
+            t_s: 1.5,
+            v_in_v: 3.6,
+            omega_n_rad_s: 31.41592653589793,
+            tau_rot_nm: 0.368,
+            i_in_a: 2.5,
+            temp_c: 25.0,
+            repeat: 4,
+            tau_cam_est_nm: 1e-7,
+            tau_cam_meas_nm: 0.1 + 0.2,
+            tau_cam_eq10_nm: 12345678.0,
+            backdriven: 0,
+        };
+        let mut out = Vec::new();
+        write_csv(&[p.clone(), SweepPoint { backdriven: 1, ..p }], &mut out).unwrap();
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "t_s,v_in_v,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,repeat,tau_cam_est_nm,tau_cam_meas_nm,tau_cam_eq10_nm,backdriven\n\
+             1.5,3.6,31.41592653589793,0.368,2.5,25.0,4,1e-7,0.30000000000000004,12345678.0,0\n\
+             1.5,3.6,31.41592653589793,0.368,2.5,25.0,4,1e-7,0.30000000000000004,12345678.0,1\n"
+        );
+    }
+}
