@@ -274,6 +274,7 @@ pub fn generate_session(
             v_in: plan.with_voltage.then_some(v),
             temp_c: plan.with_temperature.then_some(temp),
             backdriven: plan.with_backdriven.then(|| truth.backdrives(&op)),
+            ..MeasuredRow::default()
         });
     }
     rows

@@ -276,14 +276,14 @@ pub fn discover(
                     Err((rows, e)) => (rows, Some(e)),
                 };
             for r in &mut rows {
-                r.point += offset;
+                r.point = r.point.map(|p| p + offset);
             }
             append(&setup.csv, head.as_deref(), &rows, setup.force)?;
             all.extend(rows);
             if let Some(e) = failed {
                 return Err(e);
             }
-            let data = Dataset::from_rows(&source, all.iter().map(Row::measured).collect())?;
+            let data = Dataset::from_rows(&source, all.clone())?;
             let o = explain::explain(&data, rig, &setup.options)?;
             let e = &o.explanation;
             let used = all.len();

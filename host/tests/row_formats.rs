@@ -121,13 +121,13 @@ fn files_written_before_the_load_kg_column_and_cut_rows_still_read() {
     assert_eq!(plan.as_deref(), Some("x"));
     // The third row was cut mid-write: not a completed row.
     assert_eq!(rows.len(), 2);
-    assert_eq!(rows[0].point, 0);
-    assert_eq!(rows[0].v_in_v, Some(3.6));
+    assert_eq!(rows[0].point, Some(0));
+    assert_eq!(rows[0].v_in, Some(3.6));
     assert_eq!(rows[0].target_hz, None);
     assert_eq!(rows[0].temp_c, None);
-    assert_eq!(rows[0].backdriven, Some(0));
+    assert_eq!(rows[0].backdriven, Some(false));
     assert_eq!(rows[0].load_kg, None);
-    assert_eq!(rows[1].v_in_v, None);
+    assert_eq!(rows[1].v_in, None);
     assert_eq!(rows[1].target_hz, Some(5.0));
     assert_eq!(rows[1].temp_c, Some(25.5));
     assert_eq!(rows[1].backdriven, None);
