@@ -99,6 +99,24 @@ enum Cell {
 }
 
 impl Column {
+    /// Every column, one per field of [`MeasuredRow`], in the field order.
+    pub const ALL: [Column; 14] = [
+        Column::Point,
+        Column::Repeat,
+        Column::Time,
+        Column::Supply,
+        Column::TargetHz,
+        Column::CamSpeed,
+        Column::Load,
+        Column::Current,
+        Column::Temperature,
+        Column::TauCamEstimate,
+        Column::TauCamMeasured,
+        Column::TauCamEq10,
+        Column::Backdriven,
+        Column::LoadKg,
+    ];
+
     /// The column's name in a CSV header (and the field's serde name).
     pub const fn name(self) -> &'static str {
         match self {
@@ -416,22 +434,7 @@ mod tests {
     fn every_field_is_a_column_under_its_serde_name() {
         // The columns' names are the fields' serde names: a row written under every
         // column reads back whole through serde.
-        let all = [
-            Column::Point,
-            Column::Repeat,
-            Column::Time,
-            Column::Supply,
-            Column::TargetHz,
-            Column::CamSpeed,
-            Column::Load,
-            Column::Current,
-            Column::Temperature,
-            Column::TauCamEstimate,
-            Column::TauCamMeasured,
-            Column::TauCamEq10,
-            Column::Backdriven,
-            Column::LoadKg,
-        ];
+        let all = Column::ALL;
         let full = MeasuredRow {
             target_hz: Some(5.0),
             temp_c: Some(25.5),
