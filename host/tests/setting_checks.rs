@@ -36,7 +36,11 @@ fn refuses(args: &[&str], flag: &str, value: &str, why: String) {
 fn explain_settings_are_refused_with_the_librarys_reasons() {
     let measured = ["explain", "--measured", "no-such.csv", "--json"];
     let with = |extra: &[&'static str]| -> Vec<&'static str> {
-        measured.iter().copied().chain(extra.iter().copied()).collect()
+        measured
+            .iter()
+            .copied()
+            .chain(extra.iter().copied())
+            .collect()
     };
     refuses(
         &with(&["--alpha", "0.7"]),
@@ -67,7 +71,14 @@ fn explain_settings_are_refused_with_the_librarys_reasons() {
     assert!(text.contains("'many' is not a whole number"), "{text}");
     // The bounds themselves are accepted (the run then fails on the missing file, not
     // on the setting).
-    let text = fails(&with(&["--folds", "20", "--replicates", "0", "--alpha", "0.49"]));
+    let text = fails(&with(&[
+        "--folds",
+        "20",
+        "--replicates",
+        "0",
+        "--alpha",
+        "0.49",
+    ]));
     assert!(text.contains("no-such.csv"), "{text}");
 }
 
