@@ -67,6 +67,13 @@ impl RigLink for AnyLink {
             AnyLink::Real(l) => l.state(),
         }
     }
+
+    fn clock_s(&mut self) -> f64 {
+        match self {
+            AnyLink::Simulated(l) => RigLink::clock_s(l.as_mut()),
+            AnyLink::Real(l) => l.clock_s(),
+        }
+    }
 }
 
 /// The session the scenarios run on, or `None` (skipped, with the reason printed).
@@ -167,7 +174,13 @@ fn comms_loss_over_the_virtual_devices_serial_port() {
     // the motor at its comms timeout and latches COMMS_TIMEOUT.
     let mut link = served_bench();
     let r = scenario::comms_loss_drill(&mut link, 10.0).expect("drill runs");
-    assert!(r.to_safe_s.is_some(), "{r:?}");
+    // In the device's own time: the comms timeout (500 ms) runs from the last heartbeat,
+    // at most one heartbeat interval (150 ms) before they stopped; so no sooner than
+    // 350 ms. (A host that stalls only makes it later; counting the scenario's 10 ms
+    // steps instead said 0.22 s here, as the served device slows while the host is quiet.)
+    let t = r.to_safe_s.expect("reaches the safe state");
+    let timeout_s = f64::from(protocol::COMMS_TIMEOUT_MS) / 1e3;
+    assert!(t >= timeout_s - scenario::HEARTBEAT_S, "{r:?}");
     assert!(r.comms_timeout_latched, "{r:?}");
     assert!(r.cleared, "{r:?}");
 }
