@@ -13,12 +13,23 @@
 use std::io::Read;
 use std::path::Path;
 
+use rigfile::row::Column;
+
 use crate::ExplainError;
 
 /// Required columns, in the order of the error messages.
-pub const REQUIRED_COLUMNS: [&str; 3] = ["omega_n_rad_s", "tau_rot_nm", "i_in_a"];
+pub const REQUIRED_COLUMNS: [&str; 3] = [
+    Column::CamSpeed.name(),
+    Column::Load.name(),
+    Column::Current.name(),
+];
 /// Optional columns the analysis uses.
-pub const OPTIONAL_COLUMNS: [&str; 4] = ["t_s", "v_in_v", "temp_c", "backdriven"];
+pub const OPTIONAL_COLUMNS: [&str; 4] = [
+    Column::Time.name(),
+    Column::Supply.name(),
+    Column::Temperature.name(),
+    Column::Backdriven.name(),
+];
 /// Fewest rows with a current that `rig explain` works with.
 pub const MIN_ROWS: usize = 10;
 /// Longest line of a measured file, bytes: a header of every column the tools write is
@@ -74,24 +85,10 @@ impl<R: Read> Read for LineBounded<R> {
     }
 }
 
-/// One test point.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct MeasuredRow {
-    /// Cam speed w_n, rad/s.
-    pub omega_n: f64,
-    /// Load torque on the output tau_rot, N m.
-    pub tau_rot: f64,
-    /// Mean vibrator current, A (`None` only where the load was not backdriven).
-    pub i_in: Option<f64>,
-    /// Time of the test since the start of the session, s.
-    pub t_s: Option<f64>,
-    /// Vibrator supply voltage, V.
-    pub v_in: Option<f64>,
-    /// Motor temperature, deg C.
-    pub temp_c: Option<f64>,
-    /// Whether the output backdrove.
-    pub backdriven: Option<bool>,
-}
+/// One test point: the rig tools' one measured-row type ([`rigfile::row`]), which every
+/// sweep CSV writes; explain uses its cam speed, load, current, time, supply, temperature
+/// and backdrive observation.
+pub use rigfile::row::MeasuredRow;
 
 /// A validated set of test points, stored as columns. An optional column counts as present
 /// when every row has it.
@@ -526,46 +523,19 @@ impl Dataset {
     }
 
     /// Writes the data as CSV with the standard column names (optional columns only when
-    /// present).
+    /// present), numbers as Rust prints them.
     pub fn write_csv<W: std::io::Write>(&self, out: W) -> Result<(), ExplainError> {
-        let mut w = csv::Writer::from_writer(out);
-        let mut header = vec!["omega_n_rad_s", "tau_rot_nm", "i_in_a"];
-        let flags = [
-            (self.has_time, "t_s"),
-            (self.has_voltage, "v_in_v"),
-            (self.has_temperature, "temp_c"),
-            (self.has_backdriven, "backdriven"),
-        ];
-        header.extend(flags.iter().filter(|(has, _)| *has).map(|(_, c)| *c));
-        let io = |e: csv::Error| ExplainError::Output(std::io::Error::other(e));
-        w.write_record(&header).map_err(io)?;
-        let opt = |v: Option<f64>| v.map(|x| format!("{x}")).unwrap_or_default();
-        for r in self.rows() {
-            let mut rec = vec![
-                format!("{}", r.omega_n),
-                format!("{}", r.tau_rot),
-                opt(r.i_in),
-            ];
-            if self.has_time {
-                rec.push(opt(r.t_s));
-            }
-            if self.has_voltage {
-                rec.push(opt(r.v_in));
-            }
-            if self.has_temperature {
-                rec.push(opt(r.temp_c));
-            }
-            if self.has_backdriven {
-                rec.push(match r.backdriven {
-                    Some(true) => "1".into(),
-                    Some(false) => "0".into(),
-                    None => String::new(),
-                });
-            }
-            w.write_record(&rec).map_err(io)?;
-        }
-        w.flush()?;
-        Ok(())
+        use rigfile::row::{EXPLAIN_COLUMNS, Numbers};
+        let present = |c: &Column| match c {
+            Column::Time => self.has_time,
+            Column::Supply => self.has_voltage,
+            Column::Temperature => self.has_temperature,
+            Column::Backdriven => self.has_backdriven,
+            _ => true,
+        };
+        let columns: Vec<Column> = EXPLAIN_COLUMNS.into_iter().filter(present).collect();
+        rigfile::row::write_columns(out, &columns, Numbers::Plain, true, self.rows())
+            .map_err(|e| ExplainError::Output(std::io::Error::other(e)))
     }
 
     /// Number of rows.
@@ -589,6 +559,7 @@ impl Dataset {
             v_in: opt(&self.v_in),
             temp_c: opt(&self.temp_c),
             backdriven: self.backdriven.get(k).copied(),
+            ..MeasuredRow::default()
         }
     }
 
@@ -759,5 +730,29 @@ mod tests {
         d.write_csv(&mut out).unwrap();
         let back = Dataset::parse_csv(out.as_slice(), "measured.csv").unwrap();
         assert_eq!(back, d);
+    }
+
+    #[test]
+    fn saved_csv_keeps_its_bytes() {
+        // Numbers as Rust prints them (`1`, not `1.0`; no exponent), a held row's current
+        // empty, the optional columns only when present, in their fixed order.
+        let mut text = String::from("backdriven,tau_rot_nm,omega_n_rad_s,i_in_a,v_in_v\n");
+        for k in 0..11 {
+            text.push_str(&format!("1,{},31.4,2.5,{}\n", 0.1 + 0.2 * k as f64, 3.6));
+        }
+        text.push_str("0,0.0000001,1e2,,8.8\n");
+        let d = parse(&text).unwrap();
+        let mut out = Vec::new();
+        d.write_csv(&mut out).unwrap();
+        let out = String::from_utf8(out).unwrap();
+        let mut lines = out.lines();
+        assert_eq!(
+            lines.next(),
+            Some("omega_n_rad_s,tau_rot_nm,i_in_a,v_in_v,backdriven")
+        );
+        assert_eq!(lines.next(), Some("31.4,0.1,2.5,3.6,1"));
+        assert_eq!(lines.next(), Some("31.4,0.30000000000000004,2.5,3.6,1"));
+        assert_eq!(lines.last(), Some("100,0.0000001,,8.8,0"));
+        assert!(out.ends_with('\n') && !out.contains('\r'));
     }
 }

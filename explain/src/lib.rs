@@ -34,6 +34,7 @@ pub mod gap;
 pub mod lack_of_fit;
 pub mod library;
 pub mod mechanism;
+pub mod options;
 
 pub mod plausibility;
 pub mod points;

@@ -152,7 +152,7 @@ pub enum TestOrder {
 
 /// How a bench session runs its tests: their order and the rests between them.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Session {
+pub struct BenchSchedule {
     /// Order of the tests.
     pub order: TestOrder,
     /// A rest after every this many tests (0: none).
@@ -181,7 +181,7 @@ pub type ExtraCurrent<'a> = &'a (dyn Fn(&CurrentModel, &Conditions) -> f64 + Syn
 /// A synthetic sweep of `truth` (the model with its hidden effects) under `plan`, with the
 /// random test order and noise fixed by `seed`.
 pub fn generate(truth: &CurrentModel, plan: &SweepPlan, seed: u64) -> Vec<MeasuredRow> {
-    generate_session(truth, plan, &Session::default(), seed, None)
+    generate_session(truth, plan, &BenchSchedule::default(), seed, None)
 }
 
 /// A synthetic bench session of `truth` under `plan`, its tests ordered and rested as
@@ -191,7 +191,7 @@ pub fn generate(truth: &CurrentModel, plan: &SweepPlan, seed: u64) -> Vec<Measur
 pub fn generate_session(
     truth: &CurrentModel,
     plan: &SweepPlan,
-    session: &Session,
+    session: &BenchSchedule,
     seed: u64,
     extra: Option<ExtraCurrent>,
 ) -> Vec<MeasuredRow> {
@@ -274,6 +274,7 @@ pub fn generate_session(
             v_in: plan.with_voltage.then_some(v),
             temp_c: plan.with_temperature.then_some(temp),
             backdriven: plan.with_backdriven.then(|| truth.backdrives(&op)),
+            ..MeasuredRow::default()
         });
     }
     rows
@@ -310,7 +311,7 @@ mod tests {
     #[test]
     fn bench_orders_and_rests() {
         let plan = SweepPlan::default();
-        let asc = Session {
+        let asc = BenchSchedule {
             order: TestOrder::Ascending,
             rest_every: 30,
             rest_s: 1800.0,
@@ -329,7 +330,7 @@ mod tests {
         // An extra current in another form is added.
         let extra = |_: &CurrentModel, c: &Conditions| 0.1 * c.op.tau_rot;
         let plain = generate(&paper(), &plan, 4);
-        let more = generate_session(&paper(), &plan, &Session::default(), 4, Some(&extra));
+        let more = generate_session(&paper(), &plan, &BenchSchedule::default(), 4, Some(&extra));
         for (a, b) in plain.iter().zip(&more) {
             let d = b.i_in.unwrap() - a.i_in.unwrap();
             assert!((d - 0.1 * a.tau_rot).abs() < 1e-12);

@@ -17,7 +17,7 @@
 
 use std::fmt::Write as _;
 
-use explain::synth::{self, Conditions, Session, SweepPlan, TestOrder};
+use explain::synth::{self, BenchSchedule, Conditions, SweepPlan, TestOrder};
 use explain::{self, Dataset, Options, Verdict};
 use model::effects::{CurrentModel, Effect};
 use model::plant::NoiseSource;
@@ -130,12 +130,12 @@ fn rigs() -> Vec<(&'static str, RigFile)> {
     ]
 }
 
-fn sessions() -> Vec<(&'static str, Session)> {
+fn sessions() -> Vec<(&'static str, BenchSchedule)> {
     vec![
-        ("shuffled", Session::default()),
+        ("shuffled", BenchSchedule::default()),
         (
             "ascending, 20-min rest every 30",
-            Session {
+            BenchSchedule {
                 order: TestOrder::Ascending,
                 rest_every: 30,
                 rest_s: 1200.0,
@@ -143,7 +143,7 @@ fn sessions() -> Vec<(&'static str, Session)> {
         ),
         (
             "shuffled within voltage",
-            Session {
+            BenchSchedule {
                 order: TestOrder::ShuffledWithinVoltage,
                 rest_every: 0,
                 rest_s: 0.0,
@@ -164,7 +164,13 @@ fn signed(rng: &mut NoiseSource, lo: f64, hi: f64) -> f64 {
 }
 
 /// One data set: `truth` on `rig` under `plan` and `session`, sizes drawn by `seed`.
-fn dataset(rig: &RigFile, truth: Truth, plan: &SweepPlan, session: &Session, seed: u64) -> Dataset {
+fn dataset(
+    rig: &RigFile,
+    truth: Truth,
+    plan: &SweepPlan,
+    session: &BenchSchedule,
+    seed: u64,
+) -> Dataset {
     let mut model = rig.current_model().unwrap();
     let mut rng = NoiseSource::new(seed ^ 0xbe7c_4ba7_c400_0014);
     let mut plan = plan.clone();

@@ -20,7 +20,7 @@
 //! cargo test --release -p explain --test explain_open_world -- --ignored --nocapture
 //! ```
 
-use explain::synth::{self, Conditions, Session, SweepPlan};
+use explain::synth::{self, BenchSchedule, Conditions, SweepPlan};
 use explain::{self, Dataset, Explanation, Options, Verdict};
 use model::effects::{CurrentModel, Effect};
 use model::plant::NoiseSource;
@@ -151,7 +151,13 @@ fn dataset(rig: &RigFile, u: Option<Unknown>, plan: &SweepPlan, seed: u64) -> Da
     let model = rig.current_model().unwrap();
     let mut rng = NoiseSource::new(seed ^ 0x0be7_0a11_d000_0019);
     let extra = u.map(|u| extra(u, plan, &mut rng));
-    let rows = synth::generate_session(&model, plan, &Session::default(), seed, extra.as_deref());
+    let rows = synth::generate_session(
+        &model,
+        plan,
+        &BenchSchedule::default(),
+        seed,
+        extra.as_deref(),
+    );
     Dataset::from_rows("open-world", rows).unwrap()
 }
 
@@ -381,7 +387,13 @@ fn hidden_dataset(rig: &RigFile, h: Hidden, plan: &SweepPlan, seed: u64) -> Data
         Hidden::Unknown(u) => Some(extra(u, plan, &mut NoiseSource::new(seed ^ 0x0be7))),
         _ => None,
     };
-    let rows = synth::generate_session(&model, plan, &Session::default(), seed, extra.as_deref());
+    let rows = synth::generate_session(
+        &model,
+        plan,
+        &BenchSchedule::default(),
+        seed,
+        extra.as_deref(),
+    );
     Dataset::from_rows("batch", rows).unwrap()
 }
 

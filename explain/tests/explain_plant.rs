@@ -75,6 +75,7 @@ fn sweep_with_drive(
                 v_in: Some(v),
                 temp_c: Some(s.temperature),
                 backdriven: Some(s.output_speed.abs() > 1e-3),
+                ..MeasuredRow::default()
             }
         })
         .collect()

@@ -3,7 +3,7 @@
 //! finding with it among the candidates, the written model carries it and explains the data,
 //! and a bad expression is refused naming what to fix.
 
-use explain::synth::{self, Conditions, Session, SweepPlan};
+use explain::synth::{self, BenchSchedule, Conditions, SweepPlan};
 use explain::{self, Dataset, Options, Verdict};
 use model::effects::CurrentModel;
 use rigfile::RigFile;
@@ -35,7 +35,7 @@ fn data(c: f64, noise_a: f64, seed: u64) -> Dataset {
     let rows = synth::generate_session(
         &truth,
         &plan(noise_a),
-        &Session::default(),
+        &BenchSchedule::default(),
         seed,
         Some(&extra),
     );

@@ -3,7 +3,8 @@
 //! vibrator may run (a released gear can drop its load: clear the load first).
 
 use hil_tests::{Target, target};
-use host::scenario::DeviceLink;
+use host::connection::Connection;
+use host::experiment::DeviceBench;
 use sim::RigLink;
 use sim::riglink as scenario;
 use sim::{SimConfig, SimLink, SimRig};
@@ -14,10 +15,26 @@ fn simulated() -> SimLink {
     link
 }
 
-/// Either rig behind one error type, so a test body is written once.
+/// Either rig behind one error type, so a test body is written once: the simulator's own
+/// link, or a device over the serial client as every procedure drives it ([`DeviceBench`]).
 enum AnyLink {
     Simulated(Box<SimLink>),
-    Real(Box<DeviceLink<Box<dyn serialport::SerialPort>>>),
+    Real(Box<DeviceBench>),
+}
+
+/// The procedures' bench on a connected client (`device`: the virtual device behind it).
+fn device_bench(
+    (client, info): (
+        host::client::Client<host::client::SerialTransport>,
+        protocol::DeviceInfo,
+    ),
+    device: Option<host::virtual_device::VirtualDevice>,
+) -> DeviceBench {
+    DeviceBench::new(Connection {
+        client,
+        info,
+        device,
+    })
 }
 
 impl RigLink for AnyLink {
@@ -50,6 +67,13 @@ impl RigLink for AnyLink {
             AnyLink::Real(l) => l.state(),
         }
     }
+
+    fn clock_s(&mut self) -> f64 {
+        match self {
+            AnyLink::Simulated(l) => RigLink::clock_s(l.as_mut()),
+            AnyLink::Real(l) => l.clock_s(),
+        }
+    }
 }
 
 /// The session the scenarios run on, or `None` (skipped, with the reason printed).
@@ -63,9 +87,9 @@ fn with_link(test: &str, run: &mut dyn FnMut(&mut AnyLink)) {
                 );
                 return;
             }
-            let (client, _) = host::client::Client::open(&port, protocol::DEFAULT_BAUD_RATE)
+            let opened = host::client::Client::open(&port, protocol::DEFAULT_BAUD_RATE)
                 .expect("the rig answers");
-            run(&mut AnyLink::Real(Box::new(DeviceLink::new(client))));
+            run(&mut AnyLink::Real(Box::new(device_bench(opened, None))));
         }
     }
 }
@@ -114,18 +138,24 @@ fn real_rig_identity_without_motion() {
     assert!(cal.validate().is_ok());
 }
 
-#[test]
-fn release_cycle_over_the_virtual_devices_serial_port() {
-    // The same scenario through the real serial path: client, pseudo-terminal, firmware core.
+/// The virtual device served on a pseudo-terminal at 5x, through the real serial path
+/// (client, pseudo-terminal, firmware core), on the bench a real rig is driven through.
+fn served_bench() -> DeviceBench {
     let dev = host::virtual_device::VirtualDevice::paper(5.0).expect("virtual device");
     let io =
         host::client::open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).expect("pty opens");
     let mut opts = host::client::ClientOptions::new(dev.port_name());
     opts.time_scale = dev.speed();
     opts.reply_timeout = std::time::Duration::from_secs(1);
-    let (client, _) = host::client::Client::connect(io, opts).expect("hello");
-    let mut link = DeviceLink::new(client);
+    let opened = host::client::Client::connect(io, opts).expect("hello");
+    let mut link = device_bench(opened, Some(dev));
     link.wait(1.2).expect("boot");
+    link
+}
+
+#[test]
+fn release_cycle_over_the_virtual_devices_serial_port() {
+    let mut link = served_bench();
     let r = scenario::release_cycle(&mut link, 10.0, 1.0).expect("release cycle runs");
     assert!(
         r.to_vibrating_s.is_some() && r.to_locked_s.is_some(),
@@ -136,4 +166,21 @@ fn release_cycle_over_the_virtual_devices_serial_port() {
         protocol::FaultFlags::empty().to_string(),
         "{r:?}"
     );
+}
+
+#[test]
+fn comms_loss_over_the_virtual_devices_serial_port() {
+    // The heartbeats stop on the procedures' bench as on a vanished host: the device stops
+    // the motor at its comms timeout and latches COMMS_TIMEOUT.
+    let mut link = served_bench();
+    let r = scenario::comms_loss_drill(&mut link, 10.0).expect("drill runs");
+    // In the device's own time: the comms timeout (500 ms) runs from the last heartbeat,
+    // at most one heartbeat interval (150 ms) before they stopped; so no sooner than
+    // 350 ms. (A host that stalls only makes it later; counting the scenario's 10 ms
+    // steps instead said 0.22 s here, as the served device slows while the host is quiet.)
+    let t = r.to_safe_s.expect("reaches the safe state");
+    let timeout_s = f64::from(protocol::COMMS_TIMEOUT_MS) / 1e3;
+    assert!(t >= timeout_s - scenario::HEARTBEAT_S, "{r:?}");
+    assert!(r.comms_timeout_latched, "{r:?}");
+    assert!(r.cleared, "{r:?}");
 }

@@ -113,8 +113,8 @@ fn torque_sweep_current_and_torque_grow_with_load_and_speed() {
     let rms = (points
         .iter()
         .map(|p| {
-            let want = p.tau_cam_eq10_nm + kappa * drive.required_inertia_torque(p.omega_n_rad_s);
-            (p.tau_cam_meas_nm - want).powi(2)
+            let want = p.tau_cam_eq10.unwrap() + kappa * drive.required_inertia_torque(p.omega_n);
+            (p.tau_cam_meas.unwrap() - want).powi(2)
         })
         .sum::<f64>()
         / points.len() as f64)
@@ -123,7 +123,7 @@ fn torque_sweep_current_and_torque_grow_with_load_and_speed() {
     // The firmware's per-revolution estimate matches the logged current's torque.
     assert!(s.rmse_estimate_vs_measured_nm < 0.004, "{s:?}");
     // Temperature and time advance through the session.
-    assert!(points.iter().any(|p| p.temp_c > 26.0));
+    assert!(points.iter().any(|p| p.temp_c.unwrap() > 26.0));
 }
 
 #[test]

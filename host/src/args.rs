@@ -59,6 +59,25 @@ pub fn non_negative(s: &str) -> Result<f64, String> {
     }
 }
 
+/// Parses a whole number (for a count such as folds or replicates).
+pub fn whole(s: &str) -> Result<u32, String> {
+    s.trim()
+        .parse::<u32>()
+        .map_err(|_| format!("'{s}' is not a whole number"))
+}
+
+/// Parses `s` with `parse`, then checks it with the library's `check` (the one check of a
+/// setting, which Python calls too): its reason after the value, as clap shows it under
+/// the flag's name.
+pub fn checked<T: std::fmt::Display + Copy, U>(
+    s: &str,
+    parse: fn(&str) -> Result<T, String>,
+    check: fn(T) -> Result<U, String>,
+) -> Result<U, String> {
+    let v = parse(s)?;
+    check(v).map_err(|why| format!("{v}: {why}"))
+}
+
 /// Parses an efficiency in (0, 1].
 pub fn efficiency(s: &str) -> Result<f64, String> {
     let v = finite(s)?;

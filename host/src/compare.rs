@@ -172,8 +172,8 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>,
     let outcome = sweep::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
     let mut currents = vec![None; plan.points.len()];
     for r in &outcome.rows {
-        if let Some(slot) = currents.get_mut(r.point) {
-            *slot = Some(r.i_in_a + sensor_offset);
+        if let (Some(slot), Some(i)) = (r.point.and_then(|p| currents.get_mut(p)), r.i_in) {
+            *slot = Some(i + sensor_offset);
         }
     }
     Ok(currents)

@@ -191,6 +191,29 @@ pub struct DiscoverySetup {
     pub command: String,
 }
 
+// One check per setting a user gives, which the CLI's value parsers and Python's
+// `Rig.discover` both call; the reason says what to give, the caller names the setting.
+impl DiscoverySetup {
+    /// The budget of test points, 12 to 10,000.
+    pub fn check_max_points(points: u32) -> Result<usize, String> {
+        if (12..=10_000).contains(&points) {
+            Ok(points as usize)
+        } else {
+            Err("give 12 to 10000 test points".into())
+        }
+    }
+
+    /// Each explanation's bootstrap replicates, 20 to 10,000 (a round settles on the
+    /// bootstrap's confidence).
+    pub fn check_replicates(replicates: u32) -> Result<usize, String> {
+        if (20..=10_000).contains(&replicates) {
+            Ok(replicates as usize)
+        } else {
+            Err("give 20 to 10000 bootstrap replicates".into())
+        }
+    }
+}
+
 /// What a finished discovery found.
 #[derive(Debug)]
 pub struct Discovery {
@@ -276,14 +299,14 @@ pub fn discover(
                     Err((rows, e)) => (rows, Some(e)),
                 };
             for r in &mut rows {
-                r.point += offset;
+                r.point = r.point.map(|p| p + offset);
             }
             append(&setup.csv, head.as_deref(), &rows, setup.force)?;
             all.extend(rows);
             if let Some(e) = failed {
                 return Err(e);
             }
-            let data = Dataset::from_rows(&source, all.iter().map(Row::measured).collect())?;
+            let data = Dataset::from_rows(&source, all.clone())?;
             let o = explain::explain(&data, rig, &setup.options)?;
             let e = &o.explanation;
             let used = all.len();

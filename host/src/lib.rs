@@ -32,7 +32,6 @@ pub mod monitor;
 pub mod output_paths;
 pub mod ports;
 pub mod provenance;
-pub mod scenario;
 pub mod signals;
 pub mod sweep_report;
 pub mod synthetic;

@@ -8,13 +8,13 @@ use std::path::Path;
 use reporting::plot::{self, Legend, PALETTE, Series, XyPanel};
 
 use crate::RigError;
-use sim::scenarios::sweep::SweepPoint;
+use crate::experiment::sweep::Row;
 
 pub use crate::experiment::plan::{SWEEP_LOADS_NM, sweep_loads};
 
 /// The supply voltages of the sweep, ascending.
-fn voltages(points: &[SweepPoint]) -> Vec<f64> {
-    let mut v: Vec<f64> = points.iter().map(|p| p.v_in_v).collect();
+fn voltages(points: &[Row]) -> Vec<f64> {
+    let mut v: Vec<f64> = points.iter().filter_map(|p| p.v_in).collect();
     v.sort_by(f64::total_cmp);
     v.dedup();
     v
@@ -23,17 +23,18 @@ fn voltages(points: &[SweepPoint]) -> Vec<f64> {
 /// The three panels of the sweep figure: Fig. 8's current and cam speed, and Fig. 9's cam
 /// torque with Eq. (10) at the mean cam speed, per supply voltage; repeats as their means
 /// with bars of +-1 standard deviation ([`plot::mean_with_spread`]).
-pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 3] {
+pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     let volts = voltages(points);
-    let at = |v: f64| points.iter().filter(move |p| p.v_in_v == v);
+    let at = |v: f64| points.iter().filter(move |p| p.v_in == Some(v));
     let color = |k: usize| PALETTE[k % PALETTE.len()];
-    let x = plot::span(points.iter().map(|p| p.tau_rot_nm), 0.08, false);
-    let per_voltage = |f: &dyn Fn(&SweepPoint) -> f64, labelled: bool| -> Vec<Series> {
+    let x = plot::span(points.iter().map(|p| p.tau_rot), 0.08, false);
+    // A point without the value plotted (none in the simulator's sweep) is left out.
+    let per_voltage = |f: &dyn Fn(&Row) -> Option<f64>, labelled: bool| -> Vec<Series> {
         volts
             .iter()
             .enumerate()
             .flat_map(|(k, &v)| {
-                let pts: Vec<(f64, f64)> = at(v).map(|p| (p.tau_rot_nm, f(p))).collect();
+                let pts: Vec<(f64, f64)> = at(v).filter_map(|p| Some((p.tau_rot, f(p)?))).collect();
                 let mut s = plot::mean_with_spread(color(k), 3, format!("{v:.1} V"), &pts);
                 if !labelled && let Some(last) = s.last_mut() {
                     last.label = None;
@@ -46,7 +47,7 @@ pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 3] {
         caption: Some("current (Fig. 8): mean, bars +-1 sd over repeats".into()),
         x_label: "tau_rot [N m]".into(),
         y_label: "i_in [A]".into(),
-        series: per_voltage(&|p| p.i_in_a, true),
+        series: per_voltage(&|p| p.i_in, true),
         x_range: Some(x),
         legend: Some(Legend::Outside),
         fine_grid: true,
@@ -56,15 +57,15 @@ pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 3] {
         caption: Some("cam speed (Fig. 8)".into()),
         x_label: "tau_rot [N m]".into(),
         y_label: "w_n [rad/s]".into(),
-        series: per_voltage(&|p| p.omega_n_rad_s, false),
+        series: per_voltage(&|p| Some(p.omega_n), false),
         x_range: Some(x),
         fine_grid: true,
         ..XyPanel::default()
     };
-    let mut torque = per_voltage(&|p| p.tau_cam_meas_nm * 1e3, true);
+    let mut torque = per_voltage(&|p| p.tau_cam_meas.map(|t| t * 1e3), true);
     for (k, &v) in volts.iter().enumerate() {
         let eq10: Vec<(f64, f64)> = at(v)
-            .map(|p| (p.tau_rot_nm, p.tau_cam_eq10_nm * 1e3))
+            .filter_map(|p| Some((p.tau_rot, p.tau_cam_eq10? * 1e3)))
             .collect();
         // Eq. (10) at the mean cam speed of the repeats: the paper's model, as reference.
         let mean = plot::mean_with_spread(color(k), 0, "", &eq10)
@@ -81,8 +82,8 @@ pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 3] {
     // in its Figs. 8-9).
     let held: Vec<(f64, f64)> = points
         .iter()
-        .filter(|p| p.backdriven == 0)
-        .map(|p| (p.tau_rot_nm, p.tau_cam_meas_nm * 1e3))
+        .filter(|p| p.backdriven == Some(false))
+        .filter_map(|p| Some((p.tau_rot, p.tau_cam_meas? * 1e3)))
         .collect();
     if !held.is_empty() {
         // Drawn first: the means stay visible on top.
@@ -106,7 +107,7 @@ pub fn sweep_panels(points: &[SweepPoint]) -> [XyPanel; 3] {
 
 /// Draws Fig. 8 (current and cam speed) and Fig. 9 of the sweep side by side into the SVG
 /// `path`, atomically.
-pub fn sweep_figure(path: &Path, points: &[SweepPoint]) -> Result<(), RigError> {
+pub fn sweep_figure(path: &Path, points: &[Row]) -> Result<(), RigError> {
     Ok(plot::columns_figure(
         path,
         (460, 400),
@@ -118,9 +119,9 @@ pub fn sweep_figure(path: &Path, points: &[SweepPoint]) -> Result<(), RigError> 
 /// Panels of a `rig experiment torque-sweep` CSV: the current (Fig. 8) and the cam speed
 /// (Fig. 8's speed panel) against the load, per supply voltage (or frequency): the mean
 /// over repeats as points, the spread (mean +- one standard deviation) as bars.
-pub fn experiment_panels(rows: &[crate::experiment::sweep::Row]) -> [XyPanel; 2] {
-    let drive = |r: &crate::experiment::sweep::Row| r.v_in_v.or(r.target_hz).unwrap_or(0.0);
-    let unit = if rows.iter().any(|r| r.v_in_v.is_some()) {
+pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
+    let drive = |r: &Row| r.v_in.or(r.target_hz).unwrap_or(0.0);
+    let unit = if rows.iter().any(|r| r.v_in.is_some()) {
         "V"
     } else {
         "Hz"
@@ -128,15 +129,15 @@ pub fn experiment_panels(rows: &[crate::experiment::sweep::Row]) -> [XyPanel; 2]
     let mut drives: Vec<f64> = rows.iter().map(drive).collect();
     drives.sort_by(f64::total_cmp);
     drives.dedup();
-    let x = plot::span(rows.iter().map(|r| r.tau_rot_nm), 0.08, false);
-    let panel = |caption: &str, y: &str, f: &dyn Fn(&crate::experiment::sweep::Row) -> f64| {
+    let x = plot::span(rows.iter().map(|r| r.tau_rot), 0.08, false);
+    let panel = |caption: &str, y: &str, f: &dyn Fn(&Row) -> Option<f64>| {
         let mut series = Vec::new();
         for (k, &d) in drives.iter().enumerate() {
             let color = PALETTE[k % PALETTE.len()];
             let samples: Vec<(f64, f64)> = rows
                 .iter()
                 .filter(|r| drive(r) == d)
-                .map(|r| (r.tau_rot_nm, f(r)))
+                .filter_map(|r| Some((r.tau_rot, f(r)?)))
                 .collect();
             series.extend(plot::mean_with_spread(
                 color,
@@ -160,17 +161,14 @@ pub fn experiment_panels(rows: &[crate::experiment::sweep::Row]) -> [XyPanel; 2]
         panel(
             "current (Fig. 8): mean, bars +-1 sd over repeats",
             "i_in [A]",
-            &|r| r.i_in_a,
+            &|r| r.i_in,
         ),
-        panel("cam speed (Fig. 8)", "w_n [rad/s]", &|r| r.omega_n_rad_s),
+        panel("cam speed (Fig. 8)", "w_n [rad/s]", &|r| Some(r.omega_n)),
     ]
 }
 
 /// Draws [`experiment_panels`] side by side into the SVG `path`, atomically.
-pub fn experiment_figure(
-    path: &Path,
-    rows: &[crate::experiment::sweep::Row],
-) -> Result<(), RigError> {
+pub fn experiment_figure(path: &Path, rows: &[Row]) -> Result<(), RigError> {
     Ok(plot::columns_figure(
         path,
         (480, 400),
@@ -180,7 +178,7 @@ pub fn experiment_figure(
 }
 
 /// Writes the sweep points as CSV to `path`, atomically (a failed run keeps an existing file).
-pub fn write_csv(points: &[SweepPoint], path: &Path) -> Result<(), RigError> {
+pub fn write_csv(points: &[Row], path: &Path) -> Result<(), RigError> {
     reporting::write_atomic_with(path, |tmp| {
         let file = std::fs::File::create(tmp).map_err(|source| RigError::File {
             action: "write",
@@ -200,19 +198,20 @@ pub fn write_csv(points: &[SweepPoint], path: &Path) -> Result<(), RigError> {
 mod tests {
     use super::*;
 
-    fn point(v: f64, load: f64) -> SweepPoint {
-        SweepPoint {
-            t_s: 0.0,
-            v_in_v: v,
-            omega_n_rad_s: 30.0 * v,
-            tau_rot_nm: load,
-            i_in_a: 2.0 + 0.2 * load,
-            temp_c: 25.0,
-            repeat: 0,
-            tau_cam_est_nm: 0.01 * load,
-            tau_cam_meas_nm: 0.01 * load,
-            tau_cam_eq10_nm: 0.011 * load,
-            backdriven: 1,
+    fn point(v: f64, load: f64) -> Row {
+        Row {
+            t_s: Some(0.0),
+            v_in: Some(v),
+            omega_n: 30.0 * v,
+            tau_rot: load,
+            i_in: Some(2.0 + 0.2 * load),
+            temp_c: Some(25.0),
+            repeat: Some(0),
+            tau_cam_est: Some(0.01 * load),
+            tau_cam_meas: Some(0.01 * load),
+            tau_cam_eq10: Some(0.011 * load),
+            backdriven: Some(true),
+            ..Row::default()
         }
     }
 
@@ -221,8 +220,8 @@ mod tests {
         let mut points = Vec::new();
         for r in 0..3 {
             let mut p = point(3.6, 1.0);
-            p.repeat = r;
-            p.i_in_a += 0.1 * f64::from(r);
+            p.repeat = Some(r);
+            p.i_in = Some(2.2 + 0.1 * f64::from(r));
             points.push(p);
         }
         let [current, ..] = sweep_panels(&points);
@@ -249,7 +248,7 @@ mod tests {
 
     #[test]
     fn figure_has_both_panels_and_every_voltage() {
-        let points: Vec<SweepPoint> = [3.6, 6.2, 8.8]
+        let points: Vec<Row> = [3.6, 6.2, 8.8]
             .iter()
             .flat_map(|&v| [0.368, 1.84, 3.68].map(|l| point(v, l)))
             .collect();

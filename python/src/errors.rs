@@ -60,6 +60,7 @@ pub fn to_py(e: RigError) -> PyErr {
     let msg = e.to_string();
     match e {
         RigError::BadValue { .. }
+        | RigError::Explain(explain::ExplainError::BadValue { .. })
         | RigError::Gear { .. }
         | RigError::CalibrationFile { .. }
         | RigError::RigFile { .. }

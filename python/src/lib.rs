@@ -125,41 +125,8 @@ fn explain_csv(
     propose: bool,
 ) -> PyResult<String> {
     py.detach(|| -> Result<String, RigError> {
-        let bad = |what: String, why: &str| RigError::BadValue {
-            what,
-            why: why.into(),
-        };
-        let mut options = ::explain::Options::default();
-        if let Some(a) = alpha {
-            if !(a > 0.0 && a < 0.5) {
-                return Err(bad(
-                    format!("alpha {a}"),
-                    "the guard level must lie in (0, 0.5), e.g. 0.01",
-                ));
-            }
-            options.alpha = a;
-        }
-        if let Some(f) = folds {
-            if !(2..=20).contains(&f) {
-                return Err(bad(format!("folds {f}"), "give 2 to 20 folds"));
-            }
-            options.folds = f as usize;
-        }
-        if let Some(r) = replicates {
-            if r > 10_000 {
-                return Err(bad(format!("replicates {r}"), "give 0 to 10000 replicates"));
-            }
-            options.replicates = r as usize;
-        }
-        if let Some(n) = stated_noise_ma {
-            if !(n.is_finite() && n >= 0.0) {
-                return Err(bad(
-                    format!("stated_noise_ma {n}"),
-                    "give zero or a positive noise in mA",
-                ));
-            }
-            options.stated_noise_a = (n > 0.0).then_some(n * 1e-3);
-        }
+        // The CLI's checks of each setting (`explain::options`), named as Python spells it.
+        let options = ::explain::Options::checked(alpha, folds, replicates, stated_noise_ma)?;
         let mut rig = match &model {
             Some(p) => rigfile::RigFile::load(p)?,
             None => rigfile::RigFile::paper(),

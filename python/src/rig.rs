@@ -481,19 +481,12 @@ impl NativeRig {
         force: bool,
     ) -> PyResult<String> {
         self.call(py, move |w| {
-            // The CLI's ranges (`--max-points`, `--replicates`), with its field names.
-            if !(12..=10_000).contains(&max_points) {
-                return Err(bad(
-                    format!("max_points {max_points}"),
-                    "give 12 to 10000 test points",
-                ));
-            }
-            if !(20..=10_000).contains(&replicates) {
-                return Err(bad(
-                    format!("replicates {replicates}"),
-                    "give 20 to 10000 bootstrap replicates",
-                ));
-            }
+            // The CLI's checks (`--max-points`, `--replicates`), named as Python spells them.
+            use host::discover::DiscoverySetup as Setup;
+            let max_points = Setup::check_max_points(max_points)
+                .map_err(|why| bad(format!("max_points {max_points}"), why))?;
+            let replicates = Setup::check_replicates(replicates)
+                .map_err(|why| bad(format!("replicates {replicates}"), why))?;
             let rig = host::discover::starting_rig(model.as_deref())?;
             // An existing CSV is refused before the rig moves, and never truncated.
             sweep::check_output(&csv, false, force)?;
@@ -501,10 +494,10 @@ impl NativeRig {
             let setup = host::discover::DiscoverySetup {
                 csv: csv.clone(),
                 force,
-                max_points: max_points as usize,
+                max_points,
                 seed,
                 options: ::explain::Options {
-                    replicates: replicates as usize,
+                    replicates,
                     ..::explain::Options::default()
                 },
                 command: "backdrive_rig Rig.discover".into(),
@@ -531,43 +524,16 @@ impl NativeRig {
     ) -> PyResult<String> {
         self.call(py, move |w| {
             idle(w, "hold_release", false)?;
-            for (name, v, positive) in [
-                ("hold_s", hold_s, false),
-                ("release_s", release_s, true),
-                ("after_s", after_s, false),
-            ] {
-                if !(v.is_finite() && (v > 0.0 || (!positive && v == 0.0))) {
-                    return Err(bad(
-                        format!("{name} {v}"),
-                        if positive {
-                            "give a positive number of seconds"
-                        } else {
-                            "give zero or a positive number of seconds"
-                        },
-                    ));
-                }
-            }
+            // The CLI's checks of each setting, named as Python spells them.
             let calibration = w.bench.calibration()?;
-            let hz = host::limits::check_release_freq("freq_hz", freq_hz, &calibration)?;
-            let cap = model::BoardLimits::PAPER.max_release_load_nm;
-            if let Some(load) = load_nm
-                && !(load.is_finite() && (0.0..=cap).contains(&load))
-            {
-                return Err(bad(
-                    format!("load_nm {load}"),
-                    format!(
-                        "outside 0 to {cap} N m (the gear's tooth strength, {}): give at most that",
-                        host::experiment::load_text(cap)
-                    ),
-                ));
-            }
             let opts = hold_release::HoldRelease {
                 load_nm,
                 hold_s,
-                hz: f64::from(hz),
+                hz: freq_hz,
                 release_s,
                 after_s,
-            };
+            }
+            .checked(hold_release::SettingNames::PYTHON, &calibration)?;
             let mut operator = Operator::scripted(b"", false);
             operator.stop = w.stop.clone();
             let samples = hold_release::run(&mut w.bench, &mut operator, &opts, &mut |_| {})?;

@@ -81,6 +81,7 @@ pub mod keys;
 pub mod paper_units;
 mod parse;
 pub mod plan;
+pub mod row;
 mod sections;
 pub mod wire;
 

@@ -24,25 +24,34 @@ pub trait RigLink {
     fn keep_alive(&mut self, on: bool);
     /// Lets `seconds` pass (virtual or wall-clock), heartbeats going on when kept alive.
     fn wait(&mut self, seconds: f64) -> Result<(), Self::Error>;
-    /// The supervisor state of the newest telemetry sample.
+    /// The supervisor state of the newest telemetry sample (a link may wait for a fresh
+    /// one).
     fn state(&mut self) -> Result<SupervisorState, Self::Error>;
+    /// The rig's own clock, s: virtual time on the simulated rig, the device time of the
+    /// newest telemetry on a device (never the host's clock, which a device need not keep
+    /// pace with).
+    fn clock_s(&mut self) -> f64;
 
-    /// Waits until `done(state)` or `limit_s` passes; returns the time waited.
+    /// Waits until `done(state)` or `limit_s` passes; returns the time waited, by
+    /// [`RigLink::clock_s`]: the waits and whatever reading the state took.
     fn wait_for_state(
         &mut self,
         limit_s: f64,
         done: &dyn Fn(SupervisorState) -> bool,
     ) -> Result<Option<f64>, Self::Error> {
         let step = 0.01;
-        let mut waited = 0.0;
-        while waited <= limit_s {
-            if done(self.state()?) {
+        let start = self.clock_s();
+        loop {
+            let state = self.state()?;
+            let waited = self.clock_s() - start;
+            if done(state) {
                 return Ok(Some(waited));
             }
+            if waited > limit_s {
+                return Ok(None);
+            }
             self.wait(step)?;
-            waited += step;
         }
-        Ok(None)
     }
 
     /// Latched faults.
@@ -95,6 +104,10 @@ impl RigLink for SimLink {
         self.last_telemetry
             .map(|t| t.state)
             .ok_or_else(|| SimError::Protocol("no telemetry from the simulated rig yet".into()))
+    }
+
+    fn clock_s(&mut self) -> f64 {
+        self.rig.time()
     }
 }
 

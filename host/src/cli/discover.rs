@@ -49,7 +49,7 @@ pub struct DiscoverArgs {
     #[arg(long)]
     pub force: bool,
     /// Budget of test points (plan points x repeats; the paper's sweep has 150).
-    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(12..=10_000))]
+    #[arg(long, default_value_t = 60, value_parser = parse_max_points)]
     pub max_points: u32,
     /// Rig file (TOML) the explanations start from [default: the paper's rig].
     #[arg(long, visible_alias = "rig", value_name = "FILE")]
@@ -67,7 +67,7 @@ pub struct DiscoverArgs {
     #[arg(long, value_name = "FILE")]
     pub write_model: Option<PathBuf>,
     /// Replicates of each explanation's block bootstrap.
-    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(20..=10_000))]
+    #[arg(long, default_value_t = 200, value_parser = parse_replicates)]
     pub replicates: u32,
     /// With --sim: the virtual rig's plant (`paper`: with the paper's speed-dependent axial
     /// friction, as every other verb; `ideal`: the paper's equations only) [default: paper].
@@ -103,6 +103,16 @@ fn bench_for(a: &DiscoverArgs, dev: &DeviceOpts) -> Result<Box<dyn Bench>, RigEr
         });
     }
     Ok(Box::new(DeviceBench::new(dev.connect()?)))
+}
+
+// The library's ranges ([`DiscoverySetup::check_max_points`], `check_replicates`), which
+// Python checks too.
+fn parse_max_points(s: &str) -> Result<u32, String> {
+    crate::args::checked(s, crate::args::whole, DiscoverySetup::check_max_points).map(|n| n as u32)
+}
+
+fn parse_replicates(s: &str) -> Result<u32, String> {
+    crate::args::checked(s, crate::args::whole, DiscoverySetup::check_replicates).map(|n| n as u32)
 }
 
 /// Runs `rig discover`.

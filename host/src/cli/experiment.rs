@@ -80,19 +80,19 @@ pub struct HoldArgs {
     #[arg(long)]
     pub svg: Option<PathBuf>,
     /// Load, N m (Fig. 5: 1.0 kg on 75 mm).
-    #[arg(long, default_value_t = model::paper::FIG5_LOAD.torque(), value_parser = crate::args::non_negative)]
+    #[arg(long, default_value_t = model::paper::FIG5_LOAD.torque(), value_parser = hold_load)]
     pub load: f64,
     /// Hold without vibration, s (the paper: 14.5).
-    #[arg(long, default_value_t = model::paper::FIG5_HOLD_S, value_parser = crate::args::non_negative)]
+    #[arg(long, default_value_t = model::paper::FIG5_HOLD_S, value_parser = hold_s)]
     pub hold: f64,
     /// Vibration frequency, Hz.
     #[arg(long, default_value_t = 5.0, value_parser = crate::args::positive)]
     pub freq: f64,
     /// Vibration time, s.
-    #[arg(long, default_value_t = 2.0, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 2.0, value_parser = release_s)]
     pub release: f64,
     /// Recorded after the vibration stops, s.
-    #[arg(long, default_value_t = 1.5, value_parser = crate::args::non_negative)]
+    #[arg(long, default_value_t = 1.5, value_parser = after_s)]
     pub after: f64,
     /// Replace an existing --csv (without it an existing file is refused, unchanged).
     #[arg(long)]
@@ -120,6 +120,39 @@ pub struct BackdriveArgs {
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+// Hold-release's settings, checked by the procedure's own checks (Python calls them too).
+fn hold_load(s: &str) -> Result<f64, String> {
+    crate::args::checked(
+        s,
+        crate::args::finite,
+        hold_release::HoldRelease::check_load_nm,
+    )
+}
+
+fn hold_s(s: &str) -> Result<f64, String> {
+    crate::args::checked(
+        s,
+        crate::args::finite,
+        hold_release::HoldRelease::check_hold_s,
+    )
+}
+
+fn release_s(s: &str) -> Result<f64, String> {
+    crate::args::checked(
+        s,
+        crate::args::finite,
+        hold_release::HoldRelease::check_release_s,
+    )
+}
+
+fn after_s(s: &str) -> Result<f64, String> {
+    crate::args::checked(
+        s,
+        crate::args::finite,
+        hold_release::HoldRelease::check_after_s,
+    )
 }
 
 fn plan_of(a: &SweepArgs) -> Result<Plan, RigError> {
@@ -228,27 +261,16 @@ fn hold_release_run(
     operator: &mut Operator,
     out: &mut impl Write,
 ) -> Result<(), RigError> {
-    // The same ranges as `rig release`: nothing is silently changed.
+    // The same ranges as `rig release` and Python's: nothing is silently changed.
     let calibration = bench.calibration()?;
-    let hz = crate::limits::check_release_freq("--freq", h.freq, &calibration)?;
-    let cap = model::BoardLimits::PAPER.max_release_load_nm;
-    if h.load > cap {
-        return Err(RigError::BadValue {
-            what: format!("--load {}", reporting::human(h.load)),
-            why: format!(
-                "is above the gear's tooth-strength limit of {} N m ({}): give at most that",
-                reporting::human(cap),
-                crate::experiment::load_text(cap)
-            ),
-        });
-    }
     let opts = hold_release::HoldRelease {
         load_nm: Some(h.load),
         hold_s: h.hold,
-        hz: f64::from(hz),
+        hz: h.freq,
         release_s: h.release,
         after_s: h.after,
-    };
+    }
+    .checked(hold_release::SettingNames::CLI, &calibration)?;
     let samples = hold_release::run(bench, operator, &opts, &mut |l| eprintln!("{l}"))?;
     hold_release::write_csv(&samples, &h.csv)?;
     let svg = h.svg.unwrap_or_else(|| h.csv.with_extension("svg"));

@@ -104,18 +104,18 @@ pub struct ExplainArgs {
     #[arg(long, default_value_t = 5, requires = "synthetic", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     pub repeats: u32,
     /// Replicates of the block bootstrap of the selection (0: no bootstrap, no confidence).
-    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(0..=10_000))]
+    #[arg(long, default_value_t = 200, value_parser = parse_replicates)]
     pub replicates: u32,
     /// Level of the false-discovery guard (probability that effect-free data gives a finding).
     #[arg(long, default_value_t = 0.002, value_parser = parse_alpha)]
     pub alpha: f64,
     /// Folds of the held-out validation over blocks of test points.
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u8).range(2..=20))]
+    #[arg(long, default_value_t = 5, value_parser = parse_folds)]
     pub folds: u8,
     /// Row noise of the current that you know (from repeats elsewhere or the logger), mA: the
     /// lack-of-fit test's reference when the data has too few repeats for a pure error
     /// [default for --synthetic: --noise-ma].
-    #[arg(long, value_name = "MA", value_parser = crate::args::non_negative)]
+    #[arg(long, value_name = "MA", value_parser = parse_stated_noise_ma)]
     pub stated_noise_ma: Option<f64>,
     /// Write a test plan (docs/plans.md) with the points that best separate the leading
     /// candidates (or pin the finding) for `rig experiment torque-sweep --plan FILE`; JSON
@@ -142,15 +142,27 @@ fn parse_hidden(s: &str) -> Result<Hidden, String> {
         })
 }
 
+// The settings' ranges are the library's ([`explain::options`]), which Python checks too.
 fn parse_alpha(s: &str) -> Result<f64, String> {
-    let v = crate::args::finite(s)?;
-    if v > 0.0 && v < 0.5 {
-        Ok(v)
-    } else {
-        Err(format!(
-            "{v}: the guard level must lie in (0, 0.5), e.g. 0.01"
-        ))
-    }
+    crate::args::checked(s, crate::args::finite, Options::check_alpha)
+}
+
+fn parse_folds(s: &str) -> Result<u8, String> {
+    let folds = crate::args::checked(s, crate::args::whole, Options::check_folds)?;
+    // At most 20 folds (the check's range).
+    Ok(folds as u8)
+}
+
+fn parse_replicates(s: &str) -> Result<u32, String> {
+    crate::args::checked(s, crate::args::whole, Options::check_replicates).map(|r| r as u32)
+}
+
+/// The noise in mA as given (the options take it in A, [`options`]).
+fn parse_stated_noise_ma(s: &str) -> Result<f64, String> {
+    let ma = crate::args::finite(s)?;
+    Options::check_stated_noise_ma(ma)
+        .map(|_| ma)
+        .map_err(|why| format!("{ma}: {why}"))
 }
 
 /// The data `rig explain` reads or makes: the data set, the synthetic truth, the source's

@@ -225,6 +225,10 @@ impl RigLink for InProcessBench {
     fn state(&mut self) -> Result<SupervisorState, RigError> {
         sampled_state(self)
     }
+
+    fn clock_s(&mut self) -> f64 {
+        self.link.rig.time()
+    }
 }
 
 impl Bench for InProcessBench {
@@ -269,6 +273,9 @@ pub struct DeviceBench {
     /// The session.
     pub session: Connection,
     temp_c: Option<f64>,
+    /// The device time of the newest telemetry sample received, s (its
+    /// [`RigLink::clock_s`]).
+    device_time_s: Option<f64>,
 }
 
 impl DeviceBench {
@@ -277,10 +284,14 @@ impl DeviceBench {
         Self {
             session,
             temp_c: None,
+            device_time_s: None,
         }
     }
 
     fn note(&mut self, msg: &DeviceMessage) {
+        if let DeviceMessage::Telemetry(t) = msg {
+            self.device_time_s = Some(t.device_time_us as f64 / 1e6);
+        }
         if let DeviceMessage::Health(h) = msg
             && h.motor_temp_c.is_finite()
             && self
@@ -326,6 +337,16 @@ impl RigLink for DeviceBench {
     fn state(&mut self) -> Result<SupervisorState, RigError> {
         sampled_state(self)
     }
+
+    /// The device's own time (a served virtual rig does not keep its speed-up while the
+    /// host is quiet, so the host's clock would not do): the newest telemetry sample's,
+    /// waiting for one when none came yet (0 when none comes).
+    fn clock_s(&mut self) -> f64 {
+        if self.device_time_s.is_none() {
+            let _ = self.sample();
+        }
+        self.device_time_s.unwrap_or(0.0)
+    }
 }
 
 impl Bench for DeviceBench {
@@ -350,7 +371,10 @@ impl Bench for DeviceBench {
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
             match self.session.client.recv(left)? {
-                Some(DeviceMessage::Telemetry(t)) => return Ok(Some(t)),
+                Some(msg @ DeviceMessage::Telemetry(t)) => {
+                    self.note(&msg);
+                    return Ok(Some(t));
+                }
                 Some(other) => self.note(&other),
                 None => return Ok(None),
             }

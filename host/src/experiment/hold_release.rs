@@ -43,6 +43,115 @@ impl Default for HoldRelease {
     }
 }
 
+/// How a caller names the settings in its messages: the CLI's flags or Python's keywords.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SettingNames {
+    /// The load, N m.
+    pub load: &'static str,
+    /// The hold without vibration, s.
+    pub hold: &'static str,
+    /// The vibration frequency, Hz.
+    pub freq: &'static str,
+    /// The vibration time, s.
+    pub release: &'static str,
+    /// The time recorded after the vibration stops, s.
+    pub after: &'static str,
+}
+
+impl SettingNames {
+    /// `rig experiment hold-release`'s flags.
+    pub const CLI: Self = Self {
+        load: "--load",
+        hold: "--hold",
+        freq: "--freq",
+        release: "--release",
+        after: "--after",
+    };
+    /// Python's `Rig.hold_release` keywords.
+    pub const PYTHON: Self = Self {
+        load: "load_nm",
+        hold: "hold_s",
+        freq: "freq_hz",
+        release: "release_s",
+        after: "after_s",
+    };
+}
+
+/// Zero or more seconds; else what to give.
+fn check_seconds(s: f64, positive: bool) -> Result<f64, String> {
+    if s.is_finite() && (s > 0.0 || (!positive && s == 0.0)) {
+        Ok(s)
+    } else if positive {
+        Err("give a positive number of seconds".into())
+    } else {
+        Err("give zero or a positive number of seconds".into())
+    }
+}
+
+// One check per setting, which the CLI's value parsers and Python's `Rig.hold_release` both
+// call ([`HoldRelease::checked`]); the reason says what to give, the caller names the setting.
+impl HoldRelease {
+    /// The hold without vibration, zero or more seconds.
+    pub fn check_hold_s(s: f64) -> Result<f64, String> {
+        check_seconds(s, false)
+    }
+
+    /// The vibration time, a positive number of seconds.
+    pub fn check_release_s(s: f64) -> Result<f64, String> {
+        check_seconds(s, true)
+    }
+
+    /// The time recorded after the vibration stops, zero or more seconds.
+    pub fn check_after_s(s: f64) -> Result<f64, String> {
+        check_seconds(s, false)
+    }
+
+    /// The load, 0 N m up to the gear's tooth strength (the board's release cap).
+    pub fn check_load_nm(nm: f64) -> Result<f64, String> {
+        let cap = model::BoardLimits::PAPER.max_release_load_nm;
+        if nm.is_finite() && (0.0..=cap).contains(&nm) {
+            Ok(nm)
+        } else {
+            Err(format!(
+                "outside 0 to {} N m (the gear's tooth strength, {}): give at most that",
+                reporting::human(cap),
+                super::load_text(cap)
+            ))
+        }
+    }
+
+    /// These settings with every one checked, the frequency against the device's
+    /// `calibration` ([`crate::limits::check_release_freq`], as `rig release`): the first
+    /// bad one is an error naming it as `names` spell it. Nothing is silently changed.
+    pub fn checked(
+        self,
+        names: SettingNames,
+        calibration: &protocol::RigParameters,
+    ) -> Result<Self, RigError> {
+        let named = |name: &str, v: f64, checked: Result<f64, String>| {
+            checked.map_err(|why| RigError::BadValue {
+                what: format!("{name} {}", reporting::human(v)),
+                why,
+            })
+        };
+        if let Some(load) = self.load_nm {
+            named(names.load, load, Self::check_load_nm(load))?;
+        }
+        named(names.hold, self.hold_s, Self::check_hold_s(self.hold_s))?;
+        named(
+            names.release,
+            self.release_s,
+            Self::check_release_s(self.release_s),
+        )?;
+        named(names.after, self.after_s, Self::check_after_s(self.after_s))?;
+        let hz = crate::limits::check_release_freq(names.freq, self.hz, calibration)?;
+        Ok(Self {
+            hz: f64::from(hz),
+            ..self
+        })
+    }
+}
+
 /// One sample of the time history (one CSV row).
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct Sample {

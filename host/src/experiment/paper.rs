@@ -2,7 +2,7 @@
 //! procedures ([`super::sweep`], [`super::backdrive`], [`super::hold_release`]) through
 //! [`InProcessBench`]: one implementation behind `rig sim torque-sweep|table1|fig5`, `rig demo`
 //! and the software-in-the-loop tests, with their results in the shapes those print
-//! ([`sim::scenarios`]' `SweepPoint`, `Table1Row`, `Fig5Result`).
+//! ([`sim::scenarios`]' `MeasuredRow`, `Table1Row`, `Fig5Result`).
 
 use model::plant::Load;
 use sim::scenarios::{fig5, sweep, table1};
@@ -29,7 +29,7 @@ fn config(
 /// `opts`' gear set, loads, voltages, repeats, window, rest, seed, effects and sensor
 /// supply; its rows with the simulator's extra columns (the torque measured by Eqs.
 /// (15)-(17) and Eq. (10) at the mean cam speed).
-pub fn torque_sweep(opts: &sweep::SweepOptions) -> Result<Vec<sweep::SweepPoint>, RigError> {
+pub fn torque_sweep(opts: &sweep::SweepOptions) -> Result<Vec<sweep::MeasuredRow>, RigError> {
     Ok(torque_sweep_with_error(opts, None)?.0)
 }
 
@@ -42,7 +42,7 @@ pub fn torque_sweep(opts: &sweep::SweepOptions) -> Result<Vec<sweep::SweepPoint>
 pub fn torque_sweep_with_error(
     opts: &sweep::SweepOptions,
     fitted: Option<&rigfile::RigFile>,
-) -> Result<(Vec<sweep::SweepPoint>, f64), RigError> {
+) -> Result<(Vec<sweep::MeasuredRow>, f64), RigError> {
     use super::sweep as procedure;
     let mut config = config(opts.z, Load::Torque(0.0), opts.seed, opts.sensor_supply_v)?;
     config.plant.effects = opts.effects;
@@ -79,8 +79,9 @@ pub fn torque_sweep_with_error(
         .rows
         .iter()
         .filter_map(|r| {
-            let truth = bench.true_cam_torque_nm(r.t_s, r.t_s + window_s + slack)?;
-            Some(r.tau_cam_est_nm - truth)
+            let t_s = r.t_s?;
+            let truth = bench.true_cam_torque_nm(t_s, t_s + window_s + slack)?;
+            Some(r.tau_cam_est? - truth)
         })
         .collect();
     let estimate_rms_error_nm = if errors.len() == outcome.rows.len() && !errors.is_empty() {
@@ -91,18 +92,10 @@ pub fn torque_sweep_with_error(
     let points = outcome
         .rows
         .into_iter()
-        .map(|r| sweep::SweepPoint {
-            t_s: r.t_s,
-            v_in_v: r.v_in_v.unwrap_or(0.0),
-            omega_n_rad_s: r.omega_n_rad_s,
-            tau_rot_nm: r.tau_rot_nm,
-            i_in_a: r.i_in_a,
-            temp_c: r.temp_c.unwrap_or(f64::NAN),
-            repeat: r.repeat,
-            tau_cam_est_nm: r.tau_cam_est_nm,
-            tau_cam_meas_nm: calibration.cam_torque(r.i_in_a, r.omega_n_rad_s),
-            tau_cam_eq10_nm: drive.required_cam_torque(mu, r.tau_rot_nm, r.omega_n_rad_s),
-            backdriven: r.backdriven.unwrap_or(1),
+        .map(|r| sweep::MeasuredRow {
+            tau_cam_meas: r.i_in.map(|i| calibration.cam_torque(i, r.omega_n)),
+            tau_cam_eq10: Some(drive.required_cam_torque(mu, r.tau_rot, r.omega_n)),
+            ..r
         })
         .collect();
     Ok((points, estimate_rms_error_nm))

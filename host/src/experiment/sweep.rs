@@ -11,7 +11,8 @@ use std::io::Write;
 use std::path::Path;
 
 use protocol::{SupervisorState, TelemetrySample};
-use serde::{Deserialize, Serialize};
+use rigfile::row::EXPERIMENT_SWEEP;
+use serde::Serialize;
 
 use super::bench::{Bench, Go, Operator, Verdict, interrupted};
 use super::plan::{Plan, Run};
@@ -50,36 +51,12 @@ pub enum Window {
     Revolutions,
 }
 
-/// One row of the sweep's CSV. The first columns are those `rig explain` reads.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Row {
-    /// Position in the plan's run order (`--resume` skips the ones written).
-    pub point: usize,
-    /// Repeat, 0-based.
-    pub repeat: u32,
-    /// Start of the averaging window, device clock, s.
-    pub t_s: f64,
-    /// Open-loop supply, V (empty in closed loop).
-    pub v_in_v: Option<f64>,
-    /// Closed-loop target frequency, Hz (empty in open loop).
-    pub target_hz: Option<f64>,
-    /// Mean cam speed over the window, rad/s.
-    pub omega_n_rad_s: f64,
-    /// Load torque hung on the output, N m.
-    pub tau_rot_nm: f64,
-    /// Mean motor current over the window, A.
-    pub i_in_a: f64,
-    /// Motor temperature at the window's start, deg C (empty when not sensed).
-    pub temp_c: Option<f64>,
-    /// The firmware's tau_cam estimate, mean over the window, N m.
-    pub tau_cam_est_nm: f64,
-    /// Whether the output moved (1) or held (0); empty when nobody could tell.
-    pub backdriven: Option<u8>,
-    /// The load as the mass hung on the paper's output pulley (radius
-    /// `model::paper::R_OUT`), kg (empty in files written before this column).
-    #[serde(default)]
-    pub load_kg: Option<f64>,
-}
+/// One row of the sweep's CSV: the rig tools' one measured-row type, with the columns of
+/// [`rigfile::row::EXPERIMENT_SWEEP`] (the first ones `rig explain` reads). The procedure
+/// fills the point, repeat, window start, drive (`v_in` in open loop, `target_hz` in closed
+/// loop), cam speed, load, current, temperature (when sensed), tau_cam estimate,
+/// `backdriven` (when someone could tell) and `load_kg`.
+pub type Row = rigfile::row::MeasuredRow;
 
 /// What a sweep did.
 #[derive(Debug, Clone, Serialize)]
@@ -158,50 +135,27 @@ pub fn read_rows(path: &Path) -> Result<(Vec<Row>, Option<String>), RigError> {
     for r in reader.deserialize::<Row>() {
         // A row cut short by a crash mid-write is not a completed row.
         match r {
-            Ok(row) => rows.push(row),
-            Err(_) => break,
+            Ok(row) if EXPERIMENT_SWEEP.is_complete(&row) => rows.push(row),
+            _ => break,
         }
     }
     Ok((rows, plan))
 }
 
-/// The CSV header line.
-fn header() -> String {
-    "point,repeat,t_s,v_in_v,target_hz,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,tau_cam_est_nm,backdriven,load_kg\n"
-        .into()
-}
-
-impl Row {
-    /// The row as a person writes it: the means of `f32` telemetry to the 7 significant
-    /// digits they carry (3.16632, not 3.166320013999939), `f32` readings as written.
-    pub fn for_people(&self) -> Row {
-        let mean = |v: f64| reporting::significant(v, 7);
-        Row {
-            v_in_v: self.v_in_v.map(reporting::human_f64),
-            target_hz: self.target_hz.map(reporting::human_f64),
-            omega_n_rad_s: mean(self.omega_n_rad_s),
-            tau_rot_nm: reporting::human_f64(self.tau_rot_nm),
-            i_in_a: mean(self.i_in_a),
-            temp_c: self.temp_c.map(reporting::human_f64),
-            tau_cam_est_nm: mean(self.tau_cam_est_nm),
-            load_kg: self.load_kg.map(|m| reporting::significant(m, 6)),
-            ..self.clone()
-        }
-    }
-}
-
-impl Row {
-    /// The row as the explanation reads it (`rig explain`'s columns).
-    pub fn measured(&self) -> explain::MeasuredRow {
-        explain::MeasuredRow {
-            omega_n: self.omega_n_rad_s,
-            tau_rot: self.tau_rot_nm,
-            i_in: Some(self.i_in_a),
-            t_s: Some(self.t_s),
-            v_in: self.v_in_v,
-            temp_c: self.temp_c,
-            backdriven: self.backdriven.map(|b| b == 1),
-        }
+/// `row` as a person writes it: the means of `f32` telemetry to the 7 significant digits
+/// they carry (3.16632, not 3.166320013999939), `f32` readings as written.
+pub fn for_people(row: &Row) -> Row {
+    let mean = |v: f64| reporting::significant(v, 7);
+    Row {
+        v_in: row.v_in.map(reporting::human_f64),
+        target_hz: row.target_hz.map(reporting::human_f64),
+        omega_n: mean(row.omega_n),
+        tau_rot: reporting::human_f64(row.tau_rot),
+        i_in: row.i_in.map(mean),
+        temp_c: row.temp_c.map(reporting::human_f64),
+        tau_cam_est: row.tau_cam_est.map(mean),
+        load_kg: row.load_kg.map(|m| reporting::significant(m, 6)),
+        ..*row
     }
 }
 
@@ -209,26 +163,19 @@ fn csv_line(row: &Row) -> Result<String, RigError> {
     csv_text([row], false)
 }
 
-/// `rows` as CSV text, numbers as people write them ([`Row::for_people`]), under the
-/// column names when `header` (and there is a row).
+/// `rows` as CSV text ([`EXPERIMENT_SWEEP`]), numbers as people write them
+/// ([`for_people`]), under the column names when `header` (and there is a row).
 pub fn csv_text<'a>(
     rows: impl IntoIterator<Item = &'a Row>,
     header: bool,
 ) -> Result<String, RigError> {
-    let mut w = csv::WriterBuilder::new()
-        .has_headers(header)
-        .from_writer(Vec::new());
-    for row in rows {
-        w.serialize(row.for_people())
-            .map_err(|e| RigError::BadValue {
-                what: "a sweep row".into(),
-                why: e.to_string(),
-            })?;
-    }
-    let bytes = w.into_inner().map_err(|e| RigError::BadValue {
-        what: "a sweep row".into(),
-        why: e.to_string(),
-    })?;
+    let mut bytes = Vec::new();
+    EXPERIMENT_SWEEP
+        .write_csv(&mut bytes, header, rows.into_iter().map(for_people))
+        .map_err(|e| RigError::BadValue {
+            what: "a sweep row".into(),
+            why: e.to_string(),
+        })?;
     Ok(String::from_utf8_lossy(&bytes).into_owned())
 }
 
@@ -366,7 +313,7 @@ pub fn run_to<B: Bench + ?Sized>(
     let mut hung: Option<f64> = None;
     let todo: Vec<&Run> = runs
         .iter()
-        .filter(|r| !done.iter().any(|d| d.point == r.index))
+        .filter(|r| !done.iter().any(|d| d.point == Some(r.index)))
         .collect();
     let result = (|| {
         for run in todo {
@@ -429,8 +376,8 @@ pub fn run_to<B: Bench + ?Sized>(
                     runs.len(),
                     super::load_text(run.load_nm),
                     drive_text(run),
-                    row.i_in_a,
-                    row.omega_n_rad_s
+                    row.i_in.unwrap_or(f64::NAN),
+                    row.omega_n
                 );
                 if asks {
                     let ask_moved = row.backdriven.is_none();
@@ -438,7 +385,7 @@ pub fn run_to<B: Bench + ?Sized>(
                         Verdict::Redo => continue,
                         Verdict::Keep(moved) => {
                             if let Some(m) = moved {
-                                row.backdriven = Some(u8::from(m));
+                                row.backdriven = Some(m);
                             }
                         }
                     }
@@ -571,7 +518,7 @@ fn open_csv<B: Bench + ?Sized>(
         return Ok((rows, out));
     }
     check_output(csv, false, setup.force)?;
-    let head = provenance(bench, setup)? + &header();
+    let head = provenance(bench, setup)? + &EXPERIMENT_SWEEP.header();
     let mut out = Appender {
         file: create_new(csv, setup.force)?,
         path,
@@ -701,7 +648,7 @@ fn measure<B: Bench + ?Sized>(
             None => break,
         }
     }
-    row.backdriven = super::bench::moved(before, after).map(u8::from);
+    row.backdriven = super::bench::moved(before, after);
     Ok(row)
 }
 
@@ -808,22 +755,24 @@ fn average<B: Bench + ?Sized>(
     let n = f64::from(n.max(1));
     Ok((
         Row {
-            point: run.index,
-            repeat: run.repeat,
-            t_s: t0 as f64 / 1e6,
-            v_in_v: run.volts,
+            point: Some(run.index),
+            repeat: Some(run.repeat),
+            t_s: Some(t0 as f64 / 1e6),
+            v_in: run.volts,
             target_hz: run.hz,
-            omega_n_rad_s: sum_w / n,
-            tau_rot_nm: run.load_nm,
-            i_in_a: sum_i / n,
+            omega_n: sum_w / n,
+            tau_rot: run.load_nm,
+            i_in: Some(sum_i / n),
             temp_c,
-            tau_cam_est_nm: if estimates.is_empty() {
+            tau_cam_est: Some(if estimates.is_empty() {
                 f64::from(last.tau_cam_nm)
             } else {
                 estimates.iter().sum::<f64>() / estimates.len() as f64
-            },
+            }),
             backdriven: None,
             load_kg: Some(super::load_mass_kg(run.load_nm)),
+            tau_cam_meas: None,
+            tau_cam_eq10: None,
         },
         Some(last),
     ))
@@ -921,8 +870,8 @@ mod tests {
                 }
                 let at: Vec<f64> = rows
                     .iter()
-                    .filter(|r| r.v_in_v == Some(v) && r.tau_rot_nm == load)
-                    .map(|r| r.i_in_a)
+                    .filter(|r| r.v_in == Some(v) && r.tau_rot == load)
+                    .filter_map(|r| r.i_in)
                     .collect();
                 assert_eq!(at.len(), 2, "two repeats at {load} N m, {v} V");
                 means.push((load, at.iter().sum::<f64>() / 2.0));
@@ -935,8 +884,8 @@ mod tests {
         }
         let speed = |v: f64| {
             rows.iter()
-                .filter(|r| r.v_in_v == Some(v))
-                .map(|r| r.omega_n_rad_s)
+                .filter(|r| r.v_in == Some(v))
+                .map(|r| r.omega_n)
                 .sum::<f64>()
         };
         assert!(speed(3.6) < speed(6.2) && speed(6.2) < speed(8.8));
@@ -966,10 +915,10 @@ mod tests {
         assert_eq!(rows.len(), 2);
         for r in &rows {
             let hz = r.target_hz.unwrap();
-            assert!(r.v_in_v.is_none());
-            let measured = r.omega_n_rad_s / std::f64::consts::TAU;
+            assert!(r.v_in.is_none());
+            let measured = r.omega_n / std::f64::consts::TAU;
             assert!((measured - hz).abs() < 0.1 * hz, "{measured} Hz at {hz} Hz");
-            assert_eq!(r.backdriven, Some(1), "1 N m falls once released");
+            assert_eq!(r.backdriven, Some(true), "1 N m falls once released");
         }
     }
 }

@@ -52,32 +52,13 @@ impl Default for SweepOptions {
     }
 }
 
-/// One test point (one CSV row).
-#[derive(Debug, Clone, Serialize)]
-pub struct SweepPoint {
-    /// Start of the averaging window since the session began, s.
-    pub t_s: f64,
-    /// Supply voltage, V.
-    pub v_in_v: f64,
-    /// Mean cam speed over the window, rad/s.
-    pub omega_n_rad_s: f64,
-    /// Load torque, N m.
-    pub tau_rot_nm: f64,
-    /// Mean current over the window, A (logged on the sensor, as the paper's logger).
-    pub i_in_a: f64,
-    /// Motor temperature at the window's start, deg C.
-    pub temp_c: f64,
-    /// Repeat index, 0-based.
-    pub repeat: u32,
-    /// The firmware's tau_cam estimate at the window's end, N m.
-    pub tau_cam_est_nm: f64,
-    /// Torque from the mean current by Eqs. (15)-(17), N m.
-    pub tau_cam_meas_nm: f64,
-    /// Eq. (10) at the mean cam speed, N m.
-    pub tau_cam_eq10_nm: f64,
-    /// The output moved during the test (1) or stayed held (0).
-    pub backdriven: u8,
-}
+/// One test point (one CSV row): the rig tools' one measured-row type. The sweep fills
+/// its supply, cam speed, load, current, temperature, repeat, backdrive observation and the
+/// three tau_cam columns ([`rigfile::row::SIM_SWEEP`]).
+pub use rigfile::row::MeasuredRow;
+
+/// The name a sweep's row had before the rig tools shared one row type.
+pub type SweepPoint = MeasuredRow;
 
 /// What `rig sim torque-sweep --json` prints.
 #[derive(Debug, Clone, Serialize)]
@@ -103,16 +84,16 @@ pub struct SweepSummary {
 }
 
 /// Summarises the points (means over repeats) and checks the paper's trends.
-pub fn summarise(points: &[SweepPoint], opts: &SweepOptions) -> SweepSummary {
-    let mean = |v: f64, tau: f64, f: &dyn Fn(&SweepPoint) -> f64| {
+pub fn summarise(points: &[MeasuredRow], opts: &SweepOptions) -> SweepSummary {
+    let mean = |v: f64, tau: f64, f: &dyn Fn(&MeasuredRow) -> f64| {
         let sel: Vec<f64> = points
             .iter()
-            .filter(|p| p.v_in_v == v && p.tau_rot_nm == tau)
+            .filter(|p| p.v_in == Some(v) && p.tau_rot == tau)
             .map(f)
             .collect();
         sel.iter().sum::<f64>() / sel.len().max(1) as f64
     };
-    let grows = |f: &dyn Fn(&SweepPoint) -> f64| {
+    let grows = |f: &dyn Fn(&MeasuredRow) -> f64| {
         let by_load = opts.voltages.iter().all(|&v| {
             opts.loads
                 .windows(2)
@@ -125,9 +106,11 @@ pub fn summarise(points: &[SweepPoint], opts: &SweepOptions) -> SweepSummary {
         });
         (by_load, by_speed)
     };
-    let (current_grows_with_load, current_grows_with_speed) = grows(&|p| p.i_in_a);
-    let (tau_cam_grows_with_load, tau_cam_grows_with_speed) = grows(&|p| p.tau_cam_est_nm);
-    let rms = |f: &dyn Fn(&SweepPoint) -> f64| {
+    // A value the sweep did not measure (none here) counts as NaN: no trend, RMS NaN.
+    let value = |v: Option<f64>| v.unwrap_or(f64::NAN);
+    let (current_grows_with_load, current_grows_with_speed) = grows(&|p| value(p.i_in));
+    let (tau_cam_grows_with_load, tau_cam_grows_with_speed) = grows(&|p| value(p.tau_cam_est));
+    let rms = |f: &dyn Fn(&MeasuredRow) -> f64| {
         (points.iter().map(|p| f(p).powi(2)).sum::<f64>() / points.len().max(1) as f64).sqrt()
     };
     SweepSummary {
@@ -138,8 +121,8 @@ pub fn summarise(points: &[SweepPoint], opts: &SweepOptions) -> SweepSummary {
             .map(|&v| {
                 let sel: Vec<f64> = points
                     .iter()
-                    .filter(|p| p.v_in_v == v)
-                    .map(|p| p.omega_n_rad_s)
+                    .filter(|p| p.v_in == Some(v))
+                    .map(|p| p.omega_n)
                     .collect();
                 (
                     v,
@@ -153,19 +136,58 @@ pub fn summarise(points: &[SweepPoint], opts: &SweepOptions) -> SweepSummary {
         current_grows_with_speed,
         tau_cam_grows_with_load,
         tau_cam_grows_with_speed,
-        rmse_tau_cam_vs_eq10_nm: rms(&|p| p.tau_cam_meas_nm - p.tau_cam_eq10_nm),
-        rmse_estimate_vs_measured_nm: rms(&|p| p.tau_cam_est_nm - p.tau_cam_meas_nm),
-        not_backdriven: points.iter().filter(|p| p.backdriven == 0).count(),
+        rmse_tau_cam_vs_eq10_nm: rms(&|p| value(p.tau_cam_meas) - value(p.tau_cam_eq10)),
+        rmse_estimate_vs_measured_nm: rms(&|p| value(p.tau_cam_est) - value(p.tau_cam_meas)),
+        not_backdriven: points
+            .iter()
+            .filter(|p| p.backdriven == Some(false))
+            .count(),
     }
 }
 
-/// Writes the points as CSV (header: `t_s,v_in_v,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,...`)
-/// to `out`; callers that write a file do so atomically (`reporting::write_atomic_with`).
-pub fn write_csv<W: std::io::Write>(points: &[SweepPoint], out: W) -> Result<(), csv::Error> {
-    let mut w = csv::Writer::from_writer(out);
-    for p in points {
-        w.serialize(p)?;
+/// Writes the points as CSV ([`rigfile::row::SIM_SWEEP`]: `t_s,v_in_v,omega_n_rad_s,
+/// tau_rot_nm,i_in_a,temp_c,...`; no header without points) to `out`; callers that write a
+/// file do so atomically (`reporting::write_atomic_with`).
+pub fn write_csv<W: std::io::Write>(points: &[MeasuredRow], out: W) -> Result<(), csv::Error> {
+    rigfile::row::SIM_SWEEP.write_csv(out, true, points)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_columns_and_number_format_are_fixed() {
+        // Numbers as the csv crate's serializer writes them (shortest round trip, `5.0`,
+        // `1e-7`), under the column names, in this order.
+        let p = MeasuredRow {
+            t_s: Some(1.5),
+            v_in: Some(3.6),
+            omega_n: 31.41592653589793,
+            tau_rot: 0.368,
+            i_in: Some(2.5),
+            temp_c: Some(25.0),
+            repeat: Some(4),
+            tau_cam_est: Some(1e-7),
+            tau_cam_meas: Some(0.1 + 0.2),
+            tau_cam_eq10: Some(12345678.0),
+            backdriven: Some(false),
+            // Not sim columns: not written.
+            point: Some(7),
+            load_kg: Some(1.0),
+            target_hz: None,
+        };
+        let moved = MeasuredRow {
+            backdriven: Some(true),
+            ..p
+        };
+        let mut out = Vec::new();
+        write_csv(&[p, moved], &mut out).unwrap();
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "t_s,v_in_v,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,repeat,tau_cam_est_nm,tau_cam_meas_nm,tau_cam_eq10_nm,backdriven\n\
+             1.5,3.6,31.41592653589793,0.368,2.5,25.0,4,1e-7,0.30000000000000004,12345678.0,0\n\
+             1.5,3.6,31.41592653589793,0.368,2.5,25.0,4,1e-7,0.30000000000000004,12345678.0,1\n"
+        );
     }
-    w.flush()?;
-    Ok(())
 }
