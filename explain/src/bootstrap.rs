@@ -437,6 +437,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
     let m = draws(opts.replicates, points.blocks);
     let mut paths: Vec<Vec<Mechanism>> = vec![Vec::new(); opts.replicates];
     let mut active = vec![true; opts.replicates];
+    // Replicates whose last effect is implausible alone (kept only if the next one makes
+    // the pair plausible).
+    let mut provisional = vec![false; opts.replicates];
     for _level in 0..depth {
         // Explore the paths the replicates reached that the real selection did not.
         let mut reached: BTreeMap<&Vec<Mechanism>, usize> = BTreeMap::new();
@@ -544,7 +547,10 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             let (e, gain, s) = best?;
             let mut reached = p.clone();
             reached.push(e);
-            if implausible.contains(&reached) {
+            // As in the selection, an implausible model is only a way to a plausible pair:
+            // a replicate that is already on one stops.
+            let beyond_limits = implausible.contains(&reached);
+            if beyond_limits && provisional[r] {
                 return None;
             }
             let confirmed = match (here.held_out, s.held_out) {
@@ -558,20 +564,32 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 (Some(b), Some(a)) => a.rmse < b.rmse,
                 _ => true,
             };
-            (gain > 0.0 && gain > node.critical && confirmed).then_some(e)
+            (gain > 0.0 && gain > node.critical && confirmed).then_some((e, beyond_limits))
         });
         let mut any = false;
         for (r, mv) in moves.into_iter().enumerate() {
             match mv {
-                Some(e) => {
+                Some((e, beyond_limits)) => {
                     paths[r].push(e);
+                    provisional[r] = beyond_limits;
                     any = true;
                 }
-                None => active[r] = false,
+                None => {
+                    active[r] = false;
+                    if std::mem::take(&mut provisional[r]) {
+                        paths[r].pop();
+                    }
+                }
             }
         }
         if !any {
             break;
+        }
+    }
+    // A replicate still on an implausible model names nothing of it.
+    for (p, pending) in paths.iter_mut().zip(&provisional) {
+        if *pending {
+            p.pop();
         }
     }
     let selected = paths

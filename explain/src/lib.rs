@@ -28,6 +28,7 @@ pub mod bootstrap;
 pub mod calibration;
 pub mod data;
 pub mod design;
+pub mod drivers;
 pub mod extrapolation;
 pub mod fit;
 pub mod gap;
@@ -129,6 +130,14 @@ pub struct EffectReport {
     /// Held-out edges of the tested range (whole speed levels and load ranges) predicted
     /// with and without it; null when the effect did not stay in the final model.
     pub extrapolation: Option<extrapolation::Extrapolation>,
+    /// Whether the variable its law follows beats a generic shape in another variable
+    /// (time, revolutions, temperature, speed, load, current) in the final model (at the
+    /// step that named it, when it did not stay); null for a law with no driver (a
+    /// constant, a variance, a user effect).
+    pub driver_check: Option<drivers::DriverCheck>,
+    /// The other named effect without which this one's fit needs values no rig can have
+    /// (the two reach physical values only together); null for an effect plausible alone.
+    pub only_together_with: Option<String>,
 }
 
 /// A row of a candidate table.
@@ -834,6 +843,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     model_weights.truncate(10);
 
     let mut effects = Vec::new();
+    let mut step_start = &selection.start;
     for (k, step) in selection
         .steps
         .iter()
@@ -867,7 +877,18 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             limits: plaus.checks,
             extrapolation: in_final
                 .then(|| extrapolation::extrapolation(&points, &after, best.cand)),
+            driver_check: if in_final {
+                drivers::check_in_final(&points, &after, best.cand)
+            } else {
+                drivers::check(&points, step_start, f, best.cand)
+            },
+            only_together_with: match &step.decision {
+                select::Decision::AddedOnlyTogether { partner, .. } => Some(partner.clone()),
+                select::Decision::Added { partner, .. } => partner.clone(),
+                _ => None,
+            },
         });
+        step_start = f;
     }
     let named = selection.added();
     let named_names: Vec<String> = named.iter().map(name_of).collect();
@@ -915,6 +936,17 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
                 })
                 .collect();
         }
+    }
+    // A named effect whose driver a generic shape in another variable matches is no
+    // explanation either: the verdict turns ambiguous, with the effect as its candidate.
+    let undriven = effects
+        .iter()
+        .find(|f| f.driver_check.as_ref().is_some_and(|d| !d.separated));
+    if let (true, Some(f)) = (ambiguous_candidates.is_empty(), undriven) {
+        ambiguous_candidates.push(AmbiguousCandidate {
+            name: f.name.clone(),
+            probability: inclusion_of(&f.name).unwrap_or(0.0),
+        });
     }
     let ambiguous: Vec<String> = ambiguous_candidates
         .iter()
