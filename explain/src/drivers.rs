@@ -482,3 +482,47 @@ pub fn check_in_final(points: &TestPoints, after: &Fit, cand: Mechanism) -> Opti
     let less = fit::fit_from(points, &points.all, &spec, &model, &starts);
     check(points, &less, after, cand)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_separating_test_fits_the_two_drivers() {
+        let t = |own: &[Driver], other| separating_test(own, other);
+        assert!(t(&[Driver::Temperature], Driver::Time).contains("cool-down rest"));
+        assert!(t(&[Driver::Temperature], Driver::Revolutions).contains("cool-down rest"));
+        assert!(t(&[Driver::Time], Driver::Temperature).contains("cool-down rest"));
+        assert!(t(&[Driver::Time], Driver::Revolutions).contains("one cam speed for a stretch"));
+        assert!(t(&[Driver::Speed], Driver::Current).contains("reference meter"));
+        assert!(t(&[Driver::Load], Driver::Time).contains("shuffled order"));
+        assert!(t(&[Driver::Time], Driver::Load).contains("shuffled order"));
+        assert!(t(&[Driver::Speed], Driver::Load).contains("more speed levels"));
+    }
+
+    #[test]
+    fn a_check_reads_as_its_numbers() {
+        let alt = Alternative {
+            driver: Driver::Time,
+            shape: "t x friction current".into(),
+            words: "friction that grows with the time".into(),
+            chi2: 120.0,
+        };
+        let mut check = DriverCheck {
+            drivers: vec![Driver::Temperature],
+            chi2: 80.0,
+            best_alternative: Some(alt),
+            separated: false,
+            margin: SEPARATION_CHI2,
+            separating_test: separating_test(&[Driver::Temperature], Driver::Time),
+        };
+        let s = check.summary("thermal-drift");
+        assert!(s.contains("chi^2 80.0") && s.contains("chi^2 120.0"), "{s}");
+        assert!(s.contains("the motor temperature or the time"), "{s}");
+        assert!(s.contains("cool-down rest"), "{s}");
+        check.separated = true;
+        check.chi2 = 300.0;
+        let s = check.summary("thermal-drift");
+        assert!(s.contains("better than any generic shape"), "{s}");
+    }
+}
