@@ -269,15 +269,15 @@ impl Projector {
     /// Chi-square that column `x` (A per unit coefficient at each point) explains of the
     /// residual with the unknowns refitted.
     fn chi2(&self, x: &[f64]) -> f64 {
-        let (n, p) = (x.len(), self.p);
+        let p = self.p;
         let xw: Vec<f64> = x.iter().zip(&self.scale).map(|(a, s)| a * s).collect();
         let total: f64 = xw.iter().map(|v| v * v).sum();
         let mut perp = xw;
         if let Some(l) = &self.chol {
             let mut b = vec![0.0; p];
-            for k in 0..n {
+            for (k, v) in perp.iter().enumerate() {
                 for (y, by) in b.iter_mut().enumerate() {
-                    *by += self.jac[k * p + y] * perp[k];
+                    *by += self.jac[k * p + y] * v;
                 }
             }
             let c = stats::cholesky_solve(l, p, &b);
@@ -286,7 +286,8 @@ impl Projector {
             }
         }
         let s: f64 = perp.iter().map(|v| v * v).sum();
-        if !(s > 1e-9 * total) {
+        // A shape the model's own unknowns already span (or NaN) explains nothing new.
+        if !(s.is_finite() && total.is_finite()) || s <= 1e-9 * total {
             return 0.0;
         }
         let u: f64 = perp.iter().zip(&self.residual).map(|(a, b)| a * b).sum();
@@ -341,7 +342,9 @@ fn shapes(driver: Driver, v: &[f64], friction: &[f64]) -> Vec<(String, String, V
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
             (a.min(x), b.max(x))
         });
-    if !(hi - lo > 1e-9 * hi.abs().max(1e-9)) {
+    // A driver that does not vary (or is not finite) offers no shape.
+    let spread = hi - lo;
+    if spread.is_nan() || spread <= 1e-9 * hi.abs().max(1e-9) {
         return Vec::new();
     }
     let f_max = friction
