@@ -602,6 +602,19 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
             );
         }
         s.push('\n');
+        for eff in &e.effects {
+            if let Some(p) = &eff.only_together_with {
+                let _ = writeln!(
+                    s,
+                    "- {} and {p} reach physical values only together (fitted without the other, one of them needs values no rig can have).",
+                    eff.name
+                );
+            }
+            if let Some(d) = &eff.driver_check {
+                let _ = writeln!(s, "- Driver: {}.", d.summary(&eff.name));
+            }
+        }
+        s.push('\n');
     }
     for (k, step) in e.steps.iter().enumerate() {
         let _ = writeln!(s, "## Step {}: {}\n", k + 1, step.reason);
