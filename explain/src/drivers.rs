@@ -13,8 +13,9 @@
 //! model's own unknowns (linearised at that fit, weighted by the final model's noise). The effect's own change of the fitted current is
 //! scored the same way. The effect is `separated` when it explains at least
 //! [`SEPARATION_CHI2`] more chi-square than the best alternative; when not, the verdict
-//! cannot be `explained`, and the report names the alternative driver and the test that
-//! would separate the two.
+//! cannot be `explained`, its confidence is the bootstrap share times the named law's
+//! weight against the alternative ([`DriverCheck::weight`]), and the report names the
+//! alternative driver and the test that would separate the two.
 
 use serde::Serialize;
 
@@ -157,6 +158,15 @@ pub struct DriverCheck {
 }
 
 impl DriverCheck {
+    /// The weight of the named law against the best alternative, two models of one
+    /// coefficient each: 1 / (1 + exp((chi2_alternative - chi2) / 2)) (their BIC weights,
+    /// the penalties cancelling); 1 without an alternative.
+    pub fn weight(&self) -> f64 {
+        self.best_alternative
+            .as_ref()
+            .map_or(1.0, |a| 1.0 / (1.0 + ((a.chi2 - self.chi2) / 2.0).exp()))
+    }
+
     /// One sentence for the finding.
     pub fn summary(&self, name: &str) -> String {
         match &self.best_alternative {
@@ -521,6 +531,8 @@ mod tests {
         };
         let s = check.summary("thermal-drift");
         assert!(s.contains("chi^2 80.0") && s.contains("chi^2 120.0"), "{s}");
+        // 40 chi-square behind the alternative: the named law's weight is e^-20.
+        assert!((check.weight() - 1.0 / (1.0 + 20f64.exp())).abs() < 1e-12);
         assert!(s.contains("the motor temperature or the time"), "{s}");
         assert!(s.contains("cool-down rest"), "{s}");
         check.separated = true;

@@ -263,7 +263,9 @@ pub struct Explanation {
     /// For `explained`: the probability that the named set of effects is exactly right,
     /// calibrated on generated batches with truths outside the library
     /// ([`calibration::calibrated`] of `confidence_raw`). For the other verdicts: the
-    /// bootstrap share (`confidence_raw`). Null without a bootstrap.
+    /// bootstrap share (`confidence_raw`), times the weight of each named effect whose
+    /// driver a generic shape in another variable matches against that shape
+    /// ([`drivers::DriverCheck::weight`]). Null without a bootstrap.
     pub confidence: Option<f64>,
     /// Share of the block-bootstrap replicates of the whole selection that reach the same set
     /// of effects (none, for `no-missing-effect`); null without a bootstrap.
@@ -1099,6 +1101,8 @@ struct Judgement {
     lack_of_fit: lack_of_fit::LackOfFit,
     verdict: Verdict,
     robust_sigma_a: f64,
+    /// The product of the weights of the named effects whose driver is not settled.
+    driver_weight: f64,
 }
 
 /// The effects named, their rivals, the final model's gap and lack of fit, and the verdict.
@@ -1141,7 +1145,14 @@ fn judge(
         &lack_of_fit,
         !ambiguous_candidates.is_empty(),
     );
+    let driver_weight = effects
+        .iter()
+        .filter_map(|f| f.driver_check.as_ref())
+        .filter(|d| !d.separated)
+        .map(drivers::DriverCheck::weight)
+        .product();
     Judgement {
+        driver_weight,
         effects,
         named,
         named_names,
@@ -1213,7 +1224,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         ambiguous_candidates: j.ambiguous_candidates,
         confidence: share.map(|s| match verdict {
             Verdict::Explained => calibration::calibrated(s),
-            _ => s,
+            _ => s * j.driver_weight,
         }),
         confidence_raw: share,
         inclusion_probabilities,

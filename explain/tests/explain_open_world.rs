@@ -809,6 +809,10 @@ fn wear_that_time_explains_as_well_is_not_named_as_thermal_drift() {
         e.ambiguous.first().map(String::as_str),
         Some(drift.name.as_str())
     );
+    // Lower confidence: the share times the drift's weight against the better alternative.
+    let (c, raw) = (e.confidence.unwrap(), e.confidence_raw.unwrap());
+    assert!((c - raw * check.weight()).abs() < 1e-12, "{c} {raw}");
+    assert!(c < 0.5 * raw, "{c} {raw}");
 }
 
 #[test]
