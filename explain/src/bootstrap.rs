@@ -405,6 +405,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
     // Paths whose last effect's full-data fit breaks a physical limit: as in the selection,
     // a replicate that reaches one names nothing more.
     let mut implausible: BTreeSet<Vec<Mechanism>> = BTreeSet::new();
+    // Of those, the paths whose last shape sits on the edge of its search: no partner makes
+    // them plausible (as in the selection), so a replicate that reaches one stops.
+    let mut dead_ends: BTreeSet<Vec<Mechanism>> = BTreeSet::new();
     let mut steps: BTreeMap<Vec<Mechanism>, StepNode> = BTreeMap::new();
     let mut path = Vec::new();
     fits.insert(path.clone(), selection.start.clone());
@@ -414,8 +417,12 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             if let Some(f) = &c.fit {
                 let mut child = path.clone();
                 child.push(c.cand);
-                if !crate::plausibility::check_model(points, f).plausible {
+                let plausibility = crate::plausibility::check_model(points, f);
+                if !plausibility.plausible {
                     implausible.insert(child.clone());
+                }
+                if !plausibility.only_physical_limits_broken() {
+                    dead_ends.insert(child.clone());
                 }
                 fits.insert(child, f.clone());
                 children.push(c.cand);
@@ -483,8 +490,12 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                     for (e, f) in children {
                         let mut child = p.clone();
                         child.push(e);
-                        if !crate::plausibility::check_model(points, &f).plausible {
+                        let plausibility = crate::plausibility::check_model(points, &f);
+                        if !plausibility.plausible {
                             implausible.insert(child.clone());
+                        }
+                        if !plausibility.only_physical_limits_broken() {
+                            dead_ends.insert(child.clone());
                         }
                         fits.insert(child, f);
                     }
@@ -550,7 +561,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             // As in the selection, an implausible model is only a way to a plausible pair:
             // a replicate that is already on one stops.
             let beyond_limits = implausible.contains(&reached);
-            if beyond_limits && provisional[r] {
+            if beyond_limits && (provisional[r] || dead_ends.contains(&reached)) {
                 return None;
             }
             let confirmed = match (here.held_out, s.held_out) {
