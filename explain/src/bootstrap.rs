@@ -405,6 +405,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
     // Paths whose last effect's full-data fit breaks a physical limit: as in the selection,
     // a replicate that reaches one names nothing more.
     let mut implausible: BTreeSet<Vec<Mechanism>> = BTreeSet::new();
+    // Of those, the paths whose last shape sits on the edge of its search: no partner makes
+    // them plausible (as in the selection), so a replicate that reaches one stops.
+    let mut dead_ends: BTreeSet<Vec<Mechanism>> = BTreeSet::new();
     let mut steps: BTreeMap<Vec<Mechanism>, StepNode> = BTreeMap::new();
     let mut path = Vec::new();
     fits.insert(path.clone(), selection.start.clone());
@@ -414,8 +417,12 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             if let Some(f) = &c.fit {
                 let mut child = path.clone();
                 child.push(c.cand);
-                if !crate::plausibility::check_model(points, f).plausible {
+                let plausibility = crate::plausibility::check_model(points, f);
+                if !plausibility.plausible {
                     implausible.insert(child.clone());
+                }
+                if !plausibility.only_physical_limits_broken() {
+                    dead_ends.insert(child.clone());
                 }
                 fits.insert(child, f.clone());
                 children.push(c.cand);
@@ -437,6 +444,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
     let m = draws(opts.replicates, points.blocks);
     let mut paths: Vec<Vec<Mechanism>> = vec![Vec::new(); opts.replicates];
     let mut active = vec![true; opts.replicates];
+    // Replicates whose last effect is implausible alone (kept only if the next one makes
+    // the pair plausible).
+    let mut provisional = vec![false; opts.replicates];
     for _level in 0..depth {
         // Explore the paths the replicates reached that the real selection did not.
         let mut reached: BTreeMap<&Vec<Mechanism>, usize> = BTreeMap::new();
@@ -480,8 +490,12 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                     for (e, f) in children {
                         let mut child = p.clone();
                         child.push(e);
-                        if !crate::plausibility::check_model(points, &f).plausible {
+                        let plausibility = crate::plausibility::check_model(points, &f);
+                        if !plausibility.plausible {
                             implausible.insert(child.clone());
+                        }
+                        if !plausibility.only_physical_limits_broken() {
+                            dead_ends.insert(child.clone());
                         }
                         fits.insert(child, f);
                     }
@@ -544,7 +558,10 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             let (e, gain, s) = best?;
             let mut reached = p.clone();
             reached.push(e);
-            if implausible.contains(&reached) {
+            // As in the selection, an implausible model is only a way to a plausible pair:
+            // a replicate that is already on one stops.
+            let beyond_limits = implausible.contains(&reached);
+            if beyond_limits && (provisional[r] || dead_ends.contains(&reached)) {
                 return None;
             }
             let confirmed = match (here.held_out, s.held_out) {
@@ -558,20 +575,32 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 (Some(b), Some(a)) => a.rmse < b.rmse,
                 _ => true,
             };
-            (gain > 0.0 && gain > node.critical && confirmed).then_some(e)
+            (gain > 0.0 && gain > node.critical && confirmed).then_some((e, beyond_limits))
         });
         let mut any = false;
         for (r, mv) in moves.into_iter().enumerate() {
             match mv {
-                Some(e) => {
+                Some((e, beyond_limits)) => {
                     paths[r].push(e);
+                    provisional[r] = beyond_limits;
                     any = true;
                 }
-                None => active[r] = false,
+                None => {
+                    active[r] = false;
+                    if std::mem::take(&mut provisional[r]) {
+                        paths[r].pop();
+                    }
+                }
             }
         }
         if !any {
             break;
+        }
+    }
+    // A replicate still on an implausible model names nothing of it.
+    for (p, pending) in paths.iter_mut().zip(&provisional) {
+        if *pending {
+            p.pop();
         }
     }
     let selected = paths

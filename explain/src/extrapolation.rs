@@ -48,7 +48,7 @@ pub struct Extrapolation {
 }
 
 /// The model `spec` without `cand`.
-fn without(spec: &ModelSpec, cand: Mechanism) -> ModelSpec {
+pub(crate) fn without(spec: &ModelSpec, cand: Mechanism) -> ModelSpec {
     let mut s = spec.clone();
     match cand {
         Mechanism::Effect(e) => s.effects.retain(|&x| x != e),

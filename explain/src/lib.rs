@@ -28,6 +28,7 @@ pub mod bootstrap;
 pub mod calibration;
 pub mod data;
 pub mod design;
+pub mod drivers;
 pub mod extrapolation;
 pub mod fit;
 pub mod gap;
@@ -130,6 +131,14 @@ pub struct EffectReport {
     /// Held-out edges of the tested range (whole speed levels and load ranges) predicted
     /// with and without it; null when the effect did not stay in the final model.
     pub extrapolation: Option<extrapolation::Extrapolation>,
+    /// Whether the variable its law follows beats a generic shape in another variable
+    /// (time, revolutions, temperature, speed, load, current) in the final model (at the
+    /// step that named it, when it did not stay); null for a law with no driver (a
+    /// constant, a variance, a user effect).
+    pub driver_check: Option<drivers::DriverCheck>,
+    /// The other named effect without which this one's fit needs values no rig can have
+    /// (the two reach physical values only together); null for an effect plausible alone.
+    pub only_together_with: Option<String>,
 }
 
 /// A row of a candidate table.
@@ -255,7 +264,9 @@ pub struct Explanation {
     /// For `explained`: the probability that the named set of effects is exactly right,
     /// calibrated on generated batches with truths outside the library
     /// ([`calibration::calibrated`] of `confidence_raw`). For the other verdicts: the
-    /// bootstrap share (`confidence_raw`). Null without a bootstrap.
+    /// bootstrap share (`confidence_raw`), times the weight of each named effect whose
+    /// driver a generic shape in another variable matches against that shape
+    /// ([`drivers::DriverCheck::weight`]). Null without a bootstrap.
     pub confidence: Option<f64>,
     /// Share of the block-bootstrap replicates of the whole selection that reach the same set
     /// of effects (none, for `no-missing-effect`); null without a bootstrap.
@@ -753,8 +764,27 @@ fn screened_points(
     Ok((points, outliers, warnings))
 }
 
-/// Explains `data` against the rig (and model) of `rig`.
-pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outcome, ExplainError> {
+/// The run's inputs made ready: the starting model, what the rig file loads, the screened
+/// test points with the term registry centred on them.
+struct Prepared {
+    /// The model the selection starts from (loaded effects and terms).
+    spec: ModelSpec,
+    /// The starting model's parameters.
+    start: model::effects::CurrentModel,
+    /// The loaded terms' starting coordinates.
+    known_x: Vec<Vec<f64>>,
+    /// Names of the loaded effects and terms.
+    known_names: Vec<String>,
+    /// The screened test points.
+    points: TestPoints,
+    /// Rows set aside.
+    outliers: Vec<Outlier>,
+    /// Warnings on the rig file and the data.
+    warnings: Vec<String>,
+}
+
+/// Step 0: the rig file's model and checks, the screened points, the terms centred on them.
+fn prepare(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Prepared, ExplainError> {
     let start = rig.current_model()?;
     let (known, _) = rig.effects().map_err(|why| ExplainError::RigFile {
         file: "model".into(),
@@ -763,10 +793,6 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     let mut warnings = robust::check_rig(rig)?;
     let registry = term_registry(rig)?;
     let (known_terms, known_x) = known_terms(rig, &registry)?;
-    let spec = ModelSpec {
-        effects: known.clone(),
-        terms: known_terms.clone(),
-    };
     let base_spec = ModelSpec {
         effects: known.clone(),
         terms: Vec::new(),
@@ -779,45 +805,92 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     }
     check_user_terms(&points, &start)?;
     warnings.extend(data_warnings);
-    let selection = select::select_from(&points, &spec, &start, &known_x, options);
-    let boot = bootstrap::bootstrap(&points, &selection, options);
-    let thermal = points.thermal;
-    let before = selection.start.clone();
-    let after = selection.end.clone();
+    let known_names = known
+        .iter()
+        .map(|e| e.name().to_string())
+        .chain(known_terms.iter().map(|&t| points.terms[t].name.clone()))
+        .collect();
+    Ok(Prepared {
+        spec: ModelSpec {
+            effects: known,
+            terms: known_terms,
+        },
+        start,
+        known_x,
+        known_names,
+        points,
+        outliers,
+        warnings,
+    })
+}
+
+/// A warning when the final model's mu is outside the physical range.
+fn mu_warning(after: &Fit) -> Option<String> {
     let (mu_lo, mu_hi) = model::effects::MU_PHYSICAL.range(&model::effects::LimitContext {
         max_axial_force_n: 0.0,
         eccentricity_m: 0.0,
     });
-    if !(mu_lo..=mu_hi).contains(&after.model.mu) {
-        warnings.push(format!(
+    (!(mu_lo..=mu_hi).contains(&after.model.mu)).then(|| {
+        format!(
             "the fitted mu = {:.4} is outside the physical range [{mu_lo}, {mu_hi}] ({}): no effect is named on it; check the unit of tau_rot_nm (N m) and the rig file's gear and calibration",
             after.model.mu,
             model::effects::MU_PHYSICAL.why
-        ));
-    }
-    let name_of = |c: &Mechanism| c.name(&points).to_string();
-    // Inclusion of an effect by name: in any of its laws.
-    let inclusion_of = |name: &str| {
-        boot.as_ref()
-            .map(|b| b.share(|s| s.iter().any(|c| c.name(&points) == name)))
-    };
+        )
+    })
+}
 
-    // BIC weights of every step's models, and of every model fitted.
-    let mut current_bic = before.bic;
+/// The block bootstrap as the report reads it: inclusion by effect name (in any of its
+/// laws) and the rivals of a named effect.
+struct Resampled<'a> {
+    boot: Option<&'a bootstrap::Bootstrap>,
+    points: &'a TestPoints,
+}
+
+impl Resampled<'_> {
+    /// Share of the replicates that select effect `name` (in any of its laws).
+    fn inclusion(&self, name: &str) -> Option<f64> {
+        self.boot
+            .map(|b| b.share(|s| s.iter().any(|c| c.name(self.points) == name)))
+    }
+
+    /// The competitors selected instead of `name` in at least `share` of the replicates,
+    /// most often first.
+    fn rivals(&self, name: &str, competitors: &[String], share: f64) -> Vec<String> {
+        let Some(b) = self.boot else {
+            return Vec::new();
+        };
+        let has = |s: &[Mechanism], n: &str| s.iter().any(|c| c.name(self.points) == n);
+        let mut r: Vec<(String, f64)> = competitors
+            .iter()
+            .map(|c| (c.clone(), b.share(|s| has(s, c) && !has(s, name))))
+            .filter(|(_, s)| *s >= share)
+            .collect();
+        r.sort_by(|a, b| b.1.total_cmp(&a.1));
+        r.into_iter().map(|(c, _)| c).collect()
+    }
+}
+
+/// BIC weights of every step's models (per candidate) and of every model fitted along the
+/// selection (heaviest first, up to ten).
+fn selection_weights(
+    points: &TestPoints,
+    selection: &select::Selection,
+) -> (Vec<Vec<Option<f64>>>, Vec<ModelWeight>) {
+    let mut current_bic = selection.start.bic;
     let mut weights_by_step = Vec::new();
-    let mut all_models: Vec<(Vec<String>, f64)> = vec![(Vec::new(), before.bic)];
+    let mut all_models: Vec<(Vec<String>, f64)> = vec![(Vec::new(), selection.start.bic)];
     let mut path: Vec<String> = Vec::new();
     for step in &selection.steps {
         weights_by_step.push(step_weights(step, current_bic));
         for c in &step.candidates {
             if let Some(f) = &c.fit {
                 let mut effects = path.clone();
-                effects.push(cand_label(&points, c.cand));
+                effects.push(cand_label(points, c.cand));
                 all_models.push((effects, f.bic));
             }
         }
         if let (true, Some(b)) = (step.accepted, step.best()) {
-            path.push(cand_label(&points, b.cand));
+            path.push(cand_label(points, b.cand));
             current_bic = b.fit.as_ref().map_or(current_bic, |f| f.bic);
         }
     }
@@ -833,8 +906,21 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         .collect();
     model_weights.sort_by(|a, b| b.weight.total_cmp(&a.weight));
     model_weights.truncate(10);
+    (weights_by_step, model_weights)
+}
 
+/// The report of every effect the selection added, in the order added: its fit (in the
+/// final model when it stayed), limits, extrapolation, driver check and partner.
+fn effect_reports(
+    points: &TestPoints,
+    selection: &select::Selection,
+    weights_by_step: &[Vec<Option<f64>>],
+    resampled: &Resampled,
+) -> Vec<EffectReport> {
+    let after = &selection.end;
+    let thermal = points.thermal;
     let mut effects = Vec::new();
+    let mut step_start = &selection.start;
     for (k, step) in selection
         .steps
         .iter()
@@ -844,87 +930,202 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         let best = step.best().expect("an accepted step has a best candidate");
         let f = best.fit.as_ref().expect("fitted");
         let in_final = best.cand.in_spec(&after.spec);
-        let source = if in_final { &after } else { f };
-        let plaus = plausibility::check(&points, best.cand, source);
+        let source = if in_final { after } else { f };
+        let plaus = plausibility::check(points, best.cand, source);
+        let name = best.cand.name(points);
         effects.push(EffectReport {
-            name: name_of(&best.cand),
-            form: best.cand.form(&points).map(str::to_string),
-            params: cand_params(&points, best.cand, source, thermal),
-            intervals: cand_intervals(&points, best.cand, source, thermal),
+            name: name.to_string(),
+            form: best.cand.form(points).map(str::to_string),
+            params: cand_params(points, best.cand, source, thermal),
+            intervals: cand_intervals(points, best.cand, source, thermal),
             delta_bic: -best.improvement,
             p_value: step.p_value,
             holdout_rmse_a: best.held_out.map(|h| h.rmse),
-            description: cand_description(&points, best.cand, source, thermal),
-            inclusion_probability: inclusion_of(best.cand.name(&points)),
+            description: cand_description(points, best.cand, source, thermal),
+            inclusion_probability: resampled.inclusion(name),
             // The effect's weight: all its laws'.
             bic_weight: step
                 .candidates
                 .iter()
                 .zip(&weights_by_step[k])
-                .filter(|(c, _)| c.cand.name(&points) == best.cand.name(&points))
+                .filter(|(c, _)| c.cand.name(points) == name)
                 .filter_map(|(_, w)| *w)
                 .sum(),
             plausible: plaus.plausible,
             limits: plaus.checks,
-            extrapolation: in_final
-                .then(|| extrapolation::extrapolation(&points, &after, best.cand)),
+            extrapolation: in_final.then(|| extrapolation::extrapolation(points, after, best.cand)),
+            driver_check: if in_final {
+                drivers::check_in_final(points, after, best.cand)
+            } else {
+                drivers::check(points, step_start, f, best.cand)
+            },
+            only_together_with: match &step.decision {
+                select::Decision::AddedOnlyTogether { partner, .. } => Some(partner.clone()),
+                select::Decision::Added { partner, .. } => partner.clone(),
+                _ => None,
+            },
         });
+        step_start = f;
     }
-    let named = selection.added();
-    let named_names: Vec<String> = named.iter().map(name_of).collect();
-    let known_names: Vec<String> = known
-        .iter()
-        .map(|e| e.name().to_string())
-        .chain(known_terms.iter().map(|&t| points.terms[t].name.clone()))
-        .collect();
-    // Competitors by name: every applicable effect (any law) not named and not loaded.
+    effects
+}
+
+/// Every applicable effect (any law) neither named nor loaded, by name, sorted.
+fn competitors(points: &TestPoints, named: &[String], known: &[String]) -> Vec<String> {
     let traits = points.traits();
-    let mut competitors: Vec<String> = select::pending(&points, &ModelSpec::base())
+    let mut out: Vec<String> = select::pending(points, &ModelSpec::base())
         .into_iter()
-        .filter(|c| c.not_applicable(&points, &traits).is_none())
-        .map(|c| name_of(&c))
-        .filter(|n| !named_names.contains(n) && !known_names.contains(n))
+        .filter(|c| c.not_applicable(points, &traits).is_none())
+        .map(|c| c.name(points).to_string())
+        .filter(|n| !named.contains(n) && !known.contains(n))
         .collect();
-    competitors.dedup();
-    competitors.sort();
-    competitors.dedup();
-    // A competitor selected instead of a named effect in enough replicates: ambiguous.
-    let rivals_of = |name: &str| -> Vec<String> {
-        let Some(b) = &boot else {
-            return Vec::new();
-        };
-        let has = |s: &[Mechanism], n: &str| s.iter().any(|c| c.name(&points) == n);
-        let mut r: Vec<(String, f64)> = competitors
-            .iter()
-            .map(|c| (c.clone(), b.share(|s| has(s, c) && !has(s, name))))
-            .filter(|(_, share)| *share >= options.ambiguity_share)
-            .collect();
-        r.sort_by(|a, b| b.1.total_cmp(&a.1));
-        r.into_iter().map(|(c, _)| c).collect()
+    out.sort();
+    out.dedup();
+    out
+}
+
+/// The candidates of an ambiguous verdict: the leading finding and the competitors selected
+/// instead of it often enough; else the first named effect whose driver a generic shape in
+/// another variable matches (a named effect that is no explanation either).
+fn ambiguous_candidates(
+    effects: &[EffectReport],
+    competitors: &[String],
+    resampled: &Resampled,
+    share: f64,
+) -> Vec<AmbiguousCandidate> {
+    let candidate = |name: &str| AmbiguousCandidate {
+        probability: resampled.inclusion(name).unwrap_or(0.0),
+        name: name.to_string(),
     };
     // The verdict turns on the leading finding; rivals of later effects are listed with
     // their step.
-    let mut ambiguous_candidates = Vec::new();
-    if let Some(first) = named_names.first() {
-        let rivals = rivals_of(first);
+    if let Some(first) = effects.first() {
+        let rivals = resampled.rivals(&first.name, competitors, share);
         if !rivals.is_empty() {
-            ambiguous_candidates = std::iter::once(first.clone())
-                .chain(rivals)
-                .map(|c| AmbiguousCandidate {
-                    probability: inclusion_of(&c).unwrap_or(0.0),
-                    name: c,
-                })
+            return std::iter::once(first.name.as_str())
+                .chain(rivals.iter().map(String::as_str))
+                .map(candidate)
                 .collect();
         }
     }
-    let ambiguous: Vec<String> = ambiguous_candidates
+    effects
         .iter()
-        .map(|c| c.name.clone())
-        .collect();
-    let gap_before = gap::gap(&points, &before);
-    let gap_after = gap::gap(&points, &after);
+        .find(|f| f.driver_check.as_ref().is_some_and(|d| !d.separated))
+        .map(|f| vec![candidate(&f.name)])
+        .unwrap_or_default()
+}
+
+/// The verdict from what was named, the lack of fit and the ambiguity.
+fn verdict_of(named_any: bool, lack_of_fit: &lack_of_fit::LackOfFit, ambiguous: bool) -> Verdict {
+    match (named_any, lack_of_fit.significant) {
+        (false, false) => Verdict::NoMissingEffect,
+        (false, true) => Verdict::Unexplained,
+        (true, true) => Verdict::PartlyExplained,
+        (true, false) if ambiguous => Verdict::Ambiguous,
+        (true, false) => Verdict::Explained,
+    }
+}
+
+/// The report of every step of the selection.
+fn step_reports(
+    points: &TestPoints,
+    selection: &select::Selection,
+    weights_by_step: &[Vec<Option<f64>>],
+    competitors: &[String],
+    resampled: &Resampled,
+    options: &Options,
+) -> Vec<StepReport> {
+    let thermal = points.thermal;
+    selection
+        .steps
+        .iter()
+        .zip(weights_by_step)
+        .map(|(s, w)| StepReport {
+            best: s.best().map(|c| c.cand.name(points).to_string()),
+            accepted: s.accepted,
+            p_value: s.p_value,
+            reason: s.decision.to_string(),
+            ambiguous_with: match s.best() {
+                Some(b) if s.accepted => {
+                    resampled.rivals(b.cand.name(points), competitors, options.ambiguity_share)
+                }
+                _ => Vec::new(),
+            },
+            critical_delta_bic: -s.critical,
+            candidates: merge_by_name(
+                s.candidates
+                    .iter()
+                    .zip(w)
+                    .map(|(c, &w)| {
+                        candidate_report(
+                            points,
+                            c,
+                            thermal,
+                            w,
+                            resampled.inclusion(c.cand.name(points)),
+                        )
+                    })
+                    .collect(),
+            ),
+        })
+        .collect()
+}
+
+/// How the block bootstrap ran and its most frequent selections.
+fn bootstrap_report(points: &TestPoints, boot: &bootstrap::Bootstrap) -> BootstrapReport {
+    BootstrapReport {
+        replicates: boot.replicates,
+        blocks: boot.blocks,
+        block_length: boot.block_length,
+        seed: boot.seed,
+        selections: boot
+            .sets()
+            .into_iter()
+            .take(5)
+            .map(|(set, share)| BootstrapSet {
+                effects: set.iter().map(|c| cand_label(points, *c)).collect(),
+                share,
+            })
+            .collect(),
+    }
+}
+
+/// What the report concludes from the selection and the resamples.
+struct Judgement {
+    effects: Vec<EffectReport>,
+    named: Vec<Mechanism>,
+    named_names: Vec<String>,
+    competitors: Vec<String>,
+    ambiguous_candidates: Vec<AmbiguousCandidate>,
+    gap_before: Gap,
+    gap_after: Gap,
+    lack_of_fit: lack_of_fit::LackOfFit,
+    verdict: Verdict,
+    robust_sigma_a: f64,
+    /// The product of the weights of the named effects whose driver is not settled.
+    driver_weight: f64,
+}
+
+/// The effects named, their rivals, the final model's gap and lack of fit, and the verdict.
+fn judge(
+    points: &TestPoints,
+    selection: &select::Selection,
+    weights_by_step: &[Vec<Option<f64>>],
+    resampled: &Resampled,
+    known_names: &[String],
+    options: &Options,
+) -> Judgement {
+    let after = &selection.end;
+    let effects = effect_reports(points, selection, weights_by_step, resampled);
+    let named = selection.added();
+    let named_names: Vec<String> = named.iter().map(|c| c.name(points).to_string()).collect();
+    let competitors = competitors(points, &named_names, known_names);
+    let ambiguous_candidates =
+        ambiguous_candidates(&effects, &competitors, resampled, options.ambiguity_share);
+    let gap_before = gap::gap(points, &selection.start);
+    let gap_after = gap::gap(points, after);
     let mut residuals: Vec<f64> = {
-        let f = after.predict_rows(&points);
+        let f = after.predict_rows(points);
         points
             .row_view
             .current
@@ -934,90 +1135,105 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             .collect()
     };
     let lack_of_fit = lack_of_fit::lack_of_fit(
-        &points,
-        &after,
+        points,
+        after,
         &residuals,
         &gap_after,
         options.stated_noise_a,
     );
+    let verdict = verdict_of(
+        !effects.is_empty(),
+        &lack_of_fit,
+        !ambiguous_candidates.is_empty(),
+    );
+    let driver_weight = effects
+        .iter()
+        .filter_map(|f| f.driver_check.as_ref())
+        .filter(|d| !d.separated)
+        .map(drivers::DriverCheck::weight)
+        .product();
+    Judgement {
+        driver_weight,
+        effects,
+        named,
+        named_names,
+        competitors,
+        ambiguous_candidates,
+        gap_before,
+        gap_after,
+        lack_of_fit,
+        verdict,
+        robust_sigma_a: robust::robust_scale(&mut residuals),
+    }
+}
 
-    let verdict = match (effects.is_empty(), lack_of_fit.significant) {
-        (true, false) => Verdict::NoMissingEffect,
-        (true, true) => Verdict::Unexplained,
-        (false, true) => Verdict::PartlyExplained,
-        (false, false) if !ambiguous.is_empty() => Verdict::Ambiguous,
-        (false, false) => Verdict::Explained,
+/// Explains `data` against the rig (and model) of `rig`: prepare the points, select, resample
+/// the selection, judge, then report.
+pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outcome, ExplainError> {
+    let Prepared {
+        spec,
+        start,
+        known_x,
+        known_names,
+        points,
+        outliers,
+        mut warnings,
+    } = prepare(data, rig, options)?;
+    let selection = select::select_from(&points, &spec, &start, &known_x, options);
+    let boot = bootstrap::bootstrap(&points, &selection, options);
+    let resampled = Resampled {
+        boot: boot.as_ref(),
+        points: &points,
     };
+    warnings.extend(mu_warning(&selection.end));
+    let (weights_by_step, model_weights) = selection_weights(&points, &selection);
+    let j = judge(
+        &points,
+        &selection,
+        &weights_by_step,
+        &resampled,
+        &known_names,
+        options,
+    );
     let mut inclusion_probabilities = BTreeMap::new();
     if boot.is_some() {
-        for name in competitors.iter().chain(&named_names) {
-            if let Some(p) = inclusion_of(name) {
+        for name in j.competitors.iter().chain(&j.named_names) {
+            if let Some(p) = resampled.inclusion(name) {
                 inclusion_probabilities.insert(name.clone(), p);
             }
         }
     }
-    let steps: Vec<StepReport> = selection
-        .steps
-        .iter()
-        .zip(&weights_by_step)
-        .map(|(s, w)| StepReport {
-            best: s.best().map(|c| name_of(&c.cand)),
-            accepted: s.accepted,
-            p_value: s.p_value,
-            reason: s.decision.to_string(),
-            ambiguous_with: match s.best() {
-                Some(b) if s.accepted => rivals_of(b.cand.name(&points)),
-                _ => Vec::new(),
-            },
-            critical_delta_bic: -s.critical,
-            candidates: merge_by_name(
-                s.candidates
-                    .iter()
-                    .zip(w)
-                    .map(|(c, &w)| {
-                        candidate_report(&points, c, thermal, w, inclusion_of(c.cand.name(&points)))
-                    })
-                    .collect(),
-            ),
-        })
-        .collect();
-    let robust_sigma_a = robust::robust_scale(&mut residuals);
-    drop(residuals);
-    let bootstrap = boot.as_ref().map(|b| BootstrapReport {
-        replicates: b.replicates,
-        blocks: b.blocks,
-        block_length: b.block_length,
-        seed: b.seed,
-        selections: b
-            .sets()
-            .into_iter()
-            .take(5)
-            .map(|(set, share)| BootstrapSet {
-                effects: set.iter().map(|c| cand_label(&points, *c)).collect(),
-                share,
-            })
-            .collect(),
-    });
+    let steps = step_reports(
+        &points,
+        &selection,
+        &weights_by_step,
+        &j.competitors,
+        &resampled,
+        options,
+    );
+    let share = boot.as_ref().map(|b| b.set_share(&j.named));
+    let (before, after) = (&selection.start, &selection.end);
+    let verdict = j.verdict;
     let mut explanation = Explanation {
         verdict,
-        effects,
-        ambiguous,
-        ambiguous_candidates,
-        confidence: boot.as_ref().map(|b| {
-            let share = b.set_share(&named);
-            if verdict == Verdict::Explained {
-                calibration::calibrated(share)
-            } else {
-                share
-            }
+        effects: j.effects,
+        ambiguous: j
+            .ambiguous_candidates
+            .iter()
+            .map(|c| c.name.clone())
+            .collect(),
+        ambiguous_candidates: j.ambiguous_candidates,
+        confidence: share.map(|s| match verdict {
+            Verdict::Explained => calibration::calibrated(s),
+            _ => s * j.driver_weight,
         }),
-        confidence_raw: boot.as_ref().map(|b| b.set_share(&named)),
+        confidence_raw: share,
         inclusion_probabilities,
         model_weights,
-        bootstrap,
+        bootstrap: boot.as_ref().map(|b| bootstrap_report(&points, b)),
         outliers,
         warnings,
-        robust_sigma_a,
+        robust_sigma_a: j.robust_sigma_a,
         rows_in_data: data.len(),
         pooled: points.pooled,
         points: points.len(),
@@ -1037,11 +1253,11 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             .map(|s| s.candidates.clone())
             .unwrap_or_default(),
         steps,
-        gap_before,
-        gap_after,
+        gap_before: j.gap_before,
+        gap_after: j.gap_after,
         residual_shape: matches!(verdict, Verdict::Unexplained | Verdict::PartlyExplained)
-            .then(|| residual_shape::residual_shape(&points, &after)),
-        lack_of_fit,
+            .then(|| residual_shape::residual_shape(&points, after)),
+        lack_of_fit: j.lack_of_fit,
         finding: String::new(),
         report_dir: None,
         model_written: None,
@@ -1051,8 +1267,8 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     Ok(Outcome {
         explanation,
         points,
-        before,
-        after,
+        before: selection.start,
+        after: selection.end,
         rig: rig.clone(),
     })
 }

@@ -29,6 +29,9 @@ pub struct LimitCheck {
     pub within: bool,
     /// Why the limit is there.
     pub why: String,
+    /// Whether it is the edge of a shape's search rather than a physical limit.
+    #[serde(skip)]
+    pub search_edge: bool,
 }
 
 /// The plausibility of one fitted candidate.
@@ -41,6 +44,12 @@ pub struct Plausibility {
 }
 
 impl Plausibility {
+    /// Whether every limit broken is a physical one (no shape on the edge of its search,
+    /// which says the law only mimics the data whatever else is added).
+    pub fn only_physical_limits_broken(&self) -> bool {
+        self.checks.iter().all(|c| c.within || !c.search_edge)
+    }
+
     /// The limits that fail, in words ("kappa = 2.4 is beyond kappa within [-1, 1]: why").
     pub fn failures(&self) -> String {
         self.checks
@@ -111,6 +120,7 @@ fn check_limit(
         limit: describe(limit, ctx),
         within: value.is_finite() && (inside || reaches),
         why: limit.why.to_string(),
+        search_edge: false,
     }
 }
 
@@ -176,6 +186,7 @@ pub fn check(points: &TestPoints, cand: Mechanism, fit: &Fit) -> Plausibility {
                     p.unit
                 ),
                 within: !on_edge,
+                search_edge: true,
                 why: "a shape on the edge of its search means the data asks for a bend outside the range it can place; the law only mimics the data".into(),
             });
         }

@@ -262,6 +262,15 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                     let _ = write!(s, "Extrapolation: {}. ", x.summary);
                 }
                 let rivals = accepted.get(k).map_or(&[][..], |st| &st.ambiguous_with[..]);
+                if let Some(p) = &eff.only_together_with {
+                    let _ = write!(
+                        s,
+                        "It and {p} reach physical values only together (fitted without the other, one of them needs values no rig can have). "
+                    );
+                }
+                if let Some(d) = eff.driver_check.as_ref().filter(|d| !d.separated) {
+                    let _ = write!(s, "But {}. ", d.summary(&eff.name));
+                }
                 if k > 0 && !rivals.is_empty() {
                     let _ = write!(
                         s,
@@ -270,7 +279,7 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                     );
                 }
             }
-            if e.verdict == Verdict::Ambiguous {
+            if e.verdict == Verdict::Ambiguous && e.ambiguous.len() >= 2 {
                 let shares = e
                     .ambiguous_candidates
                     .iter()
@@ -352,6 +361,12 @@ pub fn render_text(e: &Explanation, source: &str) -> String {
                 opt_pct(eff.inclusion_probability)
             );
             let _ = writeln!(s, "    {}", params_text(&eff.params, &eff.intervals));
+            if let Some(p) = &eff.only_together_with {
+                let _ = writeln!(s, "    plausible only together with {p}");
+            }
+            if let Some(d) = eff.driver_check.as_ref().filter(|d| !d.separated) {
+                let _ = writeln!(s, "    driver not settled: {}", d.summary(&eff.name));
+            }
         }
     }
     if !e.ambiguous.is_empty() {
@@ -585,6 +600,19 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
                 p_text(eff.p_value),
                 opt_ma(eff.holdout_rmse_a)
             );
+        }
+        s.push('\n');
+        for eff in &e.effects {
+            if let Some(p) = &eff.only_together_with {
+                let _ = writeln!(
+                    s,
+                    "- {} and {p} reach physical values only together (fitted without the other, one of them needs values no rig can have).",
+                    eff.name
+                );
+            }
+            if let Some(d) = &eff.driver_check {
+                let _ = writeln!(s, "- Driver: {}.", d.summary(&eff.name));
+            }
         }
         s.push('\n');
     }

@@ -218,13 +218,32 @@ pub enum Decision {
         p_value: f64,
         /// The held-out scores before and after, in words.
         held_out: String,
+        /// The effect of the step before, when that one needed this one to be plausible.
+        partner: Option<String>,
+    },
+    /// Added although its fit alone needs values no rig can have, because the next step's
+    /// effect, fitted jointly with it, brings every value within its limits.
+    AddedOnlyTogether {
+        /// The candidate's name.
+        best: String,
+        /// Its BIC improvement.
+        improvement: f64,
+        /// The guard's p-value.
+        p_value: f64,
+        /// The limits its fit alone breaks, each with its reason.
+        limits: String,
+        /// The next step's effect.
+        partner: String,
     },
 }
 
 impl Decision {
     /// Whether the best candidate was added.
     pub fn accepted(&self) -> bool {
-        matches!(self, Decision::Added { .. })
+        matches!(
+            self,
+            Decision::Added { .. } | Decision::AddedOnlyTogether { .. }
+        )
     }
 }
 
@@ -282,9 +301,30 @@ impl std::fmt::Display for Decision {
                 improvement,
                 p_value,
                 held_out,
+                partner,
+            } => {
+                write!(
+                    f,
+                    "{best} improves the BIC by {improvement:.1} ({}); {held_out}",
+                    p_text(*p_value)
+                )?;
+                match partner {
+                    Some(p) => write!(
+                        f,
+                        "; with it every value of {p} is physical: the two are plausible only together"
+                    ),
+                    None => Ok(()),
+                }
+            }
+            Decision::AddedOnlyTogether {
+                best,
+                improvement,
+                p_value,
+                limits,
+                partner,
             } => write!(
                 f,
-                "{best} improves the BIC by {improvement:.1} ({}); {held_out}",
+                "{best} improves the BIC by {improvement:.1} ({}); alone only with values no rig can have ({limits}), but with {partner} (the next step) every value is physical: the two are named together",
                 p_text(*p_value)
             ),
         }
@@ -955,7 +995,11 @@ pub fn select(
 }
 
 /// Forward selection from the model `spec` started at `start` and its terms at
-/// `start_terms`.
+/// `start_terms`: fit the starting model, then take steps until one adds nothing. A step
+/// whose best candidate needs values no rig can have may still add it when the next step's
+/// best candidate, fitted jointly with it, brings every value back within its limits: the
+/// two are named together ([`Decision::AddedOnlyTogether`]), each having passed the same
+/// tests as any other.
 pub fn select_from(
     points: &TestPoints,
     spec: &ModelSpec,
@@ -963,142 +1007,37 @@ pub fn select_from(
     start_terms: &[Vec<f64>],
     opts: &Options,
 ) -> Selection {
-    let traits = points.traits();
-    let first = fit::fit_from(points, &points.all, spec, start, start_terms);
-    // Refit from the first fit so a loaded model and a selected one end at the same optimum.
-    let mut current = fit::fit_from(points, &points.all, spec, &first.model, &first.term_x);
+    let (mut current, start_held_out) = start_fit(points, spec, start, start_terms);
     let start_fit = current.clone();
-    let start_held_out = fit::held_out(points, spec, &current.model, &current.term_x);
     let mut current_held_out = start_held_out;
     let mut steps = Vec::new();
-    let full_table = points.len() <= FULL_TABLE_POINTS;
-
     while current.spec.effects.len() < opts.max_effects {
-        let pending = pending(points, &current.spec);
-        let Some(Explored {
-            mut candidates,
-            null,
-            critical,
-            critical_influence,
-        }) = explore(points, &current, opts)
-        else {
+        let Some(mut step) = take_step(points, &current, current_held_out, opts) else {
             break;
         };
-        let best_improvement = candidates[0].improvement;
-        let exceed = null.iter().filter(|&&v| v >= best_improvement).count();
-        let p_value = (1 + exceed) as f64 / (1 + null.len()) as f64;
-        // Held-out scores: every fitted candidate on small data; on large data the best,
-        // and only when the guard has not already turned it down.
-        let guard_passed = best_improvement > 0.0 && p_value < opts.alpha;
-        let scored: Vec<usize> = (0..candidates.len())
-            .filter(|&i| candidates[i].fit.is_some())
-            .filter(|&i| full_table || (guard_passed && i == 0))
-            .collect();
-        let scores = fit::par_map(&scored, |&i| {
-            let c = &candidates[i];
-            let f = c.fit.as_ref().expect("filtered to fitted candidates");
-            fit::held_out(points, &f.spec, &f.model, &f.term_x)
-        });
-        for (&i, s) in scored.iter().zip(scores) {
-            candidates[i].held_out = s;
+        if !step.accepted {
+            let partner = matches!(step.decision, Decision::Implausible { .. })
+                .then(|| complete_plausibility(points, &current, &step, opts))
+                .flatten();
+            let Some(mut next) = partner else {
+                steps.push(step);
+                break;
+            };
+            step.decision = only_together(&step.decision, &next, points);
+            step.accepted = true;
+            steps.push(step);
+            (current, current_held_out) = advance(points, &next);
+            if let Decision::Added { partner, .. } = &mut next.decision {
+                *partner = steps
+                    .last()
+                    .and_then(Step::best)
+                    .map(|b| b.cand.name(points).to_string());
+            }
+            steps.push(next);
+            continue;
         }
-
-        let best = &candidates[0];
-        let best_fit = best.fit.as_ref().expect("fitted");
-        let hold_gain = best_fit.hold_errors + 2 <= current.hold_errors;
-        let (ok_held_out, held_note) = confirmed(
-            match best.cand {
-                Mechanism::Effect(e) => Some(e),
-                Mechanism::Term(_) => None,
-            },
-            current_held_out,
-            best.held_out,
-            hold_gain,
-        );
-        let best_name = best.cand.name(points).to_string();
-        let decision = if best_improvement <= 0.0 {
-            Decision::NoImprovement {
-                best: best_name,
-                improvement: best_improvement,
-            }
-        } else if p_value >= opts.alpha {
-            Decision::BelowGuard {
-                best: best_name,
-                improvement: best_improvement,
-                p_value,
-                alpha: opts.alpha,
-            }
-        } else if !ok_held_out {
-            Decision::NotConfirmed {
-                best: best_name,
-                improvement: best_improvement,
-                p_value,
-                held_out: held_note,
-            }
-        } else if let Some(why) = Some(crate::plausibility::check_model(points, best_fit))
-            .filter(|p| !p.plausible)
-            .map(|p| p.failures())
-        {
-            Decision::Implausible {
-                best: best_name,
-                improvement: best_improvement,
-                p_value,
-                limits: why,
-            }
-        } else {
-            let (without, k) = improvement_without_top_point(points, &current, best_fit);
-            if without <= critical_influence {
-                Decision::CarriedByOnePoint {
-                    best: best_name,
-                    improvement: best_improvement,
-                    p_value,
-                    row: points.rows[k] + 1,
-                    without,
-                    critical: critical_influence,
-                    level: INFLUENCE_ALPHA.max(opts.alpha),
-                }
-            } else {
-                Decision::Added {
-                    best: best_name,
-                    improvement: best_improvement,
-                    p_value,
-                    held_out: held_note,
-                }
-            }
-        };
-        let accepted = decision.accepted();
-        // The inapplicable candidates close the table.
-        for c in pending {
-            if let Some(why) = c.not_applicable(points, &traits) {
-                candidates.push(Candidate {
-                    cand: c,
-                    not_applicable: Some(why),
-                    fit: None,
-                    improvement: f64::NAN,
-                    estimated: false,
-                    held_out: None,
-                });
-            }
-        }
-        let next = accepted.then(|| (candidates[0].fit.clone(), candidates[0].held_out));
-        steps.push(Step {
-            candidates,
-            p_value,
-            critical,
-            held_out_before: current_held_out,
-            accepted,
-            decision,
-        });
-        match next {
-            Some((Some(f), h)) => {
-                current = f;
-                current_held_out = match h {
-                    Some(h) => Some(h),
-                    None => fit::held_out(points, &current.spec, &current.model, &current.term_x),
-                };
-            }
-            _ => break,
-        }
+        (current, current_held_out) = advance(points, &step);
+        steps.push(step);
     }
     Selection {
         start: start_fit,
@@ -1106,6 +1045,287 @@ pub fn select_from(
         steps,
         end_held_out: current_held_out,
         end: current,
+    }
+}
+
+/// The starting model fitted (twice, so a loaded model and a selected one end at the same
+/// optimum) and its held-out score.
+fn start_fit(
+    points: &TestPoints,
+    spec: &ModelSpec,
+    start: &CurrentModel,
+    start_terms: &[Vec<f64>],
+) -> (Fit, Option<HeldOut>) {
+    let first = fit::fit_from(points, &points.all, spec, start, start_terms);
+    let current = fit::fit_from(points, &points.all, spec, &first.model, &first.term_x);
+    let held_out = fit::held_out(points, spec, &current.model, &current.term_x);
+    (current, held_out)
+}
+
+/// The model after an accepted step, with its held-out score.
+fn advance(points: &TestPoints, step: &Step) -> (Fit, Option<HeldOut>) {
+    let best = &step.candidates[0];
+    let f = best
+        .fit
+        .clone()
+        .expect("an accepted step has a fitted best");
+    let held_out = match best.held_out {
+        Some(h) => Some(h),
+        None => fit::held_out(points, &f.spec, &f.model, &f.term_x),
+    };
+    (f, held_out)
+}
+
+/// One step of the selection from `current`: every candidate explored, the best scored and
+/// judged; `None` when no candidate is left.
+fn take_step(
+    points: &TestPoints,
+    current: &Fit,
+    current_held_out: Option<HeldOut>,
+    opts: &Options,
+) -> Option<Step> {
+    take_step_with_null(points, current, current_held_out, opts).map(|(step, _, _)| step)
+}
+
+/// [`take_step`] with the guard's null draws and its critical value at
+/// [`INFLUENCE_ALPHA`].
+fn take_step_with_null(
+    points: &TestPoints,
+    current: &Fit,
+    current_held_out: Option<HeldOut>,
+    opts: &Options,
+) -> Option<(Step, Vec<f64>, f64)> {
+    let pending = pending(points, &current.spec);
+    let Explored {
+        mut candidates,
+        null,
+        critical,
+        critical_influence,
+    } = explore(points, current, opts)?;
+    let best_improvement = candidates[0].improvement;
+    let exceed = null.iter().filter(|&&v| v >= best_improvement).count();
+    let p_value = (1 + exceed) as f64 / (1 + null.len()) as f64;
+    let guard_passed = best_improvement > 0.0 && p_value < opts.alpha;
+    score_held_out(points, &mut candidates, guard_passed);
+    let decision = decide(
+        points,
+        current,
+        current_held_out,
+        &candidates[0],
+        p_value,
+        critical_influence,
+        opts,
+    );
+    close_table(points, pending, &mut candidates);
+    let step = Step {
+        candidates,
+        p_value,
+        critical,
+        held_out_before: current_held_out,
+        accepted: decision.accepted(),
+        decision,
+    };
+    Some((step, null, critical_influence))
+}
+
+/// Held-out scores: every fitted candidate on small data; on large data the best, and only
+/// when the guard has not already turned it down.
+fn score_held_out(points: &TestPoints, candidates: &mut [Candidate], guard_passed: bool) {
+    let full_table = points.len() <= FULL_TABLE_POINTS;
+    let scored: Vec<usize> = (0..candidates.len())
+        .filter(|&i| candidates[i].fit.is_some())
+        .filter(|&i| full_table || (guard_passed && i == 0))
+        .collect();
+    let scores = fit::par_map(&scored, |&i| {
+        let f = candidates[i]
+            .fit
+            .as_ref()
+            .expect("filtered to fitted candidates");
+        fit::held_out(points, &f.spec, &f.model, &f.term_x)
+    });
+    for (&i, s) in scored.iter().zip(scores) {
+        candidates[i].held_out = s;
+    }
+}
+
+/// The step's decision on its best candidate: the first rule that turns it down (no
+/// improvement, the guard, the held-out points, the physical limits, a single point), or
+/// added.
+fn decide(
+    points: &TestPoints,
+    current: &Fit,
+    current_held_out: Option<HeldOut>,
+    best: &Candidate,
+    p_value: f64,
+    critical_influence: f64,
+    opts: &Options,
+) -> Decision {
+    let best_fit = best.fit.as_ref().expect("fitted");
+    let improvement = best.improvement;
+    let hold_gain = best_fit.hold_errors + 2 <= current.hold_errors;
+    let (ok_held_out, held_note) = confirmed(
+        match best.cand {
+            Mechanism::Effect(e) => Some(e),
+            Mechanism::Term(_) => None,
+        },
+        current_held_out,
+        best.held_out,
+        hold_gain,
+    );
+    let best_name = best.cand.name(points).to_string();
+    if improvement <= 0.0 {
+        return Decision::NoImprovement {
+            best: best_name,
+            improvement,
+        };
+    }
+    if p_value >= opts.alpha {
+        return Decision::BelowGuard {
+            best: best_name,
+            improvement,
+            p_value,
+            alpha: opts.alpha,
+        };
+    }
+    if !ok_held_out {
+        return Decision::NotConfirmed {
+            best: best_name,
+            improvement,
+            p_value,
+            held_out: held_note,
+        };
+    }
+    let plausibility = crate::plausibility::check_model(points, best_fit);
+    if !plausibility.plausible {
+        return Decision::Implausible {
+            best: best_name,
+            improvement,
+            p_value,
+            limits: plausibility.failures(),
+        };
+    }
+    let (without, k) = improvement_without_top_point(points, current, best_fit);
+    if without <= critical_influence {
+        return Decision::CarriedByOnePoint {
+            best: best_name,
+            improvement,
+            p_value,
+            row: points.rows[k] + 1,
+            without,
+            critical: critical_influence,
+            level: INFLUENCE_ALPHA.max(opts.alpha),
+        };
+    }
+    Decision::Added {
+        best: best_name,
+        improvement,
+        p_value,
+        held_out: held_note,
+        partner: None,
+    }
+}
+
+/// The inapplicable candidates close the step's table.
+fn close_table(points: &TestPoints, pending: Vec<Mechanism>, candidates: &mut Vec<Candidate>) {
+    let traits = points.traits();
+    for c in pending {
+        if let Some(why) = c.not_applicable(points, &traits) {
+            candidates.push(Candidate {
+                cand: c,
+                not_applicable: Some(why),
+                fit: None,
+                improvement: f64::NAN,
+                estimated: false,
+                held_out: None,
+            });
+        }
+    }
+}
+
+/// When `step`'s best candidate passed every test but the physical limits (not a shape on
+/// the edge of its search), the next step taken from its (implausible) fit: returned when that step adds its best candidate with
+/// every value of the joint model within its limits (the pair is then plausible together),
+/// `None` otherwise.
+fn complete_plausibility(
+    points: &TestPoints,
+    current: &Fit,
+    step: &Step,
+    opts: &Options,
+) -> Option<Step> {
+    if current.spec.effects.len() + 2 > opts.max_effects {
+        return None;
+    }
+    let best = step.best()?;
+    let with = best.fit.as_ref()?;
+    // A shape on the edge of its search only mimics the data: no partner makes it a law.
+    if !crate::plausibility::check_model(points, with).only_physical_limits_broken() {
+        return None;
+    }
+    let held_out = match best.held_out {
+        Some(h) => Some(h),
+        None => fit::held_out(points, &with.spec, &with.model, &with.term_x),
+    };
+    let (mut next, null, critical_influence) = take_step_with_null(points, with, held_out, opts)?;
+    if !next.accepted {
+        // The best partner is the best candidate that passes every test, the guard at its
+        // own improvement included (the guard's null is of the best of all candidates, so
+        // this is no easier).
+        let found = (1..next.candidates.len()).find_map(|i| {
+            let c = &next.candidates[i];
+            c.fit.as_ref()?;
+            let exceed = null.iter().filter(|&&v| v >= c.improvement).count();
+            let p_value = (1 + exceed) as f64 / (1 + null.len()) as f64;
+            let held = c.held_out.or_else(|| {
+                let f = c.fit.as_ref()?;
+                fit::held_out(points, &f.spec, &f.model, &f.term_x)
+            });
+            let mut c = c.clone();
+            c.held_out = held;
+            let d = decide(
+                points,
+                with,
+                held_out,
+                &c,
+                p_value,
+                critical_influence,
+                opts,
+            );
+            d.accepted().then_some((i, c, d, p_value))
+        });
+        let (i, c, d, p_value) = found?;
+        next.candidates.remove(i);
+        next.candidates.insert(0, c);
+        next.decision = d;
+        next.p_value = p_value;
+        next.accepted = true;
+    }
+    // The partner must also improve on the model without the first candidate: together
+    // they beat it by more than the first did alone.
+    let joint = next.best()?.fit.as_ref()?;
+    (joint.bic < with.bic && joint.bic < current.bic).then_some(next)
+}
+
+/// The decision of a step whose best candidate is plausible only together with the next
+/// step's.
+fn only_together(decision: &Decision, next: &Step, points: &TestPoints) -> Decision {
+    let Decision::Implausible {
+        best,
+        improvement,
+        p_value,
+        limits,
+    } = decision.clone()
+    else {
+        return decision.clone();
+    };
+    Decision::AddedOnlyTogether {
+        best,
+        improvement,
+        p_value,
+        limits,
+        partner: next
+            .best()
+            .map(|b| b.cand.name(points).to_string())
+            .unwrap_or_default(),
     }
 }
 
@@ -1169,6 +1389,7 @@ mod tests {
                     improvement: 40.0,
                     p_value: 0.0001,
                     held_out: "held-out RMSE 12.0 -> 10.0 mA".into(),
+                    partner: None,
                 },
                 "thermal-drift improves the BIC by 40.0 (p < 0.001); held-out RMSE 12.0 -> 10.0 mA",
             ),

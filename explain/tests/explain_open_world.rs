@@ -784,3 +784,117 @@ fn an_unexplained_discrepancy_gets_points_that_resolve_its_shape() {
         p.points
     );
 }
+
+#[test]
+fn wear_that_time_explains_as_well_is_not_named_as_thermal_drift() {
+    // Friction that grows with the revolutions run: thermal drift fits it within the noise
+    // with a plausible k, but a generic shape in time (or revolutions) fits it better.
+    let rig = &batch_rigs(true)[0];
+    let noise = 0.010;
+    let data = hidden_dataset(rig, Hidden::Unknown(Unknown::Wear), &plan(noise), 80_010);
+    let e = run(&data, rig, noise);
+    assert_ne!(e.verdict, Verdict::Explained, "{}", e.finding);
+    assert!(!confident_wrong(&e), "{}", e.finding);
+    let drift = e
+        .effects
+        .iter()
+        .find(|f| f.name == Effect::ThermalDrift.name())
+        .expect("thermal drift is the close candidate on this set");
+    let check = drift.driver_check.as_ref().expect("a law with a driver");
+    assert_eq!(check.drivers, vec![explain::drivers::Driver::Temperature]);
+    assert!(!check.separated, "{check:?}");
+    let alt = check.best_alternative.as_ref().unwrap();
+    assert!(
+        matches!(
+            alt.driver,
+            explain::drivers::Driver::Time | explain::drivers::Driver::Revolutions
+        ),
+        "{alt:?}"
+    );
+    assert!(alt.chi2 > check.chi2 - check.margin, "{check:?}");
+    assert!(
+        check.separating_test.contains("cool-down rest"),
+        "{check:?}"
+    );
+    assert!(e.finding.contains("cool-down rest"), "{}", e.finding);
+    assert_eq!(
+        e.ambiguous.first().map(String::as_str),
+        Some(drift.name.as_str())
+    );
+    // Lower confidence: the share times the drift's weight against the better alternative.
+    let (c, raw) = (e.confidence.unwrap(), e.confidence_raw.unwrap());
+    assert!((c - raw * check.weight()).abs() < 1e-12, "{c} {raw}");
+    assert!(c < 0.5 * raw, "{c} {raw}");
+}
+
+#[test]
+fn a_true_thermal_drift_beats_every_other_driver() {
+    let rig = &batch_rigs(true)[0];
+    let noise = 0.010;
+    let data = hidden_dataset(
+        rig,
+        Hidden::Library(Effect::ThermalDrift),
+        &plan(noise),
+        80_010,
+    );
+    let e = run(&data, rig, noise);
+    assert_eq!(e.verdict, Verdict::Explained, "{}", e.finding);
+    let f = &e.effects[0];
+    assert_eq!(f.name, Effect::ThermalDrift.name());
+    let check = f.driver_check.as_ref().unwrap();
+    assert!(check.separated, "{check:?}");
+    let alt = check.best_alternative.as_ref().expect("time is logged");
+    assert!(check.chi2 - alt.chi2 >= check.margin, "{check:?}");
+    assert!(check.separating_test.is_empty());
+    assert_eq!(f.only_together_with, None);
+}
+
+#[test]
+fn two_effects_plausible_only_together_are_named_and_reported_as_such() {
+    // Load-dependent friction with inertia rectification: the return alone needs a kappa
+    // beyond -1 (it takes up the friction's bend); with the friction law beside it every
+    // value is physical.
+    let rig = &batch_rigs(true)[1];
+    let noise = 0.010;
+    let hidden = Hidden::Pair(Effect::LoadDependentFriction, Effect::InertiaRectification);
+    let data = hidden_dataset(rig, hidden, &plan(noise), 81_010);
+    let e = run(&data, rig, noise);
+    let names: Vec<&str> = e.effects.iter().map(|f| f.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            Effect::InertiaRectification.name(),
+            Effect::LoadDependentFriction.name()
+        ],
+        "{}",
+        e.finding
+    );
+    assert_eq!(
+        e.effects[0].only_together_with.as_deref(),
+        Some(Effect::LoadDependentFriction.name())
+    );
+    assert_eq!(
+        e.effects[1].only_together_with.as_deref(),
+        Some(Effect::InertiaRectification.name())
+    );
+    assert!(e.effects.iter().all(|f| f.plausible), "{}", e.finding);
+    assert!(e.steps[0].accepted && e.steps[1].accepted);
+    assert!(
+        e.steps[0]
+            .reason
+            .contains("alone only with values no rig can have")
+            && e.steps[0].reason.contains("named together"),
+        "{}",
+        e.steps[0].reason
+    );
+    assert!(e.finding.contains("only together"), "{}", e.finding);
+    assert!(!e.lack_of_fit.significant, "{:?}", e.lack_of_fit);
+    // The JSON carries the new key; the existing ones stay.
+    let json = serde_json::to_value(&e).unwrap();
+    let first = &json["effects"][0];
+    assert_eq!(
+        first["only_together_with"],
+        Effect::LoadDependentFriction.name()
+    );
+    assert!(first.get("driver_check").is_some() && first.get("plausible").is_some());
+}

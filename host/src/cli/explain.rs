@@ -58,8 +58,12 @@ which, and where the discrepancy lives (speed level, load range, time).
 
 Verdicts: explained (named effects, what remains is within the noise), partly-explained (named
 effects shrink the gap, a significant lack of fit remains), unexplained (a significant lack of
-fit and no named effect explains it), ambiguous, no-missing-effect (no effect needed and the
-lack of fit is not significant). Exit code 0 for any verdict, 1 on bad input.";
+fit and no named effect explains it), ambiguous (also when a named effect does not beat a
+generic shape in another variable: time, revolutions, temperature, speed, load or the current;
+JSON \"driver_check\" per effect says which and the test that would separate them),
+no-missing-effect (no effect needed and the lack of fit is not significant). Two effects that
+reach physical values only together are named together (JSON \"only_together_with\").
+Exit code 0 for any verdict, 1 on bad input.";
 
 /// Arguments of `rig explain`.
 #[derive(Debug, Clone, Args)]
