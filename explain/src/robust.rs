@@ -372,7 +372,7 @@ fn affine_mu_fit(
         m.mu = mu;
         m
     };
-    let (m0, m1) = (at(0.0), at(1.0));
+    let (m0, m1) = (at(0.0).evaluator(), at(1.0).evaluator());
     let (mut saa, mut say) = (0.0, 0.0);
     let mut loads_beyond_current = 0;
     let mut parts = Vec::with_capacity(rows.len());
