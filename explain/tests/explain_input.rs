@@ -132,6 +132,34 @@ fn a_file_without_line_ends_is_refused_after_a_bounded_read() {
     );
 }
 
+/// The issue's own cases: a 20 GiB file of zeros (`truncate -s 20G`), as a measured file and
+/// as a rig file, is refused after a bounded read; a huge field is not echoed back whole.
+#[test]
+fn a_20_gib_file_and_a_huge_field_are_refused_without_echo() {
+    let dir = tempfile::tempdir().unwrap();
+    let huge = dir.path().join("x.csv");
+    let file = std::fs::File::create(&huge).unwrap();
+    if file.set_len(20 << 30).is_ok() {
+        drop(file);
+        let err = Dataset::read_csv(&huge).unwrap_err().to_string();
+        assert!(err.contains("longer than 64 KiB"), "{err}");
+        assert!(err.len() < 400, "{err}");
+        let err = RigFile::load(&huge).unwrap_err().to_string();
+        assert!(err.contains("more than the"), "{err}");
+    }
+    // A 60 KiB number in a row: the message shows its start only.
+    let long = dir.path().join("long-field.csv");
+    let mut text = String::from("omega_n_rad_s,tau_rot_nm,i_in_a\n");
+    for k in 0..12 {
+        text += &format!("31.4,{},2.5\n", 0.3 * (k + 1) as f64);
+    }
+    text += &format!("31.4,1.0,{}x\n", "7".repeat(60 << 10));
+    std::fs::write(&long, text).unwrap();
+    let err = Dataset::read_csv(&long).unwrap_err().to_string();
+    assert!(err.contains("row 13") && err.contains("i_in_a"), "{err}");
+    assert!(err.len() < 400, "{} bytes", err.len());
+}
+
 #[cfg(unix)]
 #[test]
 fn a_pipe_or_a_folder_is_refused_without_reading() {
