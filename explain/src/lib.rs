@@ -920,18 +920,22 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         .iter()
         .map(|c| c.name.clone())
         .collect();
-    let gap_before = gap::gap(&points, &before);
-    let gap_after = gap::gap(&points, &after);
-    let mut residuals: Vec<f64> = {
-        let f = after.predict_rows(&points);
-        points
-            .row_view
-            .current
-            .iter()
-            .zip(f)
-            .map(|(y, f)| y - f)
-            .collect()
-    };
+    // The final model predicted once for its gap and its residuals; the starting model's
+    // gap beside it on another core.
+    let predicted = after.predict_rows(&points);
+    let (gap_before, gap_after) = std::thread::scope(|s| {
+        let before = s.spawn(|| gap::gap(&points, &before));
+        let after = gap::gap_of(&points, &after, &predicted);
+        (before.join().expect("the gap does not panic"), after)
+    });
+    let mut residuals: Vec<f64> = points
+        .row_view
+        .current
+        .iter()
+        .zip(&predicted)
+        .map(|(y, f)| y - f)
+        .collect();
+    drop(predicted);
     let lack_of_fit = lack_of_fit::lack_of_fit(
         &points,
         &after,
