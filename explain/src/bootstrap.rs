@@ -377,17 +377,25 @@ impl Bootstrap {
     }
 }
 
+/// Block multiplicities of resamples with replacement over `blocks` blocks: each item is
+/// one resample (how often each block was drawn, `blocks` draws in all), from the seeded
+/// stream `seed`, so a run repeats exactly. The bootstrap of the selection and that of the
+/// residual's shape ([`crate::residual_shape`]) both draw so.
+pub fn block_draws(seed: u64, blocks: usize) -> impl Iterator<Item = Vec<f64>> {
+    let mut rng = NoiseSource::new(seed);
+    std::iter::repeat_with(move || {
+        let mut m = vec![0.0; blocks];
+        for _ in 0..blocks {
+            m[(rng.next_u64() % blocks as u64) as usize] += 1.0;
+        }
+        m
+    })
+}
+
 /// Block multiplicities of `replicates` draws over `blocks` blocks.
 fn draws(replicates: usize, blocks: usize) -> Vec<Vec<f64>> {
-    let mut rng = NoiseSource::new(BOOTSTRAP_SEED);
-    (0..replicates)
-        .map(|_| {
-            let mut m = vec![0.0; blocks];
-            for _ in 0..blocks {
-                m[(rng.next_u64() % blocks as u64) as usize] += 1.0;
-            }
-            m
-        })
+    block_draws(BOOTSTRAP_SEED, blocks)
+        .take(replicates)
         .collect()
 }
 

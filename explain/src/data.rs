@@ -8,7 +8,8 @@
 //! `i_in_a` empty (the paper has no current where the load did not move).
 //!
 //! The rows are kept as columns (one `Vec<f64>` per quantity, no per-row allocation), so a
-//! million rows take about 60 MB; the CSV is parsed as it streams in.
+//! million rows take about 60 MB; the CSV is parsed as it streams in, a block of whole lines
+//! (512 KiB) per core at a time.
 
 use std::io::Read;
 use std::path::Path;
@@ -58,30 +59,92 @@ struct LineBounded<R> {
     since_newline: usize,
     line: u64,
     limit: usize,
+    /// The line found too long: every later read fails with it too.
+    refused: Option<u64>,
+}
+
+impl<R> LineBounded<R> {
+    /// `inner` with lines of at most [`MAX_LINE_BYTES`].
+    fn new(inner: R) -> Self {
+        Self {
+            inner,
+            since_newline: 0,
+            line: 0,
+            limit: MAX_LINE_BYTES,
+            refused: None,
+        }
+    }
 }
 
 impl<R: Read> Read for LineBounded<R> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.inner.read(buf)?;
-        let chunk = &buf[..n];
-        match chunk.iter().rposition(|&b| b == b'\n') {
-            Some(last) => {
-                self.line += chunk.iter().filter(|&&b| b == b'\n').count() as u64;
-                self.since_newline = n - last - 1;
-            }
-            None => self.since_newline += n,
+        if let Some(line) = self.refused {
+            return Err(self.too_long(line));
         }
-        if self.since_newline > self.limit {
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                format!(
-                    "line {} is longer than {} KiB: not a CSV table of test points (a file without line ends?); reading stopped there",
-                    self.line + 1,
-                    self.limit / 1024
-                ),
-            ));
+        let n = self.inner.read(buf)?;
+        // Every line of the chunk is measured, not only its last: how the reads fall must
+        // not decide which lines pass.
+        let mut run = self.since_newline;
+        let mut too_long = None;
+        let mut start = 0;
+        for_each_line_end(&buf[..n], |end| {
+            self.line += 1;
+            if run + end - start > self.limit && too_long.is_none() {
+                too_long = Some(self.line);
+            }
+            run = 0;
+            start = end + 1;
+        });
+        run += n - start;
+        if run > self.limit && too_long.is_none() {
+            too_long = Some(self.line + 1);
+        }
+        self.since_newline = run;
+        if let Some(line) = too_long {
+            self.refused = Some(line);
+            return Err(self.too_long(line));
         }
         Ok(n)
+    }
+}
+
+/// Calls `f` with the position of every line end in `bytes`, in order; eight bytes a step.
+fn for_each_line_end(bytes: &[u8], mut f: impl FnMut(usize)) {
+    const ONES: u64 = u64::from_ne_bytes([0x01; 8]);
+    const HIGHS: u64 = u64::from_ne_bytes([0x80; 8]);
+    const ENDS: u64 = u64::from_ne_bytes([b'\n'; 8]);
+    let mut words = bytes.chunks_exact(8);
+    let mut base = 0;
+    for word in &mut words {
+        let x = u64::from_le_bytes(word.try_into().expect("eight bytes")) ^ ENDS;
+        // A high bit for every zero byte of x (and perhaps a byte after one): each checked.
+        let mut hits = x.wrapping_sub(ONES) & !x & HIGHS;
+        while hits != 0 {
+            let i = hits.trailing_zeros() as usize / 8;
+            if word[i] == b'\n' {
+                f(base + i);
+            }
+            hits &= hits - 1;
+        }
+        base += 8;
+    }
+    for (i, &b) in words.remainder().iter().enumerate() {
+        if b == b'\n' {
+            f(base + i);
+        }
+    }
+}
+
+impl<R> LineBounded<R> {
+    /// The refusal of line `line`.
+    fn too_long(&self, line: u64) -> std::io::Error {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "line {line} is longer than {} KiB: not a CSV table of test points (a file without line ends?); reading stopped there",
+                self.limit / 1024
+            ),
+        )
     }
 }
 
@@ -301,6 +364,396 @@ impl RawColumns {
     }
 }
 
+/// Bytes of whole lines parsed as one block on one thread.
+const BLOCK_BYTES: usize = 1 << 19;
+
+/// Where a measured file's columns sit.
+#[derive(Debug, Clone, Copy)]
+struct Layout {
+    omega_n: usize,
+    tau_rot: usize,
+    i_in: usize,
+    /// `t_s`, `v_in_v`, `temp_c`.
+    optional: [Option<usize>; 3],
+    backdriven: Option<usize>,
+    /// Fields of the header.
+    columns: usize,
+}
+
+/// The CSV reader's settings: headers trimmed (fields are trimmed as they are parsed,
+/// cheaper than trimming every record), `#` comments, records of any length.
+fn csv_reader<R: Read>(reader: R, has_headers: bool) -> csv::Reader<R> {
+    csv::ReaderBuilder::new()
+        .trim(csv::Trim::Headers)
+        .comment(Some(b'#'))
+        .flexible(true)
+        .has_headers(has_headers)
+        .buffer_capacity(1 << 16)
+        .from_reader(reader)
+}
+
+impl Layout {
+    /// The columns of `headers`: an error for a missing or repeated required column.
+    fn of(headers: &csv::StringRecord, name: &str) -> Result<Self, ExplainError> {
+        let file_err = |why: String| ExplainError::MeasuredFile {
+            file: name.to_string(),
+            why,
+        };
+        if headers.is_empty() || headers.iter().all(str::is_empty) {
+            return Err(ExplainError::EmptyData {
+                file: name.to_string(),
+                min_rows: MIN_ROWS,
+            });
+        }
+        let lower: Vec<String> = headers.iter().map(|h| h.to_ascii_lowercase()).collect();
+        let find = |column: &str| -> Result<Option<usize>, ExplainError> {
+            let hits: Vec<usize> = lower
+                .iter()
+                .enumerate()
+                .filter(|(_, h)| h.as_str() == column)
+                .map(|(k, _)| k)
+                .collect();
+            match hits.len() {
+                0 => Ok(None),
+                1 => Ok(Some(hits[0])),
+                _ => Err(file_err(format!(
+                    "column {column} appears {} times in the header: keep one",
+                    hits.len()
+                ))),
+            }
+        };
+        let mut required = [0usize; 3];
+        for (slot, column) in required.iter_mut().zip(REQUIRED_COLUMNS) {
+            *slot = find(column)?.ok_or_else(|| ExplainError::MissingColumn {
+                file: name.to_string(),
+                column: column.to_string(),
+                found: shortened(&headers.iter().collect::<Vec<_>>().join(", "), 240),
+            })?;
+        }
+        let [omega_n, tau_rot, i_in] = required;
+        Ok(Self {
+            omega_n,
+            tau_rot,
+            i_in,
+            optional: [find("t_s")?, find("v_in_v")?, find("temp_c")?],
+            backdriven: find("backdriven")?,
+            columns: headers.len(),
+        })
+    }
+
+    /// Appends the values of `record` to `raw`; the reason when a field is not readable.
+    fn push(&self, record: &csv::ByteRecord, raw: &mut RawColumns) -> Result<(), String> {
+        let columns = self.columns;
+        if record.len() < columns {
+            return Err(format!(
+                "has {} fields but the header has {columns}",
+                record.len()
+            ));
+        }
+        let field = |k: usize| record.get(k).unwrap_or(b"").trim_ascii();
+        let number = |k: usize, column: &str| -> Result<f64, String> {
+            parse_number(field(k))
+                .map(|v| v.unwrap_or(f64::NAN))
+                .map_err(|why| {
+                    format!(
+                        "column {column} {why} ('{}')",
+                        shortened(&String::from_utf8_lossy(field(k)), 40)
+                    )
+                })
+        };
+        let required_number = |k: usize, column: &str| -> Result<f64, String> {
+            let v = number(k, column)?;
+            if v.is_nan() {
+                Err(format!("column {column} is empty"))
+            } else {
+                Ok(v)
+            }
+        };
+        let backdriven = match self.backdriven.map(field) {
+            None | Some(b"") => MISSING_FLAG,
+            Some(b"1") => 1,
+            Some(b"0") => 0,
+            Some(v) if v.eq_ignore_ascii_case(b"true") || v.eq_ignore_ascii_case(b"yes") => 1,
+            Some(v) if v.eq_ignore_ascii_case(b"false") || v.eq_ignore_ascii_case(b"no") => 0,
+            Some(other) => {
+                return Err(format!(
+                    "column backdriven is '{}': give 0 (not backdriven) or 1 (backdriven)",
+                    String::from_utf8_lossy(other)
+                ));
+            }
+        };
+        raw.omega_n
+            .push(required_number(self.omega_n, "omega_n_rad_s")?);
+        raw.tau_rot
+            .push(required_number(self.tau_rot, "tau_rot_nm")?);
+        raw.i_in.push(number(self.i_in, "i_in_a")?);
+        let opt = |c: Option<usize>, column: &str| c.map_or(Ok(f64::NAN), |k| number(k, column));
+        raw.t_s.push(opt(self.optional[0], "t_s")?);
+        raw.v_in.push(opt(self.optional[1], "v_in_v")?);
+        raw.temp_c.push(opt(self.optional[2], "temp_c")?);
+        raw.backdriven.push(backdriven);
+        Ok(())
+    }
+}
+
+impl RawColumns {
+    /// Records that data row `row` (1-based, just pushed) sits on file line `line`: the
+    /// lines are kept only once some row is not on the line after its predecessor's.
+    fn note_line(&mut self, row: usize, line: u64) {
+        if !self.lines.is_empty() || line != row as u64 + 1 {
+            if self.lines.is_empty() {
+                // Every earlier row sat right after the header.
+                self.lines.reserve(self.omega_n.capacity());
+                self.lines.extend((1..row).map(|r| r as u32 + 1));
+            }
+            self.lines.push(u32::try_from(line).unwrap_or(u32::MAX));
+        }
+    }
+
+    /// Appends the rows of `block`, whose first byte is on file line `first_line`.
+    fn append(&mut self, block: Block, first_line: u64) {
+        let before = self.len();
+        let b = block.raw;
+        self.omega_n.extend_from_slice(&b.omega_n);
+        self.tau_rot.extend_from_slice(&b.tau_rot);
+        self.i_in.extend_from_slice(&b.i_in);
+        self.t_s.extend_from_slice(&b.t_s);
+        self.v_in.extend_from_slice(&b.v_in);
+        self.temp_c.extend_from_slice(&b.temp_c);
+        self.backdriven.extend_from_slice(&b.backdriven);
+        for (i, &local) in block.lines.iter().enumerate() {
+            let row = before + i + 1;
+            self.note_line(row, block_line(local, row, first_line));
+        }
+    }
+}
+
+/// The file line of a block's line `local` (1-based within the block; 0: unknown, then the
+/// line after the header's that row `row` would have).
+fn block_line(local: u64, row: usize, first_line: u64) -> u64 {
+    if local == 0 {
+        row as u64 + 1
+    } else {
+        first_line + local - 1
+    }
+}
+
+/// Rows parsed from one block of whole lines, with the line of each within the block.
+struct Block {
+    raw: RawColumns,
+    lines: Vec<u64>,
+}
+
+/// Why a block failed: its row (1-based within the block), its line within the block and
+/// the reason.
+type BlockError = (usize, u64, String);
+
+/// Parses a block of whole lines (no header, no quotes).
+fn parse_block(bytes: &[u8], layout: &Layout) -> Result<Block, BlockError> {
+    let mut csv = csv_reader(bytes, false);
+    let rows = bytes.len() / 48;
+    let mut block = Block {
+        raw: RawColumns::with_capacity(rows),
+        lines: Vec::with_capacity(rows),
+    };
+    let mut record = csv::ByteRecord::new();
+    loop {
+        let row = block.raw.len() + 1;
+        match csv.read_byte_record(&mut record) {
+            Ok(false) => return Ok(block),
+            Ok(true) => {}
+            Err(e) => {
+                let line = e.position().map_or(0, |p| p.line());
+                return Err((row, line, format!("not readable as CSV: {e}")));
+            }
+        }
+        let line = record.position().map_or(0, |p| p.line());
+        layout
+            .push(&record, &mut block.raw)
+            .map_err(|why| (row, line, why))?;
+        block.lines.push(line);
+    }
+}
+
+/// Reads the records of `csv` (positioned after the header) into `raw`, its line `k` being
+/// the file's line `k + line_offset`.
+fn read_records<R: Read>(
+    csv: &mut csv::Reader<R>,
+    layout: &Layout,
+    name: &str,
+    raw: &mut RawColumns,
+    line_offset: u64,
+) -> Result<(), ExplainError> {
+    let mut record = csv::ByteRecord::new();
+    loop {
+        let row = raw.len() + 1;
+        match csv.read_byte_record(&mut record) {
+            Ok(false) => return Ok(()),
+            Ok(true) => {}
+            Err(e) => {
+                let line = e.position().map_or(0, |p| p.line() + line_offset);
+                return Err(row_error(
+                    name,
+                    row,
+                    line,
+                    format!("not readable as CSV: {e}"),
+                ));
+            }
+        }
+        let line = record
+            .position()
+            .map_or(row as u64 + 1, |p| p.line() + line_offset);
+        layout
+            .push(&record, raw)
+            .map_err(|why| row_error(name, row, line, why))?;
+        raw.note_line(row, line);
+    }
+}
+
+/// Reads from `reader` until `buf` holds `size` bytes or the input ends (then `true`).
+fn fill(reader: &mut impl Read, buf: &mut Vec<u8>, size: usize) -> std::io::Result<bool> {
+    let mut filled = buf.len();
+    buf.resize(size, 0);
+    while filled < size {
+        match reader.read(&mut buf[filled..]) {
+            Ok(0) => {
+                buf.truncate(filled);
+                return Ok(true);
+            }
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => {
+                buf.truncate(filled);
+                return Err(e);
+            }
+        }
+    }
+    Ok(false)
+}
+
+/// Parses a measured CSV from `reader` (`bytes` long, if known, to reserve the columns
+/// once), in blocks of about `block_bytes` of whole lines parsed on as many threads as the
+/// machine has cores, with the file's row and line numbers in every message. A block with a
+/// quote or a carriage return ([`needs_stream`]) and everything after it are read in one
+/// stream, as is a file whose header is not in its first block. Every line stays bounded
+/// ([`MAX_LINE_BYTES`]), so a file without line ends is refused after a bounded read.
+fn parse_blocks<R: Read>(
+    reader: R,
+    name: &str,
+    bytes: u64,
+    block_bytes: usize,
+) -> Result<Dataset, ExplainError> {
+    let mut reader = LineBounded::new(reader);
+    let mut raw = RawColumns::with_capacity((bytes / 48).min(MAX_RESERVED_ROWS) as usize);
+    // Whole lines of the next block, and the part line after them.
+    // Whole lines of the next block, whether the input ended there, and whether the read
+    // failed (a line beyond the limit): then the block is what was read, and the one stream
+    // reads it and meets the error again, with the row it is in.
+    let next_block = |reader: &mut LineBounded<R>, carry: &mut Vec<u8>| {
+        let mut buf = std::mem::take(carry);
+        // A part line as long as a block (the reader stops it at the line limit) grows by
+        // a block.
+        let size = if buf.len() < block_bytes {
+            block_bytes
+        } else {
+            buf.len() + block_bytes
+        };
+        match fill(reader, &mut buf, size) {
+            Err(_) => (buf, false, true),
+            Ok(true) => (buf, true, false),
+            Ok(false) => {
+                match buf.iter().rposition(|&b| b == b'\n') {
+                    Some(last) => *carry = buf.split_off(last + 1),
+                    None => *carry = std::mem::take(&mut buf),
+                }
+                (buf, false, false)
+            }
+        }
+    };
+    let mut carry = Vec::new();
+    let (first, mut end, failed) = next_block(&mut reader, &mut carry);
+    // The header from the first block.
+    let mut header = csv_reader(first.as_slice(), true);
+    let headers = header.headers().cloned();
+    let body = header.position().clone();
+    drop(header);
+    let in_first = body.byte() > 0 && (body.byte() as usize) < first.len() || end;
+    if failed || !in_first || needs_stream(&first) {
+        // One stream: the first block, the part line and the rest.
+        let rest = std::io::Cursor::new(first).chain(std::io::Cursor::new(carry));
+        let mut csv = csv_reader(rest.chain(reader), true);
+        let headers = csv
+            .headers()
+            .map_err(|e| ExplainError::MeasuredFile {
+                file: name.to_string(),
+                why: format!("cannot read the header: {e}"),
+            })?
+            .clone();
+        let layout = Layout::of(&headers, name)?;
+        read_records(&mut csv, &layout, name, &mut raw, 0)?;
+        return raw.validate(name);
+    }
+    let headers = headers.map_err(|e| ExplainError::MeasuredFile {
+        file: name.to_string(),
+        why: format!("cannot read the header: {e}"),
+    })?;
+    let layout = Layout::of(&headers, name)?;
+    let mut first = first;
+    first.drain(..body.byte() as usize);
+    let mut pending = vec![(first, body.line())];
+    // The line the next block starts on: a block ends at its last line end, and the reader
+    // has counted every line end so far.
+    let mut line = reader.line + 1;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    loop {
+        // Gather a block per thread, parse them together, append in file order.
+        let mut stream = None;
+        while !end && pending.len() < threads {
+            let (block, last, failed) = next_block(&mut reader, &mut carry);
+            end = last;
+            if failed || needs_stream(&block) {
+                stream = Some((block, line));
+                break;
+            }
+            pending.push((block, line));
+            line = reader.line + 1;
+        }
+        let parsed = crate::fit::par_map(&pending, |(block, _)| parse_block(block, &layout));
+        for ((_, first_line), block) in pending.drain(..).zip(parsed) {
+            match block {
+                Ok(block) => raw.append(block, first_line),
+                Err((row, local, why)) => {
+                    let row = raw.len() + row;
+                    return Err(row_error(
+                        name,
+                        row,
+                        block_line(local, row, first_line),
+                        why,
+                    ));
+                }
+            }
+        }
+        if let Some((block, first_line)) = stream {
+            // A quote, a carriage return or a read error: the rest in one stream.
+            let rest = std::io::Cursor::new(block).chain(std::io::Cursor::new(carry));
+            let mut csv = csv_reader(rest.chain(reader), false);
+            read_records(&mut csv, &layout, name, &mut raw, first_line - 1)?;
+            break;
+        }
+        if end {
+            break;
+        }
+    }
+    raw.validate(name)
+}
+
+/// Whether `block` must be read in one stream with the rest: a quote (a field could hold a
+/// line end) or a carriage return (the CSV reader counts the lines of CR LF text its own
+/// way, so a block's line numbers would not add up).
+fn needs_stream(block: &[u8]) -> bool {
+    block.contains(&b'"') || block.contains(&b'\r')
+}
+
 /// Parses one CSV field as a finite number; `Ok(None)` when it is empty.
 fn parse_number(bytes: &[u8]) -> Result<Option<f64>, String> {
     if bytes.is_empty() {
@@ -385,141 +838,7 @@ impl Dataset {
     /// [`Dataset::parse_csv`] with the size of the input in bytes, if known, to reserve the
     /// columns once.
     fn parse_csv_sized<R: Read>(reader: R, name: &str, bytes: u64) -> Result<Self, ExplainError> {
-        // Fields are trimmed as they are parsed (cheaper than trimming every record).
-        let reader = LineBounded {
-            inner: reader,
-            since_newline: 0,
-            line: 0,
-            limit: MAX_LINE_BYTES,
-        };
-        let mut csv = csv::ReaderBuilder::new()
-            .trim(csv::Trim::Headers)
-            .comment(Some(b'#'))
-            .flexible(true)
-            .buffer_capacity(1 << 16)
-            .from_reader(reader);
-        let file_err = |why: String| ExplainError::MeasuredFile {
-            file: name.to_string(),
-            why,
-        };
-        let headers = csv
-            .headers()
-            .map_err(|e| file_err(format!("cannot read the header: {e}")))?
-            .clone();
-        if headers.is_empty() || headers.iter().all(str::is_empty) {
-            return Err(ExplainError::EmptyData {
-                file: name.to_string(),
-                min_rows: MIN_ROWS,
-            });
-        }
-        let lower: Vec<String> = headers.iter().map(|h| h.to_ascii_lowercase()).collect();
-        let find = |column: &str| -> Result<Option<usize>, ExplainError> {
-            let hits: Vec<usize> = lower
-                .iter()
-                .enumerate()
-                .filter(|(_, h)| h.as_str() == column)
-                .map(|(k, _)| k)
-                .collect();
-            match hits.len() {
-                0 => Ok(None),
-                1 => Ok(Some(hits[0])),
-                _ => Err(file_err(format!(
-                    "column {column} appears {} times in the header: keep one",
-                    hits.len()
-                ))),
-            }
-        };
-        let mut required = [0usize; 3];
-        for (slot, column) in required.iter_mut().zip(REQUIRED_COLUMNS) {
-            *slot = find(column)?.ok_or_else(|| ExplainError::MissingColumn {
-                file: name.to_string(),
-                column: column.to_string(),
-                found: shortened(&headers.iter().collect::<Vec<_>>().join(", "), 240),
-            })?;
-        }
-        let [c_omega, c_tau, c_i] = required;
-        let optional = [find("t_s")?, find("v_in_v")?, find("temp_c")?];
-        let c_bd = find("backdriven")?;
-        let columns = headers.len();
-
-        // About 60 bytes a row in the usual files: reserve once instead of doubling.
-        let mut raw = RawColumns::with_capacity((bytes / 48).min(MAX_RESERVED_ROWS) as usize);
-        let mut record = csv::ByteRecord::new();
-        loop {
-            let row = raw.len() + 1;
-            match csv.read_byte_record(&mut record) {
-                Ok(false) => break,
-                Ok(true) => {}
-                Err(e) => {
-                    let line = e.position().map_or(0, |p| p.line());
-                    return Err(row_error(
-                        name,
-                        row,
-                        line,
-                        format!("not readable as CSV: {e}"),
-                    ));
-                }
-            }
-            let line = record.position().map_or(row as u64 + 1, |p| p.line());
-            let bad = |why: String| row_error(name, row, line, why);
-            if record.len() < columns {
-                return Err(bad(format!(
-                    "has {} fields but the header has {columns}",
-                    record.len()
-                )));
-            }
-            let field = |k: usize| record.get(k).unwrap_or(b"").trim_ascii();
-            let number = |k: usize, column: &str| -> Result<f64, ExplainError> {
-                parse_number(field(k))
-                    .map(|v| v.unwrap_or(f64::NAN))
-                    .map_err(|why| {
-                        bad(format!(
-                            "column {column} {why} ('{}')",
-                            String::from_utf8_lossy(field(k))
-                        ))
-                    })
-            };
-            let required_number = |k: usize, column: &str| -> Result<f64, ExplainError> {
-                let v = number(k, column)?;
-                if v.is_nan() {
-                    Err(bad(format!("column {column} is empty")))
-                } else {
-                    Ok(v)
-                }
-            };
-            let backdriven = match c_bd.map(field) {
-                None | Some(b"") => MISSING_FLAG,
-                Some(b"1") => 1,
-                Some(b"0") => 0,
-                Some(v) if v.eq_ignore_ascii_case(b"true") || v.eq_ignore_ascii_case(b"yes") => 1,
-                Some(v) if v.eq_ignore_ascii_case(b"false") || v.eq_ignore_ascii_case(b"no") => 0,
-                Some(other) => {
-                    return Err(bad(format!(
-                        "column backdriven is '{}': give 0 (not backdriven) or 1 (backdriven)",
-                        String::from_utf8_lossy(other)
-                    )));
-                }
-            };
-            raw.omega_n.push(required_number(c_omega, "omega_n_rad_s")?);
-            raw.tau_rot.push(required_number(c_tau, "tau_rot_nm")?);
-            raw.i_in.push(number(c_i, "i_in_a")?);
-            let opt =
-                |c: Option<usize>, column: &str| c.map_or(Ok(f64::NAN), |k| number(k, column));
-            raw.t_s.push(opt(optional[0], "t_s")?);
-            raw.v_in.push(opt(optional[1], "v_in_v")?);
-            raw.temp_c.push(opt(optional[2], "temp_c")?);
-            raw.backdriven.push(backdriven);
-            let line32 = u32::try_from(line).unwrap_or(u32::MAX);
-            if !raw.lines.is_empty() || line != row as u64 + 1 {
-                if raw.lines.is_empty() {
-                    // Every earlier row sat right after the header.
-                    raw.lines.reserve(raw.omega_n.capacity());
-                    raw.lines.extend((1..row).map(|r| r as u32 + 1));
-                }
-                raw.lines.push(line32);
-            }
-        }
-        raw.validate(name)
+        parse_blocks(reader, name, bytes, BLOCK_BYTES)
     }
 
     /// Writes the data as CSV with the standard column names (optional columns only when
@@ -633,6 +952,91 @@ mod tests {
                 )
             })
             .collect()
+    }
+
+    #[test]
+    fn line_ends_are_found_eight_bytes_at_a_time() {
+        // Every byte value next to line ends, at every offset and length.
+        let bytes: Vec<u8> = (0..600u32)
+            .map(|k| match k % 7 {
+                0 | 3 => b'\n',
+                1 => (k % 256) as u8,
+                2 => 0x0b,
+                _ => 0x09,
+            })
+            .collect();
+        for start in 0..9 {
+            for len in [0, 1, 7, 8, 9, 63, 64, 65, 590] {
+                let slice = &bytes[start..(start + len).min(bytes.len())];
+                let mut found = Vec::new();
+                for_each_line_end(slice, |i| found.push(i));
+                let naive: Vec<usize> = (0..slice.len()).filter(|&i| slice[i] == b'\n').collect();
+                assert_eq!(found, naive, "start {start}, len {len}");
+            }
+        }
+    }
+
+    /// The file read as one stream (the reader before blocks): the oracle of the blocks.
+    fn parse_stream(text: &str) -> Result<Dataset, ExplainError> {
+        let bounded = LineBounded::new(text.as_bytes());
+        let mut csv = csv_reader(bounded, true);
+        let headers = csv.headers().unwrap().clone();
+        let layout = Layout::of(&headers, "measured.csv")?;
+        let mut raw = RawColumns::default();
+        read_records(&mut csv, &layout, "measured.csv", &mut raw, 0)?;
+        raw.validate("measured.csv")
+    }
+
+    #[test]
+    fn blocks_read_as_one_stream_reads() {
+        let header = "omega_n_rad_s,tau_rot_nm,i_in_a,t_s,backdriven";
+        let rows: Vec<String> = (0..40)
+            .map(|k| format!("{},{},{},{k},1", 31.4 + k as f64, 0.1 * k as f64, 2.5))
+            .collect();
+        let plain = format!("{header}\n{}\n", rows.join("\n"));
+        let commented = format!(
+            "# rig A\n\n{header}\n{}\n# a rest\n\n{}\n",
+            rows[..15].join("\n"),
+            rows[15..].join("\r\n")
+        );
+        let quoted = format!("{header}\n{}\n\"31.4\",1.0,2.5,99,1\n", rows.join("\n"));
+        let no_end = format!("{header}\n{}", rows.join("\n"));
+        let mut bad_late = rows.clone();
+        bad_late[33] = "31.4,1.0,abc,33,1".into();
+        let bad_late = format!("# x\n{header}\n{}\n", bad_late.join("\n"));
+        let mut short = rows.clone();
+        short[21] = "31.4,1.0".into();
+        let short = format!("{header}\n\n{}\n", short.join("\n"));
+        let mut long = rows.clone();
+        long[30] = format!("31.4,1.0,2.5,{},1", "7".repeat(3 * MAX_LINE_BYTES));
+        let long = format!("{header}\n{}\n", long.join("\n"));
+        for text in [plain, commented, quoted, no_end, bad_late, short, long] {
+            let stream = parse_stream(&text);
+            for block in [1, 7, 40, 100, 1 << 20] {
+                let got = parse_blocks(text.as_bytes(), "measured.csv", 0, block);
+                match (&stream, &got) {
+                    (Ok(a), Ok(b)) => {
+                        assert_eq!(a, b, "block {block}: {text}");
+                        for k in 0..a.len() {
+                            assert_eq!(a.line(k), b.line(k), "block {block}, row {k}: {text}");
+                        }
+                    }
+                    // Where a read stops decides how many rows come before a refused line;
+                    // the line itself is named exactly.
+                    (Err(a), Err(b)) if a.to_string().contains("longer than") => {
+                        let tail = |e: &ExplainError| {
+                            e.to_string()
+                                .split_off(e.to_string().find("line 32").unwrap())
+                        };
+                        assert_eq!(tail(a), tail(b), "block {block}")
+                    }
+                    (Err(a), Err(b)) => {
+                        assert_eq!(a.to_string(), b.to_string(), "block {block}")
+                    }
+                    _ => panic!("block {block}: {stream:?} against {got:?}"),
+                }
+            }
+        }
     }
 
     #[test]

@@ -112,12 +112,17 @@ fn bin_from_sums(label: String, centre: f64, n: usize, sum: f64, sq: f64) -> Bin
 
 /// The gap between `fit` (fitted to every point) and the measured currents of every row.
 pub fn gap(points: &TestPoints, fit: &Fit) -> Gap {
+    gap_of(points, fit, &fit.predict_rows(points))
+}
+
+/// [`gap`] with the fit's prediction of every row ([`Fit::predict_rows`]) at hand.
+pub fn gap_of(points: &TestPoints, fit: &Fit, predicted_rows: &[f64]) -> Gap {
     let rv = &points.row_view;
     let ev = fit.model.evaluator();
     let res: Vec<f64> = rv
         .current
         .iter()
-        .zip(fit.predict_rows(points))
+        .zip(predicted_rows)
         .map(|(y, f)| y - f)
         .collect();
     let n = res.len();

@@ -8,8 +8,6 @@
 
 use serde::Serialize;
 
-use model::plant::NoiseSource;
-
 use super::fit::Fit;
 use super::points::TestPoints;
 use super::stats;
@@ -437,13 +435,7 @@ pub fn residual_shape(points: &TestPoints, fit: &Fit) -> ResidualShape {
     let (coefficients, sse1) = least_squares(&total, nb, &chosen).unwrap_or((Vec::new(), total.yy));
     // Block bootstrap of the selection.
     let mut counts = vec![0usize; nb];
-    let mut rng = NoiseSource::new(SEED);
-    let blocks = by_block.len();
-    for _ in 0..RESAMPLES {
-        let mut draws = vec![0.0f64; blocks];
-        for _ in 0..blocks {
-            draws[(rng.next_u64() % blocks as u64) as usize] += 1.0;
-        }
+    for draws in crate::bootstrap::block_draws(SEED, by_block.len()).take(RESAMPLES) {
         let mut m = Moments::zero(nb);
         for (b, d) in by_block.iter().zip(&draws) {
             if *d > 0.0 {

@@ -304,6 +304,36 @@ fn duplicates(data: &Dataset) -> Vec<String> {
 /// Rows the unit screen ([`unit_check`]) reads at most (evenly spread over the file).
 const UNIT_SCREEN_ROWS: usize = 20_000;
 
+/// Largest ratio of the upper to the lower quartile of the back-EMF speed shares for the
+/// `v_in_v` column to speak on the speed's unit: the motor's resistance warms by at most
+/// half over a session (+0.39 %/K up to 150 C), which moves a share by far less.
+const BACK_EMF_SCATTER: f64 = 1.5;
+
+/// The cam-speed units the unit screen tries: rad/s per unit, name, and the fix.
+const SPEED_UNITS: [(f64, &str, &str); 3] = [
+    (1.0, "rad/s", ""),
+    (
+        std::f64::consts::TAU,
+        "Hz",
+        "multiply the column by 2 pi = 6.283",
+    ),
+    (
+        std::f64::consts::TAU / 60.0,
+        "rpm",
+        "multiply the column by 2 pi / 60 = 0.1047",
+    ),
+];
+
+/// One row the unit screen reads: cam speed, load and current as given, and the vibrator
+/// voltage (NaN without a `v_in_v` column).
+#[derive(Debug, Clone, Copy)]
+struct ScreenRow {
+    omega_n: f64,
+    tau_rot: f64,
+    i_in: f64,
+    v_in: f64,
+}
+
 /// One reading of the speed and load columns: scale factors to SI and the unit they assume.
 struct Reading {
     speed_scale: f64,
@@ -312,28 +342,54 @@ struct Reading {
     load_unit: &'static str,
 }
 
-/// The paper's model with mu fitted by least squares on `rows` (speed, load, current) read
-/// with `r`: (mu, RMSE in A). The current is affine in mu (Eq. 10), so two evaluations per
-/// row give it exactly.
+/// The paper's model fitted to the rows under one [`Reading`].
+struct ReadingFit {
+    /// mu by least squares.
+    mu: f64,
+    /// RMS misfit, A.
+    rmse: f64,
+    /// Rows of the heavier half whose friction current alone, at the least physical mu and
+    /// the loads of the reading, exceeds the row's whole measured current.
+    loads_beyond_current: usize,
+}
+
+/// The paper's model with mu fitted by least squares on `rows` read with `r`. The current
+/// is affine in mu (Eq. 10), so two evaluations per row give it exactly: the friction
+/// current per unit mu, a, and the rest, b. With `mu_lo` the least physical mu, a row whose
+/// `mu_lo a` exceeds its measured current cannot carry its load as read: the rest (loss,
+/// inertia, -C2 / C1) is never negative, so on any rig the measured current pays at least
+/// the friction of the true mu >= `mu_lo`. Those rows are counted among the ones whose
+/// load is at least `heavy` (as given), where the friction weighs most.
 fn affine_mu_fit(
     start: &model::effects::CurrentModel,
-    rows: &[(f64, f64, f64)],
+    rows: &[ScreenRow],
     r: &Reading,
-) -> (f64, f64) {
+    mu_lo: f64,
+    heavy: f64,
+) -> ReadingFit {
     let at = |mu: f64| {
         let mut m = *start;
         m.mu = mu;
         m
     };
-    let (m0, m1) = (at(0.0), at(1.0));
+    let (m0, m1) = (at(0.0).evaluator(), at(1.0).evaluator());
     let (mut saa, mut say) = (0.0, 0.0);
+    let mut loads_beyond_current = 0;
     let mut parts = Vec::with_capacity(rows.len());
-    for &(w, t, y) in rows {
-        let op = model::effects::OperatingPoint::new(w * r.speed_scale, t * r.load_scale, 0.0);
+    for row in rows {
+        let op = model::effects::OperatingPoint::new(
+            row.omega_n * r.speed_scale,
+            row.tau_rot * r.load_scale,
+            0.0,
+        );
         let b = m0.current(&op);
         let a = m1.current(&op) - b;
+        let y = row.i_in;
         saa += a * a;
         say += a * (y - b);
+        if row.tau_rot.abs() >= heavy && mu_lo * a > y {
+            loads_beyond_current += 1;
+        }
         parts.push((a, b, y));
     }
     let mu = if saa > 0.0 { say / saa } else { 0.0 };
@@ -341,16 +397,58 @@ fn affine_mu_fit(
         .iter()
         .map(|(a, b, y)| (y - b - mu * a) * (y - b - mu * a))
         .sum();
-    (mu, (sse / rows.len().max(1) as f64).sqrt())
+    ReadingFit {
+        mu,
+        rmse: (sse / rows.len().max(1) as f64).sqrt(),
+        loads_beyond_current,
+    }
 }
 
-/// Refuses a speed or load column in another unit than the header says (cam speed in Hz in
-/// `omega_n_rad_s`, loads in N mm in `tau_rot_nm`): the paper's model is fitted to a sample of
-/// the rows read as given and read in each probable unit; when another reading fits at least
-/// as well with a physical mu where the given one needs an unphysical mu, or at least twice as
-/// well (and the given one needs an unphysical mu or fits four times worse), the column is
-/// named with its probable unit. rpm and mA are caught by the
-/// range rules of [`range_check`].
+/// Median over the rows with a voltage of the cam speed as given over the speed the
+/// motor's back-EMF allows at that voltage and current, (v - R i) / (N Ke) (the RS-735,
+/// [`rs735`]). `None` without a `v_in_v` column, with fewer than [`crate::data::MIN_ROWS`]
+/// rows between the breakaway voltage and the supply, or when the shares scatter by more
+/// than [`BACK_EMF_SCATTER`] between their quartiles: then the column is not the motor's
+/// voltage (the bridge supply logged instead, or a duty cycle) and says nothing on the speed.
+fn speed_share_of_back_emf(rows: &[ScreenRow]) -> Option<f64> {
+    let mut shares: Vec<f64> = rows
+        .iter()
+        .filter(|r| (rs735::BREAKAWAY_V..=board::BRIDGE_SUPPLY_V).contains(&r.v_in.abs()))
+        .filter_map(|r| {
+            let emf = r.v_in.abs() - rs735::RESISTANCE_OHM * r.i_in.abs();
+            (emf > 0.0).then(|| r.omega_n.abs() * rs735::KE_CAM_V_S_PER_RAD / emf)
+        })
+        .collect();
+    if shares.len() < crate::data::MIN_ROWS {
+        return None;
+    }
+    shares.sort_unstable_by(f64::total_cmp);
+    let at = |p: f64| shares[((shares.len() - 1) as f64 * p).round() as usize];
+    (at(0.75) <= BACK_EMF_SCATTER * at(0.25)).then(|| at(0.5))
+}
+
+/// Refuses a speed or load column in another unit than the header says (cam speed in Hz or
+/// rpm in `omega_n_rad_s`, loads in N mm in `tau_rot_nm`), naming the column and its
+/// probable unit. The evidence is the magnitude, from the rig's physics, so that data in
+/// the header's units is not refused on any rig (a fit alone is not: where the model misses
+/// an effect, a saturating sensor's flattened top fits a tenth of the speeds better):
+///
+/// - loads: read as given, in most rows of the heavier half the friction at the least
+///   physical mu would alone draw more current than the vibrator drew, and read in N mm it
+///   would not;
+/// - speeds, with a `v_in_v` column: the speeds as given sit nearer, in ratio, to the
+///   probable unit's share of the speed the motor's back-EMF allows at those voltages than
+///   to that speed itself (a rad/s column would be taken for Hz only with a winding of 2.4
+///   times the RS-735's resistance at 3.6 V and 2.5 A).
+///
+/// Without a voltage the current cannot bound the speed's magnitude (a viscous loss within
+/// its physical limit matches a Hz column's rise), so a Hz reading then rests on the fit of
+/// the paper's model to a sample of the rows: it must fit at least as well with a physical mu
+/// where the given reading needs an unphysical mu, or fit clearly better (half the misfit,
+/// and a quarter of it when the given mu is physical); rpm is then left to the range rules.
+/// Those rules of [`range_check`] catch the larger slips (cam speeds beyond the motor's
+/// no-load speed at the supply, currents beyond the sensor's range: mA), which data in the
+/// header's units cannot break.
 pub fn unit_check(
     data: &Dataset,
     excluded: &[bool],
@@ -364,78 +462,118 @@ pub fn unit_check(
         return Ok(());
     }
     let step = usable.len().div_ceil(UNIT_SCREEN_ROWS).max(1);
-    let rows: Vec<(f64, f64, f64)> = usable
+    let voltage = data.v_in();
+    let rows: Vec<ScreenRow> = usable
         .iter()
         .step_by(step)
-        .map(|&k| (data.omega_n()[k], data.tau_rot()[k], current[k]))
+        .map(|&k| ScreenRow {
+            omega_n: data.omega_n()[k],
+            tau_rot: data.tau_rot()[k],
+            i_in: current[k],
+            v_in: voltage.map_or(f64::NAN, |v| v[k]),
+        })
         .collect();
     let w_max = no_load_cam_speed();
-    let top_speed = rows.iter().fold(0.0f64, |m, r| m.max(r.0.abs()));
-    let readings = [
-        Reading {
-            speed_scale: 1.0,
-            load_scale: 1.0,
-            speed_unit: "rad/s",
-            load_unit: "N m",
-        },
-        Reading {
-            speed_scale: 1.0,
-            load_scale: 1e-3,
-            speed_unit: "rad/s",
-            load_unit: "N mm",
-        },
-        Reading {
-            speed_scale: std::f64::consts::TAU,
-            load_scale: 1.0,
-            speed_unit: "Hz",
-            load_unit: "N m",
-        },
-        Reading {
-            speed_scale: std::f64::consts::TAU,
-            load_scale: 1e-3,
-            speed_unit: "Hz",
-            load_unit: "N mm",
-        },
-    ];
+    let top_speed = rows.iter().fold(0.0f64, |m, r| m.max(r.omega_n.abs()));
+    // Indexed by 2 * speed unit + load unit.
+    let readings: Vec<Reading> = SPEED_UNITS
+        .iter()
+        .flat_map(|&(speed_scale, speed_unit, _)| {
+            [(1.0, "N m"), (1e-3, "N mm")].map(|(load_scale, load_unit)| Reading {
+                speed_scale,
+                load_scale,
+                speed_unit,
+                load_unit,
+            })
+        })
+        .collect();
     let physical = model::effects::MU_PHYSICAL.range(&model::effects::LimitContext {
         max_axial_force_n: 0.0,
         eccentricity_m: 0.0,
     });
     let is_physical = |mu: f64| mu >= physical.0 && mu <= physical.1;
-    let (mu0, rmse0) = affine_mu_fit(start, &rows, &readings[0]);
-    let mut best: Option<(&Reading, f64, f64)> = None;
-    for r in &readings[1..] {
+    // The heavier half of the rows (by load).
+    let mut loads: Vec<f64> = rows.iter().map(|r| r.tau_rot.abs()).collect();
+    let heavy = median(&mut loads);
+    let heavy_rows = rows.iter().filter(|r| r.tau_rot.abs() >= heavy).count();
+    let fits: Vec<ReadingFit> = readings
+        .iter()
+        .map(|r| affine_mu_fit(start, &rows, r, physical.0, heavy))
+        .collect();
+    let (mu0, rmse0) = (fits[0].mu, fits[0].rmse);
+    let speed_share = speed_share_of_back_emf(&rows);
+    // Candidate readings, best fit first: the first one both kinds of evidence back.
+    let mut order: Vec<usize> = (1..readings.len())
         // A reading in Hz must still be a speed the motor reaches.
-        if top_speed * r.speed_scale > w_max {
-            continue;
+        .filter(|&j| top_speed * readings[j].speed_scale <= w_max)
+        .collect();
+    order.sort_by(|&a, &b| fits[a].rmse.total_cmp(&fits[b].rmse));
+    let most = |count: usize| 2 * count > heavy_rows;
+    let chosen = order.into_iter().find(|&j| {
+        let (r, fit) = (&readings[j], &fits[j]);
+        // Loads: impossible as given (at this reading's speeds), possible as read.
+        let loads = (r.load_scale != 1.0)
+            .then(|| most(fits[j & !1].loads_beyond_current) && !most(fit.loads_beyond_current));
+        // Speeds: nearer, in ratio, to what this unit gives at the voltages than to rad/s.
+        let speeds = (r.speed_scale != 1.0).then(|| {
+            speed_share.map(|q| {
+                let given = 1.0 / r.speed_scale;
+                (q.ln() - given.ln()).abs() < q.ln().abs()
+            })
+        });
+        if loads == Some(false) || speeds == Some(Some(false)) {
+            return false;
         }
-        let (mu, rmse) = affine_mu_fit(start, &rows, r);
-        if is_physical(mu) && best.is_none_or(|b| rmse < b.2) {
-            best = Some((r, mu, rmse));
+        if speeds != Some(None) {
+            // Each changed column is impossible as given: that is the evidence (the fit is
+            // not, where the model misses an effect: a saturating sensor's flattened top
+            // fits slower speeds better).
+            return true;
         }
-    }
-    let Some((r, mu, rmse)) = best else {
+        // Speeds without a voltage to weigh them by: the current alone cannot bound the
+        // speed's magnitude (a viscous loss within its physical limit matches a Hz column's
+        // rise), so only Hz, on the fit alone; rpm that the range rules pass stays. (A
+        // saturating sensor's flattened top makes a tenth of the speeds fit better.)
+        if r.speed_scale < 1.0 {
+            return false;
+        }
+        // Loads scaled by 1000
+        // scale mu by 1/1000 and fit as well: an unphysical mu that a probable unit makes
+        // physical, at no worse a fit, is enough; otherwise the other reading must fit
+        // clearly better.
+        let same_fit_physical_mu = !is_physical(mu0) && fit.rmse <= 1.25 * rmse0;
+        let clearly_better =
+            fit.rmse < 0.5 * rmse0 && (!is_physical(mu0) || fit.rmse < 0.25 * rmse0);
+        is_physical(fit.mu) && (same_fit_physical_mu || clearly_better)
+    });
+    let Some(j) = chosen else {
         return Ok(());
     };
-    // Loads scaled by 1000 scale mu by 1/1000 and fit as well: an unphysical mu that a
-    // probable unit makes physical, at no worse a fit, is enough; otherwise the other
-    // reading must fit clearly better.
-    let same_fit_physical_mu = !is_physical(mu0) && rmse <= 1.25 * rmse0;
-    let clearly_better = rmse < 0.5 * rmse0 && (!is_physical(mu0) || rmse < 0.25 * rmse0);
-    if !(same_fit_physical_mu || clearly_better) {
-        return Ok(());
-    }
+    let (r, mu, rmse) = (&readings[j], fits[j].mu, fits[j].rmse);
     let mut columns = Vec::new();
     if r.load_scale != 1.0 {
         columns.push(format!(
-            "column tau_rot_nm looks like {} (largest load {}), not N m: give the load in N m (divide the column by 1000)",
+            "column tau_rot_nm looks like {} (largest load {}), not N m: at the least physical tooth friction (mu = {}) loads that large would draw more current in friction alone than the vibrator drew in {} of the {} rows of the heavier half; give the load in N m (divide the column by 1000)",
             r.load_unit,
-            short(data.tau_rot().iter().fold(0.0f64, |m, v| m.max(v.abs())))
+            short(data.tau_rot().iter().fold(0.0f64, |m, v| m.max(v.abs()))),
+            physical.0,
+            fits[j & !1].loads_beyond_current,
+            heavy_rows
         ));
     }
     if r.speed_scale != 1.0 {
+        let against_voltage = speed_share.map_or(String::new(), |q| {
+            format!(
+                " (read as rad/s it is {} times the speed the motor's back-EMF allows at the v_in_v voltages, median)",
+                short(q)
+            )
+        });
+        let fix = SPEED_UNITS
+            .iter()
+            .find(|u| u.1 == r.speed_unit)
+            .map_or("", |u| u.2);
         columns.push(format!(
-            "column omega_n_rad_s looks like the cam speed in {} (largest {}), not rad/s: give it in rad/s (multiply the column by 2 pi = 6.283)",
+            "column omega_n_rad_s looks like the cam speed in {} (largest {}), not rad/s{against_voltage}: give it in rad/s ({fix})",
             r.speed_unit,
             short(top_speed)
         ));

@@ -417,22 +417,44 @@ pub struct ModelAt {
 }
 
 impl ModelAt {
-    /// `model`'s quantities `needs` at `ops`.
+    /// `model`'s quantities `needs` at `ops`: one pass over the points, the torque parts
+    /// once per point (they give the current, the friction current and the axial force) and
+    /// the gear's axial force per torque once.
     pub fn new(model: &CurrentModel, ops: &[OperatingPoint], needs: Needs) -> Self {
-        let col = |on: bool, f: &dyn Fn(&OperatingPoint) -> f64| -> Vec<f64> {
+        let col = |on: bool| {
             if on {
-                ops.iter().map(f).collect()
+                Vec::with_capacity(ops.len())
             } else {
                 Vec::new()
             }
         };
-        Self {
-            current: col(needs.current, &|op| model.current(op)),
-            friction: col(needs.friction, &|op| model.friction_current(op)),
-            inertia: col(needs.inertia, &|op| inertia_current(model, op)),
-            axial: col(needs.axial, &|op| model.axial_force(op)),
+        let mut at = Self {
+            current: col(needs.current),
+            friction: col(needs.friction),
+            inertia: col(needs.inertia),
+            axial: col(needs.axial),
             eccentricity: model.drive.eccentricity,
+        };
+        let per_torque = model.drive.gear.axial_force_per_torque();
+        let parts_needed = needs.current || needs.friction || needs.axial;
+        for op in ops {
+            if parts_needed {
+                let parts = model.torque_parts_with(op, per_torque);
+                if needs.current {
+                    at.current.push(model.current_of(&parts, op));
+                }
+                if needs.friction {
+                    at.friction.push(model.friction_current_of(&parts, op));
+                }
+                if needs.axial {
+                    at.axial.push(parts.axial_force);
+                }
+            }
+            if needs.inertia {
+                at.inertia.push(inertia_current(model, op));
+            }
         }
+        at
     }
 }
 

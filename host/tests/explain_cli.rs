@@ -357,3 +357,55 @@ fn json_carries_lack_of_fit_plausibility_and_extrapolation() {
     let err = String::from_utf8_lossy(&err);
     assert!(err.contains("tau_rot_nm") && err.contains("N mm"), "{err}");
 }
+
+/// `path`'s CSV with `column` multiplied by `factor` (comments dropped).
+fn scaled_column(path: &str, column: &str, factor: f64, out: &Path) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header = lines.next().unwrap();
+    let c = header.split(',').position(|f| f == column).unwrap();
+    let mut scaled = format!("{header}\n");
+    for line in lines {
+        let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+        f[c] = format!("{}", f[c].parse::<f64>().unwrap() * factor);
+        scaled += &f.join(",");
+        scaled.push('\n');
+    }
+    std::fs::write(out, scaled).unwrap();
+}
+
+/// The unit screen's messages at the command line: cam speeds in Hz or rpm are refused
+/// naming the column, the probable unit and the fix; the same rows in rad/s are not.
+#[test]
+fn cam_speeds_in_hz_or_rpm_are_refused_naming_the_column_and_the_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = synthetic_csv(dir.path(), "none", "3");
+    let v = json(&["explain", "--measured", &csv, "--json", "--no-report"]);
+    assert_eq!(v["verdict"], "no-missing-effect", "{}", v["finding"]);
+    let tau = std::f64::consts::TAU;
+    for (unit, factor, fix) in [
+        ("Hz", 1.0 / tau, "2 pi = 6.283"),
+        // Beyond the motor's no-load speed: the range rule's message.
+        ("rpm", 60.0 / tau, "not rpm"),
+    ] {
+        let file = dir.path().join(format!("{unit}.csv"));
+        scaled_column(&csv, "omega_n_rad_s", factor, &file);
+        let err = rig()
+            .args([
+                "explain",
+                "--measured",
+                file.to_str().unwrap(),
+                "--no-report",
+            ])
+            .assert()
+            .failure()
+            .get_output()
+            .stderr
+            .clone();
+        let err = String::from_utf8_lossy(&err);
+        assert!(
+            err.contains("omega_n_rad_s") && err.contains(unit) && err.contains(fix),
+            "{unit}: {err}"
+        );
+    }
+}

@@ -30,7 +30,14 @@ impl CamDrive {
 
     /// Friction part of the excitation force, N: 2 mu_ax tau_rot (1 + Z3/Z2) / (m Z4 cos a).
     pub fn friction_force(&self, mu_ax: f64, tau_rot: f64) -> f64 {
-        mu_ax * tau_rot.abs() * self.gear.axial_force_per_torque()
+        Self::friction_force_with(mu_ax, tau_rot, self.gear.axial_force_per_torque())
+    }
+
+    /// [`CamDrive::friction_force`] with the gear's axial force per torque
+    /// ([`GearSet::axial_force_per_torque`]) given: callers over many points take it once.
+    #[inline]
+    pub fn friction_force_with(mu_ax: f64, tau_rot: f64, axial_per_torque: f64) -> f64 {
+        mu_ax * tau_rot.abs() * axial_per_torque
     }
 
     /// Excitation force |F_ex| at time `t` (s) for cam speed `omega_n` (rad/s), Eq. (8), N.

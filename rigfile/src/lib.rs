@@ -159,11 +159,30 @@ impl RigFile {
                 },
             });
         }
-        let text = std::fs::read_to_string(path).map_err(|source| RigFileError::File {
+        // The read itself stays bounded too (a file can grow, or its size be unknown).
+        let read_err = |source| RigFileError::File {
             action: "read",
             path: path.display().to_string(),
             source,
-        })?;
+        };
+        let mut text = String::new();
+        std::io::Read::read_to_string(
+            &mut std::io::Read::take(
+                std::fs::File::open(path).map_err(read_err)?,
+                MAX_RIG_FILE_BYTES + 1,
+            ),
+            &mut text,
+        )
+        .map_err(read_err)?;
+        if text.len() as u64 > MAX_RIG_FILE_BYTES {
+            return Err(RigFileError::BadValue {
+                what: format!("rig file {}", path.display()),
+                why: format!(
+                    "is more than the {} KiB a rig file can need: give the rig file (TOML), not a data file",
+                    MAX_RIG_FILE_BYTES / 1024
+                ),
+            });
+        }
         Self::parse_detailed(&text, &path.display().to_string())
     }
 

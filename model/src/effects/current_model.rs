@@ -58,17 +58,29 @@ impl CurrentModel {
 
     /// Axial friction force at the teeth F_ax, N (Eq. 8's friction part with mu_ax(w_n, tau)).
     pub fn axial_force(&self, op: &OperatingPoint) -> f64 {
+        self.axial_force_with(op, self.drive.gear.axial_force_per_torque())
+    }
+
+    /// [`CurrentModel::axial_force`] with the gear's axial force per torque given
+    /// ([`crate::GearSet::axial_force_per_torque`], the same at every point).
+    pub fn axial_force_with(&self, op: &OperatingPoint, axial_per_torque: f64) -> f64 {
         let e = &self.effects;
         let g = axial_friction_speed_factor(op.omega_n, e.axial_corner_speed);
         let h = load_friction_factor_ln(e.load_exponent, op.ln_load);
-        self.drive.friction_force(self.mu * g * h, op.tau_rot)
+        CamDrive::friction_force_with(self.mu * g * h, op.tau_rot, axial_per_torque)
     }
 
     /// The parts of the mean cam torque at `op`.
     pub fn torque_parts(&self, op: &OperatingPoint) -> TorqueParts {
+        self.torque_parts_with(op, self.drive.gear.axial_force_per_torque())
+    }
+
+    /// [`CurrentModel::torque_parts`] with the gear's axial force per torque given: the same
+    /// numbers, without the gear geometry's trigonometry at every point.
+    pub fn torque_parts_with(&self, op: &OperatingPoint, axial_per_torque: f64) -> TorqueParts {
         let e = &self.effects;
         let ecc = self.drive.eccentricity;
-        let f = self.axial_force(op);
+        let f = self.axial_force_with(op, axial_per_torque);
         let w = op.omega_n.abs();
         TorqueParts {
             axial_force: f,
@@ -86,16 +98,25 @@ impl CurrentModel {
 
     /// Mean vibrator current at `op`, A: (torque - C2) / C1' + i_0.
     pub fn current(&self, op: &OperatingPoint) -> f64 {
-        let t = self.torque_parts(op).total();
+        self.current_of(&self.torque_parts(op), op)
+    }
+
+    /// [`CurrentModel::current`] from the torque parts at `op` ([`CurrentModel::torque_parts`]).
+    pub fn current_of(&self, parts: &TorqueParts, op: &OperatingPoint) -> f64 {
         offset_current(
-            (t - self.calibration.c2) / self.torque_constant(op),
+            (parts.total() - self.calibration.c2) / self.torque_constant(op),
             self.effects.current_offset,
         )
     }
 
     /// The current the friction term draws, A: the part the mesh ripple scatters.
     pub fn friction_current(&self, op: &OperatingPoint) -> f64 {
-        self.torque_parts(op).friction / self.torque_constant(op)
+        self.friction_current_of(&self.torque_parts(op), op)
+    }
+
+    /// [`CurrentModel::friction_current`] from the torque parts at `op`.
+    pub fn friction_current_of(&self, parts: &TorqueParts, op: &OperatingPoint) -> f64 {
+        parts.friction / self.torque_constant(op)
     }
 
     /// Whether the load backdrives at `op`: the linear bush holds loads below
