@@ -480,7 +480,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             null_draws: ((opts.null_draws as f64 * ALT_NULL_SHARE) as usize).max(1000),
             ..*opts
         };
-        let explored = fit::par_map(&wanted, |p| {
+        let explored = crate::parallel::par_map(&wanted, |p| {
             let current = &fits[p];
             select::explore(points, current, &alt_opts).map(|ex| {
                 let children: Vec<(Mechanism, Fit)> = ex
@@ -541,12 +541,12 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         needed.sort();
         needed.dedup();
         needed.retain(|p| !lins.contains_key(p));
-        let made = fit::par_map(&needed, |p| Lin::of(points, &fits[p]));
+        let made = crate::parallel::par_map(&needed, |p| Lin::of(points, &fits[p]));
         for (p, l) in needed.into_iter().zip(made) {
             lins.insert(p, l);
         }
         // One step of every active replicate.
-        let moves = fit::par_map(&(0..opts.replicates).collect::<Vec<_>>(), |&r| {
+        let moves = crate::parallel::par_map(&(0..opts.replicates).collect::<Vec<_>>(), |&r| {
             if !active[r] {
                 return None;
             }

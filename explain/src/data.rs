@@ -718,7 +718,7 @@ fn parse_blocks<R: Read>(
             pending.push((block, line));
             line = reader.line + 1;
         }
-        let parsed = crate::fit::par_map(&pending, |(block, _)| parse_block(block, &layout));
+        let parsed = crate::parallel::par_map(&pending, |(block, _)| parse_block(block, &layout));
         for ((_, first_line), block) in pending.drain(..).zip(parsed) {
             match block {
                 Ok(block) => raw.append(block, first_line),

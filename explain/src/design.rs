@@ -43,7 +43,7 @@ use rigfile::RigFile;
 use rigfile::plan::{Order, Plan, PlanPoint};
 use serde::Serialize;
 
-use crate::fit::{self, Fit};
+use crate::fit::Fit;
 use crate::mechanism::Mechanism;
 use crate::points::TestPoints;
 use crate::select;
@@ -653,7 +653,7 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
     let mut pairs: Vec<(usize, usize)> = Vec::new();
     match goal {
         Goal::Separate => {
-            models = fit::par_map(&leaders, fitted);
+            models = crate::parallel::par_map(&leaders, fitted);
             for a in 0..models.len() {
                 for b in a + 1..models.len() {
                     pairs.push((a, b));
@@ -662,7 +662,7 @@ pub fn propose(outcome: &Outcome, space: &Space, options: &DesignOptions) -> Pro
         }
         Goal::Seek => {
             models.push(Compared::of("base".into(), &outcome.before));
-            models.extend(fit::par_map(&leaders, fitted));
+            models.extend(crate::parallel::par_map(&leaders, fitted));
             pairs.extend((1..models.len()).map(|k| (0, k)));
         }
         Goal::Resolve => {

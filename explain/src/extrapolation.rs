@@ -161,7 +161,7 @@ pub fn extrapolation(points: &TestPoints, after: &Fit, cand: Mechanism) -> Extra
             summary: "not testable: too few speed or load levels to hold a whole one out".into(),
         };
     }
-    let results = fit::par_map(&cases, |(_, train, test)| {
+    let results = crate::parallel::par_map(&cases, |(_, train, test)| {
         (
             edge_rmse(points, &less, after, train, test),
             edge_rmse(points, &with, after, train, test),

@@ -36,7 +36,7 @@ pub mod lack_of_fit;
 pub mod library;
 pub mod mechanism;
 pub mod options;
-
+pub mod parallel;
 pub mod plausibility;
 pub mod points;
 pub mod report_files;

@@ -861,7 +861,7 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
         .filter(|(_, (c, est))| could_pass(*c, *est))
         .map(|(_, (c, _))| *c)
         .collect();
-    let fits = fit::par_map(&to_fit, |&c| fit_candidate(points, current, c));
+    let fits = crate::parallel::par_map(&to_fit, |&c| fit_candidate(points, current, c));
     let mut candidates: Vec<Candidate> = to_fit
         .iter()
         .zip(fits)
@@ -1136,7 +1136,7 @@ fn score_held_out(points: &TestPoints, candidates: &mut [Candidate], guard_passe
         .filter(|&i| candidates[i].fit.is_some())
         .filter(|&i| full_table || (guard_passed && i == 0))
         .collect();
-    let scores = fit::par_map(&scored, |&i| {
+    let scores = crate::parallel::par_map(&scored, |&i| {
         let f = candidates[i]
             .fit
             .as_ref()

@@ -17,7 +17,7 @@ mod spec;
 
 use model::effects::{CurrentEvaluator, CurrentModel, Effect, OperatingPoint, Param};
 
-pub use holdout::{HeldOut, held_out, par_map};
+pub use holdout::{HeldOut, held_out};
 pub use likelihood::{
     HOLD_LABEL_ERROR, SIGMA_FLOOR_A, fit_hold, held_rows, hold_loglik, ripple_profile,
 };
