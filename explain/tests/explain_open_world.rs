@@ -20,6 +20,8 @@
 //! cargo test --release -p explain --test explain_open_world -- --ignored --nocapture
 //! ```
 
+mod common;
+
 use explain::synth::{self, BenchSchedule, Conditions, SweepPlan};
 use explain::{self, Dataset, Explanation, Options, Verdict};
 use model::effects::{CurrentModel, Effect};
@@ -170,18 +172,6 @@ fn run(data: &Dataset, rig: &RigFile, noise_a: f64) -> Explanation {
     explain::explain(data, rig, &options).unwrap().explanation
 }
 
-/// A confident wrong name on an out-of-library truth: `explained` with a confidence or a
-/// first inclusion probability of 0.8 or more (any name is wrong here).
-fn confident_wrong(e: &Explanation) -> bool {
-    e.verdict == Verdict::Explained
-        && (e.confidence.unwrap_or(0.0) >= 0.8
-            || e.effects
-                .first()
-                .and_then(|f| f.inclusion_probability)
-                .unwrap_or(0.0)
-                >= 0.8)
-}
-
 #[test]
 fn out_of_library_truths_are_not_named_confidently() {
     let rig = RigFile::paper();
@@ -205,7 +195,7 @@ fn out_of_library_truths_are_not_named_confidently() {
                 f.name
             );
         }
-        if confident_wrong(&e) {
+        if common::confident(&e) {
             confident.push(format!("{}: {}", u.name(), e.finding));
         }
         if matches!(e.verdict, Verdict::Unexplained | Verdict::PartlyExplained) {
@@ -471,41 +461,6 @@ fn explained_right(h: Hidden, e: &Explanation) -> bool {
     }
 }
 
-/// The reliability table of `stated` (confidence, right) pairs.
-fn reliability_table(stated: &[(f64, bool)]) -> String {
-    let mut out = String::from(
-        "| stated confidence | explained verdicts | mean stated | share right |\n|---|---|---|---|\n",
-    );
-    for (lo, hi) in [
-        (0.0, 0.5),
-        (0.5, 0.7),
-        (0.7, 0.8),
-        (0.8, 0.9),
-        (0.9, 0.95),
-        (0.95, 1.01),
-    ] {
-        let bin: Vec<&(f64, bool)> = stated.iter().filter(|(c, _)| *c >= lo && *c < hi).collect();
-        let right = bin.iter().filter(|(_, r)| *r).count();
-        let mean = bin.iter().map(|(c, _)| c).sum::<f64>() / bin.len().max(1) as f64;
-        out += &format!(
-            "| {lo:.2}-{:.2} | {} | {} | {} |\n",
-            hi.min(1.0),
-            bin.len(),
-            if bin.is_empty() {
-                "-".to_string()
-            } else {
-                format!("{mean:.2}")
-            },
-            if bin.is_empty() {
-                "-".to_string()
-            } else {
-                format!("{:.0} %", 100.0 * right as f64 / bin.len() as f64)
-            }
-        );
-    }
-    out
-}
-
 /// Fits the confidence map of `explain::calibration` on a batch of its own (seeds from
 /// 80 000, a third rig) and prints it as the constant to paste; the map is checked on
 /// `full_open_world_batch`, never on the batch it was fitted on.
@@ -524,7 +479,7 @@ fn fit_confidence_map() {
         pairs.len(),
         results.len()
     );
-    println!("{}", reliability_table(&pairs));
+    println!("{}", common::reliability_table(&pairs));
     println!("pub const CONFIDENCE_MAP: &[CalibrationStep] = &[");
     for s in &map {
         println!(
@@ -585,7 +540,7 @@ fn full_open_world_batch() {
             .count();
         let wrong = set
             .iter()
-            .filter(|e| confident_wrong(e) && !first(e).is_some_and(|f| truths.contains(&f)))
+            .filter(|e| common::confident(e) && !first(e).is_some_and(|f| truths.contains(&f)))
             .count();
         let count = |v: Verdict| set.iter().filter(|e| e.verdict == v).count();
         table += &format!(
@@ -633,8 +588,8 @@ fn full_open_world_batch() {
             Hidden::Library(_) => {}
         }
     }
-    let reliability = reliability_table(&stated);
-    let reliability_raw = reliability_table(&raw);
+    let reliability = common::reliability_table(&stated);
+    let reliability_raw = common::reliability_table(&raw);
     println!(
         "\n{table}\ncalibrated confidence:\n{reliability}\nbootstrap share (confidence_raw):\n{reliability_raw}"
     );
@@ -794,7 +749,7 @@ fn wear_that_time_explains_as_well_is_not_named_as_thermal_drift() {
     let data = hidden_dataset(rig, Hidden::Unknown(Unknown::Wear), &plan(noise), 80_010);
     let e = run(&data, rig, noise);
     assert_ne!(e.verdict, Verdict::Explained, "{}", e.finding);
-    assert!(!confident_wrong(&e), "{}", e.finding);
+    assert!(!common::confident(&e), "{}", e.finding);
     let drift = e
         .effects
         .iter()

@@ -55,6 +55,8 @@
 //! cargo test --release -p explain --test explain_unseen -- --ignored --nocapture
 //! ```
 
+mod common;
+
 use std::f64::consts::PI;
 
 use explain::synth::{self, BenchSchedule, Conditions, SweepPlan, TestOrder};
@@ -500,21 +502,10 @@ fn first(e: &Explanation) -> Option<&str> {
     e.effects.first().map(|f| f.name.as_str())
 }
 
-/// `explained` with a confidence or a first inclusion probability of 0.8 or more.
-fn confident(e: &Explanation) -> bool {
-    e.verdict == Verdict::Explained
-        && (e.confidence.unwrap_or(0.0) >= 0.8
-            || e.effects
-                .first()
-                .and_then(|f| f.inclusion_probability)
-                .unwrap_or(0.0)
-                >= 0.8)
-}
-
 /// The issue's confident wrong name: confident, and the truth not named (any name is wrong on
 /// an out-of-library or effect-free truth; for a library form, its family must be named).
 fn confident_wrong(t: Truth, e: &Explanation) -> bool {
-    confident(e)
+    common::confident(e)
         && match t {
             Truth::Library(f) => !e.effects.iter().any(|x| x.name == f.family().name()),
             _ => true,
@@ -680,7 +671,7 @@ fn report(truths: &[Truth], cases: &[Case]) -> (String, usize, usize, usize, usi
     }
     out += &breakdown(cases);
     out += "\nreliability of the stated confidence (every explained verdict):\n";
-    out += &reliability_table(&stated);
+    out += &common::reliability_table(&stated);
     out += &format!(
         "\nconfident wrong names on out-of-library truths: {wrong_unseen} of {unseen}; false findings on effect-free data: {false_found} of {free}\n"
     );
@@ -747,36 +738,6 @@ fn breakdown(cases: &[Case]) -> String {
             })
             .collect(),
     );
-    out
-}
-
-/// Stated confidence against the share right, in the bins of `explain_open_world.rs`.
-fn reliability_table(stated: &[(f64, bool)]) -> String {
-    let mut out = String::from(
-        "| stated confidence | explained verdicts | mean stated | share right |\n|---|---|---|---|\n",
-    );
-    for (lo, hi) in [
-        (0.0, 0.5),
-        (0.5, 0.7),
-        (0.7, 0.8),
-        (0.8, 0.9),
-        (0.9, 0.95),
-        (0.95, 1.01),
-    ] {
-        let bin: Vec<&(f64, bool)> = stated.iter().filter(|(c, _)| *c >= lo && *c < hi).collect();
-        if bin.is_empty() {
-            out += &format!("| {lo:.2}-{:.2} | 0 | - | - |\n", hi.min(1.0));
-            continue;
-        }
-        let right = bin.iter().filter(|(_, r)| *r).count();
-        let mean = bin.iter().map(|(c, _)| c).sum::<f64>() / bin.len() as f64;
-        out += &format!(
-            "| {lo:.2}-{:.2} | {} | {mean:.2} | {:.0} % ({right}) |\n",
-            hi.min(1.0),
-            bin.len(),
-            100.0 * right as f64 / bin.len() as f64
-        );
-    }
     out
 }
 
