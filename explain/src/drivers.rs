@@ -479,19 +479,7 @@ pub fn check_in_final(points: &TestPoints, after: &Fit, cand: Mechanism) -> Opti
     if let Mechanism::Effect(e) = cand {
         library::clear_params(e, &mut model.effects);
     }
-    let starts: Vec<Vec<f64>> = spec
-        .terms
-        .iter()
-        .map(|&t| {
-            after
-                .spec
-                .terms
-                .iter()
-                .position(|&x| x == t)
-                .map(|pos| after.term_x[pos].clone())
-                .unwrap_or_else(|| points.terms[t].start_point())
-        })
-        .collect();
+    let starts = after.term_starts(points, &spec);
     let less = fit::fit_from(points, &points.all, &spec, &model, &starts);
     check(points, &less, after, cand)
 }

@@ -65,19 +65,7 @@ fn edge_rmse(
     train: &[usize],
     test: &[usize],
 ) -> f64 {
-    let starts: Vec<Vec<f64>> = spec
-        .terms
-        .iter()
-        .map(|&t| {
-            start
-                .spec
-                .terms
-                .iter()
-                .position(|&x| x == t)
-                .map(|pos| start.term_x[pos].clone())
-                .unwrap_or_else(|| points.terms[t].start_point())
-        })
-        .collect();
+    let starts = start.term_starts(points, spec);
     // The final model is the start: a few iterations reach the edge fit (the cost of four
     // edges x two models stays small on large data).
     let f = fit::fit_capped(points, train, spec, &start.model, &starts, EDGE_ITERATIONS);

@@ -74,6 +74,22 @@ pub struct Fit {
 }
 
 impl Fit {
+    /// The start of each of `spec`'s terms: this fit's coordinates where it carries the term,
+    /// else the term's first start (a refit of a related model starts where this one ended).
+    pub fn term_starts(&self, points: &TestPoints, spec: &ModelSpec) -> Vec<Vec<f64>> {
+        spec.terms
+            .iter()
+            .map(|&t| {
+                self.spec
+                    .terms
+                    .iter()
+                    .position(|&x| x == t)
+                    .map(|pos| self.term_x[pos].clone())
+                    .unwrap_or_else(|| points.terms[t].start_point())
+            })
+            .collect()
+    }
+
     /// Root mean square of the residuals of the fitted rows, A.
     pub fn rmse(&self) -> f64 {
         (self.sse / self.n.max(1) as f64).sqrt()
