@@ -74,6 +74,17 @@ impl<R> LineBounded<R> {
             refused: None,
         }
     }
+
+    /// The refusal of line `line`.
+    fn too_long(&self, line: u64) -> std::io::Error {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "line {line} is longer than {} KiB: not a CSV table of test points (a file without line ends?); reading stopped there",
+                self.limit / 1024
+            ),
+        )
+    }
 }
 
 impl<R: Read> Read for LineBounded<R> {
@@ -108,44 +119,9 @@ impl<R: Read> Read for LineBounded<R> {
     }
 }
 
-/// Calls `f` with the position of every line end in `bytes`, in order; eight bytes a step.
-fn for_each_line_end(bytes: &[u8], mut f: impl FnMut(usize)) {
-    const ONES: u64 = u64::from_ne_bytes([0x01; 8]);
-    const HIGHS: u64 = u64::from_ne_bytes([0x80; 8]);
-    const ENDS: u64 = u64::from_ne_bytes([b'\n'; 8]);
-    let mut words = bytes.chunks_exact(8);
-    let mut base = 0;
-    for word in &mut words {
-        let x = u64::from_le_bytes(word.try_into().expect("eight bytes")) ^ ENDS;
-        // A high bit for every zero byte of x (and perhaps a byte after one): each checked.
-        let mut hits = x.wrapping_sub(ONES) & !x & HIGHS;
-        while hits != 0 {
-            let i = hits.trailing_zeros() as usize / 8;
-            if word[i] == b'\n' {
-                f(base + i);
-            }
-            hits &= hits - 1;
-        }
-        base += 8;
-    }
-    for (i, &b) in words.remainder().iter().enumerate() {
-        if b == b'\n' {
-            f(base + i);
-        }
-    }
-}
-
-impl<R> LineBounded<R> {
-    /// The refusal of line `line`.
-    fn too_long(&self, line: u64) -> std::io::Error {
-        std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            format!(
-                "line {line} is longer than {} KiB: not a CSV table of test points (a file without line ends?); reading stopped there",
-                self.limit / 1024
-            ),
-        )
-    }
+/// Calls `f` with the position of every line end in `bytes`, in order.
+fn for_each_line_end(bytes: &[u8], f: impl FnMut(usize)) {
+    memchr::memchr_iter(b'\n', bytes).for_each(f);
 }
 
 /// One test point: the rig tools' one measured-row type ([`rigfile::row`]), which every
@@ -662,7 +638,7 @@ fn parse_blocks<R: Read>(
             Err(_) => (buf, false, true),
             Ok(true) => (buf, true, false),
             Ok(false) => {
-                match buf.iter().rposition(|&b| b == b'\n') {
+                match memchr::memrchr(b'\n', &buf) {
                     Some(last) => *carry = buf.split_off(last + 1),
                     None => *carry = std::mem::take(&mut buf),
                 }
@@ -955,7 +931,7 @@ mod tests {
     }
 
     #[test]
-    fn line_ends_are_found_eight_bytes_at_a_time() {
+    fn line_ends_are_found_at_every_offset() {
         // Every byte value next to line ends, at every offset and length.
         let bytes: Vec<u8> = (0..600u32)
             .map(|k| match k % 7 {
