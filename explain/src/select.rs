@@ -208,6 +208,19 @@ pub enum Decision {
         /// The level of that guard.
         level: f64,
     },
+    /// A later effect (one was named before it) whose law its own driver does not tell from a
+    /// generic shape in another variable: stacked without grounds, it is not named, and what
+    /// it would explain is left to the lack of fit and the residual's shape.
+    NotSeparated {
+        /// The candidate's name.
+        best: String,
+        /// Its BIC improvement.
+        improvement: f64,
+        /// The guard's p-value.
+        p_value: f64,
+        /// The driver check, in words.
+        check: String,
+    },
     /// Added to the model.
     Added {
         /// The candidate's name.
@@ -294,6 +307,16 @@ impl std::fmt::Display for Decision {
             } => write!(
                 f,
                 "{best} improves the BIC by {improvement:.1} ({}), but without the single test point at data row {row} (the one that contributes most) only by {without:.1}, below the {critical:.1} that effect-free data reaches with probability {level}: one point does not make a finding",
+                p_text(*p_value)
+            ),
+            Decision::NotSeparated {
+                best,
+                improvement,
+                p_value,
+                check,
+            } => write!(
+                f,
+                "{best} improves the BIC by {improvement:.1} ({}), but {check}; an effect added to one already named must follow its own variable: it is not named",
                 p_text(*p_value)
             ),
             Decision::Added {
@@ -1036,6 +1059,14 @@ pub fn select_from(
             steps.push(next);
             continue;
         }
+        if !steps.is_empty()
+            && let Some(refused) = not_separated(points, &current, &step)
+        {
+            step.decision = refused;
+            step.accepted = false;
+            steps.push(step);
+            break;
+        }
         (current, current_held_out) = advance(points, &step);
         steps.push(step);
     }
@@ -1046,6 +1077,26 @@ pub fn select_from(
         end_held_out: current_held_out,
         end: current,
     }
+}
+
+/// A later step's best, accepted on every other test, whose own driver a generic shape in
+/// another variable matches ([`crate::drivers::check`]): the decision that turns it down.
+/// The first effect named is judged on the same check after the selection (the verdict is
+/// then `ambiguous`); a later one would only stack a guess on a finding.
+fn not_separated(points: &TestPoints, current: &Fit, step: &Step) -> Option<Decision> {
+    let best = step.best()?;
+    let with = best.fit.as_ref()?;
+    let check = crate::drivers::check(points, current, with, best.cand)?;
+    if check.separated {
+        return None;
+    }
+    let name = best.cand.name(points);
+    Some(Decision::NotSeparated {
+        best: name.to_string(),
+        improvement: best.improvement,
+        p_value: step.p_value,
+        check: check.summary(name),
+    })
 }
 
 /// The starting model fitted (twice, so a loaded model and a selected one end at the same

@@ -337,6 +337,8 @@ enum Hidden {
     Unknown(Unknown),
     Library(Effect),
     Pair(Effect, Effect),
+    /// A library effect with an out-of-library one beside it.
+    WithUnknown(Effect, Unknown),
 }
 
 /// Library effects paired in the two-effect sets (different variables: speed, load, time,
@@ -367,14 +369,16 @@ fn hidden_dataset(rig: &RigFile, h: Hidden, plan: &SweepPlan, seed: u64) -> Data
     };
     match h {
         Hidden::None | Hidden::Unknown(_) => {}
-        Hidden::Library(e) => library(e, &mut model),
+        Hidden::Library(e) | Hidden::WithUnknown(e, _) => library(e, &mut model),
         Hidden::Pair(a, b) => {
             library(a, &mut model);
             library(b, &mut model);
         }
     }
     let extra = match h {
-        Hidden::Unknown(u) => Some(extra(u, plan, &mut NoiseSource::new(seed ^ 0x0be7))),
+        Hidden::Unknown(u) | Hidden::WithUnknown(_, u) => {
+            Some(extra(u, plan, &mut NoiseSource::new(seed ^ 0x0be7)))
+        }
         _ => None,
     };
     let rows = synth::generate_session(
@@ -508,6 +512,7 @@ fn full_open_world_batch() {
         Hidden::Unknown(u) => format!("{} (no library law)", u.name()),
         Hidden::Library(e) => e.name().to_string(),
         Hidden::Pair(a, b) => format!("{} + {}", a.name(), b.name()),
+        Hidden::WithUnknown(e, u) => format!("{} + {} (no library law)", e.name(), u.name()),
     };
     let (mut wrong_total, mut unknown_total, mut false_findings, mut clean) = (0, 0, 0, 0);
     let (mut both, mut pairs) = (0, 0);
@@ -585,7 +590,7 @@ fn full_open_world_batch() {
                     })
                     .count();
             }
-            Hidden::Library(_) => {}
+            Hidden::Library(_) | Hidden::WithUnknown(..) => {}
         }
     }
     let reliability = common::reliability_table(&stated);
@@ -783,6 +788,56 @@ fn wear_that_time_explains_as_well_is_not_named_as_thermal_drift() {
 }
 
 #[test]
+fn a_later_effect_that_another_driver_explains_as_well_is_not_stacked() {
+    // Axial friction that falls at low speed, and friction that grows with the revolutions
+    // run beside it: after the friction law, thermal drift would take up the wear, but a
+    // generic shape in time or revolutions does as well. Issue 19 item 4: each added effect
+    // passes the tests of the first, so it is not named on top of the friction law.
+    let rig = &batch_rigs(true)[0];
+    let noise = 0.010;
+    let data = hidden_dataset(
+        rig,
+        Hidden::WithUnknown(Effect::SpeedDependentAxialFriction, Unknown::Wear),
+        &plan(noise),
+        80_013,
+    );
+    let e = run(&data, rig, noise);
+    assert_eq!(
+        e.effects.first().map(|f| f.name.as_str()),
+        Some(Effect::SpeedDependentAxialFriction.name()),
+        "{}",
+        e.finding
+    );
+    assert!(
+        e.effects.iter().all(|f| f.name != Effect::ThermalDrift.name()),
+        "{}",
+        e.finding
+    );
+    // Every effect named after the first follows its own variable.
+    for f in &e.effects[1..] {
+        assert!(
+            f.driver_check.as_ref().is_none_or(|d| d.separated),
+            "{}: {:?}",
+            f.name,
+            f.driver_check
+        );
+    }
+    // The step that would have stacked it says why, and the wear is left as a remainder.
+    let refused = e
+        .steps
+        .iter()
+        .find(|s| s.reason.contains("must follow its own variable"))
+        .unwrap_or_else(|| panic!("a step turns a later law down: {}", e.finding));
+    assert!(!refused.accepted);
+    assert!(
+        refused.reason.contains("the revolutions run") || refused.reason.contains("the time"),
+        "{}",
+        refused.reason
+    );
+    assert_ne!(e.verdict, Verdict::Ambiguous, "{}", e.finding);
+}
+
+#[test]
 fn a_true_thermal_drift_beats_every_other_driver() {
     let rig = &batch_rigs(true)[0];
     let noise = 0.010;
@@ -853,3 +908,4 @@ fn two_effects_plausible_only_together_are_named_and_reported_as_such() {
     );
     assert!(first.get("driver_check").is_some() && first.get("plausible").is_some());
 }
+
