@@ -1,177 +1,225 @@
 //! Calibrated confidence: the share of bootstrap replicates that reach a finding is not the
 //! probability that the finding is right (on batches with truths outside the library, a
-//! share of 0.9-0.95 was right in 74 % of the `explained` verdicts). A monotone map, fitted
-//! by isotonic regression on a generated batch and checked on another, turns the share into
-//! that probability ([`calibrated`]); the share itself stays in the JSON as `confidence_raw`.
+//! share of 0.9-0.95 was right in 74 % of the `explained` verdicts, and on an independent
+//! batch a stated 0.95 in 65 %). What else the report knows says how far the share can be
+//! trusted: a law that a generic shape in another variable nearly matches (a small
+//! [`drivers`](crate::drivers) margin), or a final model whose lack of fit is close to
+//! significant, is wrong more often at the same share. A logistic model of those three
+//! readings ([`Evidence`]), fitted by [`fit_logistic`] on a generated batch and checked on
+//! others, turns them into the probability:
+//! - [`CONFIDENCE_MODEL`]: that an `explained` verdict's set of effects is exactly the truth,
+//!   from the share of replicates reaching the set;
+//! - [`INCLUSION_MODEL`]: that a named effect is part of the truth, from the share of
+//!   replicates that include it.
 //!
-//! The map was fitted on `explain/tests/explain_open_world.rs`'s `fit_confidence_map`
-//! batch (its own seeds and a third rig) and is checked on `full_open_world_batch` (other
-//! seeds and rigs), whose reliability table docs/explain-validation.md gives.
+//! The shares themselves stay in the JSON (`confidence_raw`, each effect's
+//! `inclusion_probability_raw`).
 
-/// One step of a confidence map: bootstrap shares from `from` (inclusive) up to the next
-/// step's `from` were right with probability `probability`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CalibrationStep {
-    /// Lowest bootstrap share of the step.
-    pub from: f64,
-    /// Probability that an `explained` verdict with such a share names exactly the truth.
-    pub probability: f64,
-    /// Verdicts of the fitting batch in the step.
-    pub verdicts: usize,
+use serde::Serialize;
+
+/// Readings of the evidence a probability is calibrated from.
+pub const FEATURES: usize = 5;
+
+/// The driver margin (chi-square) at which its reading saturates: beyond, a law is as well
+/// separated as it gets.
+const MARGIN_FULL: f64 = 100.0;
+/// Decades of the lack of fit's p-value at which its reading saturates.
+const P_DECADES: f64 = 6.0;
+
+/// What a calibrated probability reads of a finding or of one named effect.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Evidence {
+    /// The share of bootstrap replicates that reach the finding (that include the effect).
+    pub share: f64,
+    /// The smallest driver-check margin among its effects: the chi-square its law explains
+    /// less that of the best generic shape in another variable (`None`: no effect has a law
+    /// with a driver, e.g. a sensor offset).
+    pub driver_margin: Option<f64>,
+    /// The final model's lack-of-fit p-value.
+    pub lack_of_fit_p: f64,
 }
 
-/// The map from the bootstrap share of an `explained` verdict's set of effects to the
-/// probability that the set is exactly the truth, fitted by [`isotonic`] on the
-/// `fit_confidence_map` batch: 544 data sets (the paper's rig and one with gears (50, 50,
-/// 51, 49), a 1.2 mm stroke and a 4.2 kg carrier; two plans; 3-40 mA; out-of-library
-/// truths, library effects, pairs and effect-free sets; seeds 80 000 and up), 225 of them
-/// `explained` (refitted after the driver check and the pairs plausible only together,
-/// session 7).
-pub const CONFIDENCE_MAP: &[CalibrationStep] = &[
-    CalibrationStep {
-        from: 0.0,
-        probability: 0.421,
-        verdicts: 17,
-    },
-    CalibrationStep {
-        from: 0.5,
-        probability: 0.6,
-        verdicts: 18,
-    },
-    CalibrationStep {
-        from: 0.7,
-        probability: 0.741,
-        verdicts: 25,
-    },
-    CalibrationStep {
-        from: 0.8,
-        probability: 0.85,
-        verdicts: 18,
-    },
-    CalibrationStep {
-        from: 0.85,
-        probability: 0.862,
-        verdicts: 27,
-    },
-    CalibrationStep {
-        from: 0.9,
-        probability: 0.913,
-        verdicts: 21,
-    },
-    CalibrationStep {
-        from: 0.95,
-        probability: 0.95,
-        verdicts: 99,
-    },
-];
-
-/// The probability that an `explained` verdict whose set of effects `share` of the bootstrap
-/// replicates reach is right, by [`CONFIDENCE_MAP`].
-pub fn calibrated(share: f64) -> f64 {
-    calibrated_by(CONFIDENCE_MAP, share)
+impl Evidence {
+    /// The readings the model weighs: 1, the share's log-odds (within 0.005-0.995), the
+    /// margin (ln(1 + m) / ln(1 + 100), 0 below zero and without a driver), whether no law
+    /// has a driver, and the lack of fit's -log10 p in thirds of its six decades.
+    pub fn features(&self) -> [f64; FEATURES] {
+        let s = if self.share.is_finite() {
+            self.share.clamp(0.005, 0.995)
+        } else {
+            0.005
+        };
+        let margin = self
+            .driver_margin
+            .filter(|m| m.is_finite())
+            .map_or(0.0, |m| {
+                m.clamp(0.0, MARGIN_FULL).ln_1p() / MARGIN_FULL.ln_1p()
+            });
+        let p = if self.lack_of_fit_p.is_finite() {
+            self.lack_of_fit_p.clamp(1e-300, 1.0)
+        } else {
+            1.0
+        };
+        [
+            1.0,
+            (s / (1.0 - s)).ln(),
+            margin,
+            if self.driver_margin.is_none() {
+                1.0
+            } else {
+                0.0
+            },
+            (-p.log10()).min(P_DECADES) / 3.0,
+        ]
+    }
 }
 
-/// [`calibrated`] by the map `map` (steps in rising `from`).
-pub fn calibrated_by(map: &[CalibrationStep], share: f64) -> f64 {
-    map.iter()
-        .take_while(|s| s.from <= share)
-        .last()
-        .or(map.first())
-        .map_or(share, |s| s.probability)
+/// A logistic model: probability = 1 / (1 + exp(-w . features)).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CalibrationModel {
+    /// Weight of each reading of [`Evidence::features`].
+    pub weights: [f64; FEATURES],
+    /// Cases of the batch it was fitted on.
+    pub cases: usize,
 }
 
-/// Lower edges of the bins [`isotonic`] starts from: a step per bin is all a batch of a few
-/// hundred verdicts can support (a step per distinct share would follow its noise).
-pub const BIN_EDGES: [f64; 8] = [0.0, 0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99];
+impl CalibrationModel {
+    /// The probability this model gives `evidence`.
+    pub fn probability(&self, evidence: &Evidence) -> f64 {
+        let x = evidence.features();
+        let z: f64 = self.weights.iter().zip(x).map(|(w, v)| w * v).sum();
+        1.0 / (1.0 + (-z).exp())
+    }
+}
 
-/// Isotonic regression of `right` on the bootstrap share, as a step map: pairs
-/// `(share, right)` in any order are counted in the bins of [`BIN_EDGES`], each bin's
-/// probability is its share of right verdicts with one right and one wrong added (Laplace's
-/// rule: 40 right of 40 says 0.976, not certainty), and neighbouring bins whose
-/// probabilities fall are pooled until they rise (pool adjacent violators). Empty bins join
-/// the step below them.
-pub fn isotonic(pairs: &[(f64, bool)]) -> Vec<CalibrationStep> {
-    // (lowest share, right, count) per bin with verdicts.
-    let mut blocks: Vec<(f64, f64, f64)> = Vec::new();
-    for (k, &from) in BIN_EDGES.iter().enumerate() {
-        let to = BIN_EDGES.get(k + 1).copied().unwrap_or(f64::INFINITY);
-        let bin: Vec<bool> = pairs
-            .iter()
-            .filter(|(c, _)| c.is_finite() && *c >= from && *c < to)
-            .map(|p| p.1)
-            .collect();
-        if !bin.is_empty() {
-            let right = bin.iter().filter(|&&r| r).count() as f64;
-            blocks.push((from, right, bin.len() as f64));
+/// The probability that an `explained` verdict is exactly right, fitted by [`fit_logistic`]
+/// on `explain/tests/explain_open_world.rs`'s `fit_confidence_map` batch: 544 data sets (the
+/// paper's rig and one with gears (50, 50, 51, 49), a 1.2 mm stroke and a 4.2 kg carrier;
+/// two plans; 3-40 mA; out-of-library truths, library effects, pairs and effect-free sets;
+/// seeds 80 000 and up), its `explained` verdicts (session 8).
+pub const CONFIDENCE_MODEL: CalibrationModel = CalibrationModel {
+    weights: [0.66, 0.60, 0.61, 0.49, -3.45],
+    cases: 228,
+};
+
+/// The probability that a named effect is part of the truth, fitted by [`fit_logistic`] on
+/// the same batch: every effect named by any verdict (session 8).
+pub const INCLUSION_MODEL: CalibrationModel = CalibrationModel {
+    weights: [-1.15, 0.24, 3.19, 1.53, -4.45],
+    cases: 593,
+};
+
+/// The probability that an `explained` verdict with this evidence is right
+/// ([`CONFIDENCE_MODEL`]).
+pub fn calibrated(evidence: &Evidence) -> f64 {
+    CONFIDENCE_MODEL.probability(evidence)
+}
+
+/// The probability that a named effect with this evidence is part of the truth
+/// ([`INCLUSION_MODEL`]).
+pub fn calibrated_inclusion(evidence: &Evidence) -> f64 {
+    INCLUSION_MODEL.probability(evidence)
+}
+
+/// Ridge on the weights other than the intercept: a batch of a few hundred verdicts
+/// supports five weights, not their noise.
+pub const RIDGE: f64 = 1.0;
+
+/// The logistic model of `right` on the readings of each case, by maximum likelihood with
+/// [`RIDGE`] (Newton's method; `None` when the cases cannot fix the weights).
+pub fn fit_logistic(cases: &[(Evidence, bool)]) -> Option<CalibrationModel> {
+    const N: usize = FEATURES;
+    if cases.is_empty() {
+        return None;
+    }
+    let x: Vec<[f64; N]> = cases.iter().map(|(e, _)| e.features()).collect();
+    let y: Vec<f64> = cases.iter().map(|&(_, r)| f64::from(u8::from(r))).collect();
+    let mut w = [0.0; N];
+    for _ in 0..100 {
+        let mut grad = [0.0; N];
+        let mut hess = [0.0; N * N];
+        for (xi, yi) in x.iter().zip(&y) {
+            let z: f64 = w.iter().zip(xi).map(|(a, b)| a * b).sum();
+            let p = 1.0 / (1.0 + (-z).exp());
+            for a in 0..N {
+                grad[a] += (p - yi) * xi[a];
+                for b in 0..N {
+                    hess[a * N + b] += p * (1.0 - p) * xi[a] * xi[b];
+                }
+            }
+        }
+        for a in 1..N {
+            grad[a] += RIDGE * w[a];
+            hess[a * N + a] += RIDGE;
+        }
+        hess[0] += 1e-9;
+        let l = crate::stats::cholesky(&hess, N)?;
+        let step = crate::stats::cholesky_solve(&l, N, &grad);
+        let mut largest = 0.0f64;
+        for a in 0..N {
+            w[a] -= step[a];
+            largest = largest.max(step[a].abs());
+        }
+        if !largest.is_finite() {
+            return None;
+        }
+        if largest < 1e-10 {
+            break;
         }
     }
-    let rate = |b: &(f64, f64, f64)| (b.1 + 1.0) / (b.2 + 2.0);
-    // Pool until no step falls.
-    while let Some(k) = (1..blocks.len()).find(|&k| rate(&blocks[k]) < rate(&blocks[k - 1])) {
-        let b = blocks.remove(k);
-        let a = &mut blocks[k - 1];
-        a.1 += b.1;
-        a.2 += b.2;
-    }
-    blocks
-        .iter()
-        .enumerate()
-        .map(|(k, b)| CalibrationStep {
-            from: if k == 0 { 0.0 } else { b.0 },
-            probability: rate(b),
-            verdicts: b.2 as usize,
-        })
-        .collect()
+    Some(CalibrationModel {
+        weights: w,
+        cases: cases.len(),
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    #[test]
-    fn isotonic_pools_a_violation_and_keeps_the_order() {
-        // 0.8-0.85 right 9 of 10, 0.9-0.95 right 6 of 10, 0.95-0.99 right 19 of 20, below
-        // 0.5 right 2 of 10: the 0.9 bin falls below the 0.8 bin and pools with it.
-        let mut pairs = Vec::new();
-        for k in 0..10 {
-            pairs.push((0.82, k < 9));
-            pairs.push((0.92, k < 6));
-            pairs.push((0.3, k < 2));
+    fn ev(share: f64, margin: Option<f64>, p: f64) -> Evidence {
+        Evidence {
+            share,
+            driver_margin: margin,
+            lack_of_fit_p: p,
         }
-        for k in 0..20 {
-            pairs.push((0.97, k < 19));
-        }
-        let map = isotonic(&pairs);
-        assert_eq!(map.len(), 3, "{map:?}");
-        assert_eq!(map[0].from, 0.0);
-        assert!((map[0].probability - 3.0 / 12.0).abs() < 1e-12, "{map:?}");
-        assert_eq!(map[1].from, 0.8);
-        assert!((map[1].probability - 16.0 / 22.0).abs() < 1e-12, "{map:?}");
-        assert_eq!(map[2].from, 0.95);
-        assert_eq!(map[2].verdicts, 20);
-        assert!(map.windows(2).all(|w| w[0].probability <= w[1].probability));
-        // Shares between steps take the step below; below the first, the first.
-        assert_eq!(calibrated_by(&map, 0.9), map[1].probability);
-        assert_eq!(calibrated_by(&map, 1.0), map[2].probability);
-        assert_eq!(calibrated_by(&map, 0.0), map[0].probability);
     }
 
     #[test]
-    fn the_shipped_map_is_a_monotone_probability() {
-        assert_eq!(CONFIDENCE_MAP[0].from, 0.0);
-        assert!(
-            CONFIDENCE_MAP
-                .windows(2)
-                .all(|w| w[0].from < w[1].from && w[0].probability <= w[1].probability)
-        );
-        assert!(
-            CONFIDENCE_MAP
-                .iter()
-                .all(|s| s.probability > 0.0 && s.probability < 1.0)
-        );
-        for share in [0.0, 0.5, 0.9, 1.0] {
-            let p = calibrated(share);
-            assert!((0.0..=1.0).contains(&p));
+    fn the_fit_recovers_the_weights_that_drew_the_cases() {
+        // Cases drawn from a known model: the fit finds its weights back (within the ridge's
+        // pull and the draw's noise).
+        let truth = CalibrationModel {
+            weights: [0.5, 1.0, 1.5, 0.5, -2.0],
+            cases: 0,
+        };
+        let mut rng = model::plant::NoiseSource::new(7);
+        let mut cases = Vec::new();
+        for _ in 0..20_000 {
+            let e = ev(
+                rng.uniform(),
+                (rng.uniform() < 0.8).then(|| 150.0 * rng.uniform()),
+                rng.uniform().powi(3),
+            );
+            let right = rng.uniform() < truth.probability(&e);
+            cases.push((e, right));
+        }
+        let fitted = fit_logistic(&cases).unwrap();
+        for (a, b) in fitted.weights.iter().zip(truth.weights) {
+            assert!((a - b).abs() < 0.2, "{fitted:?}");
+        }
+    }
+
+    #[test]
+    fn the_shipped_models_rise_with_the_share_and_fall_with_the_lack_of_fit() {
+        for m in [CONFIDENCE_MODEL, INCLUSION_MODEL] {
+            let at = |s, p| m.probability(&ev(s, Some(50.0), p));
+            assert!(at(0.99, 0.5) > at(0.6, 0.5));
+            assert!(at(0.99, 0.5) > at(0.99, 0.002));
+            for s in [0.0, 0.5, 1.0, f64::NAN] {
+                let p = m.probability(&ev(s, None, 0.3));
+                assert!((0.0..=1.0).contains(&p), "{p}");
+            }
         }
     }
 }

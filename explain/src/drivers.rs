@@ -167,6 +167,12 @@ impl DriverCheck {
             .map_or(1.0, |a| 1.0 / (1.0 + ((a.chi2 - self.chi2) / 2.0).exp()))
     }
 
+    /// The chi-square the effect explains beyond the best alternative (all of it when the
+    /// data offers none).
+    pub fn margin_over_best(&self) -> f64 {
+        self.chi2 - self.best_alternative.as_ref().map_or(0.0, |a| a.chi2)
+    }
+
     /// One sentence for the finding.
     pub fn summary(&self, name: &str) -> String {
         match &self.best_alternative {

@@ -117,9 +117,14 @@ pub struct EffectReport {
     pub holdout_rmse_a: Option<f64>,
     /// What the effect means at the fitted values.
     pub description: String,
+    /// The probability that the effect is part of the truth: the share of the block-bootstrap
+    /// replicates that select it, calibrated with its driver check and the final model's
+    /// lack of fit on generated batches with truths outside the library
+    /// ([`calibration::calibrated_inclusion`]); null without a bootstrap.
+    pub inclusion_probability: Option<f64>,
     /// Share of the block-bootstrap replicates of the whole selection that select it (null
     /// without a bootstrap).
-    pub inclusion_probability: Option<f64>,
+    pub inclusion_probability_raw: Option<f64>,
     /// BIC weight of the models with it (in any of its laws) among the models of its step
     /// (the model without it and every candidate).
     pub bic_weight: f64,
@@ -262,8 +267,9 @@ pub struct Explanation {
     /// The same with their bootstrap inclusion probabilities.
     pub ambiguous_candidates: Vec<AmbiguousCandidate>,
     /// For `explained`: the probability that the named set of effects is exactly right,
-    /// calibrated on generated batches with truths outside the library
-    /// ([`calibration::calibrated`] of `confidence_raw`). For the other verdicts: the
+    /// calibrated on generated batches with truths outside the library from
+    /// `confidence_raw`, the weakest driver check and the lack of fit
+    /// ([`calibration::calibrated`] of [`Explanation::evidence`]). For the other verdicts: the
     /// bootstrap share (`confidence_raw`), times the weight of each named effect whose
     /// driver a generic shape in another variable matches against that shape
     /// ([`drivers::DriverCheck::weight`]). Null without a bootstrap.
@@ -942,7 +948,9 @@ fn effect_reports(
             p_value: step.p_value,
             holdout_rmse_a: best.held_out.map(|h| h.rmse),
             description: cand_description(points, best.cand, source, thermal),
+            // Calibrated in `judge`, once the final model's lack of fit is known.
             inclusion_probability: resampled.inclusion(name),
+            inclusion_probability_raw: resampled.inclusion(name),
             // The effect's weight: all its laws'.
             bic_weight: step
                 .candidates
@@ -1013,6 +1021,48 @@ fn ambiguous_candidates(
         .find(|f| f.driver_check.as_ref().is_some_and(|d| !d.separated))
         .map(|f| vec![candidate(&f.name)])
         .unwrap_or_default()
+}
+
+impl EffectReport {
+    /// What its calibrated inclusion probability reads: its bootstrap share, its driver
+    /// check's margin and the final model's lack of fit `lack_of_fit_p` (`None` without a
+    /// bootstrap).
+    pub fn evidence(&self, lack_of_fit_p: f64) -> Option<calibration::Evidence> {
+        Some(calibration::Evidence {
+            share: self.inclusion_probability_raw?,
+            driver_margin: self
+                .driver_check
+                .as_ref()
+                .map(drivers::DriverCheck::margin_over_best),
+            lack_of_fit_p,
+        })
+    }
+}
+
+impl Explanation {
+    /// What the calibrated confidence of its finding reads (`None` without a bootstrap).
+    pub fn evidence(&self) -> Option<calibration::Evidence> {
+        self.confidence_raw
+            .map(|s| finding_evidence(s, &self.effects, self.lack_of_fit.p_value))
+    }
+}
+
+/// The evidence of a finding reached by `share` of the replicates: its weakest driver
+/// margin among `effects` and the lack of fit.
+fn finding_evidence(
+    share: f64,
+    effects: &[EffectReport],
+    lack_of_fit_p: f64,
+) -> calibration::Evidence {
+    calibration::Evidence {
+        share,
+        driver_margin: effects
+            .iter()
+            .filter_map(|f| f.driver_check.as_ref())
+            .map(drivers::DriverCheck::margin_over_best)
+            .reduce(f64::min),
+        lack_of_fit_p,
+    }
 }
 
 /// The verdict from what was named, the lack of fit and the ambiguity.
@@ -1142,6 +1192,12 @@ fn judge(
         &gap_after,
         options.stated_noise_a,
     );
+    let mut effects = effects;
+    for f in &mut effects {
+        f.inclusion_probability = f
+            .evidence(lack_of_fit.p_value)
+            .map(|e| calibration::calibrated_inclusion(&e));
+    }
     let verdict = verdict_of(
         !effects.is_empty(),
         &lack_of_fit,
@@ -1203,6 +1259,12 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
                 inclusion_probabilities.insert(name.clone(), p);
             }
         }
+        // A named effect's entry is its calibrated probability, as in `effects`.
+        for f in &j.effects {
+            if let Some(p) = f.inclusion_probability {
+                inclusion_probabilities.insert(f.name.clone(), p);
+            }
+        }
     }
     let steps = step_reports(
         &points,
@@ -1215,6 +1277,12 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
     let share = boot.as_ref().map(|b| b.set_share(&j.named));
     let (before, after) = (&selection.start, &selection.end);
     let verdict = j.verdict;
+    let confidence = share.map(|s| match verdict {
+        Verdict::Explained => {
+            calibration::calibrated(&finding_evidence(s, &j.effects, j.lack_of_fit.p_value))
+        }
+        _ => s * j.driver_weight,
+    });
     let mut explanation = Explanation {
         verdict,
         effects: j.effects,
@@ -1224,10 +1292,7 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             .map(|c| c.name.clone())
             .collect(),
         ambiguous_candidates: j.ambiguous_candidates,
-        confidence: share.map(|s| match verdict {
-            Verdict::Explained => calibration::calibrated(s),
-            _ => s * j.driver_weight,
-        }),
+        confidence,
         confidence_raw: share,
         inclusion_probabilities,
         model_weights,

@@ -254,8 +254,15 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                     p_text(eff.p_value),
                     opt_ma(eff.holdout_rmse_a)
                 );
-                if let Some(p) = eff.inclusion_probability {
+                if let Some(p) = eff.inclusion_probability_raw {
                     let _ = write!(s, ", selected in {:.0} % of the resamples", 100.0 * p);
+                }
+                if let Some(p) = eff.inclusion_probability {
+                    let _ = write!(
+                        s,
+                        " (probability {:.0} % that it is part of the truth, calibrated)",
+                        100.0 * p
+                    );
                 }
                 s.push_str(". ");
                 if let Some(x) = eff.extrapolation.as_ref().filter(|x| x.testable) {

@@ -449,6 +449,15 @@ fn run_batch(rigs: &[RigFile], seed_base: u64) -> Vec<(Hidden, Explanation)> {
         .collect()
 }
 
+/// Whether the effect called `name` is part of the truth `h`.
+fn in_truth(h: Hidden, name: &str) -> bool {
+    match h {
+        Hidden::Library(t) | Hidden::WithUnknown(t, _) => name == t.name(),
+        Hidden::Pair(a, b) => name == a.name() || name == b.name(),
+        Hidden::None | Hidden::Unknown(_) => false,
+    }
+}
+
 /// Whether an `explained` verdict is right: it names exactly the hidden library effect (or
 /// both of a pair); any name is wrong on an out-of-library or effect-free truth.
 fn explained_right(h: Hidden, e: &Explanation) -> bool {
@@ -465,6 +474,20 @@ fn explained_right(h: Hidden, e: &Explanation) -> bool {
     }
 }
 
+/// Each case of a batch to `EXPLAIN_BATCH_DUMP` ([`common::dump_case`]).
+fn dump(batch: &str, results: &[(Hidden, Explanation)]) {
+    for (h, e) in results {
+        let class = match h {
+            Hidden::None => "none",
+            Hidden::Unknown(_) | Hidden::WithUnknown(..) => "out",
+            Hidden::Library(_) => "library",
+            Hidden::Pair(..) => "pair",
+        };
+        let right = e.verdict == Verdict::Explained && explained_right(*h, e);
+        common::dump_case(batch, &format!("{h:?}"), class, right, e);
+    }
+}
+
 /// Fits the confidence map of `explain::calibration` on a batch of its own (seeds from
 /// 80 000, a third rig) and prints it as the constant to paste; the map is checked on
 /// `full_open_world_batch`, never on the batch it was fitted on.
@@ -472,27 +495,47 @@ fn explained_right(h: Hidden, e: &Explanation) -> bool {
 #[ignore = "a batch of several hundred data sets; run with --release -- --ignored --nocapture"]
 fn fit_confidence_map() {
     let results = run_batch(&batch_rigs(true), 80_000);
-    let pairs: Vec<(f64, bool)> = results
+    dump("fitting", &results);
+    let findings: Vec<(explain::calibration::Evidence, bool)> = results
         .iter()
         .filter(|(_, e)| e.verdict == Verdict::Explained)
-        .filter_map(|(h, e)| e.confidence_raw.map(|c| (c, explained_right(*h, e))))
+        .filter_map(|(h, e)| e.evidence().map(|ev| (ev, explained_right(*h, e))))
         .collect();
-    let map = explain::calibration::isotonic(&pairs);
+    let effects: Vec<(explain::calibration::Evidence, bool)> = results
+        .iter()
+        .flat_map(|(h, e)| {
+            e.effects.iter().filter_map(move |f| {
+                f.evidence(e.lack_of_fit.p_value)
+                    .map(|ev| (ev, in_truth(*h, &f.name)))
+            })
+        })
+        .collect();
+    let confidence = explain::calibration::fit_logistic(&findings).expect("the batch fixes it");
+    let inclusion = explain::calibration::fit_logistic(&effects).expect("the batch fixes it");
     println!(
-        "\nfitted on {} explained verdicts of {} data sets",
-        pairs.len(),
+        "\nfitted on {} explained verdicts and {} named effects of {} data sets",
+        findings.len(),
+        effects.len(),
         results.len()
     );
-    println!("{}", common::reliability_table(&pairs));
-    println!("pub const CONFIDENCE_MAP: &[CalibrationStep] = &[");
-    for s in &map {
+    let stated: Vec<(f64, bool)> = findings
+        .iter()
+        .map(|(ev, r)| (confidence.probability(ev), *r))
+        .collect();
+    println!("{}", common::reliability_table(&stated));
+    for (name, m) in [
+        ("CONFIDENCE_MODEL", confidence),
+        ("INCLUSION_MODEL", inclusion),
+    ] {
         println!(
-            "    CalibrationStep {{ from: {:?}, probability: {:.3}, verdicts: {} }},",
-            s.from, s.probability, s.verdicts
+            "pub const {name}: CalibrationModel = CalibrationModel {{ weights: {:.2?}, cases: {} }};",
+            m.weights, m.cases
         );
     }
-    println!("];");
-    assert!(map.len() >= 2, "{map:?}");
+    // The share counts for the finding, and a near-significant lack of fit against it.
+    for m in [confidence, inclusion] {
+        assert!(m.weights[1] > 0.0 && m.weights[4] < 0.0, "{m:?}");
+    }
 }
 
 /// The full batch: the out-of-library truths, every library effect, two-effect sets and
@@ -503,6 +546,7 @@ fn fit_confidence_map() {
 fn full_open_world_batch() {
     let hidden = batch_truths();
     let results = run_batch(&batch_rigs(false), 50_000);
+    dump("open-world", &results);
     // Per truth.
     let mut table = String::from(
         "| truth | sets | named first (explained / partly) | ambiguous with it | confident wrong | unexplained | partly-explained | no-missing-effect |\n|---|---|---|---|---|---|---|---|\n",
@@ -655,7 +699,7 @@ fn a_named_library_effect_predicts_the_held_out_edges_of_the_range() {
     // An explained verdict states the calibrated probability of its bootstrap share.
     assert_eq!(
         e.confidence,
-        e.confidence_raw.map(explain::calibration::calibrated)
+        e.evidence().map(|ev| explain::calibration::calibrated(&ev))
     );
     let x = f
         .extrapolation
@@ -809,7 +853,9 @@ fn a_later_effect_that_another_driver_explains_as_well_is_not_stacked() {
         e.finding
     );
     assert!(
-        e.effects.iter().all(|f| f.name != Effect::ThermalDrift.name()),
+        e.effects
+            .iter()
+            .all(|f| f.name != Effect::ThermalDrift.name()),
         "{}",
         e.finding
     );
@@ -908,4 +954,3 @@ fn two_effects_plausible_only_together_are_named_and_reported_as_such() {
     );
     assert!(first.get("driver_check").is_some() && first.get("plausible").is_some());
 }
-

@@ -192,7 +192,12 @@ fn named_effects_carry_inclusion_probabilities_and_a_confidence() {
         // Most replicates reach the same set; the stated confidence is that share, calibrated.
         let share = e.confidence_raw.unwrap();
         assert!(share >= 0.5, "{}", e.finding);
-        assert_eq!(e.confidence, Some(explain::calibration::calibrated(share)));
+        let evidence = e.evidence().unwrap();
+        assert_eq!(evidence.share, share);
+        assert_eq!(
+            e.confidence,
+            Some(explain::calibration::calibrated(&evidence))
+        );
         assert!(e.effects[0].bic_weight > 0.9);
         assert_eq!(e.inclusion_probabilities[effect.name()], p);
         assert!(

@@ -787,6 +787,17 @@ fn full_unseen_batch() {
             }
         }
     }
+    for c in &cases {
+        if let Ok(e) = &c.result {
+            let class = match c.truth {
+                Truth::Unseen(..) => "out",
+                Truth::Library(_) => "library",
+                Truth::None | Truth::SupplySag => "none",
+            };
+            let right = e.verdict == Verdict::Explained && explained_right(c.truth, e);
+            common::dump_case("unseen", &c.truth.label(), class, right, e);
+        }
+    }
     let (text, wrong, unseen, false_found, free) = report(&truths, &cases);
     println!("\n{} data sets\n{text}", cases.len());
     assert!(

@@ -274,7 +274,10 @@ fn issue_12_done_when_served_rig_sweep_through_line_noise_explained() {
         e["rmse_before_a"].as_f64().unwrap(),
         e["rmse_after_a"].as_f64().unwrap(),
     );
-    assert!(after < 0.1 * before, "{after} A after, {before} A before: {e}");
+    assert!(
+        after < 0.1 * before,
+        "{after} A after, {before} A before: {e}"
+    );
 
     assert_eq!(
         server.interrupt().code(),

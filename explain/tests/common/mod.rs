@@ -49,3 +49,44 @@ pub fn reliability_table(stated: &[(f64, bool)]) -> String {
     }
     out
 }
+
+/// One row of a batch's case table for studying the calibration: written to the file named by
+/// `EXPLAIN_BATCH_DUMP` (appended; nothing when it is unset). Columns: batch, truth, class
+/// (`out`, `library`, `pair`, `none`), right (an `explained` verdict naming exactly the
+/// truth), verdict, bootstrap share, confidence, first inclusion, effects, first effect,
+/// whether its extrapolation passed (empty: not tested), its driver check's margin (its
+/// chi-square less the best alternative's; empty: none), the lack of fit's p and reference.
+#[allow(dead_code)] // each batch binary uses what it needs
+pub fn dump_case(batch: &str, truth: &str, class: &str, right: bool, e: &Explanation) {
+    let Ok(path) = std::env::var("EXPLAIN_BATCH_DUMP") else {
+        return;
+    };
+    use std::io::Write;
+    let first = e.effects.first();
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
+    let line = format!(
+        "{batch},\"{truth}\",{class},{},{},{},{},{},{},{},{},{},{},{}\n",
+        right as u8,
+        e.verdict.as_str(),
+        opt(e.confidence_raw),
+        opt(e.confidence),
+        opt(first.and_then(|f| f.inclusion_probability)),
+        e.effects.len(),
+        first.map_or("", |f| f.name.as_str()),
+        first
+            .and_then(|f| f.extrapolation.as_ref())
+            .filter(|x| x.testable)
+            .map_or(String::new(), |x| (x.passed as u8).to_string()),
+        opt(first
+            .and_then(|f| f.driver_check.as_ref())
+            .map(|d| d.chi2 - d.best_alternative.as_ref().map_or(0.0, |a| a.chi2))),
+        e.lack_of_fit.p_value,
+        e.lack_of_fit.against,
+    );
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .expect("EXPLAIN_BATCH_DUMP names a writable file");
+    f.write_all(line.as_bytes()).expect("the dump is written");
+}

@@ -46,9 +46,12 @@ implausible rig values by the firmware's calibration rules) go to stderr and JSO
 \"warnings\".
 
 Confidence: a block bootstrap of the whole selection (--replicates, blocks of consecutive
-test points) gives each effect's inclusion_probability and the top-level confidence (share of
-replicates reaching the same finding); ambiguous when a competitor is selected instead of
-the leading effect in a fifth or more of them.
+test points) gives each effect's inclusion_probability_raw and the top-level confidence_raw
+(share of replicates reaching the same finding); ambiguous when a competitor is selected
+instead of the leading effect in a fifth or more of them. For an explained verdict the
+confidence, and for each named effect the inclusion_probability, is that share calibrated to a
+probability of being right (with the driver check's margin and the lack of fit, on generated
+batches with truths outside the library).
 
 Lack of fit (JSON \"lack_of_fit\"): the final model's cell means (speed level x load level)
 against the pure error of the data's repeats (an F-test), or, with drifting repeats, against
