@@ -8,7 +8,8 @@
 //! locks the gear (the procedure's path) and keeps the completed rounds' rows.
 //!
 //! Settled: `explained` with a confidence of at least [`SETTLED_CONFIDENCE`] (or no
-//! bootstrap), or with its leading effect's inclusion probability at least that, or
+//! bootstrap), or with its leading effect selected in at least that share of the bootstrap
+//! replicates (`inclusion_probability_raw`), or
 //! `no-missing-effect` with that confidence once at least [`MIN_POINTS_FOR_NONE`] test
 //! points are in (a short sweep's silence is weak evidence).
 
@@ -151,12 +152,14 @@ pub fn settled(e: &explain::Explanation, used: usize) -> bool {
     let sure = e.confidence.is_none_or(|c| c >= SETTLED_CONFIDENCE);
     match e.verdict {
         // The leading finding is what the loop looks for: settled when it is selected in
-        // enough of the resamples, whatever the smaller effects beside it.
+        // enough of the resamples (its bootstrap share, not its calibrated probability:
+        // more points do not make a law more likely to be the truth once the selection is
+        // stable), whatever the smaller effects beside it.
         Verdict::Explained => {
             sure || e
                 .effects
                 .first()
-                .and_then(|f| f.inclusion_probability)
+                .and_then(|f| f.inclusion_probability_raw)
                 .is_some_and(|p| p >= SETTLED_CONFIDENCE)
         }
         Verdict::NoMissingEffect => sure && used >= MIN_POINTS_FOR_NONE,

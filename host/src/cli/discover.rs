@@ -10,8 +10,10 @@
 //! rounds' rows.
 //!
 //! Settled: `explained` with a confidence of at least [`SETTLED_CONFIDENCE`] (or no
-//! bootstrap), or with its leading effect's inclusion probability at least that, or `no-missing-effect` with that confidence once at least
-//! [`MIN_POINTS_FOR_NONE`] test points are in (a short sweep's silence is weak evidence).
+//! bootstrap), or with its leading effect selected in at least that share of the bootstrap
+//! replicates (`inclusion_probability_raw`), or `no-missing-effect` with that confidence
+//! once at least [`MIN_POINTS_FOR_NONE`] test points are in (a short sweep's silence is weak
+//! evidence).
 
 use std::io::Write;
 use std::path::PathBuf;
