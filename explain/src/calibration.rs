@@ -86,10 +86,14 @@ pub struct CalibrationModel {
 impl CalibrationModel {
     /// The probability this model gives `evidence`.
     pub fn probability(&self, evidence: &Evidence) -> f64 {
-        let x = evidence.features();
-        let z: f64 = self.weights.iter().zip(x).map(|(w, v)| w * v).sum();
-        1.0 / (1.0 + (-z).exp())
+        logistic(&self.weights, &evidence.features())
     }
+}
+
+/// 1 / (1 + exp(-w . x)).
+fn logistic(w: &[f64; FEATURES], x: &[f64; FEATURES]) -> f64 {
+    let z: f64 = w.iter().zip(x).map(|(a, b)| a * b).sum();
+    1.0 / (1.0 + (-z).exp())
 }
 
 /// The probability that an `explained` verdict is exactly right, fitted by [`fit_logistic`]
@@ -139,8 +143,7 @@ pub fn fit_logistic(cases: &[(Evidence, bool)]) -> Option<CalibrationModel> {
         let mut grad = [0.0; N];
         let mut hess = [0.0; N * N];
         for (xi, yi) in x.iter().zip(&y) {
-            let z: f64 = w.iter().zip(xi).map(|(a, b)| a * b).sum();
-            let p = 1.0 / (1.0 + (-z).exp());
+            let p = logistic(&w, xi);
             for a in 0..N {
                 grad[a] += (p - yi) * xi[a];
                 for b in 0..N {

@@ -949,7 +949,7 @@ fn effect_reports(
             holdout_rmse_a: best.held_out.map(|h| h.rmse),
             description: cand_description(points, best.cand, source, thermal),
             // Calibrated in `judge`, once the final model's lack of fit is known.
-            inclusion_probability: resampled.inclusion(name),
+            inclusion_probability: None,
             inclusion_probability_raw: resampled.inclusion(name),
             // The effect's weight: all its laws'.
             bic_weight: step
@@ -1166,7 +1166,7 @@ fn judge(
     options: &Options,
 ) -> Judgement {
     let after = &selection.end;
-    let effects = effect_reports(points, selection, weights_by_step, resampled);
+    let mut effects = effect_reports(points, selection, weights_by_step, resampled);
     let named = selection.added();
     let named_names: Vec<String> = named.iter().map(|c| c.name(points).to_string()).collect();
     let competitors = competitors(points, &named_names, known_names);
@@ -1192,7 +1192,6 @@ fn judge(
         &gap_after,
         options.stated_noise_a,
     );
-    let mut effects = effects;
     for f in &mut effects {
         f.inclusion_probability = f
             .evidence(lack_of_fit.p_value)

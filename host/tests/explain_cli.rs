@@ -319,42 +319,9 @@ fn json_carries_lack_of_fit_plausibility_and_extrapolation() {
     assert_eq!(f["extrapolation"]["testable"], true, "{f}");
     assert!(f["extrapolation"]["edges"].as_array().unwrap().len() >= 2);
     // The same rows with the loads in N mm.
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let mut out = String::new();
-    let mut tau_col = None;
-    for line in text.lines() {
-        if line.starts_with('#') {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').collect();
-        match tau_col {
-            None => {
-                tau_col = fields.iter().position(|f| *f == "tau_rot_nm");
-                out += line;
-            }
-            Some(c) => {
-                let mut f: Vec<String> = fields.iter().map(|s| s.to_string()).collect();
-                f[c] = format!("{}", f[c].parse::<f64>().unwrap() * 1000.0);
-                out += &f.join(",");
-            }
-        }
-        out.push('\n');
-    }
     let nmm = dir.path().join("nmm.csv");
-    std::fs::write(&nmm, out).unwrap();
-    let err = rig()
-        .args([
-            "explain",
-            "--measured",
-            nmm.to_str().unwrap(),
-            "--no-report",
-        ])
-        .assert()
-        .failure()
-        .get_output()
-        .stderr
-        .clone();
-    let err = String::from_utf8_lossy(&err);
+    scaled_column(&csv, "tau_rot_nm", 1000.0, &nmm);
+    let err = refusal(&nmm);
     assert!(err.contains("tau_rot_nm") && err.contains("N mm"), "{err}");
 }
 
@@ -374,6 +341,23 @@ fn scaled_column(path: &str, column: &str, factor: f64, out: &Path) {
     std::fs::write(out, scaled).unwrap();
 }
 
+/// `rig explain --measured FILE` refused: its stderr.
+fn refusal(file: &Path) -> String {
+    let out = rig()
+        .args([
+            "explain",
+            "--measured",
+            file.to_str().unwrap(),
+            "--no-report",
+        ])
+        .assert()
+        .failure()
+        .get_output()
+        .stderr
+        .clone();
+    String::from_utf8_lossy(&out).into_owned()
+}
+
 /// The unit screen's messages at the command line: cam speeds in Hz or rpm are refused
 /// naming the column, the probable unit and the fix; the same rows in rad/s are not.
 #[test]
@@ -390,19 +374,7 @@ fn cam_speeds_in_hz_or_rpm_are_refused_naming_the_column_and_the_unit() {
     ] {
         let file = dir.path().join(format!("{unit}.csv"));
         scaled_column(&csv, "omega_n_rad_s", factor, &file);
-        let err = rig()
-            .args([
-                "explain",
-                "--measured",
-                file.to_str().unwrap(),
-                "--no-report",
-            ])
-            .assert()
-            .failure()
-            .get_output()
-            .stderr
-            .clone();
-        let err = String::from_utf8_lossy(&err);
+        let err = refusal(&file);
         assert!(
             err.contains("omega_n_rad_s") && err.contains(unit) && err.contains(fix),
             "{unit}: {err}"

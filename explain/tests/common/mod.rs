@@ -79,7 +79,7 @@ pub fn dump_case(batch: &str, truth: &str, class: &str, right: bool, e: &Explana
             .map_or(String::new(), |x| (x.passed as u8).to_string()),
         opt(first
             .and_then(|f| f.driver_check.as_ref())
-            .map(|d| d.chi2 - d.best_alternative.as_ref().map_or(0.0, |a| a.chi2))),
+            .map(explain::drivers::DriverCheck::margin_over_best)),
         e.lack_of_fit.p_value,
         e.lack_of_fit.against,
     );
