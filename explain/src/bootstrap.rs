@@ -324,6 +324,86 @@ fn bounded_step(a: &[f64], u: &[f64], p: usize, theta: &[f64], lo: &[f64], hi: &
 struct StepNode {
     critical: f64,
     children: Vec<Mechanism>,
+    /// The pairs fitted jointly at this step (first, second), as in [`select::pair_fits`].
+    pairs: Vec<(Mechanism, Mechanism)>,
+}
+
+/// Files a step's pair fits under their paths (`path` then the pair); returns the pairs.
+fn insert_pairs(
+    points: &TestPoints,
+    path: &[Mechanism],
+    pairs: &[select::PairFit],
+    fits: &mut BTreeMap<Vec<Mechanism>, Fit>,
+    implausible: &mut BTreeSet<Vec<Mechanism>>,
+) -> Vec<(Mechanism, Mechanism)> {
+    let mut out = Vec::new();
+    for pf in pairs {
+        let key = [path, &[pf.first, pf.second]].concat();
+        if !crate::plausibility::check_model(points, &pf.fit).plausible {
+            implausible.insert(key.clone());
+        }
+        fits.entry(key).or_insert_with(|| pf.fit.clone());
+        out.push((pf.first, pf.second));
+    }
+    out
+}
+
+/// A replicate's pair step at `node` (path `p`), by the selection's rule
+/// ([`select::choose_pair`]) on the replicate's scores, confirmed on held-out points as the
+/// selection confirms it.
+fn pair_move(
+    p: &[Mechanism],
+    node: &StepNode,
+    here: &Score,
+    lins: &BTreeMap<Vec<Mechanism>, Lin>,
+    implausible: &BTreeSet<Vec<Mechanism>>,
+    m: &[f64],
+) -> Option<Vec<Mechanism>> {
+    if node.pairs.is_empty() {
+        return None;
+    }
+    let scored = |key: Vec<Mechanism>| {
+        let s = lins.get(&key)?.score(m);
+        let plausible = !implausible.contains(&key);
+        Some((s, plausible))
+    };
+    let singles: Vec<(Mechanism, select::Scored)> = node
+        .children
+        .iter()
+        .filter_map(|&c| {
+            let (s, plausible) = scored([p, &[c]].concat())?;
+            Some((
+                c,
+                select::Scored {
+                    bic: s.bic,
+                    plausible,
+                },
+            ))
+        })
+        .collect();
+    let mut held = Vec::new();
+    let pairs: Vec<(Mechanism, Mechanism, select::Scored)> = node
+        .pairs
+        .iter()
+        .filter_map(|&(a, b)| {
+            let (s, plausible) = scored([p, &[a, b]].concat())?;
+            held.push(s.held_out);
+            Some((
+                a,
+                b,
+                select::Scored {
+                    bic: s.bic,
+                    plausible,
+                },
+            ))
+        })
+        .collect();
+    let k = select::choose_pair(here.bic, &singles, &pairs, node.critical)?;
+    let confirmed = match (here.held_out, held[k]) {
+        (Some(b), Some(a)) => a.rmse < b.rmse,
+        _ => true,
+    };
+    confirmed.then(|| vec![pairs[k].0, pairs[k].1])
 }
 
 /// What the bootstrap found.
@@ -436,11 +516,13 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 children.push(c.cand);
             }
         }
+        let pairs = insert_pairs(points, &path, &step.pairs, &mut fits, &mut implausible);
         steps.insert(
             path.clone(),
             StepNode {
                 critical: step.critical,
                 children,
+                pairs,
             },
         );
         match step.best() {
@@ -483,17 +565,29 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         let explored = crate::parallel::par_map(&wanted, |p| {
             let current = &fits[p];
             select::explore(points, current, &alt_opts).map(|ex| {
+                // Pairs where the best candidate clears the guard, as in the selection.
+                let pairs = if p.len() + 2 <= depth
+                    && ex
+                        .candidates
+                        .first()
+                        .is_some_and(|c| c.improvement > ex.critical)
+                {
+                    select::pair_fits(points, current, &ex.candidates)
+                } else {
+                    Vec::new()
+                };
                 let children: Vec<(Mechanism, Fit)> = ex
                     .candidates
                     .into_iter()
                     .filter_map(|c| c.fit.map(|f| (c.cand, f)))
                     .collect();
-                (ex.critical, children)
+                (ex.critical, children, pairs)
             })
         });
         for (p, ex) in wanted.into_iter().zip(explored) {
             let node = match ex {
-                Some((critical, children)) => {
+                Some((critical, children, pair_fits)) => {
+                    let pairs = insert_pairs(points, &p, &pair_fits, &mut fits, &mut implausible);
                     let names = children.iter().map(|(e, _)| *e).collect();
                     for (e, f) in children {
                         let mut child = p.clone();
@@ -510,11 +604,13 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                     StepNode {
                         critical,
                         children: names,
+                        pairs,
                     }
                 }
                 None => StepNode {
                     critical: f64::INFINITY,
                     children: Vec::new(),
+                    pairs: Vec::new(),
                 },
             };
             steps.insert(p, node);
@@ -525,6 +621,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 StepNode {
                     critical: f64::INFINITY,
                     children: Vec::new(),
+                    pairs: Vec::new(),
                 },
             );
         }
@@ -536,6 +633,9 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 let mut child = p.clone();
                 child.push(c);
                 needed.push(child);
+            }
+            for &(a, b) in &steps[p].pairs {
+                needed.push([p.as_slice(), &[a, b]].concat());
             }
         }
         needed.sort();
@@ -551,8 +651,14 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 return None;
             }
             let p = &paths[r];
+            if p.len() >= depth {
+                return None;
+            }
             let node = &steps[p];
             let here = lins[p].score(&m[r]);
+            if let Some(pair) = pair_move(p, node, &here, &lins, &implausible, &m[r]) {
+                return Some((pair, false));
+            }
             let mut best: Option<(Mechanism, f64, Score)> = None;
             for &c in &node.children {
                 let mut child = p.clone();
@@ -583,13 +689,13 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 (Some(b), Some(a)) => a.rmse < b.rmse,
                 _ => true,
             };
-            (gain > 0.0 && gain > node.critical && confirmed).then_some((e, beyond_limits))
+            (gain > 0.0 && gain > node.critical && confirmed).then_some((vec![e], beyond_limits))
         });
         let mut any = false;
         for (r, mv) in moves.into_iter().enumerate() {
             match mv {
-                Some((e, beyond_limits)) => {
-                    paths[r].push(e);
+                Some((added, beyond_limits)) => {
+                    paths[r].extend(added);
                     provisional[r] = beyond_limits;
                     any = true;
                 }

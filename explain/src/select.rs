@@ -42,6 +42,9 @@ const SCREEN_KEEP: usize = 3;
 const TERM_SCREEN_FACTOR: f64 = 2.0;
 /// See [`TERM_SCREEN_FACTOR`].
 const TERM_SCREEN_SLACK: f64 = 10.0;
+/// Pairs of candidates are fitted jointly among this many of a step's best fitted candidates
+/// ([`pair_fits`]).
+pub const PAIR_POOL: usize = 6;
 /// Level of the guard that the best improvement must still clear with its most influential
 /// test point left out (at least `Options::alpha`).
 pub const INFLUENCE_ALPHA: f64 = 0.05;
@@ -145,6 +148,29 @@ pub struct Step {
     pub accepted: bool,
     /// Why the best was or was not added.
     pub decision: Decision,
+    /// Pairs of the leading candidates fitted jointly with the current model (computed
+    /// where the guard passed; see [`choose_pair`]), for the bootstrap to compare too.
+    pub pairs: Vec<PairFit>,
+}
+
+/// Two candidates of one step fitted jointly with the current model.
+#[derive(Debug, Clone)]
+pub struct PairFit {
+    /// The one that improves the current model more alone.
+    pub first: Mechanism,
+    /// The other.
+    pub second: Mechanism,
+    /// Their joint fit.
+    pub fit: Fit,
+}
+
+/// A model compared by [`choose_pair`]: its BIC and whether every value in it is physical.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Scored {
+    /// Its BIC.
+    pub bic: f64,
+    /// Whether every value is within its physical limits.
+    pub plausible: bool,
 }
 
 /// What a step decided about its best candidate, by the first rule that turned it down (in
@@ -234,6 +260,27 @@ pub enum Decision {
         /// The effect of the step before, when that one needed this one to be plausible.
         partner: Option<String>,
     },
+    /// Added with the next step's candidate as a pair in place of the step's best candidate:
+    /// the two fitted together explain more than the best with any partner, each of the two
+    /// improving on the other alone by more than the guard's critical value.
+    AddedInPair {
+        /// The candidate's name.
+        best: String,
+        /// Its BIC improvement.
+        improvement: f64,
+        /// The guard's p-value at its improvement.
+        p_value: f64,
+        /// The held-out scores before and after, in words.
+        held_out: String,
+        /// The step's best candidate alone, passed over.
+        instead: String,
+        /// Its BIC improvement alone.
+        instead_improvement: f64,
+        /// The next step's candidate, named with it.
+        partner: String,
+        /// The pair's BIC improvement over the model before the step.
+        pair_improvement: f64,
+    },
     /// Added although its fit alone needs values no rig can have, because the next step's
     /// effect, fitted jointly with it, brings every value within its limits.
     AddedOnlyTogether {
@@ -255,7 +302,9 @@ impl Decision {
     pub fn accepted(&self) -> bool {
         matches!(
             self,
-            Decision::Added { .. } | Decision::AddedOnlyTogether { .. }
+            Decision::Added { .. }
+                | Decision::AddedOnlyTogether { .. }
+                | Decision::AddedInPair { .. }
         )
     }
 }
@@ -339,6 +388,20 @@ impl std::fmt::Display for Decision {
                     None => Ok(()),
                 }
             }
+            Decision::AddedInPair {
+                best,
+                improvement,
+                p_value,
+                held_out,
+                instead,
+                instead_improvement,
+                partner,
+                pair_improvement,
+            } => write!(
+                f,
+                "{best} improves the BIC by {improvement:.1} ({}); {held_out}; {instead} alone improves it more (by {instead_improvement:.1}), but {best} with {partner} (the next step) improves it by {pair_improvement:.1}, more than {instead} with any partner, and each of the two adds more than effect-free data would: the two are named together",
+                p_text(*p_value)
+            ),
             Decision::AddedOnlyTogether {
                 best,
                 improvement,
@@ -1035,9 +1098,25 @@ pub fn select_from(
     let mut current_held_out = start_held_out;
     let mut steps = Vec::new();
     while current.spec.effects.len() < opts.max_effects {
-        let Some(mut step) = take_step(points, &current, current_held_out, opts) else {
+        let Some((mut step, null, critical_influence)) =
+            take_step_with_null(points, &current, current_held_out, opts)
+        else {
             break;
         };
+        if let Some((first, second)) = pair_steps(
+            points,
+            &current,
+            current_held_out,
+            &mut step,
+            &null,
+            critical_influence,
+            opts,
+        ) {
+            steps.push(first);
+            (current, current_held_out) = advance(points, &second);
+            steps.push(second);
+            continue;
+        }
         if !step.accepted {
             let partner = matches!(step.decision, Decision::Implausible { .. })
                 .then(|| complete_plausibility(points, &current, &step, opts))
@@ -1077,6 +1156,226 @@ pub fn select_from(
         end_held_out: current_held_out,
         end: current,
     }
+}
+
+/// The pairs of `candidates` (a step's, best first) fitted jointly with `current`: every two
+/// of the [`PAIR_POOL`] best fitted ones that can be carried together, the better one alone
+/// first.
+pub fn pair_fits(points: &TestPoints, current: &Fit, candidates: &[Candidate]) -> Vec<PairFit> {
+    let pool: Vec<&Candidate> = candidates
+        .iter()
+        .filter(|c| c.fit.is_some() && !c.estimated)
+        .take(PAIR_POOL)
+        .collect();
+    let mut jobs: Vec<(usize, usize)> = Vec::new();
+    for i in 0..pool.len() {
+        let with = pool[i].fit.as_ref().expect("fitted");
+        for j in i + 1..pool.len() {
+            if pending(points, &with.spec).contains(&pool[j].cand) {
+                jobs.push((i, j));
+            }
+        }
+    }
+    let _ = current;
+    let fits = crate::parallel::par_map(&jobs, |&(i, j)| {
+        let with = pool[i].fit.as_ref().expect("fitted");
+        fit_candidate(points, with, pool[j].cand)
+    });
+    jobs.iter()
+        .zip(fits)
+        .map(|(&(i, j), fit)| PairFit {
+            first: pool[i].cand,
+            second: pool[j].cand,
+            fit,
+        })
+        .collect()
+}
+
+/// The rule that takes two candidates at once in place of the step's best (the selection
+/// and the bootstrap apply it alike): among the pairs whose joint model is physical, beats
+/// every physical single candidate and needs both members (each improves on the other alone
+/// by more than `critical`, the guard's critical value), the one with the lowest BIC; taken
+/// when the best single candidate clears `critical` over the model before (`here`) and
+/// needs values no rig can have, or is not in that pair and falls short of it by more than
+/// `critical`. Returns the pair's index.
+pub fn choose_pair(
+    here: f64,
+    singles: &[(Mechanism, Scored)],
+    pairs: &[(Mechanism, Mechanism, Scored)],
+    critical: f64,
+) -> Option<usize> {
+    let (best, best_score) = singles.iter().min_by(|a, b| a.1.bic.total_cmp(&b.1.bic))?;
+    if here - best_score.bic <= critical.max(0.0) {
+        return None;
+    }
+    let best_physical = singles
+        .iter()
+        .filter(|s| s.1.plausible)
+        .map(|s| s.1.bic)
+        .fold(f64::INFINITY, f64::min);
+    let alone = |m: Mechanism| singles.iter().find(|s| s.0 == m).map(|s| s.1.bic);
+    let (k, (a, b, _)) = pairs
+        .iter()
+        .enumerate()
+        .filter(|(_, (a, b, s))| {
+            s.plausible
+                && s.bic < best_physical
+                && alone(*a).is_some_and(|x| x - s.bic > critical)
+                && alone(*b).is_some_and(|x| x - s.bic > critical)
+        })
+        .min_by(|x, y| x.1.2.bic.total_cmp(&y.1.2.bic))?;
+    let pair = pairs[k].2;
+    // In place of a physical best, the pair must beat it by what effect-free data gives.
+    let replaces =
+        !best_score.plausible || (a != best && b != best && best_score.bic - pair.bic > critical);
+    replaces.then_some(k)
+}
+
+/// The two steps of a pair taken in place of `step`'s best ([`choose_pair`]), each member
+/// having passed the tests of a step of its own (the first: every test but the physical
+/// limits, which only the pair must meet; the second: every test, from the first's fit,
+/// and the driver check of a later effect); `None` (and the forward step as it was) when no
+/// pair is chosen or a member fails. Fills `step.pairs` where the guard passed.
+fn pair_steps(
+    points: &TestPoints,
+    current: &Fit,
+    current_held_out: Option<HeldOut>,
+    step: &mut Step,
+    null: &[f64],
+    critical_influence: f64,
+    opts: &Options,
+) -> Option<(Step, Step)> {
+    if step.p_value >= opts.alpha || current.spec.effects.len() + 2 > opts.max_effects {
+        return None;
+    }
+    step.pairs = pair_fits(points, current, &step.candidates);
+    let plausible = |f: &Fit| crate::plausibility::check_model(points, f).plausible;
+    let singles: Vec<(Mechanism, Scored)> = step
+        .candidates
+        .iter()
+        .filter_map(|c| {
+            let f = c.fit.as_ref()?;
+            Some((
+                c.cand,
+                Scored {
+                    bic: f.bic,
+                    plausible: plausible(f),
+                },
+            ))
+        })
+        .collect();
+    let scored: Vec<(Mechanism, Mechanism, Scored)> = step
+        .pairs
+        .iter()
+        .map(|p| {
+            (
+                p.first,
+                p.second,
+                Scored {
+                    bic: p.fit.bic,
+                    plausible: plausible(&p.fit),
+                },
+            )
+        })
+        .collect();
+    let k = choose_pair(current.bic, &singles, &scored, step.critical)?;
+    let pair = step.pairs[k].clone();
+    let pair_held_out = fit::held_out(points, &pair.fit.spec, &pair.fit.model, &pair.fit.term_x);
+    if !confirmed(None, current_held_out, pair_held_out, false).0 {
+        return None;
+    }
+    let best = step.best()?.clone();
+    // The first member, judged as a step of its own.
+    let i = step.candidates.iter().position(|c| c.cand == pair.first)?;
+    let mut first = step.candidates[i].clone();
+    let first_fit = first.fit.clone()?;
+    if first.held_out.is_none() {
+        first.held_out =
+            fit::held_out(points, &first_fit.spec, &first_fit.model, &first_fit.term_x);
+    }
+    let exceed = null.iter().filter(|&&v| v >= first.improvement).count();
+    let p_first = (1 + exceed) as f64 / (1 + null.len()) as f64;
+    let d = decide(
+        points,
+        current,
+        current_held_out,
+        &first,
+        p_first,
+        critical_influence,
+        opts,
+    );
+    // The second member: the next step from the first's fit, with it on top.
+    let (mut next, next_null, next_influence) =
+        take_step_with_null(points, &first_fit, first.held_out, opts)?;
+    let j = next.candidates.iter().position(|c| c.cand == pair.second)?;
+    let mut second = next.candidates[j].clone();
+    let second_fit = second.fit.clone()?;
+    if second.held_out.is_none() {
+        second.held_out = fit::held_out(
+            points,
+            &second_fit.spec,
+            &second_fit.model,
+            &second_fit.term_x,
+        );
+    }
+    let exceed = next_null
+        .iter()
+        .filter(|&&v| v >= second.improvement)
+        .count();
+    let p_second = (1 + exceed) as f64 / (1 + next_null.len()) as f64;
+    let d2 = decide(
+        points,
+        &first_fit,
+        first.held_out,
+        &second,
+        p_second,
+        next_influence,
+        opts,
+    );
+    if !d2.accepted() {
+        return None;
+    }
+    next.candidates.remove(j);
+    next.candidates.insert(0, second);
+    next.p_value = p_second;
+    next.decision = d2;
+    next.accepted = true;
+    if let Some(refused) = not_separated(points, &first_fit, &next) {
+        let _ = refused;
+        return None;
+    }
+    let partner = pair.second.name(points).to_string();
+    let decision = match d {
+        Decision::Implausible { .. } => only_together(&d, &next, points),
+        Decision::Added {
+            best: name,
+            improvement,
+            p_value,
+            held_out,
+            ..
+        } if best.cand != pair.first => Decision::AddedInPair {
+            best: name,
+            improvement,
+            p_value,
+            held_out,
+            instead: best.cand.name(points).to_string(),
+            instead_improvement: best.improvement,
+            partner,
+            pair_improvement: current.bic - pair.fit.bic,
+        },
+        _ => return None,
+    };
+    if let Decision::Added { partner, .. } = &mut next.decision
+        && matches!(decision, Decision::AddedOnlyTogether { .. })
+    {
+        *partner = Some(pair.first.name(points).to_string());
+    }
+    step.candidates.remove(i);
+    step.candidates.insert(0, first);
+    step.p_value = p_first;
+    step.decision = decision;
+    step.accepted = true;
+    Some((step.clone(), next))
 }
 
 /// A later step's best, accepted on every other test, whose own driver a generic shape in
@@ -1128,18 +1427,8 @@ fn advance(points: &TestPoints, step: &Step) -> (Fit, Option<HeldOut>) {
 }
 
 /// One step of the selection from `current`: every candidate explored, the best scored and
-/// judged; `None` when no candidate is left.
-fn take_step(
-    points: &TestPoints,
-    current: &Fit,
-    current_held_out: Option<HeldOut>,
-    opts: &Options,
-) -> Option<Step> {
-    take_step_with_null(points, current, current_held_out, opts).map(|(step, _, _)| step)
-}
-
-/// [`take_step`] with the guard's null draws and its critical value at
-/// [`INFLUENCE_ALPHA`].
+/// judged; `None` when no candidate is left. With the guard's null draws and its critical
+/// value at [`INFLUENCE_ALPHA`].
 fn take_step_with_null(
     points: &TestPoints,
     current: &Fit,
@@ -1175,6 +1464,7 @@ fn take_step_with_null(
         held_out_before: current_held_out,
         accepted: decision.accepted(),
         decision,
+        pairs: Vec::new(),
     };
     Some((step, null, critical_influence))
 }
