@@ -572,7 +572,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                         .first()
                         .is_some_and(|c| c.improvement > ex.critical)
                 {
-                    select::pair_fits(points, current, &ex.candidates)
+                    select::pair_fits(points, &ex.candidates)
                 } else {
                     Vec::new()
                 };

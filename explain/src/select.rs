@@ -42,9 +42,9 @@ const SCREEN_KEEP: usize = 3;
 const TERM_SCREEN_FACTOR: f64 = 2.0;
 /// See [`TERM_SCREEN_FACTOR`].
 const TERM_SCREEN_SLACK: f64 = 10.0;
-/// Pairs of candidates are fitted jointly among this many of a step's best fitted candidates
-/// ([`pair_fits`]).
-pub const PAIR_POOL: usize = 6;
+/// A step's pairs of candidates fitted jointly start from this many of its best fitted
+/// candidates, each with every other ([`pair_fits`]).
+pub const PAIR_FIRSTS: usize = 4;
 /// Level of the guard that the best improvement must still clear with its most influential
 /// test point left out (at least `Options::alpha`).
 pub const INFLUENCE_ALPHA: f64 = 0.05;
@@ -1158,17 +1158,16 @@ pub fn select_from(
     }
 }
 
-/// The pairs of `candidates` (a step's, best first) fitted jointly with `current`: every two
-/// of the [`PAIR_POOL`] best fitted ones that can be carried together, the better one alone
-/// first.
-pub fn pair_fits(points: &TestPoints, current: &Fit, candidates: &[Candidate]) -> Vec<PairFit> {
+/// The pairs of `candidates` (a step's, best first, fitted on one model) fitted jointly: each of
+/// the [`PAIR_FIRSTS`] best fitted ones with every other fitted one it can be carried with
+/// (a partner may add little alone and much with it), the better one alone first.
+pub fn pair_fits(points: &TestPoints, candidates: &[Candidate]) -> Vec<PairFit> {
     let pool: Vec<&Candidate> = candidates
         .iter()
         .filter(|c| c.fit.is_some() && !c.estimated)
-        .take(PAIR_POOL)
         .collect();
     let mut jobs: Vec<(usize, usize)> = Vec::new();
-    for i in 0..pool.len() {
+    for i in 0..pool.len().min(PAIR_FIRSTS) {
         let with = pool[i].fit.as_ref().expect("fitted");
         for j in i + 1..pool.len() {
             if pending(points, &with.spec).contains(&pool[j].cand) {
@@ -1176,7 +1175,6 @@ pub fn pair_fits(points: &TestPoints, current: &Fit, candidates: &[Candidate]) -
             }
         }
     }
-    let _ = current;
     let fits = crate::parallel::par_map(&jobs, |&(i, j)| {
         let with = pool[i].fit.as_ref().expect("fitted");
         fit_candidate(points, with, pool[j].cand)
@@ -1248,7 +1246,7 @@ fn pair_steps(
     if step.p_value >= opts.alpha || current.spec.effects.len() + 2 > opts.max_effects {
         return None;
     }
-    step.pairs = pair_fits(points, current, &step.candidates);
+    step.pairs = pair_fits(points, &step.candidates);
     let plausible = |f: &Fit| crate::plausibility::check_model(points, f).plausible;
     let singles: Vec<(Mechanism, Scored)> = step
         .candidates
@@ -1278,6 +1276,26 @@ fn pair_steps(
             )
         })
         .collect();
+    if std::env::var("PAIR_DEBUG").is_ok() {
+        for (m, sc) in &singles {
+            eprintln!(
+                "  single {} {:.1} {}",
+                m.name(points),
+                current.bic - sc.bic,
+                sc.plausible
+            );
+        }
+        for (a, b, sc) in &scored {
+            eprintln!(
+                "  pair {} + {} {:.1} {}",
+                a.name(points),
+                b.name(points),
+                current.bic - sc.bic,
+                sc.plausible
+            );
+        }
+        eprintln!("  critical {:.1}", step.critical);
+    }
     let k = choose_pair(current.bic, &singles, &scored, step.critical)?;
     let pair = step.pairs[k].clone();
     let pair_held_out = fit::held_out(points, &pair.fit.spec, &pair.fit.model, &pair.fit.term_x);

@@ -954,3 +954,99 @@ fn two_effects_plausible_only_together_are_named_and_reported_as_such() {
     );
     assert!(first.get("driver_check").is_some() && first.get("plausible").is_some());
 }
+
+#[test]
+#[ignore = "scratch"]
+fn scratch_pair_failures() {
+    let rigs = batch_rigs(false);
+    let paper_plan = |noise: f64| SweepPlan {
+        noise_a: noise,
+        ..SweepPlan::default()
+    };
+    let plans: [&dyn Fn(f64) -> SweepPlan; 2] = [&plan, &paper_plan];
+    let noises = [0.003, 0.010, 0.020, 0.040];
+    let only: Option<usize> = std::env::var("PAIR").ok().map(|v| v.parse().unwrap());
+    let mut both = 0;
+    let mut n = 0;
+    for (pi, &(a, b)) in PAIRS.iter().enumerate() {
+        if only.is_some_and(|o| o != pi) {
+            continue;
+        }
+        for r in 0..rigs.len() {
+            for (p, make) in plans.iter().enumerate() {
+                for (k, &noise) in noises.iter().enumerate() {
+                    let seed = 50_000 + 1000 * r as u64 + 100 * p as u64 + 10 * k as u64;
+                    let data = hidden_dataset(&rigs[r], Hidden::Pair(a, b), &make(noise), seed);
+                    let options = Options {
+                        replicates: 100,
+                        stated_noise_a: Some(noise),
+                        ..Options::default()
+                    };
+                    let out = explain::explain(&data, &rigs[r], &options).unwrap();
+                    let e = out.explanation.clone();
+                    n += 1;
+                    let ok = [a, b]
+                        .iter()
+                        .all(|t| e.effects.iter().any(|f| f.name == t.name()));
+                    if ok {
+                        both += 1;
+                        continue;
+                    }
+                    println!(
+                        "=== {} + {} rig {r} plan {p} noise {noise} seed {seed}: {} {:?}",
+                        a.name(),
+                        b.name(),
+                        e.verdict.as_str(),
+                        e.effects
+                            .iter()
+                            .map(|f| f.name.as_str())
+                            .collect::<Vec<_>>()
+                    );
+                    {
+                        let pts = &out.points;
+                        let start = &out.before;
+                        let fitp = |es: &[Effect]| {
+                            let mut spec = start.spec.clone();
+                            for &x in es {
+                                spec = spec.with(x);
+                            }
+                            let f = explain::fit::fit_from(
+                                pts,
+                                &pts.all,
+                                &spec,
+                                &start.model,
+                                &start.term_x,
+                            );
+                            let pl = explain::plausibility::check_model(pts, &f).plausible;
+                            (f.bic, pl)
+                        };
+                        let (bt, pt) = fitp(&[a, b]);
+                        println!(
+                            "  start bic {:.1} end bic {:.1}; truth pair bic {:.1} plausible {pt}",
+                            start.bic, out.after.bic, bt
+                        );
+                        let mut all = Vec::new();
+                        for (i, &x) in Effect::ALL.iter().enumerate() {
+                            for &y in &Effect::ALL[i + 1..] {
+                                let (bb, pp) = fitp(&[x, y]);
+                                all.push((bb, pp, x.name(), y.name()));
+                            }
+                        }
+                        all.sort_by(|p, q| p.0.total_cmp(&q.0));
+                        for t in all.iter().take(4) {
+                            println!("    pair {} + {}: {:.1} plausible {}", t.2, t.3, t.0, t.1);
+                        }
+                    }
+                    if std::env::var("FULL").is_ok() {
+                        println!("{}", explain::report_files::render_text(&e, "x"));
+                    } else {
+                        for s in &e.steps {
+                            println!("  step: {}", s.reason);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    println!("both {both} of {n}");
+}
