@@ -100,17 +100,17 @@ fn logistic(w: &[f64; FEATURES], x: &[f64; FEATURES]) -> f64 {
 /// on `explain/tests/explain_open_world.rs`'s `fit_confidence_map` batch: 544 data sets (the
 /// paper's rig and one with gears (50, 50, 51, 49), a 1.2 mm stroke and a 4.2 kg carrier;
 /// two plans; 3-40 mA; out-of-library truths, library effects, pairs and effect-free sets;
-/// seeds 80 000 and up), its `explained` verdicts (session 8).
+/// seeds 80 000 and up), its `explained` verdicts (session 9, with the pair step).
 pub const CONFIDENCE_MODEL: CalibrationModel = CalibrationModel {
-    weights: [0.66, 0.60, 0.61, 0.49, -3.45],
-    cases: 228,
+    weights: [-0.11, 0.60, 1.69, 1.05, -2.96],
+    cases: 246,
 };
 
 /// The probability that a named effect is part of the truth, fitted by [`fit_logistic`] on
-/// the same batch: every effect named by any verdict (session 8).
+/// the same batch: every effect named by any verdict (session 9).
 pub const INCLUSION_MODEL: CalibrationModel = CalibrationModel {
-    weights: [-1.15, 0.24, 3.19, 1.53, -4.45],
-    cases: 593,
+    weights: [-1.03, 0.13, 3.15, 1.38, -5.54],
+    cases: 672,
 };
 
 /// The probability that an `explained` verdict with this evidence is right
