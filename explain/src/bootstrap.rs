@@ -348,6 +348,22 @@ fn insert_pairs(
     out
 }
 
+/// Whether held-out points confirm adding `e` (scores `before` and `after`), by the
+/// selection's rule: the log score for the mesh ripple, the RMSE within 1 % for the bush
+/// (whose evidence is the backdrive observations), the RMSE otherwise.
+fn confirms(e: Mechanism, before: Option<fit::HeldOut>, after: Option<fit::HeldOut>) -> bool {
+    match (before, after) {
+        (Some(b), Some(a)) if e == Mechanism::Effect(Effect::MeshLoadSharingRipple) => {
+            a.nlpd < b.nlpd
+        }
+        (Some(b), Some(a)) if e == Mechanism::Effect(Effect::LinearBushFriction) => {
+            a.rmse <= 1.01 * b.rmse
+        }
+        (Some(b), Some(a)) => a.rmse < b.rmse,
+        _ => true,
+    }
+}
+
 /// A replicate's pair step at `node` (path `p`), by the selection's rule
 /// ([`select::choose_pair`]) on the replicate's scores, confirmed on held-out points as the
 /// selection confirms it.
@@ -399,10 +415,13 @@ fn pair_move(
         })
         .collect();
     let k = select::choose_pair(here.bic, &singles, &pairs, node.critical)?;
-    let confirmed = match (here.held_out, held[k]) {
-        (Some(b), Some(a)) => a.rmse < b.rmse,
-        _ => true,
-    };
+    // As the selection's steps: the first confirmed over the model before, the second over
+    // the first, and the pair over the model before.
+    let (first, second, _) = pairs[k];
+    let first_held = scored([p, &[first]].concat()).and_then(|(s, _)| s.held_out);
+    let confirmed = confirms(first, here.held_out, first_held)
+        && confirms(second, first_held, held[k])
+        && confirms(second, here.held_out, held[k]);
     confirmed.then(|| vec![pairs[k].0, pairs[k].1])
 }
 
@@ -678,17 +697,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
             if beyond_limits && (provisional[r] || dead_ends.contains(&reached)) {
                 return None;
             }
-            let confirmed = match (here.held_out, s.held_out) {
-                (Some(b), Some(a)) if e == Mechanism::Effect(Effect::MeshLoadSharingRipple) => {
-                    a.nlpd < b.nlpd
-                }
-                // The bush's evidence is the backdrive observations (as the selection's rule).
-                (Some(b), Some(a)) if e == Mechanism::Effect(Effect::LinearBushFriction) => {
-                    a.rmse <= 1.01 * b.rmse
-                }
-                (Some(b), Some(a)) => a.rmse < b.rmse,
-                _ => true,
-            };
+            let confirmed = confirms(e, here.held_out, s.held_out);
             (gain > 0.0 && gain > node.critical && confirmed).then_some((vec![e], beyond_limits))
         });
         let mut any = false;

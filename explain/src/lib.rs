@@ -144,6 +144,10 @@ pub struct EffectReport {
     /// The other named effect without which this one's fit needs values no rig can have
     /// (the two reach physical values only together); null for an effect plausible alone.
     pub only_together_with: Option<String>,
+    /// The other effect of a pair named together in place of a step's best candidate
+    /// (`select::Decision::AddedInPair`): the two explain more than that candidate with any
+    /// partner; null otherwise.
+    pub named_in_pair_with: Option<String>,
 }
 
 /// A row of a candidate table.
@@ -971,6 +975,17 @@ fn effect_reports(
                 select::Decision::AddedOnlyTogether { partner, .. } => Some(partner.clone()),
                 select::Decision::Added { partner, .. } => partner.clone(),
                 _ => None,
+            },
+            named_in_pair_with: match &step.decision {
+                select::Decision::AddedInPair { partner, .. } => Some(partner.clone()),
+                _ => selection.steps[..k]
+                    .iter()
+                    .rev()
+                    .find(|s| s.accepted)
+                    .and_then(|s| match &s.decision {
+                        select::Decision::AddedInPair { best, .. } => Some(best.clone()),
+                        _ => None,
+                    }),
             },
         });
         step_start = f;

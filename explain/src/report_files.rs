@@ -275,6 +275,12 @@ fn finding_core(e: &Explanation, selection: &Selection) -> String {
                         "It and {p} reach physical values only together (fitted without the other, one of them needs values no rig can have). "
                     );
                 }
+                if let Some(p) = &eff.named_in_pair_with {
+                    let _ = write!(
+                        s,
+                        "It and {p} are named as a pair: together they explain more than the best single candidate with any partner. "
+                    );
+                }
                 if let Some(d) = eff.driver_check.as_ref().filter(|d| !d.separated) {
                     let _ = write!(s, "But {}. ", d.summary(&eff.name));
                 }
@@ -370,6 +376,9 @@ pub fn render_text(e: &Explanation, source: &str) -> String {
             let _ = writeln!(s, "    {}", params_text(&eff.params, &eff.intervals));
             if let Some(p) = &eff.only_together_with {
                 let _ = writeln!(s, "    plausible only together with {p}");
+            }
+            if let Some(p) = &eff.named_in_pair_with {
+                let _ = writeln!(s, "    named as a pair with {p}");
             }
             if let Some(d) = eff.driver_check.as_ref().filter(|d| !d.separated) {
                 let _ = writeln!(s, "    driver not settled: {}", d.summary(&eff.name));
@@ -614,6 +623,13 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
                 let _ = writeln!(
                     s,
                     "- {} and {p} reach physical values only together (fitted without the other, one of them needs values no rig can have).",
+                    eff.name
+                );
+            }
+            if let Some(p) = eff.named_in_pair_with.as_ref().filter(|p| **p > eff.name) {
+                let _ = writeln!(
+                    s,
+                    "- {} and {p} are named as a pair: together they explain more than the best single candidate of their step with any partner, each adding more than effect-free data would.",
                     eff.name
                 );
             }

@@ -272,10 +272,12 @@ pub enum Decision {
         p_value: f64,
         /// The held-out scores before and after, in words.
         held_out: String,
-        /// The step's best candidate alone, passed over.
+        /// The step's best candidate alone, passed over (a family form named by its form).
         instead: String,
         /// Its BIC improvement alone.
         instead_improvement: f64,
+        /// Whether its fit alone has every value within its limits.
+        instead_plausible: bool,
         /// The next step's candidate, named with it.
         partner: String,
         /// The pair's BIC improvement over the model before the step.
@@ -395,12 +397,18 @@ impl std::fmt::Display for Decision {
                 held_out,
                 instead,
                 instead_improvement,
+                instead_plausible,
                 partner,
                 pair_improvement,
             } => write!(
                 f,
-                "{best} improves the BIC by {improvement:.1} ({}); {held_out}; {instead} alone improves it more (by {instead_improvement:.1}), but {best} with {partner} (the next step) improves it by {pair_improvement:.1}, more than {instead} with any partner, and each of the two adds more than effect-free data would: the two are named together",
-                p_text(*p_value)
+                "{best} improves the BIC by {improvement:.1} ({}); {held_out}; {instead} alone improves it more (by {instead_improvement:.1}{}), but {best} with {partner} (the next step) improves it by {pair_improvement:.1}, more than {instead} with any partner, and each of the two adds more than effect-free data would: the two are named together",
+                p_text(*p_value),
+                if *instead_plausible {
+                    ""
+                } else {
+                    ", with values no rig can have"
+                }
             ),
             Decision::AddedOnlyTogether {
                 best,
@@ -1192,7 +1200,8 @@ pub fn pair_fits(points: &TestPoints, candidates: &[Candidate]) -> Vec<PairFit> 
 /// The rule that takes two candidates at once in place of the step's best (the selection
 /// and the bootstrap apply it alike): among the pairs whose joint model is physical, beats
 /// every physical single candidate and needs both members (each improves on the other alone
-/// by more than `critical`, the guard's critical value), the one with the lowest BIC; taken
+/// by more than `critical`, the guard's critical value, and the first, as the step's own
+/// candidate, clears it over the model before, `here`), the one with the lowest BIC; taken
 /// when the best single candidate clears `critical` over the model before (`here`) and
 /// needs values no rig can have, or is not in that pair and falls short of it by more than
 /// `critical`. Returns the pair's index.
@@ -1218,7 +1227,7 @@ pub fn choose_pair(
         .filter(|(_, (a, b, s))| {
             s.plausible
                 && s.bic < best_physical
-                && alone(*a).is_some_and(|x| x - s.bic > critical)
+                && alone(*a).is_some_and(|x| x - s.bic > critical && here - x > critical)
                 && alone(*b).is_some_and(|x| x - s.bic > critical)
         })
         .min_by(|x, y| x.1.2.bic.total_cmp(&y.1.2.bic))?;
@@ -1227,6 +1236,15 @@ pub fn choose_pair(
     let replaces =
         !best_score.plausible || (a != best && b != best && best_score.bic - pair.bic > critical);
     replaces.then_some(k)
+}
+
+/// A candidate's name in a reason, its form added for a family form (whose name is its
+/// library effect's).
+fn label(points: &TestPoints, m: Mechanism) -> String {
+    match m.form(points) {
+        Some(form) => format!("{} ({form} form)", m.name(points)),
+        None => m.name(points).to_string(),
+    }
 }
 
 /// The two steps of a pair taken in place of `step`'s best ([`choose_pair`]), each member
@@ -1376,8 +1394,12 @@ fn pair_steps(
             improvement,
             p_value,
             held_out,
-            instead: best.cand.name(points).to_string(),
+            instead: label(points, best.cand),
             instead_improvement: best.improvement,
+            instead_plausible: best
+                .fit
+                .as_ref()
+                .is_some_and(|f| crate::plausibility::check_model(points, f).plausible),
             partner,
             pair_improvement: current.bic - pair.fit.bic,
         },
@@ -1772,5 +1794,61 @@ mod tests {
         assert!(above(c + 0.5) < 0.01);
         assert!(above(c) >= 0.01);
         assert_eq!(critical_value(&null, 0.0005), f64::INFINITY);
+    }
+
+    #[test]
+    fn a_pair_replaces_the_best_only_when_both_members_are_needed_and_it_wins_by_the_guard() {
+        let e = |x| Mechanism::Effect(x);
+        let (ir, visc, off, ldf) = (
+            e(Effect::InertiaRectification),
+            e(Effect::VibratorViscousLoss),
+            e(Effect::CurrentSensorOffset),
+            e(Effect::LoadDependentFriction),
+        );
+        let sc = |bic, plausible| Scored { bic, plausible };
+        let critical = 8.0;
+        let here = 0.0;
+        // The best alone (-200) is physical; viscous loss (-150) and the offset (-60) together
+        // reach -230: each adds more than 8 to the other, and the pair beats
+        // the best alone by 30, more than the guard lets through.
+        let singles = [
+            (ir, sc(-200.0, true)),
+            (visc, sc(-150.0, true)),
+            (off, sc(-60.0, true)),
+            (ldf, sc(-40.0, true)),
+        ];
+        let pairs = [
+            (ir, visc, sc(-203.0, true)),
+            (ir, off, sc(-205.0, true)),
+            (visc, off, sc(-230.0, true)),
+            (visc, ldf, sc(-160.0, true)),
+        ];
+        assert_eq!(choose_pair(here, &singles, &pairs, critical), Some(2));
+        // Not when the pair wins by less than the guard's critical value.
+        let mut close = pairs;
+        close[2].2.bic = -206.0;
+        assert_eq!(choose_pair(here, &singles, &close, critical), None);
+        // Not when one member adds too little to the other: the offset adds 7 to viscous loss.
+        let mut weak = singles;
+        weak[1].1.bic = -223.0;
+        assert_eq!(choose_pair(here, &weak, &pairs, critical), None);
+        // Not when the joint model needs values no rig can have.
+        let mut beyond = pairs;
+        beyond[2].2.plausible = false;
+        assert_eq!(choose_pair(here, &singles, &beyond, critical), None);
+        // Not when the best alone does not clear the guard over the model before.
+        assert_eq!(choose_pair(-195.0, &singles, &pairs, critical), None);
+        // An implausible best is replaced by the best physical pair, its own pairs included.
+        let mut implausible = singles;
+        implausible[0].1.plausible = false;
+        let mut with_best = pairs;
+        with_best[2].2.bic = -150.0;
+        with_best[1].2.bic = -210.0;
+        assert_eq!(
+            choose_pair(here, &implausible, &with_best, critical),
+            Some(1)
+        );
+        // A physical best already in the best pair: the forward step is kept.
+        assert_eq!(choose_pair(here, &singles, &with_best, critical), None);
     }
 }
