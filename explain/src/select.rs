@@ -1294,26 +1294,6 @@ fn pair_steps(
             )
         })
         .collect();
-    if std::env::var("PAIR_DEBUG").is_ok() {
-        for (m, sc) in &singles {
-            eprintln!(
-                "  single {} {:.1} {}",
-                m.name(points),
-                current.bic - sc.bic,
-                sc.plausible
-            );
-        }
-        for (a, b, sc) in &scored {
-            eprintln!(
-                "  pair {} + {} {:.1} {}",
-                a.name(points),
-                b.name(points),
-                current.bic - sc.bic,
-                sc.plausible
-            );
-        }
-        eprintln!("  critical {:.1}", step.critical);
-    }
     let k = choose_pair(current.bic, &singles, &scored, step.critical)?;
     let pair = step.pairs[k].clone();
     let pair_held_out = fit::held_out(points, &pair.fit.spec, &pair.fit.model, &pair.fit.term_x);

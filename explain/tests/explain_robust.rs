@@ -200,7 +200,11 @@ fn named_effects_carry_inclusion_probabilities_and_a_confidence() {
         // More likely in than not where the final model fits; the inertia set, whose final
         // lack of fit has p = 0.009, reads 0.27 (a near-significant remainder is where wrong
         // names sit in the calibration's batch), still well above a wrong name's.
-        let floor = if e.lack_of_fit.p_value < 0.01 { 0.2 } else { 0.5 };
+        let floor = if e.lack_of_fit.p_value < 0.01 {
+            0.2
+        } else {
+            0.5
+        };
         assert!(p > floor, "{}: inclusion {p} from {ev:?}", effect.name());
         // Most replicates reach the same set; the stated confidence is that share, calibrated.
         let share = e.confidence_raw.unwrap();
