@@ -102,15 +102,15 @@ fn logistic(w: &[f64; FEATURES], x: &[f64; FEATURES]) -> f64 {
 /// two plans; 3-40 mA; out-of-library truths, library effects, pairs and effect-free sets;
 /// seeds 80 000 and up), its `explained` verdicts (session 9, with the pair step).
 pub const CONFIDENCE_MODEL: CalibrationModel = CalibrationModel {
-    weights: [-0.11, 0.60, 1.69, 1.05, -2.96],
-    cases: 246,
+    weights: [-0.13, 0.60, 1.66, 1.07, -3.00],
+    cases: 247,
 };
 
 /// The probability that a named effect is part of the truth, fitted by [`fit_logistic`] on
 /// the same batch: every effect named by any verdict (session 9).
 pub const INCLUSION_MODEL: CalibrationModel = CalibrationModel {
-    weights: [-1.03, 0.13, 3.15, 1.38, -5.54],
-    cases: 672,
+    weights: [-1.22, 0.21, 2.99, 1.40, -5.53],
+    cases: 680,
 };
 
 /// The probability that an `explained` verdict with this evidence is right
