@@ -43,8 +43,10 @@ const TERM_SCREEN_FACTOR: f64 = 2.0;
 /// See [`TERM_SCREEN_FACTOR`].
 const TERM_SCREEN_SLACK: f64 = 10.0;
 /// A step's pairs of candidates fitted jointly start from this many of its best fitted
-/// candidates, each with every other ([`pair_fits`]).
+/// candidates ([`pair_fits`])...
 pub const PAIR_FIRSTS: usize = 4;
+/// ... each with this many partners, those the score test from its fit ranks highest.
+pub const PAIR_PARTNERS: usize = 3;
 /// Level of the guard that the best improvement must still clear with its most influential
 /// test point left out (at least `Options::alpha`).
 pub const INFLUENCE_ALPHA: f64 = 0.05;
@@ -895,27 +897,21 @@ fn critical_value(null: &[f64], alpha: f64) -> f64 {
     *v
 }
 
-/// Fits the applicable candidates not yet in `current` (on large data the leaders of the score
-/// test) and simulates the guard's null; `None` when no candidate is left.
-pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Explored> {
-    let traits = points.traits();
-    let full_table = points.len() <= FULL_TABLE_POINTS;
-    let applicable: Vec<Mechanism> = pending(points, &current.spec)
-        .into_iter()
-        .filter(|c| c.not_applicable(points, &traits).is_none())
-        .collect();
-    if applicable.is_empty() {
-        return None;
-    }
+/// Score-test estimates of the BIC improvement of each of `cands` (applicable, not in
+/// `current`) added to `current`, for screening; with the score tests and the mean
+/// candidates they were taken over (for the guard's null).
+fn estimate_improvements(
+    points: &TestPoints,
+    current: &Fit,
+    cands: &[Mechanism],
+) -> (ScoreTests, Vec<Mechanism>, Vec<f64>) {
     let ripple_cand = Mechanism::Effect(Effect::MeshLoadSharingRipple);
-    let mean: Vec<Mechanism> = applicable
+    let mean: Vec<Mechanism> = cands
         .iter()
         .copied()
         .filter(|c| *c != ripple_cand)
         .collect();
-    let ripple = applicable.contains(&ripple_cand);
     let tests = score_tests(points, current, &mean);
-    // Score-test estimate of each candidate's BIC improvement, for screening.
     let estimate = |c: Mechanism| -> f64 {
         let k = c.penalty(points, current.n as f64);
         if c == ripple_cand {
@@ -932,7 +928,25 @@ pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Exp
         }
         lr - k
     };
-    let mut ranked: Vec<(Mechanism, f64)> = applicable.iter().map(|&c| (c, estimate(c))).collect();
+    let estimates = cands.iter().map(|&c| estimate(c)).collect();
+    (tests, mean, estimates)
+}
+
+/// Fits the applicable candidates not yet in `current` (on large data the leaders of the score
+/// test) and simulates the guard's null; `None` when no candidate is left.
+pub fn explore(points: &TestPoints, current: &Fit, opts: &Options) -> Option<Explored> {
+    let traits = points.traits();
+    let full_table = points.len() <= FULL_TABLE_POINTS;
+    let applicable: Vec<Mechanism> = pending(points, &current.spec)
+        .into_iter()
+        .filter(|c| c.not_applicable(points, &traits).is_none())
+        .collect();
+    if applicable.is_empty() {
+        return None;
+    }
+    let ripple = applicable.contains(&Mechanism::Effect(Effect::MeshLoadSharingRipple));
+    let (tests, mean, estimates) = estimate_improvements(points, current, &applicable);
+    let mut ranked: Vec<(Mechanism, f64)> = applicable.iter().copied().zip(estimates).collect();
     ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
     let null = null_best_improvements(points, &tests, &mean, ripple, current.n, opts.null_draws);
     let critical = critical_value(&null, opts.alpha);
@@ -1166,9 +1180,10 @@ pub fn select_from(
     }
 }
 
-/// The pairs of `candidates` (a step's, best first, fitted on one model) fitted jointly: each of
-/// the [`PAIR_FIRSTS`] best fitted ones with every other fitted one it can be carried with
-/// (a partner may add little alone and much with it), the better one alone first.
+/// The pairs of `candidates` (a step's, best first, fitted on one model) fitted jointly: each
+/// of the [`PAIR_FIRSTS`] best fitted ones with the [`PAIR_PARTNERS`] fitted ones after it
+/// that the score test from its fit ranks highest (a partner may add little alone and much
+/// with it), the better one alone first.
 pub fn pair_fits(points: &TestPoints, candidates: &[Candidate]) -> Vec<PairFit> {
     let pool: Vec<&Candidate> = candidates
         .iter()
@@ -1177,11 +1192,16 @@ pub fn pair_fits(points: &TestPoints, candidates: &[Candidate]) -> Vec<PairFit> 
     let mut jobs: Vec<(usize, usize)> = Vec::new();
     for i in 0..pool.len().min(PAIR_FIRSTS) {
         let with = pool[i].fit.as_ref().expect("fitted");
-        for j in i + 1..pool.len() {
-            if pending(points, &with.spec).contains(&pool[j].cand) {
-                jobs.push((i, j));
-            }
-        }
+        let carried = pending(points, &with.spec);
+        let others: Vec<usize> = (i + 1..pool.len())
+            .filter(|&j| carried.contains(&pool[j].cand))
+            .collect();
+        // The partners the score test from the first's fit ranks highest.
+        let cands: Vec<Mechanism> = others.iter().map(|&j| pool[j].cand).collect();
+        let (_, _, estimates) = estimate_improvements(points, with, &cands);
+        let mut ranked: Vec<(usize, f64)> = others.into_iter().zip(estimates).collect();
+        ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+        jobs.extend(ranked.iter().take(PAIR_PARTNERS).map(|&(j, _)| (i, j)));
     }
     let fits = crate::parallel::par_map(&jobs, |&(i, j)| {
         let with = pool[i].fit.as_ref().expect("fitted");
