@@ -46,7 +46,7 @@ const TERM_SCREEN_SLACK: f64 = 10.0;
 /// candidates ([`pair_fits`])...
 pub const PAIR_FIRSTS: usize = 4;
 /// ... each with this many partners, those the score test from its fit ranks highest.
-pub const PAIR_PARTNERS: usize = 3;
+pub const PAIR_PARTNERS: usize = 2;
 /// Level of the guard that the best improvement must still clear with its most influential
 /// test point left out (at least `Options::alpha`).
 pub const INFLUENCE_ALPHA: f64 = 0.05;
