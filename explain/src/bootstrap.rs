@@ -330,7 +330,6 @@ struct StepNode {
 
 /// Files a step's pair fits under their paths (`path` then the pair); returns the pairs.
 fn insert_pairs(
-    points: &TestPoints,
     path: &[Mechanism],
     pairs: &[select::PairFit],
     fits: &mut BTreeMap<Vec<Mechanism>, Fit>,
@@ -339,7 +338,7 @@ fn insert_pairs(
     let mut out = Vec::new();
     for pf in pairs {
         let key = [path, &[pf.first, pf.second]].concat();
-        if !crate::plausibility::check_model(points, &pf.fit).plausible {
+        if !pf.plausible {
             implausible.insert(key.clone());
         }
         fits.entry(key).or_insert_with(|| pf.fit.clone());
@@ -535,7 +534,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
                 children.push(c.cand);
             }
         }
-        let pairs = insert_pairs(points, &path, &step.pairs, &mut fits, &mut implausible);
+        let pairs = insert_pairs(&path, &step.pairs, &mut fits, &mut implausible);
         steps.insert(
             path.clone(),
             StepNode {
@@ -606,7 +605,7 @@ pub fn bootstrap(points: &TestPoints, selection: &Selection, opts: &Options) -> 
         for (p, ex) in wanted.into_iter().zip(explored) {
             let node = match ex {
                 Some((critical, children, pair_fits)) => {
-                    let pairs = insert_pairs(points, &p, &pair_fits, &mut fits, &mut implausible);
+                    let pairs = insert_pairs(&p, &pair_fits, &mut fits, &mut implausible);
                     let names = children.iter().map(|(e, _)| *e).collect();
                     for (e, f) in children {
                         let mut child = p.clone();

@@ -164,6 +164,8 @@ pub struct PairFit {
     pub second: Mechanism,
     /// Their joint fit.
     pub fit: Fit,
+    /// Whether every value of the joint fit is within its physical limits.
+    pub plausible: bool,
 }
 
 /// A model compared by [`choose_pair`]: its BIC and whether every value in it is physical.
@@ -1125,7 +1127,7 @@ pub fn select_from(
         else {
             break;
         };
-        if let Some((first, second)) = pair_steps(
+        if let Some(second) = pair_steps(
             points,
             &current,
             current_held_out,
@@ -1134,7 +1136,7 @@ pub fn select_from(
             critical_influence,
             opts,
         ) {
-            steps.push(first);
+            steps.push(step);
             (current, current_held_out) = advance(points, &second);
             steps.push(second);
             continue;
@@ -1203,18 +1205,16 @@ pub fn pair_fits(points: &TestPoints, candidates: &[Candidate]) -> Vec<PairFit> 
         ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
         jobs.extend(ranked.iter().take(PAIR_PARTNERS).map(|&(j, _)| (i, j)));
     }
-    let fits = crate::parallel::par_map(&jobs, |&(i, j)| {
+    crate::parallel::par_map(&jobs, |&(i, j)| {
         let with = pool[i].fit.as_ref().expect("fitted");
-        fit_candidate(points, with, pool[j].cand)
-    });
-    jobs.iter()
-        .zip(fits)
-        .map(|(&(i, j), fit)| PairFit {
+        let fit = fit_candidate(points, with, pool[j].cand);
+        PairFit {
             first: pool[i].cand,
             second: pool[j].cand,
+            plausible: crate::plausibility::check_model(points, &fit).plausible,
             fit,
-        })
-        .collect()
+        }
+    })
 }
 
 /// The rule that takes two candidates at once in place of the step's best (the selection
@@ -1267,11 +1267,12 @@ fn label(points: &TestPoints, m: Mechanism) -> String {
     }
 }
 
-/// The two steps of a pair taken in place of `step`'s best ([`choose_pair`]), each member
-/// having passed the tests of a step of its own (the first: every test but the physical
-/// limits, which only the pair must meet; the second: every test, from the first's fit,
-/// and the driver check of a later effect); `None` (and the forward step as it was) when no
-/// pair is chosen or a member fails. Fills `step.pairs` where the guard passed.
+/// A pair taken in place of `step`'s best ([`choose_pair`]): `step` turned into the first
+/// member's step and the next step, the second member's, returned. Each member has passed
+/// the tests of a step of its own (the first: every test but the physical limits, which only
+/// the pair must meet; the second: every test, from the first's fit, and the driver check of
+/// a later effect). `None`, and `step` as it was but for its `pairs` (filled where the guard
+/// passed), when no pair is chosen or a member fails.
 fn pair_steps(
     points: &TestPoints,
     current: &Fit,
@@ -1280,12 +1281,11 @@ fn pair_steps(
     null: &[f64],
     critical_influence: f64,
     opts: &Options,
-) -> Option<(Step, Step)> {
+) -> Option<Step> {
     if step.p_value >= opts.alpha || current.spec.effects.len() + 2 > opts.max_effects {
         return None;
     }
     step.pairs = pair_fits(points, &step.candidates);
-    let plausible = |f: &Fit| crate::plausibility::check_model(points, f).plausible;
     let singles: Vec<(Mechanism, Scored)> = step
         .candidates
         .iter()
@@ -1295,7 +1295,7 @@ fn pair_steps(
                 c.cand,
                 Scored {
                     bic: f.bic,
-                    plausible: plausible(f),
+                    plausible: crate::plausibility::check_model(points, f).plausible,
                 },
             ))
         })
@@ -1309,78 +1309,50 @@ fn pair_steps(
                 p.second,
                 Scored {
                     bic: p.fit.bic,
-                    plausible: plausible(&p.fit),
+                    plausible: p.plausible,
                 },
             )
         })
         .collect();
-    let k = choose_pair(current.bic, &singles, &scored, step.critical)?;
-    let pair = step.pairs[k].clone();
+    let pair = &step.pairs[choose_pair(current.bic, &singles, &scored, step.critical)?];
     let pair_held_out = fit::held_out(points, &pair.fit.spec, &pair.fit.model, &pair.fit.term_x);
     if !confirmed(None, current_held_out, pair_held_out, false).0 {
         return None;
     }
-    let best = step.best()?.clone();
+    let (first_cand, second_cand, pair_bic) = (pair.first, pair.second, pair.fit.bic);
     // The first member, judged as a step of its own.
-    let i = step.candidates.iter().position(|c| c.cand == pair.first)?;
-    let mut first = step.candidates[i].clone();
-    let first_fit = first.fit.clone()?;
-    if first.held_out.is_none() {
-        first.held_out =
-            fit::held_out(points, &first_fit.spec, &first_fit.model, &first_fit.term_x);
-    }
-    let exceed = null.iter().filter(|&&v| v >= first.improvement).count();
-    let p_first = (1 + exceed) as f64 / (1 + null.len()) as f64;
-    let d = decide(
+    let i = step.candidates.iter().position(|c| c.cand == first_cand)?;
+    let (first, d, p_first) = judged_alone(
         points,
         current,
         current_held_out,
-        &first,
-        p_first,
+        &step.candidates[i],
+        null,
         critical_influence,
         opts,
-    );
+    )?;
+    let first_fit = first.fit.as_ref()?;
     // The second member: the next step from the first's fit, with it on top.
     let (mut next, next_null, next_influence) =
-        take_step_with_null(points, &first_fit, first.held_out, opts)?;
-    let j = next.candidates.iter().position(|c| c.cand == pair.second)?;
-    let mut second = next.candidates[j].clone();
-    let second_fit = second.fit.clone()?;
-    if second.held_out.is_none() {
-        second.held_out = fit::held_out(
-            points,
-            &second_fit.spec,
-            &second_fit.model,
-            &second_fit.term_x,
-        );
-    }
-    let exceed = next_null
-        .iter()
-        .filter(|&&v| v >= second.improvement)
-        .count();
-    let p_second = (1 + exceed) as f64 / (1 + next_null.len()) as f64;
-    let d2 = decide(
+        take_step_with_null(points, first_fit, first.held_out, opts)?;
+    let j = next.candidates.iter().position(|c| c.cand == second_cand)?;
+    let (second, d2, p_second) = judged_alone(
         points,
-        &first_fit,
+        first_fit,
         first.held_out,
-        &second,
-        p_second,
+        &next.candidates[j],
+        &next_null,
         next_influence,
         opts,
-    );
+    )?;
     if !d2.accepted() {
         return None;
     }
-    next.candidates.remove(j);
-    next.candidates.insert(0, second);
-    next.p_value = p_second;
-    next.decision = d2;
-    next.accepted = true;
-    if let Some(refused) = not_separated(points, &first_fit, &next) {
-        let _ = refused;
+    next.promote(j, second, d2, p_second);
+    if not_separated(points, first_fit, &next).is_some() {
         return None;
     }
-    let partner = pair.second.name(points).to_string();
+    let best = step.best()?;
     let decision = match d {
         Decision::Implausible { .. } => only_together(&d, &next, points),
         Decision::Added {
@@ -1389,33 +1361,26 @@ fn pair_steps(
             p_value,
             held_out,
             ..
-        } if best.cand != pair.first => Decision::AddedInPair {
+        } if best.cand != first_cand => Decision::AddedInPair {
             best: name,
             improvement,
             p_value,
             held_out,
             instead: label(points, best.cand),
             instead_improvement: best.improvement,
-            instead_plausible: best
-                .fit
-                .as_ref()
-                .is_some_and(|f| crate::plausibility::check_model(points, f).plausible),
-            partner,
-            pair_improvement: current.bic - pair.fit.bic,
+            instead_plausible: singles.iter().any(|(m, s)| *m == best.cand && s.plausible),
+            partner: second_cand.name(points).to_string(),
+            pair_improvement: current.bic - pair_bic,
         },
         _ => return None,
     };
     if let Decision::Added { partner, .. } = &mut next.decision
         && matches!(decision, Decision::AddedOnlyTogether { .. })
     {
-        *partner = Some(pair.first.name(points).to_string());
+        *partner = Some(first_cand.name(points).to_string());
     }
-    step.candidates.remove(i);
-    step.candidates.insert(0, first);
-    step.p_value = p_first;
-    step.decision = decision;
-    step.accepted = true;
-    Some((step.clone(), next))
+    step.promote(i, first, decision, p_first);
+    Some(next)
 }
 
 /// A later step's best, accepted on every other test, whose own driver a generic shape in
@@ -1466,6 +1431,54 @@ fn advance(points: &TestPoints, step: &Step) -> (Fit, Option<HeldOut>) {
     (f, held_out)
 }
 
+/// The guard's p-value of `improvement`: the share of the null draws (plus one) at or above it.
+fn p_value_at(null: &[f64], improvement: f64) -> f64 {
+    let exceed = null.iter().filter(|&&v| v >= improvement).count();
+    (1 + exceed) as f64 / (1 + null.len()) as f64
+}
+
+/// Candidate `c` of a step from `current` judged as if it were the step's best: its held-out
+/// score filled in, the guard's p-value at its own improvement (the null is of the best of
+/// all candidates, so this is no easier) and the step's decision on it.
+fn judged_alone(
+    points: &TestPoints,
+    current: &Fit,
+    current_held_out: Option<HeldOut>,
+    c: &Candidate,
+    null: &[f64],
+    critical_influence: f64,
+    opts: &Options,
+) -> Option<(Candidate, Decision, f64)> {
+    let f = c.fit.as_ref()?;
+    let mut c = c.clone();
+    if c.held_out.is_none() {
+        c.held_out = fit::held_out(points, &f.spec, &f.model, &f.term_x);
+    }
+    let p_value = p_value_at(null, c.improvement);
+    let d = decide(
+        points,
+        current,
+        current_held_out,
+        &c,
+        p_value,
+        critical_influence,
+        opts,
+    );
+    Some((c, d, p_value))
+}
+
+impl Step {
+    /// Puts candidate `i`, as judged (`c`, decision `d` at guard p-value `p_value`), at the
+    /// top of the step as its best.
+    fn promote(&mut self, i: usize, c: Candidate, d: Decision, p_value: f64) {
+        self.candidates.remove(i);
+        self.candidates.insert(0, c);
+        self.accepted = d.accepted();
+        self.decision = d;
+        self.p_value = p_value;
+    }
+}
+
 /// One step of the selection from `current`: every candidate explored, the best scored and
 /// judged; `None` when no candidate is left. With the guard's null draws and its critical
 /// value at [`INFLUENCE_ALPHA`].
@@ -1483,8 +1496,7 @@ fn take_step_with_null(
         critical_influence,
     } = explore(points, current, opts)?;
     let best_improvement = candidates[0].improvement;
-    let exceed = null.iter().filter(|&&v| v >= best_improvement).count();
-    let p_value = (1 + exceed) as f64 / (1 + null.len()) as f64;
+    let p_value = p_value_at(&null, best_improvement);
     let guard_passed = best_improvement > 0.0 && p_value < opts.alpha;
     score_held_out(points, &mut candidates, guard_passed);
     let decision = decide(
@@ -1649,36 +1661,21 @@ fn complete_plausibility(
     let (mut next, null, critical_influence) = take_step_with_null(points, with, held_out, opts)?;
     if !next.accepted {
         // The best partner is the best candidate that passes every test, the guard at its
-        // own improvement included (the guard's null is of the best of all candidates, so
-        // this is no easier).
+        // own improvement included.
         let found = (1..next.candidates.len()).find_map(|i| {
-            let c = &next.candidates[i];
-            c.fit.as_ref()?;
-            let exceed = null.iter().filter(|&&v| v >= c.improvement).count();
-            let p_value = (1 + exceed) as f64 / (1 + null.len()) as f64;
-            let held = c.held_out.or_else(|| {
-                let f = c.fit.as_ref()?;
-                fit::held_out(points, &f.spec, &f.model, &f.term_x)
-            });
-            let mut c = c.clone();
-            c.held_out = held;
-            let d = decide(
+            let (c, d, p_value) = judged_alone(
                 points,
                 with,
                 held_out,
-                &c,
-                p_value,
+                &next.candidates[i],
+                &null,
                 critical_influence,
                 opts,
-            );
+            )?;
             d.accepted().then_some((i, c, d, p_value))
         });
         let (i, c, d, p_value) = found?;
-        next.candidates.remove(i);
-        next.candidates.insert(0, c);
-        next.decision = d;
-        next.p_value = p_value;
-        next.accepted = true;
+        next.promote(i, c, d, p_value);
     }
     // The partner must also improve on the model without the first candidate: together
     // they beat it by more than the first did alone.
