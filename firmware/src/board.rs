@@ -115,7 +115,7 @@ use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::Ch1;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::qei::{self, Qei};
-use embassy_stm32::timer::simple_pwm::PwmPin;
+use embassy_stm32::timer::simple_pwm::{PwmPin, PwmPinConfig};
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Config, Peri, Peripherals, bind_interrupts, dma, interrupt, pac, triggers};
@@ -410,7 +410,17 @@ impl CamMotor {
         // Enable first, so the bridge is held off before the PWM pin becomes an output.
         let enable = Output::new(enable_pin, Level::Low, Speed::Low);
         let direction_pin = Output::new(direction_pin, Level::Low, Speed::Low);
-        let pwm_pin = PwmPin::new(pwm_pin, OutputType::PushPull);
+        // Low speed (OSPEEDR 00): a 20 kHz line needs edges of tens of ns at most, and the
+        // slowest slew rings least into the bridge's input (embassy's `PwmPin::new` picks
+        // very high). The boot trace checks GPIOA_OSPEEDR8 = 00.
+        let pwm_pin = PwmPin::new_with_config(
+            pwm_pin,
+            PwmPinConfig {
+                output_type: OutputType::PushPull,
+                speed: Speed::Low,
+                pull: Pull::None,
+            },
+        );
         // TIM1 clocked and reset: main output (MOE) off, CH1 disabled.
         let timer = Timer::new(tim);
         let t = pac::TIM1;

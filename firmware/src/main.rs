@@ -99,6 +99,19 @@ fn main() {
     );
 }
 
+/// The TIM1 compare value for the core's duty `duty` (sign: direction, magnitude up to 1)
+/// at `full_scale` counts; `None` for a non-finite duty, which the bridge refuses (off):
+/// `f32::NAN.min(1.0)` is 1.0, full drive.
+#[cfg(any(target_os = "none", test))]
+fn duty_compare(duty: f32, full_scale: f32) -> Option<u32> {
+    if !duty.is_finite() || !full_scale.is_finite() || full_scale < 0.0 {
+        return None;
+    }
+    // In [0, full_scale] by the clamp: the cast cannot truncate beyond the range.
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+    Some((duty.abs().min(1.0) * full_scale) as u32)
+}
+
 #[cfg(any(target_os = "none", test))]
 mod analog;
 #[cfg(target_os = "none")]
@@ -232,6 +245,8 @@ mod app {
         let reset = board::ResetCause::take();
         let crash = safety::take_crash();
         let p = embassy_stm32::init(board::config());
+        // The init pulsed SYSCFG's reset, which cleared CLL: set again, read back, logged.
+        let lockup_break = safety::arm_lockup_break();
         let config = board::core_config();
         let trip_limit_a = config.faults.overcurrent_a * board::HW_TRIP_MARGIN;
         let board::Board {
@@ -267,6 +282,11 @@ mod app {
         if let Some(crash) = crash {
             error!("the previous run ended in the safe state: {}", crash);
         }
+        if lockup_break {
+            info!("SYSCFG_CFGR2.CLL set after init: a lockup breaks TIM1");
+        } else {
+            error!("SYSCFG_CFGR2.CLL reads clear after init: a lockup leaves TIM1 switching");
+        }
         let stalled =
             reset.window_watchdog || crash.is_some_and(|c| c.cause == CrashCause::ControlStall);
 
@@ -288,13 +308,14 @@ mod app {
             parameters: loaded.calibration,
             parameters_status: loaded.status,
         };
-        // The core (~43 KiB, mostly the capture buffer) lives in its static slot; the tasks
-        // share a reference to it through the mutex. Its value still passes through a
-        // stack temporary in this task (`sub sp, #44288` in the release image), which the
-        // 46,944 B of stack above 51,360 B of statics holds with little room: anything
-        // that grows `Core` costs that twice (the target bench's boot trace catches it).
-        let slot = unwrap!(cortex_m::singleton!(: MaybeUninit<Core> = MaybeUninit::uninit()));
-        let core_ref: &'static mut Core = slot.write(Core::new(config, boot));
+        // The core (~43 KiB, mostly the capture buffer) is built in its static slot, never
+        // on this task's stack (`core_in_place`): the boot trace of the target bench
+        // measures the lowest stack pointer's margin to the guard (at least 2 KiB).
+        let core_ref = core_in_place(
+            unwrap!(cortex_m::singleton!(: MaybeUninit<Core> = MaybeUninit::uninit())),
+            config,
+            boot,
+        );
         let core: &'static SharedCore =
             unwrap!(cortex_m::singleton!(: SharedCore = Mutex::new(RefCell::new(core_ref))));
 
@@ -333,6 +354,19 @@ mod app {
         spawner.spawn(spawned(persist(core, store)));
         spawner.spawn(spawned(monitor(core, led)));
         spawner.spawn(spawned(watchdog_feeder(watchdog)));
+    }
+
+    /// Builds the core in `slot`. Out of line, with the slot a `&mut` argument (no alias):
+    /// LLVM then constructs `Core::new`'s value in the slot itself instead of in a stack
+    /// temporary that `main`'s frame would have to hold (44,288 B before, 188 B above the
+    /// stack guard).
+    #[inline(never)]
+    fn core_in_place(
+        slot: &'static mut MaybeUninit<Core>,
+        config: firmware_core::CoreConfig,
+        boot: BootInfo,
+    ) -> &'static mut Core {
+        slot.write(Core::new(config, boot))
     }
 
     /// A task's spawn token. Each task has a pool of one and is spawned once, at boot, so a
@@ -512,8 +546,12 @@ mod app {
         io.motor.set_direction(direction, &mut io.trip);
         // A refusal (a trip, or the comparator over its threshold) leaves the bridge off;
         // the next step's `poll_break` tells the core.
-        io.motor
-            .enable((out.duty.abs().min(1.0) * full_scale) as u32);
+        // A non-finite duty is refused (`NaN.min(1.0)` is 1.0: full drive): the bridge off.
+        let Some(compare) = crate::duty_compare(out.duty, full_scale) else {
+            io.motor.stop();
+            return;
+        };
+        io.motor.enable(compare);
     }
 
     /// Host bytes into the core. Checks in at least every 10 ms, link idle or not.
@@ -632,6 +670,19 @@ mod app {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_non_finite_duty_is_refused_never_full_drive() {
+        // The review's case: `NaN.min(1.0)` is 1.0, so NaN used to become 100 %.
+        assert_eq!(f32::NAN.min(1.0), 1.0);
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            assert_eq!(duty_compare(bad, 4249.0), None, "{bad}");
+        }
+        assert_eq!(duty_compare(0.5, 4250.0), Some(2125));
+        assert_eq!(duty_compare(-0.5, 4250.0), Some(2125));
+        assert_eq!(duty_compare(3.0, 4250.0), Some(4250));
+        assert_eq!(duty_compare(0.0, 4250.0), Some(0));
+    }
 
     #[test]
     fn the_identity_is_version_and_the_one_build_constant() {

@@ -252,6 +252,16 @@ unsafe extern "C" {
     static _stack_start: u8;
 }
 
+/// Sets SYSCFG_CFGR2.CLL (the core's LOCKUP into TIM1's break) and reads it back: `true`
+/// when it is set. `embassy_stm32::init` pulses SYSCFG's reset (RCC_APB2RSTR.SYSCFGRST),
+/// which clears the bit [`arm_last_resort`] set before it, so `main` calls this after the
+/// init and logs the read-back (the target bench's boot trace checks the order).
+pub fn arm_lockup_break() -> bool {
+    pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));
+    pac::SYSCFG.cfgr2().modify(|w| w.set_cll(true));
+    pac::SYSCFG.cfgr2().read().cll()
+}
+
 /// MPU region used by the stack guard.
 const STACK_GUARD_REGION: u32 = 0;
 /// MPU_CTRL: ENABLE | PRIVDEFENA (the default memory map everywhere else); HFNMIENA clear,
@@ -267,7 +277,8 @@ const MPU_CTRL_ENABLE_PRIVDEFENA: u32 = 0b101;
 /// - SYSCFG_CFGR2.CLL: the Cortex-M4's LOCKUP output into TIM1's break, so a core lockup
 ///   (a fault inside the HardFault handler or its stacking) clears MOE in hardware instead
 ///   of leaving TIM1 switching until the window watchdog resets the chip (~2 ms later).
-///   The bit is write-once: only a reset clears it.
+///   The bit is write-once: only a reset clears it, and `embassy_stm32::init`'s pulse of
+///   SYSCFG's reset does: [`arm_lockup_break`] sets it again after the init.
 pub fn arm_last_resort() {
     // SYSCFG is clocked with RCC_APB2ENR.SYSCFGEN (the bit embassy's init sets too).
     pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));

@@ -37,6 +37,13 @@ pub mod rs735 {
     /// Efficiency eta of the gearhead (a two-stage spur gearhead: about 0.8), so that the
     /// torque per ampere at the cam is C1 = eta N Kt = 62.4 N mm/A (Table 2: 62.1).
     pub const GEARHEAD_EFFICIENCY: f64 = 0.8;
+    /// Reverse (back-drive) efficiency of the gearhead: the share of power driven into its
+    /// output shaft that reaches the motor. Not from a data sheet (makers state only the
+    /// forward figure); a two-stage spur gearhead's reverse efficiency is about its forward
+    /// one at these ratios (both set by the same mesh losses), so taken equal. A braking
+    /// drive's return of the carrier's power passes through it
+    /// ([`crate::effects::KAPPA_BRAKING_DRIVE`]).
+    pub const GEARHEAD_REVERSE_EFFICIENCY: f64 = 0.8;
     /// Rotor inertia at the motor shaft, kg m^2.
     pub const ROTOR_INERTIA_KG_M2: f64 = 1.0e-5;
     /// Inertia of the cam and its shaft at the cam shaft, kg m^2.
@@ -219,24 +226,18 @@ pub mod board {
         }
     }
 
-    /// The decay mode the rig is built for, the one setting: [`Decay::Coast`] by default,
-    /// a drive that takes no power back, like the paper's bench supply, which every
-    /// closed-loop test and `rig demo` validate; [`Decay::Brake`] with this crate's
-    /// `bridge-brake-decay` feature (the firmware's feature of the same name turns it on),
-    /// for a bridge driven sign-magnitude with braking in the off-time, as the recommended
-    /// Pololu G2 24v13 is (PWM low brakes both outputs to ground). A firmware for the G2
-    /// is built with that feature; with it the virtual rig returns the carrier's power
-    /// into its bus capacitor as the G2 would.
-    ///
-    /// The board ships braking decay (the G2), so [`Decay::Brake`] is the default this
-    /// setting should have. It stays [`Decay::Coast`] while `rig explain` has no base model
-    /// for a braking drive's return through the gearhead (on a braking virtual rig a hidden
-    /// speed-dependent friction stays `partly-explained` and `rig compare` leaves more than
-    /// 1.5x explain's gap); the README's Pins section has the evidence.
-    pub const DECAY: Decay = if cfg!(feature = "bridge-brake-decay") {
-        Decay::Brake
-    } else {
+    /// The decay mode the rig is built for, the one setting: [`Decay::Brake`] by default,
+    /// the README's board, a Pololu G2 24v13 driven sign-magnitude (PWM low brakes both
+    /// outputs to ground, so the drive takes the carrier's power back through the
+    /// gearhead: [`crate::effects::KAPPA_BRAKING_DRIVE`]); [`Decay::Coast`] with this
+    /// crate's `bridge-coast-decay` feature (the firmware's feature of the same name turns
+    /// it on), a bridge that takes no power back, like the paper's bench supply. The
+    /// firmware image, its estimator and the virtual rig's plant read it; a rig file's
+    /// `[drive] decay` and a data file's `# drive:` line name the mode they were made with.
+    pub const DECAY: Decay = if cfg!(feature = "bridge-coast-decay") {
         Decay::Coast
+    } else {
+        Decay::Brake
     };
 
     /// Highest supply the H-bridge is rated for, V: the Pololu G2 24v13's operating range

@@ -156,6 +156,12 @@ flag_set! {
         /// `Request::Simulation` commands.
         const SIMULATION = 3
             => "the device is the virtual rig: it accepts simulation commands";
+        /// The bridge brakes in the PWM's off-time (slow decay, the Pololu G2): the current
+        /// may reverse and the carrier's inertial power returns through the gearhead, which
+        /// the estimator's kappa takes (`model::effects::KAPPA_BRAKING_DRIVE`). Clear: a
+        /// bridge that coasts and returns nothing.
+        const BRAKING_DECAY = 4
+            => "the bridge brakes in the PWM's off-time (slow decay): power returns to the supply, the estimator's kappa is the braking drive's";
     }
 }
 

@@ -186,6 +186,10 @@ impl SimRig {
         // The virtual rig measures its bridge supply (`BoardInputs::bus_voltage_v` below),
         // so it says so; health reports it.
         core_config.capabilities.insert(Capabilities::BUS_VOLTAGE);
+        // `Info` states the plant's drive (a rig file may set it): braking or coasting.
+        core_config
+            .capabilities
+            .set(Capabilities::BRAKING_DECAY, config.plant.regeneration);
         Self {
             plant: Plant::new(config.plant, config.seed),
             core: Core::new(core_config, boot),

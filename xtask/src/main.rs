@@ -24,13 +24,7 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("test") => test(),
-        Some("firmware") => match args.get(1).map(String::as_str) {
-            None => firmware().map(|_| ()),
-            Some("--no-check") => firmware_unchecked().map(|_| ()),
-            Some(other) => Err(format!(
-                "firmware: unknown option `{other}` (the one option is --no-check)"
-            )),
-        },
+        Some("firmware") => firmware_task(&args[1..]),
         Some("flash") => flash(),
         Some("setup") => setup(),
         Some("fuzz") => fuzz_smoke(),
@@ -38,7 +32,7 @@ fn main() -> ExitCode {
         Some("python") => python_task(true),
         _ => {
             eprintln!(
-                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, target bench --check, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use (fails over budget; --no-check: only prints)\n  flash         build the release firmware and flash it with probe-rs, streaming its defmt log (`cargo fw-flash`)\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]\n  python        the backdrive_rig wheel (maturin), installed in a fresh venv: pytest and the example notebook"
+                "usage: cargo xtask <task>\n\n  test          every check CI runs (setup, firmware build + size, target bench --check, thumb checks, fmt, clippy, docs, tests, fuzz smoke)\n  firmware      cross-build the release firmware and print its flash/RAM use (fails over budget; --no-check: only prints; --coast: the image for a coasting bridge, default the G2's braking one; --both)\n  flash         build the release firmware and flash it with probe-rs, streaming its defmt log (`cargo fw-flash`)\n  setup         install the thumb target and the rustfmt/clippy components when missing\n  fuzz          the fuzz smoke run alone (10 s per target in fuzz/; needs nightly and cargo-fuzz)\n  target-bench  the control core's cycles in an emulated Cortex-M4F [--json] [--check: fail over budget]\n  python        the backdrive_rig wheel (maturin), installed in a fresh venv: pytest and the example notebook"
             );
             Err("no task given".into())
         }
@@ -168,7 +162,20 @@ fn thumb_rustflags() -> String {
 /// Builds `package`'s binary of the same name for the thumb target (release, with
 /// [`thumb_rustflags`]) and returns the ELF's path.
 fn thumb_release_build(package: &str) -> Result<PathBuf> {
-    run(&format!("{package} release build ({THUMB})"), {
+    thumb_release_build_with(package, &[])
+}
+
+/// [`thumb_release_build`] with cargo `features`.
+fn thumb_release_build_with(package: &str, features: &[&str]) -> Result<PathBuf> {
+    let what = if features.is_empty() {
+        format!("{package} release build ({THUMB})")
+    } else {
+        format!(
+            "{package} release build ({THUMB}, features {})",
+            features.join(",")
+        )
+    };
+    run(&what, {
         let mut c = cargo();
         c.args([
             "build",
@@ -179,19 +186,101 @@ fn thumb_release_build(package: &str) -> Result<PathBuf> {
             THUMB,
         ])
         .env(THUMB_RUSTFLAGS_VAR, thumb_rustflags());
+        if !features.is_empty() {
+            c.arg("--features").arg(features.join(","));
+        }
         c
     })?;
     Ok(target_dir().join(THUMB).join("release").join(package))
 }
 
+/// The two firmware images: the default for the README's board (the Pololu G2, braking in
+/// the PWM's off-time) and the one for a bridge that coasts (feature `bridge-coast-decay`).
+/// Both are built, size-checked and boot-traced by `cargo xtask test`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Image {
+    /// The default image: braking decay (`model::hardware::board::Decay::Brake`).
+    Brake,
+    /// `--features bridge-coast-decay`: coasting decay.
+    Coast,
+}
+
+impl Image {
+    /// Both, the default last (so `target/.../release/firmware` is the default image after
+    /// a run that built both).
+    pub const BOTH: [Image; 2] = [Image::Coast, Image::Brake];
+
+    /// The decay's name, as `Info` and the log give it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Image::Brake => "brake",
+            Image::Coast => "coast",
+        }
+    }
+
+    fn features(self) -> &'static [&'static str] {
+        match self {
+            Image::Brake => &[],
+            Image::Coast => &["bridge-coast-decay"],
+        }
+    }
+
+    /// Where a copy of this image is kept (`firmware-brake`, `firmware-coast`) next to
+    /// `firmware`, which is whichever was built last.
+    pub fn kept_elf(self) -> PathBuf {
+        target_dir()
+            .join(THUMB)
+            .join("release")
+            .join(format!("firmware-{}", self.name()))
+    }
+}
+
+/// Builds `image` and keeps a copy of its ELF ([`Image::kept_elf`]); returns the copy.
+fn build_image(image: Image) -> Result<PathBuf> {
+    let elf = thumb_release_build_with("firmware", image.features())?;
+    let kept = image.kept_elf();
+    std::fs::copy(&elf, &kept)
+        .map_err(|e| format!("cannot copy {} to {}: {e}", elf.display(), kept.display()))?;
+    Ok(kept)
+}
+
+/// `cargo xtask firmware [--no-check] [--coast | --both]`.
+fn firmware_task(args: &[String]) -> Result {
+    let mut check = true;
+    let mut images = vec![Image::Brake];
+    for a in args {
+        match a.as_str() {
+            "--no-check" => check = false,
+            "--coast" => images = vec![Image::Coast],
+            "--brake" => images = vec![Image::Brake],
+            "--both" => images = Image::BOTH.to_vec(),
+            other => {
+                return Err(format!(
+                    "firmware: unknown option `{other}` (options: --no-check, --coast, --brake, --both)"
+                ));
+            }
+        }
+    }
+    for image in images {
+        if check {
+            firmware(image)?;
+        } else {
+            firmware_unchecked(image)?;
+        }
+    }
+    Ok(())
+}
+
 /// Builds the release firmware and prints its flash and RAM use; fails when either is over
 /// its budget ([`FLASH_BUDGET`], [`RAM_BUDGET`]).
-fn firmware() -> Result<size::Usage> {
-    let usage = firmware_unchecked()?;
+fn firmware(image: Image) -> Result<size::Usage> {
+    let usage = firmware_unchecked(image)?;
     if usage.flash > FLASH_BUDGET || usage.ram > RAM_BUDGET {
         return Err(format!(
-            "the firmware is over its budget: flash {} B (budget {FLASH_BUDGET} B), static RAM {} B (budget {RAM_BUDGET} B); see \"Firmware flash\" in the README for where the bytes go",
-            usage.flash, usage.ram
+            "the {} firmware is over its budget: flash {} B (budget {FLASH_BUDGET} B), static RAM {} B (budget {RAM_BUDGET} B); see \"Firmware flash\" in the README for where the bytes go",
+            image.name(),
+            usage.flash,
+            usage.ram
         ));
     }
     Ok(usage)
@@ -199,11 +288,12 @@ fn firmware() -> Result<size::Usage> {
 
 /// Builds the release firmware and prints its flash and RAM use against the budgets,
 /// without failing over them (what a flash of a grown development image wants).
-fn firmware_unchecked() -> Result<size::Usage> {
-    let elf = thumb_release_build("firmware")?;
+fn firmware_unchecked(image: Image) -> Result<size::Usage> {
+    let elf = build_image(image)?;
     let usage = size::measure(&elf)?;
     println!(
-        "firmware size: flash {} B ({:.1} KiB of {} KiB budget), static RAM {} B ({:.1} KiB of {} KiB budget)",
+        "firmware ({} decay) size: flash {} B ({:.1} KiB of {} KiB budget), static RAM {} B ({:.1} KiB of {} KiB budget)",
+        image.name(),
         usage.flash,
         usage.flash as f64 / 1024.0,
         FLASH_BUDGET / 1024,
@@ -221,7 +311,7 @@ const CHIP: &str = "STM32G474RETx";
 /// `cargo xtask flash`: the release image as [`firmware_unchecked`] builds it, flashed and
 /// run through a debug probe by `probe-rs run`, which then streams the defmt log.
 fn flash() -> Result {
-    let usage = firmware_unchecked()?;
+    let usage = firmware_unchecked(Image::Brake)?;
     if usage.flash > FLASH_BUDGET {
         println!("firmware size: over the {FLASH_BUDGET} B budget; flashing anyway");
     }
@@ -250,22 +340,41 @@ fn flash() -> Result {
 fn target_bench(args: &[String]) -> Result {
     let options = target_bench::Options::parse(args)?;
     setup()?;
-    let firmware_elf = thumb_release_build("firmware")?;
+    for image in Image::BOTH {
+        build_image(image)?;
+    }
     let python = target_bench::python_env(&target_dir())?;
-    bench_run(options, &firmware_elf, &python)
+    bench_run(options, &python)
 }
 
-/// The emulator run of `target_bench`, the firmware already built.
-fn bench_run(options: target_bench::Options, firmware_elf: &Path, python: &Path) -> Result {
-    let usage = size::measure(firmware_elf)?;
+/// The emulator run of `target_bench`, both firmware images already built
+/// ([`Image::kept_elf`]): the control core's cycles and the default image's failure paths
+/// and boot trace, then the other image's failure paths and boot trace (`images`).
+fn bench_run(options: target_bench::Options, python: &Path) -> Result {
+    let firmware_elf = Image::Brake.kept_elf();
+    let usage = size::measure(&firmware_elf)?;
     let board = root().join("firmware").join("src").join("board.rs");
     let board = std::fs::read_to_string(&board)
         .map_err(|e| format!("cannot read {}: {e}", board.display()))?;
     let enable = target_bench::bridge_enable_bsrr(&board)?;
     let image = thumb_release_build("firmware-bench")?;
     let driver = root().join("xtask").join("target_bench").join("driver.py");
-    let output = target_bench::run_driver(python, &driver, &image, Some((firmware_elf, enable)))?;
-    let result = target_bench::result(&output, usage, &image)?;
+    let output =
+        target_bench::run_driver(python, &driver, &image, Some((&firmware_elf, enable)))?;
+    let mut result = target_bench::result(&output, usage, &image)?;
+    let mut images = serde_json::Map::new();
+    images.insert(
+        Image::Brake.name().into(),
+        target_bench::image_figures(&result),
+    );
+    let coast_elf = Image::Coast.kept_elf();
+    let coast_usage = size::measure(&coast_elf)?;
+    let boot = target_bench::run_boot_only(python, &driver, &coast_elf, enable)?;
+    images.insert(
+        Image::Coast.name().into(),
+        target_bench::boot_only_figures(&boot, coast_usage, &result),
+    );
+    target_bench::add_images(&mut result, images)?;
     if options.json {
         println!("{result}");
     } else {
@@ -305,7 +414,7 @@ fn bench_check() -> Result {
         json: false,
         check: true,
     };
-    bench_run(options, &firmware_elf(), &python)
+    bench_run(options, &python)
 }
 
 fn test() -> Result {
@@ -315,7 +424,9 @@ fn test() -> Result {
         c.args(["fmt", "--all", "--", "--check"]);
         c
     })?;
-    firmware()?;
+    for image in Image::BOTH {
+        firmware(image)?;
+    }
     bench_check()?;
     run(
         "model, protocol and firmware-core build for the thumb target",

@@ -4,9 +4,11 @@ use std::path::Path;
 
 use object::{Object, ObjectSection, SectionFlags, SectionKind};
 
-/// Flash budget of the release firmware, bytes (issue 11: 48 KiB). `cargo xtask firmware`
-/// and `cargo xtask target-bench` check the same number.
-pub const FLASH_BUDGET: u64 = 48 * 1024;
+/// Flash budget of the release firmware, bytes: 64 KiB of the 496 KiB below the calibration
+/// store (issue 11 set 48 KiB; issue 30 raised it for the braking image and the stream to
+/// come). `cargo xtask firmware` and `cargo xtask target-bench` check the same number, for
+/// both images ([`crate::Image`]).
+pub const FLASH_BUDGET: u64 = 64 * 1024;
 /// Static RAM budget of the release firmware (capture buffer included), bytes.
 pub const RAM_BUDGET: u64 = 64 * 1024;
 

@@ -836,6 +836,12 @@ PWR_CR5 = 0x4000_7080
 RCC_CFGR = RCC_BASE + 0x08
 TIM1_BASE = 0x4001_2C00
 SYSCFG_CFGR2 = 0x4001_001C
+# RCC_APB2RSTR: bit 0 SYSCFGRST (embassy's init pulses it, which clears SYSCFG_CFGR2.CLL).
+RCC_APB2RSTR = 0x4002_1040
+# GPIOA_OSPEEDR: PA8's speed in bits 16..17 (00 low).
+GPIOA_OSPEEDR = 0x4800_0008
+# The review's margin between the lowest stack pointer at boot and the stack guard, bytes.
+STACK_MARGIN_MIN = 2048
 COMP3_CSR = 0x4001_0208
 ADC1_CFGR = 0x5000_000C
 GPIOB_PUPDR = 0x4800_040C
@@ -888,7 +894,13 @@ def _ready_bits(uc, address):
         wr(rd() | 1)
 
 
-def boot_checks(writes, symbols, final, enable_bsrr, enable_bit):
+def stack_guard_top(final):
+    """The end (exclusive) of the MPU's stack-guard region from the final MPU writes."""
+    rbar, rasr = final.get(MPU_RBAR, 0), final.get(MPU_RASR, 0)
+    return (rbar & ~0x1F) + (1 << ((rasr >> 1 & 0x1F) + 1))
+
+
+def boot_checks(writes, symbols, final, enable_bsrr, enable_bit, lowest_stack=None):
     """The register sequences that matter, from the boot's peripheral writes
     [(instruction, address, value)] and the final values {address: value}. Each check:
     {name, pass, detail, gate} (gate false: a known gap, reported, not failing --check)."""
@@ -944,6 +956,15 @@ def boot_checks(writes, symbols, final, enable_bsrr, enable_bit):
         ", ".join(f"{reg:#x}={final.get(reg, 0):#x}" for reg, _ in pulls))
     add("SYSCFG_CFGR2.CLL: a lockup breaks TIM1", final.get(SYSCFG_CFGR2, 0) & 1,
         f"CFGR2 {final.get(SYSCFG_CFGR2, 0):#x}")
+    resets = [k for k, (_, a, v) in enumerate(writes) if a == RCC_APB2RSTR and v & 1]
+    cll_sets = [k for k, (_, a, v) in enumerate(writes) if a == SYSCFG_CFGR2 and v & 1]
+    add("SYSCFG_CFGR2.CLL set after init's SYSCFG reset pulse",
+        bool(cll_sets) and (not resets or cll_sets[-1] > resets[-1]),
+        f"last SYSCFGRST write #{resets[-1] if resets else None}, "
+        f"last CLL write #{cll_sets[-1] if cll_sets else None}")
+    ospeed = final.get(GPIOA_OSPEEDR, 0) >> 16 & 3
+    add("PA8 (the 20 kHz PWM) at low speed (GPIOA_OSPEEDR8 = 00)", ospeed == 0,
+        f"OSPEEDR8 {ospeed:#b}")
     sheap = symbols.get("__sheap", (0, 0, 0))[0]
     rbar, rasr = final.get(MPU_RBAR, 0), final.get(MPU_RASR, 0)
     size = 1 << ((rasr >> 1 & 0x1F) + 1)
@@ -951,6 +972,11 @@ def boot_checks(writes, symbols, final, enable_bsrr, enable_bit):
     add("stack guard: an MPU region with no access right above the statics",
         final.get(MPU_CTRL, 0) & 1 and rasr & 1 and rasr >> 24 & 7 == 0
         and sheap <= base < sheap + size, f"base {base:#x} size {size} statics end {sheap:#x}")
+    margin = None if lowest_stack is None else lowest_stack - (base + size)
+    add(f"stack: at least {STACK_MARGIN_MIN} B between the lowest stack pointer at boot "
+        "and the guard", margin is not None and margin >= STACK_MARGIN_MIN,
+        f"lowest stack access {lowest_stack if lowest_stack is None else hex(lowest_stack)}, "
+        f"guard top {base + size:#x}, margin {margin} B")
     enable_low = first(lambda a, v: a == enable_bsrr and v >> enable_bit & 1)
     pwm_af = first(lambda a, v: a == 0x4800_0000 and v >> 16 & 3 == 2)
     add("bridge enable driven low before PA8 becomes TIM1's output",
@@ -985,6 +1011,10 @@ def boot_trace(elf_path, enable_bsrr, enable_bit):
     costing = Costing()
     state = {"cycles": 0, "insns": 0, "pending": None, "failed": None}
     writes = []
+    sheap = symbols.get("__sheap", (0, 0, 0))[0]
+    # The lowest RAM address written above the statics (the stack's deepest point) and the
+    # lowest SP seen at a block's start.
+    low = {"write": None, "sp": None}
 
     def on_block(uc, addr, size, _user):
         if state["pending"] is not None:
@@ -997,6 +1027,9 @@ def boot_trace(elf_path, enable_bsrr, enable_bit):
         b = costing.block(bytes(uc.mem_read(addr, size)), addr)
         state["cycles"] += b.cycles
         state["insns"] += b.insns
+        sp = uc.reg_read(U.UC_ARM_REG_SP)
+        if low["sp"] is None or sp < low["sp"]:
+            low["sp"] = sp
         if b.cond_fallthrough is not None:
             state["pending"] = b.cond_fallthrough
         if state["insns"] > BOOT_INSN_LIMIT:
@@ -1011,6 +1044,12 @@ def boot_trace(elf_path, enable_bsrr, enable_bit):
     def on_write(uc, _access, address, _size, value, _user):
         if 0x4000_0000 <= address < 0x6000_0000 or 0xE000_E000 <= address < 0xE010_0000:
             writes.append((state["cycles"], address, value & 0xFFFF_FFFF))
+            if address == RCC_APB2RSTR and value & 1:
+                # SYSCFG held in reset: its registers return to their reset values.
+                uc.mem_write(SYSCFG_CFGR2, struct.pack("<I", 0))
+        elif sheap <= address < RAM[0] + RAM[1]:
+            if low["write"] is None or address < low["write"]:
+                low["write"] = address
 
     uc.hook_add(unicorn.UC_HOOK_MEM_UNMAPPED, map_page)
     uc.hook_add(unicorn.UC_HOOK_BLOCK, on_block)
@@ -1036,15 +1075,41 @@ def boot_trace(elf_path, enable_bsrr, enable_bit):
         final[a] = struct.unpack("<I", bytes(uc.mem_read(a, 4)))[0]
     checks = [{"name": "boot reaches the executor without a fault", "pass": reached,
                "detail": f"stopped in {where}", "gate": True}]
-    checks += boot_checks(writes, symbols, final, enable_bsrr, enable_bit)
+    lowest = min(x for x in (low["write"], low["sp"]) if x is not None) \
+        if low["write"] is not None or low["sp"] is not None else None
+    checks += boot_checks(writes, symbols, final, enable_bsrr, enable_bit, lowest)
+    guard_top = stack_guard_top(final)
     return {"cycles": state["cycles"], "instructions": state["insns"],
             "reached_executor": reached, "stopped_in": where, "checks": checks,
+            "lowest_stack_address": lowest, "stack_guard_top": guard_top,
+            "stack_margin_bytes": None if lowest is None else lowest - guard_top,
             "peripheral_writes": [[c, a, v] for c, a, v in writes]}
+
+
+def boot_only(argv):
+    """`--boot-only FIRMWARE_ELF BSRR BIT`: the firmware's failure paths and boot trace
+    alone (a second image, whose control core the bench image already measured)."""
+    try:
+        safe = safe_state_paths(argv[2], int(argv[3], 0), int(argv[4], 0))
+        boot = boot_trace(argv[2], int(argv[3], 0), int(argv[4], 0))
+    except (Failure, OSError, ValueError) as e:
+        print(f"target bench: {e}", file=sys.stderr)
+        return 1
+    result = {"panic_to_safe_cycles": safe["panic"]["cycles"], "safe_state": safe,
+              "boot": boot, "boot_cycles": boot["cycles"],
+              "boot_checks": [{"name": c["name"], "pass": c["pass"], "gate": c["gate"]}
+                              for c in boot["checks"]]}
+    json.dump(result, sys.stdout)
+    sys.stdout.write("\n")
+    return 0
 
 
 def main(argv):
     usage = ("usage: driver.py FIRMWARE_BENCH_ELF "
-             "[--safe-state FIRMWARE_ELF ENABLE_BSRR_ADDRESS ENABLE_BSRR_BIT]")
+             "[--safe-state FIRMWARE_ELF ENABLE_BSRR_ADDRESS ENABLE_BSRR_BIT]\n"
+             "       driver.py --boot-only FIRMWARE_ELF ENABLE_BSRR_ADDRESS ENABLE_BSRR_BIT")
+    if len(argv) == 5 and argv[1] == "--boot-only":
+        return boot_only(argv)
     if len(argv) not in (2, 6) or (len(argv) == 6 and argv[2] != "--safe-state"):
         print(usage, file=sys.stderr)
         return 2

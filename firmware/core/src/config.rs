@@ -440,7 +440,12 @@ impl Default for CoreConfig {
             supply_v: board::BRIDGE_SUPPLY_V as f32,
             comms_timeout_us: protocol::COMMS_TIMEOUT_MS as u64 * 1000,
             board_name: "nucleo-g474re",
-            capabilities: protocol::Capabilities::empty(),
+            // The board's decay mode (`model::hardware::board::DECAY`), stated in `Info`.
+            capabilities: if board::DECAY.returns_power() {
+                protocol::Capabilities::BRAKING_DECAY
+            } else {
+                protocol::Capabilities::empty()
+            },
             time_scale: 1.0,
             current: CurrentSensorConfig::default(),
             motor: MotorConfig::default(),

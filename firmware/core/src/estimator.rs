@@ -92,8 +92,8 @@ pub struct Coefficients {
     c: [f32; 4],
     /// Eq. (10)'s friction part per newton metre of load: 2/pi mu e (axial force per torque).
     per_load: f32,
-    /// The inertia share present in a revolution mean per (rad/s)^2: 0 when the drive
-    /// takes the carrier's power back, else half of M e^2 / pi.
+    /// The inertia share present in a revolution mean per (rad/s)^2: (1 + kappa) M e^2 / pi
+    /// with the drive's kappa (`model::effects::drive_kappa`).
     inertia_in_mean: f32,
 }
 
@@ -104,11 +104,10 @@ impl Coefficients {
         Self {
             c,
             per_load,
-            inertia_in_mean: if carrier_power_returned {
-                0.0
-            } else {
-                0.5 * inertia
-            },
+            // (1 + kappa) of M e^2 / pi: 0.18 of it for a braking drive (its return through
+            // the gearhead, `model::effects::KAPPA_BRAKING_DRIVE`), 1/2 for a coasting one.
+            #[allow(clippy::cast_possible_truncation)] // a fraction in [0, 1/2]
+            inertia_in_mean: (1.0 + drive_kappa(carrier_power_returned)) as f32 * inertia,
         }
     }
 
@@ -409,7 +408,11 @@ mod tests {
         let mut m = model();
         let w = TAU * 10.0;
         let inertia = m.drive.required_inertia_torque(w);
-        assert!(m.required(0.0, w).abs() < 1e-12);
+        // A braking drive returns eta_f eta_b = 64 % of it through the gearhead: 0.18 left.
+        assert!((m.required(0.0, w) - 0.18 * inertia).abs() < 1e-9 * inertia.max(1.0));
+        let c = m.coefficients();
+        let f32_share = c.required(0.0, w as f32) / inertia as f32;
+        assert!((f32_share - 0.18).abs() < 1e-4, "{f32_share}");
         m.carrier_power_returned = false;
         // Rectified over a turn: M w^2 e^2 / (2 pi), half of Eq. (10)'s term.
         assert!((m.required(0.0, w) - 0.5 * inertia).abs() < 1e-12);

@@ -22,6 +22,12 @@ pub struct FlashArgs {
     /// (`cargo xtask firmware --no-check`, the image CI measures) and flash that.
     #[arg(long, value_name = "PATH")]
     pub elf: Option<PathBuf>,
+    /// The bridge's decay mode the image is built for when no --elf is given: `brake` (the
+    /// default, the Pololu G2: PWM low brakes) or `coast` (a bridge that coasts in the
+    /// off-time; feature `bridge-coast-decay`).
+    #[arg(long, value_name = "MODE", default_value = "brake", conflicts_with = "elf",
+          value_parser = ["brake", "coast"])]
+    pub decay: String,
     /// Check the image and print what would be done; neither the chip nor the rig is touched.
     #[arg(long)]
     pub dry_run: bool,
@@ -115,7 +121,7 @@ pub fn run(a: FlashArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let map = flash::board_map()?;
     let elf = match &a.elf {
         Some(p) => p.clone(),
-        None => workspace::build_release(&workspace::current_root()?)?,
+        None => workspace::build_release(&workspace::current_root()?, a.decay == "coast")?,
     };
     let (_bytes, image) = flash::load(&elf, &map)?;
     let mut report = describe(&elf, &a.chip, &image, &map, a.dry_run);

@@ -50,6 +50,9 @@ pub struct InfoReport {
     pub capabilities: Vec<&'static str>,
     /// Device seconds per wall-clock second: 1 on a board, the `--speed` of a virtual rig.
     pub time_scale: f64,
+    /// The bridge's decay mode: `brake` (slow decay, the Pololu G2: power returns) or
+    /// `coast` (`Capabilities::BRAKING_DECAY` clear).
+    pub decay: &'static str,
 }
 
 /// Lower-case name of a calibration status.
@@ -83,6 +86,14 @@ impl InfoReport {
                 .map(|(name, _)| *name)
                 .collect(),
             time_scale: f64::from(info.time_scale),
+            decay: if info
+                .capabilities
+                .contains(protocol::Capabilities::BRAKING_DECAY)
+            {
+                "brake"
+            } else {
+                "coast"
+            },
         }
     }
 }
@@ -110,6 +121,16 @@ pub fn run(a: InfoArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         if !report.capabilities.is_empty() {
             writeln!(out, "fitted     {}", report.capabilities.join(", "))?;
         }
+        writeln!(
+            out,
+            "bridge     {} decay{}",
+            report.decay,
+            if report.decay == "brake" {
+                " (PWM low brakes: power returns through the gearhead)"
+            } else {
+                " (the off-time coasts: no power returns)"
+            }
+        )?;
         if report.time_scale != 1.0 {
             writeln!(
                 out,

@@ -77,14 +77,16 @@ pub fn release_elf(root: &Path) -> PathBuf {
         .join("firmware")
 }
 
-/// Builds the release firmware of the workspace at `root` (cargo's progress on stderr) and
-/// returns the ELF's path.
-pub fn build_release(root: &Path) -> Result<PathBuf, RigError> {
+/// Builds the release firmware of the workspace at `root` (cargo's progress on stderr), the
+/// image for a coasting bridge when `coast` (else the default, braking, the Pololu G2's),
+/// and returns the ELF's path.
+pub fn build_release(root: &Path, coast: bool) -> Result<PathBuf, RigError> {
     // Through xtask, which builds the release image exactly as CI measures it (its rustflags
     // trim registry paths from the panic locations: `thumb_rustflags` in xtask).
-    eprintln!("building the firmware: cargo xtask firmware --no-check");
+    let decay = if coast { "--coast" } else { "--brake" };
+    eprintln!("building the firmware: cargo xtask firmware --no-check {decay}");
     let status = cargo()
-        .args(["xtask", "firmware", "--no-check"])
+        .args(["xtask", "firmware", "--no-check", decay])
         .current_dir(root)
         .stdout(std::process::Stdio::null())
         .status()
@@ -96,7 +98,7 @@ pub fn build_release(root: &Path) -> Result<PathBuf, RigError> {
         return Err(RigError::BadValue {
             what: "firmware build".into(),
             why: format!(
-                "the firmware build (cargo xtask firmware --no-check) failed ({status}); see its messages above (a missing target: `rustup target add {THUMB}`)"
+                "the firmware build (cargo xtask firmware --no-check {decay}) failed ({status}); see its messages above (a missing target: `rustup target add {THUMB}`)"
             ),
         });
     }

@@ -176,23 +176,48 @@ pub const KAPPA_EQ10: f64 = 0.0;
 /// kappa of a drive that also brakes the carrier: the fully rectified 2 M_hat w_n^2 e^2 / pi.
 pub const KAPPA_FULLY_RECTIFIED: f64 = 1.0;
 
-/// The kappa of a drive that does (`true`) or does not take the carrier's power back:
-/// [`KAPPA_POWER_RETURNED`] or [`KAPPA_POWER_NOT_RETURNED`]. The plant (`regeneration`) and
-/// the firmware's estimator (`carrier_power_returned`) are such drives.
+/// kappa of a braking (slow-decay) drive whose return of the carrier's inertial power
+/// passes back through the gearhead: -(1 + eta_f eta_b) / 2, -0.82 at the RS-735's 80 %
+/// forward and reverse efficiency. From first principles: the cam torque is read from the
+/// motor current through the forward efficiency (C1 = eta_f N Kt), so while the motor
+/// drives the carrier the reading is the inertia torque T itself; while the carrier pushes
+/// the cam the motor receives eta_b T and the reading is eta_f eta_b T, returned. The
+/// half-turns of either sign each average M_hat w_n^2 e^2 / (2 pi), so the turn mean is
+/// (1 - eta_f eta_b) / 2 of Eq. (10)'s term: (1 + kappa) = (1 - eta_f eta_b) / 2.
+/// Between [`KAPPA_POWER_RETURNED`] (lossless gearhead) and [`KAPPA_POWER_NOT_RETURNED`]
+/// (nothing back).
+pub const KAPPA_BRAKING_DRIVE: f64 = braking_kappa(
+    crate::hardware::rs735::GEARHEAD_EFFICIENCY,
+    crate::hardware::rs735::GEARHEAD_REVERSE_EFFICIENCY,
+);
+
+/// [`KAPPA_BRAKING_DRIVE`] for a gearhead of forward efficiency `eta_f` and reverse
+/// efficiency `eta_b` (each in (0, 1]).
+#[inline]
+pub const fn braking_kappa(eta_f: f64, eta_b: f64) -> f64 {
+    -0.5 * (1.0 + eta_f * eta_b)
+}
+
+/// The kappa of a drive that does (`true`: a braking drive, [`KAPPA_BRAKING_DRIVE`], its
+/// return through the gearhead) or does not (`false`: [`KAPPA_POWER_NOT_RETURNED`]) take
+/// the carrier's power back. The plant (`regeneration`), the firmware's estimator
+/// (`carrier_power_returned`) and `rig explain`'s base model are such drives
+/// (`model::hardware::board::DECAY`).
 #[inline]
 pub const fn drive_kappa(power_returned: bool) -> f64 {
     if power_returned {
-        KAPPA_POWER_RETURNED
+        KAPPA_BRAKING_DRIVE
     } else {
         KAPPA_POWER_NOT_RETURNED
     }
 }
 
-/// Whether a fitted `kappa` is nearer a drive that takes power back than one that does
-/// not (below -3/4, halfway between the two).
+/// Whether a fitted `kappa` is nearer a drive that takes power back (through the
+/// gearhead, [`KAPPA_BRAKING_DRIVE`]) than one that does not (below -0.66, halfway
+/// between the two).
 #[inline]
 pub fn kappa_returns_power(kappa: f64) -> bool {
-    kappa < 0.5 * (KAPPA_POWER_RETURNED + KAPPA_POWER_NOT_RETURNED)
+    kappa < 0.5 * (KAPPA_BRAKING_DRIVE + KAPPA_POWER_NOT_RETURNED)
 }
 
 /// Mean inertia torque (1 + kappa) T_10, floored at zero, for Eq. (10)'s inertia term
@@ -408,6 +433,24 @@ mod tests {
         }
         assert!((load_dependent_kappa(-0.5, 0.1, -2.0) + 0.3).abs() < 1e-12);
         assert!(kappa_returns_power(-0.9) && !kappa_returns_power(-0.6));
+        assert!(kappa_returns_power(KAPPA_BRAKING_DRIVE));
+        assert!(!kappa_returns_power(KAPPA_POWER_NOT_RETURNED));
+    }
+
+    #[test]
+    fn a_braking_drive_returns_the_inertia_term_through_the_gearhead() {
+        // 80 % forward and back: -(1 + 0.64) / 2 = -0.82, between all returned (-1) and
+        // nothing returned (-1/2); lossless it is -1, with no way back it is -1/2.
+        assert!((KAPPA_BRAKING_DRIVE + 0.82).abs() < 1e-12, "{KAPPA_BRAKING_DRIVE}");
+        assert!(KAPPA_POWER_RETURNED < KAPPA_BRAKING_DRIVE);
+        assert!(KAPPA_BRAKING_DRIVE < KAPPA_POWER_NOT_RETURNED);
+        assert_eq!(braking_kappa(1.0, 1.0), KAPPA_POWER_RETURNED);
+        assert_eq!(braking_kappa(0.8, 0.0), KAPPA_POWER_NOT_RETURNED);
+        assert_eq!(drive_kappa(true), KAPPA_BRAKING_DRIVE);
+        // The instantaneous law returns eta_f eta_b of the inertia torque while the carrier
+        // pushes the cam: the reading of the eta_b the motor receives through eta_f.
+        let pushed = carrier_inertia_torque_at_kappa(-1.0, 10.0, KAPPA_BRAKING_DRIVE);
+        assert!((pushed + 0.64).abs() < 1e-12, "{pushed}");
         // Eq. (10) and the fully rectified form.
         let eq10 = drive.required_inertia_torque(w);
         assert_eq!(rectified_inertia_torque(&drive, w, KAPPA_EQ10), eq10);
