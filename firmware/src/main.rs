@@ -10,12 +10,14 @@
 //! | `host_rx`       | thread                   | UART bytes -> `Core::receive`                            |
 //! | `host_tx`       | thread                   | `Core::transmit` -> UART                                 |
 //! | `persist`       | thread                   | writes a calibration to flash, reports the outcome       |
-//! | `monitor`       | thread                   | LD2: 1 Hz blink locked, on while vibrating, 5 Hz on a fault; logs state changes and, every 10 s, the board's health; hands the core's measured current zero to the overcurrent trip |
+//! | `monitor`       | thread                   | LD2: 1 Hz blink locked, on while vibrating, 5 Hz on a fault; logs state changes and, every 10 s, the board's health |
 //! | `watchdog_feeder` | thread                 | feeds the IWDG only when control, host_rx and host_tx all checked in |
 //!
 //! The control task runs on a higher-priority interrupt executor so that a flash erase
 //! (blocking, ~20 ms, in thread mode) or a long UART write never delays a control step.
-//! The core is shared through a critical-section mutex; each access is one short call.
+//! The core is shared through a priority-ceiling mutex (BASEPRI at the control executor's
+//! priority, `safety::CeilingMutex`); each access is one short call, and the trip's and
+//! the WWDG's interrupts, above the ceiling, never wait for it.
 //!
 //! Failures end in the safe state (vibration off) by direct register writes, then a reset:
 //! see `safety` (panic, HardFault, NMI, unhandled interrupts, a stalled control loop) and
@@ -128,7 +130,7 @@ mod trip;
 mod app {
     use core::cell::{Cell, RefCell};
     use core::mem::MaybeUninit;
-    use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
+    use core::sync::atomic::{AtomicU8, Ordering};
 
     use cortex_m::peripheral::DWT;
     use defmt::{error, info, unwrap, warn};
@@ -137,7 +139,7 @@ mod app {
     use embassy_futures::select::{Either, select};
     use embassy_stm32::gpio::Output;
     use embassy_stm32::interrupt;
-    use embassy_stm32::interrupt::{InterruptExt, Priority};
+    use embassy_stm32::interrupt::InterruptExt;
     use embassy_stm32::mode::Async;
     use embassy_stm32::peripherals::IWDG;
     use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
@@ -157,8 +159,9 @@ mod app {
     use crate::safety::{self, CrashCause, StallWatchdog};
     use crate::trip::OvercurrentTrip;
 
-    /// The control core, shared by the tasks.
-    type SharedCore = Mutex<CriticalSectionRawMutex, RefCell<&'static mut Core>>;
+    /// The control core, shared by the tasks, behind the priority ceiling's lock
+    /// (`safety::CeilingMutex`: BASEPRI, so the trip and the WWDG's early wakeup never wait).
+    type SharedCore = Mutex<safety::CeilingMutex, RefCell<&'static mut Core>>;
 
     /// Watchdog check-in bits: each task sets its own; the feeder needs all of them.
     const CONTROL: u8 = 1 << 0;
@@ -192,10 +195,6 @@ mod app {
             ResetCause::Other
         }
     }
-
-    /// The core's measured current-sensor zero (f32 bits; 0 = none yet), from `monitor` to
-    /// the control task, which re-centres the overcurrent trip on it.
-    static CURRENT_ZERO: AtomicU32 = AtomicU32::new(0);
 
     /// Control steps per health snapshot: one second.
     const HEALTH_STEPS: u32 = 1000;
@@ -335,7 +334,7 @@ mod app {
             error!("TIM1 does not count: no current samples will come");
         }
 
-        interrupt::UART4.set_priority(Priority::P6);
+        interrupt::UART4.set_priority(safety::CORE_CEILING);
         let control_spawner = CONTROL_EXECUTOR.start(interrupt::UART4);
         control_spawner.spawn(spawned(control(
             core,
@@ -492,7 +491,7 @@ mod app {
                 // (`safety::take_flash_ecc_error`), which counts the slot as corrupt.
                 flash_ecc_error: false,
             };
-            let out = core.lock(|c| {
+            let (out, zero) = core.lock(|c| {
                 let mut c = c.borrow_mut();
                 c.set_board_inputs(board_inputs);
                 if board::OUTPUT_ENCODER.is_some() {
@@ -501,8 +500,18 @@ mod app {
                 let start = DWT::cycle_count();
                 let out = c.step(&inputs);
                 c.record_step_cycles(DWT::cycle_count().wrapping_sub(start));
-                out
+                (out, c.measured_current_zero_adc())
             });
+            // The trip takes the measured zero in the step that measured it, before this
+            // step's drive: the supervisor drives only once the zero is measured, so no
+            // release ever runs on the nominal zero. Without one the bridge stays off.
+            if let Some(zero) = zero {
+                let bits = zero.to_bits();
+                if bits != zero_bits {
+                    zero_bits = bits;
+                    io.trip.set_zero(zero);
+                }
+            }
             if hw_trip && !out.enable {
                 // The core stopped driving and latched HW_OVERCURRENT from the break flag:
                 // the break may be cleared once the current is back under the threshold,
@@ -512,14 +521,13 @@ mod app {
                     warn!("overcurrent trip cleared: the core holds a latched fault");
                 }
             }
-            drive(&mut io, &out, full_scale);
+            if zero.is_some() {
+                drive(&mut io, &out, full_scale);
+            } else {
+                io.motor.stop();
+            }
             if let Some(calibration) = out.persist {
                 PERSIST.signal(calibration);
-            }
-            let zero = CURRENT_ZERO.load(Ordering::Relaxed);
-            if zero != zero_bits {
-                zero_bits = zero;
-                io.trip.set_zero(f32::from_bits(zero));
             }
             CHECK_INS.fetch_or(CONTROL, Ordering::Relaxed);
 
@@ -611,7 +619,7 @@ mod app {
     const HEALTH_LOG_TICKS: u32 = 100;
 
     /// LD2 shows the supervisor state; state and fault changes are logged, the board's
-    /// health every 10 s; the core's measured current zero goes to the overcurrent trip.
+    /// health every 10 s.
     #[embassy_executor::task]
     async fn monitor(core: &'static SharedCore, mut led: Output<'static>) {
         let mut ticker = Ticker::every(Duration::from_millis(100));
@@ -620,13 +628,10 @@ mod app {
         loop {
             // Three reads, not `status()`: the binary needs no more (and the snapshot's
             // code, ~450 B, stays out of the image).
-            let (state, faults, zero) = core.lock(|c| {
+            let (state, faults) = core.lock(|c| {
                 let c = c.borrow();
-                (c.state(), c.latched_faults().bits(), c.current_zero_adc())
+                (c.state(), c.latched_faults().bits())
             });
-            if let Some(zero) = zero.filter(|z| *z > 0.0) {
-                CURRENT_ZERO.store(zero.to_bits(), Ordering::Relaxed);
-            }
             if (state, faults) != last {
                 info!("supervisor: {} (faults {:#010x})", state.name(), faults);
                 last = (state, faults);

@@ -262,6 +262,37 @@ pub fn arm_lockup_break() -> bool {
     pac::SYSCFG.cfgr2().read().cll()
 }
 
+/// The priority of the control executor (UART4's vector) and the ceiling of the core's
+/// lock ([`CeilingMutex`]): the highest priority of any code that locks the core.
+pub const CORE_CEILING: Priority = Priority::P6;
+
+/// The core's lock: a priority ceiling with BASEPRI instead of a critical section
+/// (PRIMASK). While locked, BASEPRI masks [`CORE_CEILING`] and below (the control executor
+/// and thread mode, the only code that touches the core), so the lock is exclusive; the
+/// trip's break interrupt and the WWDG's early wakeup (both P0, above the ceiling, and
+/// neither touches the core) are never delayed by it, however long a step takes. The
+/// target bench's boot trace checks both priorities against the ceiling.
+pub struct CeilingMutex;
+
+// SAFETY: every user of the core runs at or below CORE_CEILING (thread mode, and the control
+// executor at exactly CORE_CEILING: `main`), so with BASEPRI at the ceiling none of them can
+// preempt the holder, and the holder's own code cannot re-enter `lock` from a higher
+// priority. Interrupts above the ceiling never touch the core.
+unsafe impl embassy_sync::blocking_mutex::raw::RawMutex for CeilingMutex {
+    const INIT: Self = CeilingMutex;
+
+    fn lock<R>(&self, f: impl FnOnce() -> R) -> R {
+        let before = cortex_m::register::basepri::read();
+        // Raises BASEPRI only (BASEPRI_MAX), so a nested lock keeps the outer ceiling.
+        cortex_m::register::basepri_max::write(u8::from(CORE_CEILING));
+        let r = f();
+        // SAFETY: restores the value read above; a lock never lowers the mask below the
+        // level its caller had.
+        unsafe { cortex_m::register::basepri::write(before) };
+        r
+    }
+}
+
 /// MPU region used by the stack guard.
 const STACK_GUARD_REGION: u32 = 0;
 /// MPU_CTRL: ENABLE | PRIVDEFENA (the default memory map everywhere else); HFNMIENA clear,

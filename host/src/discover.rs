@@ -421,9 +421,11 @@ impl Discovery {
 /// this project's firmware's drive decay (the rows come from it, real or virtual, as the
 /// CSV's provenance says).
 pub fn starting_rig(model: Option<&Path>) -> Result<RigFile, RigError> {
-    Ok(match model {
+    let rig = match model {
         Some(p) => RigFile::load(p)?,
         None => RigFile::paper(),
-    }
-    .with_drive_decay(model::hardware::board::REGENERATIVE_DECAY))
+    };
+    // The rig file's drive (`[drive] decay`, the board's braking drive by default).
+    let returned = rig.drive.decay.returns_power();
+    Ok(rig.with_drive_decay(returned))
 }

@@ -43,12 +43,13 @@ impl fmt::Display for KeySpec {
 }
 
 /// The sections a rig file may have; any other section is kept as it is but not read.
-pub const SECTIONS: [&str; 7] = [
+pub const SECTIONS: [&str; 8] = [
     "gear",
     "cam",
     "friction",
     "calibration",
     "limits",
+    "drive",
     "model",
     "user_effects",
 ];
@@ -377,6 +378,15 @@ pub const KEYS: &[KeySpec] = &[
         "15.0",
         Some("max_freq_hz"),
         "highest vibration frequency the firmware will drive",
+    ),
+    key(
+        "drive",
+        "decay",
+        "-",
+        "`brake` or `coast`",
+        "\"brake\"",
+        None,
+        "what the H-bridge does in the PWM's off-time: `brake` (slow decay, the Pololu G2: the carrier's power returns through the gearhead, kappa -0.82) or `coast` (nothing returns, kappa -1/2); the virtual rig, the estimator and `rig explain`'s base model follow it",
     ),
     key(
         "model",

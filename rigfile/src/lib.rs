@@ -90,9 +90,9 @@ pub use error::RigFileError;
 pub use keys::KeySpec;
 pub use parse::{FileFormat, Loaded};
 pub use sections::{
-    CALIBRATION_TEMPERATURE_C, CalibrationSection, CamSection, EffectEntry, FitSection,
-    FrictionSection, GearSection, LimitsSection, ModelSection, TermEntry, UserEffectDef,
-    UserParamDef,
+    CALIBRATION_TEMPERATURE_C, CalibrationSection, CamSection, DecayMode, DriveSection,
+    EffectEntry, FitSection, FrictionSection, GearSection, LimitsSection, ModelSection,
+    TermEntry, UserEffectDef, UserParamDef,
 };
 
 /// The first line of every rig file the tools write.
@@ -113,6 +113,8 @@ pub struct RigFile {
     pub calibration: CalibrationSection,
     /// The limits the firmware enforces.
     pub limits: LimitsSection,
+    /// The drive: the bridge's decay mode (braking by default, the README's board).
+    pub drive: DriveSection,
     /// The fitted model, when `rig explain` wrote one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelSection>,

@@ -364,6 +364,62 @@ impl Default for LimitsSection {
     }
 }
 
+/// `[drive]`: which drive the rig's H-bridge is, the one setting the virtual rig's plant,
+/// the firmware's estimator and `rig explain`'s base model read for a rig
+/// (`model::hardware::board::DECAY` is the board's default).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DriveSection {
+    /// What the bridge does in the PWM's off-time: `brake` (slow decay, the Pololu G2:
+    /// power returns through the gearhead) or `coast` (nothing returns).
+    pub decay: DecayMode,
+}
+
+impl Default for DriveSection {
+    fn default() -> Self {
+        Self {
+            decay: DecayMode::from(model::hardware::board::DECAY),
+        }
+    }
+}
+
+/// A bridge's decay mode as a rig file names it (`[drive] decay`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DecayMode {
+    /// Slow decay (both low sides on in the off-time): the carrier's power returns.
+    Brake,
+    /// The off-time coasts: nothing returns.
+    Coast,
+}
+
+impl DecayMode {
+    /// Whether the drive takes the carrier's power back (`PlantParams::regeneration`,
+    /// the estimator's `carrier_power_returned`).
+    pub const fn returns_power(self) -> bool {
+        matches!(self, Self::Brake)
+    }
+
+    /// `brake` or `coast`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Brake => "brake",
+            Self::Coast => "coast",
+        }
+    }
+
+    /// The mode of a drive that does (`true`) or does not take power back.
+    pub const fn from_returns_power(returned: bool) -> Self {
+        if returned { Self::Brake } else { Self::Coast }
+    }
+}
+
+impl From<model::hardware::board::Decay> for DecayMode {
+    fn from(d: model::hardware::board::Decay) -> Self {
+        Self::from_returns_power(d.returns_power())
+    }
+}
+
 /// `[model]`: the fitted model of the vibrator current.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

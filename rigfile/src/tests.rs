@@ -348,13 +348,13 @@ fn user_effects_and_terms_round_trip() {
 
 #[test]
 fn the_drive_decay_is_a_known_inertia_term_unless_the_model_fits_it() {
-    use model::effects::{KAPPA_POWER_NOT_RETURNED, KAPPA_POWER_RETURNED};
+    use model::effects::{KAPPA_BRAKING_DRIVE, KAPPA_POWER_NOT_RETURNED};
     let paper = RigFile::paper();
     let eq10 = paper.current_model().unwrap().effects.rectification;
     assert_eq!(eq10, 0.0, "the paper's rig alone is Eq. (10)");
     for (regenerative, kappa) in [
         (false, KAPPA_POWER_NOT_RETURNED),
-        (true, KAPPA_POWER_RETURNED),
+        (true, KAPPA_BRAKING_DRIVE),
     ] {
         let rig = paper.with_drive_decay(regenerative);
         let m = rig.current_model().unwrap();
@@ -389,4 +389,28 @@ fn profile_shift_round_trips_and_a_mismatch_names_the_key_and_the_fix() {
         err.contains("profile_shift") && err.contains("x3 + x4"),
         "{err}"
     );
+}
+
+#[test]
+fn the_drive_decay_round_trips_and_defaults_to_the_boards_braking_drive() {
+    // The README's board brakes (the Pololu G2): the default, written out explicitly.
+    let paper = RigFile::paper();
+    assert_eq!(paper.drive.decay, crate::DecayMode::Brake);
+    assert!(paper.drive.decay.returns_power());
+    let text = paper.to_toml().unwrap();
+    assert!(text.contains("[drive]\ndecay = \"brake\""), "{text}");
+    assert_eq!(RigFile::parse(&text, "paper.toml").unwrap(), paper);
+    // A coasting rig round-trips as coast.
+    let mut coast = RigFile::paper();
+    coast.drive.decay = crate::DecayMode::Coast;
+    let text = coast.to_toml().unwrap();
+    assert!(text.contains("decay = \"coast\""), "{text}");
+    let back = RigFile::parse(&text, "coast.toml").unwrap();
+    assert_eq!(back, coast);
+    assert!(!back.drive.decay.returns_power());
+    // A wrong value names the section and the allowed ones.
+    let e = RigFile::parse("[drive]\ndecay = \"fast\"\n", "bad.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("[drive]") && e.contains("brake") && e.contains("coast"), "{e}");
 }

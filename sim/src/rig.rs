@@ -83,8 +83,8 @@ impl SimConfig {
     /// built around its C1-C4 (C5 and C6 follow from them, Eqs. 16-17) at the calibration
     /// temperature, and, when the file has a fitted `[model]`, its mu as the cam's axial
     /// friction and the effects the plant can represent (`RigFile::plant_effects`; the rest
-    /// are left out). The plant keeps its own drive (no regeneration, as [`SimConfig::paper`])
-    /// unless the `[model]` fits `inertia-rectification`.
+    /// are left out). The plant's drive is the file's `[drive] decay` (braking by default)
+    /// unless the `[model]` fits `inertia-rectification`; the core's estimator follows it.
     pub fn from_rig_file(rig: &RigFile) -> Result<Self, SimError> {
         let bad = |e: rigfile::RigFileError| SimError::BadValue {
             what: "rig file".into(),
@@ -99,6 +99,8 @@ impl SimConfig {
         plant.mu_ax = rig.friction.mu_s;
         plant.motor = MotorParams::rs735(&rig.calibration());
         plant.motor.ambient_c = rig.calibration.temperature_c;
+        // The rig's drive (`[drive] decay`), unless the `[model]` fitted its own below.
+        plant.regeneration = rig.drive.decay.returns_power();
         if let Some(m) = &rig.model {
             let setup = rig.plant_effects().map_err(bad)?;
             plant.mu_ax = m.mu;
@@ -107,9 +109,12 @@ impl SimConfig {
                 plant.regeneration = regeneration;
             }
         }
+        let mut core = CoreConfig::default();
+        // The firmware core's estimator runs on the same drive as the plant.
+        core.estimator.carrier_power_returned = plant.regeneration;
         Ok(Self {
             plant,
-            core: CoreConfig::default(),
+            core,
             calibration,
             calibration_status: ParametersStatus::Valid,
             watchdog_reset: false,
@@ -165,6 +170,8 @@ pub struct SimRig {
     frozen_count: u16,
     flash: Option<RigParameters>,
     bench: BenchSettings,
+    /// A debug probe halted the core ([`SimRig::debug_halt`]): no control steps run.
+    halted: bool,
 }
 
 impl SimRig {
@@ -202,6 +209,7 @@ impl SimRig {
             injections: Injections::default(),
             frozen_count: 0,
             flash: Some(config.calibration),
+            halted: false,
             bench: BenchSettings {
                 supply_v: None,
                 sensor_supply_v: None,
@@ -249,7 +257,7 @@ impl SimRig {
                 });
             self.tick += u64::from(n);
             left -= u64::from(n);
-            if self.tick.is_multiple_of(self.ticks_per_step as u64) {
+            if !self.halted && self.tick.is_multiple_of(self.ticks_per_step as u64) {
                 self.control_step();
             }
         }
@@ -318,6 +326,29 @@ impl SimRig {
             }
             self.outbox.extend_from_slice(&buf[..n]);
         }
+    }
+
+    /// A debug probe halts the core, as the board's halt state leaves the bridge: no control
+    /// step runs; TIM1 (frozen in debug, `DBG_TIM1_STOP`) puts PA8 at its idle level, low,
+    /// and the bridge enable, a GPIO, stays as it was. On the Pololu G2 (braking decay) PWM
+    /// low with the enable high brakes the motor: both low sides short the winding, so a
+    /// spinning cam drives its back-EMF over the winding resistance alone (about 17 A at
+    /// 15 Hz), which the plant models as the drive enabled at duty 0.
+    pub fn debug_halt(&mut self) {
+        self.halted = true;
+        self.drive = Drive {
+            duty: 0.0,
+            enabled: self.drive.enabled,
+        };
+    }
+
+    /// The IWDG (not frozen in debug) resets the chip ~250 ms into a halt: the pins float,
+    /// the bridge's pull-downs switch it off. The core stays halted (the drill ends here).
+    pub fn watchdog_reset_pins(&mut self) {
+        self.drive = Drive {
+            duty: 0.0,
+            enabled: false,
+        };
     }
 
     /// Bytes from the host to the device. `Simulation` commands act on the plant and the

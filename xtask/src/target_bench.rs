@@ -304,8 +304,35 @@ pub fn image_figures(result: &Value) -> Value {
         "lowest_stack_address": boot["lowest_stack_address"],
         "stack_guard_top": boot["stack_guard_top"],
         "panic_to_safe_cycles": result["panic_to_safe_cycles"],
-        "trip_path_mask_cycles_worst": result["trip_path_mask_cycles_worst"],
+        "core_lock_cycles_worst": result["core_lock_cycles_worst"],
+        "trip_masked_by_core_lock": trip_masked(&result["boot_checks"]),
+        "trip_path_mask_cycles_worst": trip_path_mask(result, &result["boot_checks"]),
     })
+}
+
+/// Whether the boot trace found the trip's interrupt at or below the core lock's ceiling
+/// (so the lock can delay it); `None` without a boot trace.
+fn trip_masked(checks: &Value) -> Option<bool> {
+    checks
+        .as_array()?
+        .iter()
+        .find(|c| {
+            c["name"]
+                .as_str()
+                .is_some_and(|n| n.starts_with("trip interrupt above the core lock"))
+        })
+        .map(|c| c["pass"] != true)
+}
+
+/// The longest the core lock can hold off the trip path, cycles: 0 when the trip is
+/// above its ceiling (BASEPRI masks it never), else the longest hold. Embassy's own short
+/// critical sections (PRIMASK, its queues and time driver) are not measured here.
+fn trip_path_mask(result: &Value, checks: &Value) -> Value {
+    match trip_masked(checks) {
+        Some(false) => json!(0),
+        Some(true) => result["core_lock_cycles_worst"].clone(),
+        None => Value::Null,
+    }
 }
 
 /// Runs the driver's `--boot-only` mode on a firmware ELF: its failure paths and boot
@@ -349,7 +376,13 @@ pub fn boot_only_figures(boot: &Value, usage: Usage, default: &Value) -> Value {
         "lowest_stack_address": boot["boot"]["lowest_stack_address"],
         "stack_guard_top": boot["boot"]["stack_guard_top"],
         "panic_to_safe_cycles": boot["panic_to_safe_cycles"],
-        "trip_path_mask_cycles_worst": default["trip_path_mask_cycles_worst"],
+        "core_lock_cycles_worst": default["core_lock_cycles_worst"],
+        "trip_masked_by_core_lock": trip_masked(&boot["boot_checks"]),
+        "trip_path_mask_cycles_worst": match trip_masked(&boot["boot_checks"]) {
+            Some(false) => json!(0),
+            Some(true) => default["core_lock_cycles_worst"].clone(),
+            None => Value::Null,
+        },
     })
 }
 
@@ -362,6 +395,12 @@ pub fn add_images(result: &mut Value, images: serde_json::Map<String, Value>) ->
         .ok_or("internal: figures not an object")?;
     map.insert("decay".into(), json!("brake"));
     map.insert("stack_margin_bytes".into(), margin);
+    if let Some(brake) = images.get("brake") {
+        map.insert(
+            "trip_path_mask_cycles_worst".into(),
+            brake["trip_path_mask_cycles_worst"].clone(),
+        );
+    }
     map.insert("images".into(), Value::Object(images));
     let over: Vec<String> = over_budget(result).into_iter().map(|o| o.0).collect();
     if let Some(map) = result.as_object_mut() {
@@ -688,10 +727,12 @@ pub fn result(d: &DriverOutput, firmware: Usage, image: &Path) -> Result<Value, 
         "panic_to_safe_cycles": d.panic_to_safe_cycles,
         "boot_cycles": d.boot_cycles,
         "boot_checks": d.boot_checks,
-        // The core lock masks every interrupt (PRIMASK) for the step and each call under
-        // it: the longest the trip's interrupt (the PA9 drop after the hardware break) and
-        // the WWDG's early wakeup can wait behind it.
-        "trip_path_mask_cycles_worst": d.step_cycles_worst.max(d.lock_cycles_worst),
+        // The longest the core lock is held (the step, or a call under it). The lock is a
+        // BASEPRI ceiling at the control executor's priority: it masks the trip's break
+        // interrupt and the WWDG's early wakeup only when they are not above the ceiling
+        // (`trip_masked_by_core_lock`, from the boot trace's NVIC priorities); then this is
+        // the longest they can wait behind it.
+        "core_lock_cycles_worst": d.step_cycles_worst.max(d.lock_cycles_worst),
     });
     let budgets: serde_json::Map<String, Value> = BUDGETS
         .iter()

@@ -840,6 +840,7 @@ SYSCFG_CFGR2 = 0x4001_001C
 RCC_APB2RSTR = 0x4002_1040
 # GPIOA_OSPEEDR: PA8's speed in bits 16..17 (00 low).
 GPIOA_OSPEEDR = 0x4800_0008
+NVIC_IPR = 0xE000_E400
 # The review's margin between the lowest stack pointer at boot and the stack guard, bytes.
 STACK_MARGIN_MIN = 2048
 COMP3_CSR = 0x4001_0208
@@ -977,6 +978,12 @@ def boot_checks(writes, symbols, final, enable_bsrr, enable_bit, lowest_stack=No
         "and the guard", margin is not None and margin >= STACK_MARGIN_MIN,
         f"lowest stack access {lowest_stack if lowest_stack is None else hex(lowest_stack)}, "
         f"guard top {base + size:#x}, margin {margin} B")
+    # NVIC_IPR: one byte per IRQ (G474: TIM1_BRK_TIM15 24, UART4 52, the control executor).
+    ipr = lambda irq: final.get(NVIC_IPR + irq)
+    brk, ctl = ipr(24), ipr(52)
+    add("trip interrupt above the core lock's ceiling (TIM1_BRK P0, UART4 executor P6 = "
+        "BASEPRI ceiling)", brk is not None and ctl == 0x60 and brk < ctl,
+        f"TIM1_BRK IPR {brk}, UART4 IPR {ctl}")
     enable_low = first(lambda a, v: a == enable_bsrr and v >> enable_bit & 1)
     pwm_af = first(lambda a, v: a == 0x4800_0000 and v >> 16 & 3 == 2)
     add("bridge enable driven low before PA8 becomes TIM1's output",

@@ -188,6 +188,26 @@ fn input(args: &ExplainArgs, rig: &mut RigFile) -> Result<Input, RigError> {
         (Some(path), _) => {
             let data = Dataset::read_csv(path)?;
             if let Some(regenerative) = crate::provenance::Header::read(path).regenerative {
+                let measured = rigfile::DecayMode::from_returns_power(regenerative);
+                match &args.model {
+                    // Never mixed: data of one drive against a rig file of the other.
+                    Some(model) if rig.drive.decay != measured => {
+                        return Err(RigError::BadValue {
+                            what: "--measured".into(),
+                            why: format!(
+                                "{} was measured on a {} drive (its `# drive:` line) but {} says [drive] decay = \"{}\": the base model's inertia term differs (kappa {} vs {}); set [drive] decay = \"{}\" in the rig file if the data's drive is the rig's, or measure again on the rig's drive",
+                                path.display(),
+                                measured.name(),
+                                model.display(),
+                                rig.drive.decay.name(),
+                                model::effects::drive_kappa(regenerative),
+                                model::effects::drive_kappa(rig.drive.decay.returns_power()),
+                                measured.name(),
+                            ),
+                        });
+                    }
+                    _ => rig.drive.decay = measured,
+                }
                 *rig = rig.clone().with_drive_decay(regenerative);
             }
             Ok(Input {

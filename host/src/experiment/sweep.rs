@@ -104,7 +104,10 @@ pub fn provenance<B: Bench + ?Sized>(
         calibration: &calibration,
         window: setup.window.describe(),
         plan: &setup.plan,
-        regenerative: model::hardware::board::REGENERATIVE_DECAY,
+        // The device's drive, as its `Info` states it (`Capabilities::BRAKING_DECAY`).
+        regenerative: info
+            .capabilities
+            .contains(protocol::Capabilities::BRAKING_DECAY),
     }
     .header())
 }

@@ -435,6 +435,14 @@ mod tests {
         assert!(kappa_returns_power(-0.9) && !kappa_returns_power(-0.6));
         assert!(kappa_returns_power(KAPPA_BRAKING_DRIVE));
         assert!(!kappa_returns_power(KAPPA_POWER_NOT_RETURNED));
+        // Eq. (10) and the fully rectified form.
+        let eq10 = drive.required_inertia_torque(w);
+        assert_eq!(rectified_inertia_torque(&drive, w, KAPPA_EQ10), eq10);
+        assert_eq!(
+            rectified_inertia_torque(&drive, w, KAPPA_FULLY_RECTIFIED),
+            2.0 * eq10
+        );
+        assert_eq!(rectified_inertia_torque(&drive, w, -3.0), 0.0);
     }
 
     #[test]
@@ -451,14 +459,6 @@ mod tests {
         // pushes the cam: the reading of the eta_b the motor receives through eta_f.
         let pushed = carrier_inertia_torque_at_kappa(-1.0, 10.0, KAPPA_BRAKING_DRIVE);
         assert!((pushed + 0.64).abs() < 1e-12, "{pushed}");
-        // Eq. (10) and the fully rectified form.
-        let eq10 = drive.required_inertia_torque(w);
-        assert_eq!(rectified_inertia_torque(&drive, w, KAPPA_EQ10), eq10);
-        assert_eq!(
-            rectified_inertia_torque(&drive, w, KAPPA_FULLY_RECTIFIED),
-            2.0 * eq10
-        );
-        assert_eq!(rectified_inertia_torque(&drive, w, -3.0), 0.0);
     }
 
     #[test]

@@ -11,7 +11,7 @@ use crate::SimError;
 use crate::{Injections, SimConfig, SimLink, SimRig};
 
 /// The drills, in the order they run.
-pub const DRILLS: [&str; 7] = [
+pub const DRILLS: [&str; 8] = [
     "overcurrent",
     "encoder-loss",
     "comms-loss",
@@ -19,7 +19,12 @@ pub const DRILLS: [&str; 7] = [
     "reversed-encoder",
     "load-limit",
     "overvoltage",
+    "debug-halt",
 ];
+
+/// How long a debug halt lasts before the IWDG (~250 ms, not frozen in debug) resets the
+/// chip and the bridge's pull-downs switch it off, s.
+const HALT_UNTIL_IWDG_S: f64 = 0.25;
 
 /// Longest a drill waits for the safe state, s.
 const SAFE_WITHIN_S: f64 = 3.0;
@@ -39,6 +44,13 @@ pub struct FaultOutcome {
     pub faults: Vec<String>,
     /// A release request is refused while the fault is latched.
     pub release_refused: bool,
+    /// The largest motor current from the drill's cause to its end, A (|i|, the plant's).
+    pub peak_current_a: f64,
+    /// Whether that peak is inside the current sensor's range (ACS714-05: +-5 A): beyond
+    /// it the firmware reads a clipped current and the comparator trip is blind.
+    pub peak_within_sensor_range: bool,
+    /// The drive the drill ran on: `brake` or `coast` (the plant's).
+    pub decay: &'static str,
 }
 
 /// Runs the named drills (all of [`DRILLS`] when empty).
@@ -70,8 +82,48 @@ fn motor_off(link: &SimLink) -> bool {
     !link.rig.drive().enabled && link.rig.plant().state().current.abs() < 1e-3
 }
 
+/// Advances `link` by `seconds` in 0.1 ms steps, raising `peak` to the largest |current|.
+fn wait_tracking(link: &mut SimLink, seconds: f64, peak: &mut f64) {
+    let steps = (seconds / 1e-4).round() as u32;
+    for _ in 0..steps {
+        link.wait(1e-4);
+        *peak = peak.max(link.rig.plant().state().current.abs());
+    }
+}
+
 fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
+    let mut peak = 0.0f64;
     let (mut link, cause) = match name {
+        "debug-halt" => {
+            // A probe halts the core at 15 Hz, mid-vibration (the review's case): the core
+            // stops, the bridge keeps the board's halt state until the IWDG resets the chip.
+            let mut link = rig(seed, |_| {})?;
+            release(&mut link, 15.0)?;
+            link.wait(1.5);
+            peak = link.rig.plant().state().current.abs();
+            link.rig.debug_halt();
+            let steps = (HALT_UNTIL_IWDG_S / 1e-4).round() as u32;
+            for _ in 0..steps {
+                link.rig.advance(1e-4);
+                peak = peak.max(link.rig.plant().state().current.abs());
+            }
+            link.rig.watchdog_reset_pins();
+            link.rig.advance(0.05);
+            let motor_off = motor_off(&link);
+            let range = model::hardware::acs714::RANGE_A;
+            return Ok(FaultOutcome {
+                name: name.to_string(),
+                motor_off,
+                // The halted core latches nothing; the reset that follows is the safe state.
+                fault_latched: false,
+                time_to_safe_s: Some(HALT_UNTIL_IWDG_S),
+                faults: Vec::new(),
+                release_refused: true,
+                peak_current_a: peak,
+                peak_within_sensor_range: peak <= range,
+                decay: decay_name(&link),
+            });
+        }
         "overcurrent" => {
             let mut link = rig(seed, |_| {})?;
             release(&mut link, 10.0)?;
@@ -155,13 +207,20 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
             });
         }
     };
+    peak = peak.max(link.rig.plant().state().current.abs());
     let time_to_safe_s = if cause {
-        link.wait_until(SAFE_WITHIN_S, 0.0001, |l| !l.rig.bridge_on())
+        let mut seen = peak;
+        let t = link.wait_until(SAFE_WITHIN_S, 0.0001, |l| {
+            seen = seen.max(l.rig.plant().state().current.abs());
+            !l.rig.bridge_on()
+        });
+        peak = seen;
+        t
     } else {
         Some(0.0)
     };
     link.keep_alive(None);
-    link.wait(0.6);
+    wait_tracking(&mut link, 0.6, &mut peak);
     let release_refused = !matches!(
         link.request(&Request::Release {
             on: true,
@@ -178,5 +237,16 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
         time_to_safe_s,
         faults: latched.names().map(str::to_string).collect(),
         release_refused,
+        peak_current_a: peak,
+        peak_within_sensor_range: peak <= model::hardware::acs714::RANGE_A,
+        decay: decay_name(&link),
     })
+}
+
+fn decay_name(link: &SimLink) -> &'static str {
+    if link.rig.plant().params().regeneration {
+        "brake"
+    } else {
+        "coast"
+    }
 }

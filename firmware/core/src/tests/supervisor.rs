@@ -33,15 +33,30 @@ fn boot_with(calibration: RigParameters) -> BootInfo {
 fn boots_locked_and_waits_for_the_current_zero() {
     let mut rig = Rig::new(2.0);
     rig.button = true; // held from power-up: ignored until let go
+    // Before the first zero ends there is no measured zero for the overcurrent trip: the
+    // binary keeps the trip on it and the bridge off (`measured_current_zero_adc`).
+    assert_eq!(rig.core.measured_current_zero_adc(), None);
     let out = rig.step();
     assert!(!out.enable);
     assert!(rig.core.status().zeroing);
+    assert_eq!(rig.core.measured_current_zero_adc(), None);
     assert_eq!(rig.ack(&release(10.0)), Ok(()));
     // Zero takes 1000 samples (100 ms); the release waits for it.
     for _ in 0..98 {
         assert!(!rig.step().enable);
         assert_eq!(rig.state(), SupervisorState::Locked);
+        // Never a drive without the trip's measured zero.
+        assert_eq!(rig.core.measured_current_zero_adc(), None);
     }
+    // The first step that may drive comes after the zero is measured: the binary centres
+    // the trip on it in that same step, before `drive`.
+    for _ in 0..20 {
+        if rig.step().enable {
+            break;
+        }
+    }
+    let zero = rig.core.measured_current_zero_adc().expect("zero measured before a drive");
+    assert!((zero - 2068.0).abs() < 3.0, "{zero}");
     rig.run_ms_alive(5);
     let s = rig.core.status();
     assert!(!s.zeroing && (s.current_zero_adc - 2068.0).abs() < 3.0);
