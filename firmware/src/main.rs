@@ -355,17 +355,15 @@ mod app {
         spawner.spawn(spawned(watchdog_feeder(watchdog)));
     }
 
-    /// Builds the core in `slot`. Out of line, with the slot a `&mut` argument (no alias):
-    /// LLVM then constructs `Core::new`'s value in the slot itself instead of in a stack
-    /// temporary that `main`'s frame would have to hold (44,288 B before, 188 B above the
-    /// stack guard).
-    #[inline(never)]
+    /// Builds the core in `slot` (`Core::new_in`: field by field, the capture buffer
+    /// zero-filled in place), never in a stack temporary that `main`'s frame would have to
+    /// hold (44,288 B before, 188 B above the stack guard).
     fn core_in_place(
         slot: &'static mut MaybeUninit<Core>,
         config: firmware_core::CoreConfig,
         boot: BootInfo,
     ) -> &'static mut Core {
-        slot.write(Core::new(config, boot))
+        Core::new_in(slot, config, boot)
     }
 
     /// A task's spawn token. Each task has a pool of one and is spawned once, at boot, so a

@@ -91,8 +91,8 @@ pub use keys::KeySpec;
 pub use parse::{FileFormat, Loaded};
 pub use sections::{
     CALIBRATION_TEMPERATURE_C, CalibrationSection, CamSection, DecayMode, DriveSection,
-    EffectEntry, FitSection, FrictionSection, GearSection, LimitsSection, ModelSection,
-    TermEntry, UserEffectDef, UserParamDef,
+    EffectEntry, FitSection, FrictionSection, GearSection, LimitsSection, ModelSection, TermEntry,
+    UserEffectDef, UserParamDef,
 };
 
 /// The first line of every rig file the tools write.

@@ -412,5 +412,8 @@ fn the_drive_decay_round_trips_and_defaults_to_the_boards_braking_drive() {
     let e = RigFile::parse("[drive]\ndecay = \"fast\"\n", "bad.toml")
         .unwrap_err()
         .to_string();
-    assert!(e.contains("[drive]") && e.contains("brake") && e.contains("coast"), "{e}");
+    assert!(
+        e.contains("[drive]") && e.contains("brake") && e.contains("coast"),
+        "{e}"
+    );
 }

@@ -44,6 +44,14 @@ pub const PAPER_BUSH_HOLD_NM: f64 = 1.75;
 pub const PAPER_BUSH_OMEGA_RAD_S: f64 = 20.0;
 
 impl Preset {
+    /// The drive the paper's rig used: a bench supply through a drive that took no power
+    /// back (coasting, kappa -1/2), as its Eq. (10) and Fig. 9 show (the measured cam
+    /// torque grows with speed by the acceleration phase's inertia term, which a braking
+    /// drive would return through the gearhead, 82 % of it). A preset sets effects only;
+    /// the virtual rig's drive is the rig's (`[drive] decay`, braking by default): a rig
+    /// file with `[drive] decay = "coast"` reproduces the paper's (`docs/presets.md`).
+    pub const PAPER_DRIVE: rigfile::DecayMode = rigfile::DecayMode::Coast;
+
     /// The paper's equations alone: no effect.
     pub fn ideal() -> Self {
         Self {

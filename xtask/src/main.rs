@@ -359,8 +359,7 @@ fn bench_run(options: target_bench::Options, python: &Path) -> Result {
     let enable = target_bench::bridge_enable_bsrr(&board)?;
     let image = thumb_release_build("firmware-bench")?;
     let driver = root().join("xtask").join("target_bench").join("driver.py");
-    let output =
-        target_bench::run_driver(python, &driver, &image, Some((&firmware_elf, enable)))?;
+    let output = target_bench::run_driver(python, &driver, &image, Some((&firmware_elf, enable)))?;
     let mut result = target_bench::result(&output, usage, &image)?;
     let mut images = serde_json::Map::new();
     images.insert(

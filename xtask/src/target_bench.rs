@@ -388,7 +388,10 @@ pub fn boot_only_figures(boot: &Value, usage: Usage, default: &Value) -> Value {
 
 /// Adds `images` (per decay mode, [`image_figures`]) to the result, `decay` (the default
 /// image's) and the default image's `stack_margin_bytes`, and recomputes `over_budget`.
-pub fn add_images(result: &mut Value, images: serde_json::Map<String, Value>) -> Result<(), String> {
+pub fn add_images(
+    result: &mut Value,
+    images: serde_json::Map<String, Value>,
+) -> Result<(), String> {
     let margin = result["detail"]["boot"]["stack_margin_bytes"].clone();
     let map = result
         .as_object_mut()
@@ -827,7 +830,9 @@ pub fn table(r: &Value) -> String {
         let _ = writeln!(
             s,
             "image {name:<6} flash {} B, static RAM {} B, boot {} cycles, stack margin {} B",
-            image["flash_bytes"], image["static_ram_bytes"], image["boot_cycles"],
+            image["flash_bytes"],
+            image["static_ram_bytes"],
+            image["boot_cycles"],
             image["stack_margin_bytes"]
         );
     }
@@ -1006,7 +1011,10 @@ mod tests {
         let r = json!({"boot_checks": [{"name": "CLL", "pass": true, "gate": true}],
             "images": {"coast": {"boot_checks": [
                 {"name": "stack: margin", "pass": false, "gate": true}]}}});
-        assert_eq!(failed_boot_checks(&r), vec!["coast: stack: margin".to_string()]);
+        assert_eq!(
+            failed_boot_checks(&r),
+            vec!["coast: stack: margin".to_string()]
+        );
     }
 
     #[test]

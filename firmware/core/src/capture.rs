@@ -40,6 +40,7 @@ const GROUP_START: u16 = 0x8000;
 
 /// One stored sample.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[repr(C)]
 struct RawSample {
     adc: u16,
     encoder: u16,
@@ -91,6 +92,59 @@ pub struct Capture {
 }
 
 impl Capture {
+    /// Writes [`Capture::new`] into `p` in place: the small fields one by one, the buffer
+    /// zero-filled where it lies (a [`RawSample`] of zeros is its default), so the 40 000 B
+    /// never pass through a stack temporary ([`crate::Core::new_in`]).
+    ///
+    /// # Safety
+    /// `p` must be valid for writes and aligned for a `Capture`; what it held is
+    /// overwritten without being dropped.
+    #[allow(unsafe_code)]
+    pub(crate) unsafe fn init_in(p: *mut Self) {
+        use core::ptr::addr_of_mut;
+        // SAFETY: the caller's contract; each field is written once through a raw pointer.
+        // `RawSample` is two `u16`, for which all-zero bytes are a valid (the default) value.
+        unsafe {
+            addr_of_mut!((*p).phase).write(CapturePhase::Idle);
+            addr_of_mut!((*p).id).write(0);
+            addr_of_mut!((*p).decimation).write(1);
+            addr_of_mut!((*p).countdown).write(0);
+            addr_of_mut!((*p).sample_rate_hz).write(0);
+            addr_of_mut!((*p).total).write(0);
+            addr_of_mut!((*p).recorded).write(0);
+            addr_of_mut!((*p).sent).write(0);
+            addr_of_mut!((*p).upload_position).write(0);
+            addr_of_mut!((*p).upload_last_raw).write(0);
+            addr_of_mut!((*p).buf).write_bytes(0, 1);
+            addr_of_mut!((*p).group_start).write(0);
+            addr_of_mut!((*p).output_hold).write(0);
+            addr_of_mut!((*p).output_fitted).write(false);
+            addr_of_mut!((*p).upload_output_position).write(0);
+            addr_of_mut!((*p).upload_output_last_raw).write(0);
+        }
+        // Every field of `Capture`, written above (a compile-time check, never run).
+        const _: fn(Capture) = |c| {
+            let Capture {
+                phase: _,
+                id: _,
+                decimation: _,
+                countdown: _,
+                sample_rate_hz: _,
+                total: _,
+                recorded: _,
+                sent: _,
+                upload_position: _,
+                upload_last_raw: _,
+                buf: _,
+                group_start: _,
+                output_hold: _,
+                output_fitted: _,
+                upload_output_position: _,
+                upload_output_last_raw: _,
+            } = c;
+        };
+    }
+
     /// An idle capture with an empty buffer.
     pub fn new() -> Self {
         Self {
@@ -286,6 +340,20 @@ impl Default for Capture {
 )]
 mod tests {
     use super::*;
+
+    #[test]
+    #[allow(unsafe_code)]
+    fn a_capture_built_in_place_is_a_new_one_whatever_the_slot_held() {
+        // `Core::new_in`'s path: the slot's old bytes (here 0xAA) never show through.
+        let mut slot = Box::new(core::mem::MaybeUninit::<Capture>::uninit());
+        // SAFETY: a byte fill of the slot's own memory, then `init_in` writes every field.
+        let built = unsafe {
+            slot.as_mut_ptr().write_bytes(0xAA, 1);
+            Capture::init_in(slot.as_mut_ptr());
+            slot.assume_init_ref()
+        };
+        assert_eq!(format!("{built:?}"), format!("{:?}", Capture::new()));
+    }
 
     fn upload(c: &mut Capture) -> (Vec<CaptureSample>, Option<DeviceMessage>) {
         let mut samples = Vec::new();

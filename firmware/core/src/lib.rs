@@ -53,9 +53,8 @@
 //! [`Core`] holds the capture buffer ([`CAPTURE_CAPACITY`] samples of 4 bytes, 40 000
 //! bytes, 1.0 s at 10 kHz; the output encoder rides in the ADC codes' spare bits, see
 //! [`OUTPUT_GROUP_MIN`]) and is 43 000 bytes in all on the target; the release image
-//! uses ~45 KiB of static RAM and ~63.2 KiB of flash (`cargo xtask firmware`). Build it
-//! in place (`MaybeUninit::write(Core::new(..))` into a static slot, as the binary does)
-//! rather than on the stack.
+//! uses ~50 KiB of static RAM (`cargo xtask firmware`). Build it in place with
+//! [`Core::new_in`] into a static slot, as the binary does, never on the stack.
 #![cfg_attr(not(test), no_std)]
 // No silent numeric narrowing on the target (as in `model` and `protocol`): every cast that
 // can truncate, lose a sign or wrap is written so it cannot, or carries an `allow` with its

@@ -449,7 +449,10 @@ mod tests {
     fn a_braking_drive_returns_the_inertia_term_through_the_gearhead() {
         // 80 % forward and back: -(1 + 0.64) / 2 = -0.82, between all returned (-1) and
         // nothing returned (-1/2); lossless it is -1, with no way back it is -1/2.
-        assert!((KAPPA_BRAKING_DRIVE + 0.82).abs() < 1e-12, "{KAPPA_BRAKING_DRIVE}");
+        assert!(
+            (KAPPA_BRAKING_DRIVE + 0.82).abs() < 1e-12,
+            "{KAPPA_BRAKING_DRIVE}"
+        );
         assert!(KAPPA_POWER_RETURNED < KAPPA_BRAKING_DRIVE);
         assert!(KAPPA_BRAKING_DRIVE < KAPPA_POWER_NOT_RETURNED);
         assert_eq!(braking_kappa(1.0, 1.0), KAPPA_POWER_RETURNED);

@@ -1031,7 +1031,21 @@ fn info_reports_the_time_scale() {
 #[test]
 fn health_reports_nan_for_a_bus_voltage_the_board_does_not_declare() {
     let mut rig = Rig::new(0.0);
-    assert!(rig.core.config().capabilities.is_empty());
+    // The default board declares its decay mode only (braking: the G2), no measured bus.
+    assert!(
+        !rig.core
+            .config()
+            .capabilities
+            .contains(protocol::Capabilities::BUS_VOLTAGE)
+    );
+    assert_eq!(
+        rig.core.config().capabilities,
+        if model::hardware::board::DECAY.returns_power() {
+            protocol::Capabilities::BRAKING_DECAY
+        } else {
+            protocol::Capabilities::empty()
+        }
+    );
     rig.core.set_board_inputs(crate::BoardInputs {
         bus_voltage_v: 12.0,
         motor_temp_c: 30.0,

@@ -55,7 +55,10 @@ fn boots_locked_and_waits_for_the_current_zero() {
             break;
         }
     }
-    let zero = rig.core.measured_current_zero_adc().expect("zero measured before a drive");
+    let zero = rig
+        .core
+        .measured_current_zero_adc()
+        .expect("zero measured before a drive");
     assert!((zero - 2068.0).abs() < 3.0, "{zero}");
     rig.run_ms_alive(5);
     let s = rig.core.status();
