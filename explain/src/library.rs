@@ -197,7 +197,7 @@ pub fn describe(effect: Effect, p: &EffectParams, thermal: ThermalDriver) -> Str
             "the inertia term is (1 {:+.2}) M w^2 e^2 / pi: {}",
             p.rectification,
             if kappa_returns_power(p.rectification) {
-                "the drive takes the carrier's inertial power back, the term averages out over a turn"
+                "the drive takes the carrier's inertial power back (a braking drive returns it through the gearhead, kappa -(1 + eta_f eta_b) / 2: -0.82 at 80 % each way; -1 returns all of it)"
             } else if p.rectification < 0.5 * (KAPPA_POWER_NOT_RETURNED + KAPPA_EQ10) {
                 "only the positive half of the inertial power is paid (the drive cannot take power back)"
             } else if p.rectification < 0.0 {

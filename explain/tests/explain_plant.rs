@@ -1,10 +1,11 @@
 //! `rig explain` on torque sweeps of the simulated rig (`model::plant`): an effect switched on
 //! in the plant but not in the model is named.
 //!
-//! With a regenerating drive the inertia term of Eq. (9) averages out over a turn, while
-//! Eq. (10) keeps M_hat w^2 e^2 / pi: against the paper's model alone that is itself a finding
-//! (`inertia-rectification`, kappa = -1; a drive that cannot take power back pays half of it,
-//! kappa = -1/2). The model the regenerating plant is compared with here therefore carries
+//! With a braking (regenerating) drive the inertia term of Eq. (9) returns through the
+//! gearhead, eta_f eta_b of it (kappa = -(1 + eta_f eta_b) / 2 = -0.82), while Eq. (10)
+//! keeps M_hat w^2 e^2 / pi: against the paper's model alone that is itself a finding
+//! (`inertia-rectification`, kappa = -0.82; a drive that cannot take power back pays half of
+//! it, kappa = -1/2). The model the braking plant is compared with here therefore carries
 //! that term as a known effect (a rig file with `[model]`).
 
 use explain::{self, Dataset, MeasuredRow, Options, Verdict};
@@ -81,10 +82,10 @@ fn sweep_with_drive(
         .collect()
 }
 
-/// The paper's rig with a regenerating drive: Eq. (10) without its inertia term.
+/// The paper's rig with a braking drive: Eq. (10) with 0.18 of its inertia term.
 fn regenerating_model() -> RigFile {
     let mut params = std::collections::BTreeMap::new();
-    params.insert("kappa".to_string(), -1.0);
+    params.insert("kappa".to_string(), model::effects::KAPPA_BRAKING_DRIVE);
     RigFile::paper().with_model(
         paper::MU_S,
         vec![EffectEntry {
@@ -109,8 +110,13 @@ fn paper_model_against_the_regenerating_plant_finds_the_inertia_term_averaging_o
     );
     assert_eq!(e.verdict, Verdict::Explained, "{}", e.finding);
     assert_eq!(e.effects[0].name, "inertia-rectification");
+    // The braking drive's return through the gearhead, from first principles: -0.82,
+    // told apart from a lossless return (-1) and from none (-1/2).
     let kappa = e.effects[0].params["kappa"];
-    assert!((kappa + 1.0).abs() < 0.15, "kappa {kappa}");
+    assert!(
+        (kappa - model::effects::KAPPA_BRAKING_DRIVE).abs() < 0.08,
+        "kappa {kappa}"
+    );
 }
 
 #[test]

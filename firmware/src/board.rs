@@ -445,15 +445,18 @@ impl CamMotor {
             w.set_urs(Urs::ANY_EVENT);
             w.set_cen(true);
         });
-        // Debug freeze (DBG_TIM1_STOP set): a probe halting the core stops TIM1 and puts
-        // its outputs in their off state, PA8 at its idle level (low). The enable pin is a
-        // GPIO and stays as it was, so on the Pololu G2 a halt mid-drive brakes the motor
-        // (PWM low = both low sides on): the cam stops, it never keeps vibrating. Left
-        // running (the other choice), TIM1 would keep driving the last duty with no
-        // software behind it. The IWDG is deliberately not frozen: a halt longer than
-        // ~250 ms resets the board, the pins float and the pull-downs switch the bridge
-        // off. The WWDG is frozen (`StallWatchdog::new`), or every breakpoint would reset.
-        pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
+        // Debug halt (`model::hardware::board::TIM1_STOPS_IN_DEBUG`, false): TIM1 keeps
+        // switching the last duty while a probe halts the core, with the COMP3 break still
+        // armed, until the IWDG (not frozen) resets the chip ~250 ms in; the pins then float
+        // and the bridge's pull-downs switch it off (the G2 sleeps and coasts). Stopped
+        // instead (DBG_TIM1_STOP set, as before), TIM1 would put PA8 at its idle level, low,
+        // while the enable (a GPIO) stays high: the G2 brakes a spinning cam at about 17 A,
+        // beyond the current sensor's range and in the direction COMP3 does not watch.
+        // The WWDG is frozen (`StallWatchdog::new`), or every breakpoint would reset. The
+        // boot trace checks the bit.
+        pac::DBGMCU
+            .apb2fzr()
+            .modify(|w| w.set_tim1(model::hardware::board::TIM1_STOPS_IN_DEBUG));
         // Break from COMP3 only (not the BKIN pins).
         t.af1().modify(|w| {
             w.set_bkine(false);

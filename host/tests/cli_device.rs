@@ -92,16 +92,24 @@ fn info_json_has_the_contract_keys() {
     assert_eq!(v["firmware_build"], "virtual", "{v}");
     assert_eq!(v["reset_cause"], "power-on", "{v}");
     assert!(v["uptime_s"].as_u64().is_some(), "{v}");
-    // The virtual rig has the optional output-shaft encoder fitted and measures its bus.
+    // The virtual rig has the optional output-shaft encoder fitted and measures its bus;
+    // its bridge brakes by default (the README's Pololu G2).
     assert_eq!(
         v["capabilities"],
-        serde_json::json!(["OUTPUT_ENCODER", "BUS_VOLTAGE", "SIMULATION"]),
+        serde_json::json!([
+            "OUTPUT_ENCODER",
+            "BUS_VOLTAGE",
+            "SIMULATION",
+            "BRAKING_DECAY"
+        ]),
         "{v}"
     );
+    assert_eq!(v["decay"], "brake", "{v}");
     assert_eq!(v["time_scale"], 1.0, "{v}");
     let v = json_of(rig().args(["--sim", "--speed", "4", "info", "--json"]));
     assert_eq!(v["time_scale"], 4.0, "{v}");
     let text = stdout_of(sim(&["info"]));
+    assert!(text.contains("bridge     brake decay"), "{text}");
     assert!(
         text.contains("firmware")
             && text.contains(&format!("protocol   v{}", protocol::PROTOCOL_VERSION)),

@@ -381,3 +381,47 @@ fn cam_speeds_in_hz_or_rpm_are_refused_naming_the_column_and_the_unit() {
         );
     }
 }
+
+#[test]
+fn a_sweep_of_the_other_drive_than_the_rig_file_is_refused_never_mixed() {
+    // Issue 30: data measured on a braking drive (its `# drive:` line) against a rig file
+    // of a coasting one would fit a base model with the wrong inertia term.
+    let dir = tempfile::tempdir().unwrap();
+    let csv = synthetic_csv(dir.path(), "none", "1");
+    let braking = dir.path().join("braking.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    std::fs::write(
+        &braking,
+        format!("# drive: regenerative_decay = true (inertia-rectification kappa = -0.82)\n{text}"),
+    )
+    .unwrap();
+    let coast = dir.path().join("coast.toml");
+    std::fs::write(&coast, "[drive]\ndecay = \"coast\"\n").unwrap();
+    let out = rig()
+        .args(["explain", "--no-report", "--json", "--measured"])
+        .arg(&braking)
+        .arg("--model")
+        .arg(&coast)
+        .assert()
+        .failure()
+        .get_output()
+        .stderr
+        .clone();
+    let e = String::from_utf8_lossy(&out);
+    assert!(
+        e.contains("braking") || e.contains("brake"),
+        "names the data's drive: {e}"
+    );
+    assert!(e.contains("[drive] decay"), "names the setting to fix: {e}");
+    assert!(!e.contains("panicked"), "{e}");
+    // The same data with a braking rig file (the default) is explained.
+    let brake = dir.path().join("brake.toml");
+    std::fs::write(&brake, "[drive]\ndecay = \"brake\"\n").unwrap();
+    rig()
+        .args(["explain", "--no-report", "--json", "--measured"])
+        .arg(&braking)
+        .arg("--model")
+        .arg(&brake)
+        .assert()
+        .success();
+}

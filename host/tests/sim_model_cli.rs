@@ -164,6 +164,21 @@ fn model_needs_sim_and_a_fitted_rig_file() {
         .stdout
         .clone();
     assert!(String::from_utf8_lossy(&out).contains("\"board\": \"virtual\""));
+    // The rig file's drive is the virtual device's: braking by default, coast when it says.
+    assert!(String::from_utf8_lossy(&out).contains("\"decay\": \"brake\""));
+    let coast = dir.path().join("coast.toml");
+    std::fs::write(&coast, "[drive]\ndecay = \"coast\"\n").unwrap();
+    let out = rig()
+        .args(["--sim", "--speed", SPEED, "info", "--json", "--model"])
+        .arg(&coast)
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let text = String::from_utf8_lossy(&out);
+    assert!(text.contains("\"decay\": \"coast\""), "{text}");
+    assert!(!text.contains("BRAKING_DECAY"), "{text}");
     for (file, fix) in [(&missing, "--write-model"), (&junk, "--write-model")] {
         let e = said(
             rig()

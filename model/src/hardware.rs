@@ -240,6 +240,16 @@ pub mod board {
         Decay::Brake
     };
 
+    /// Whether a debug halt stops TIM1 (DBGMCU_APB2FZR.DBG_TIM1_STOP), read by the firmware
+    /// (`board.rs`) and the virtual rig's halt (`sim::SimRig::debug_halt`). `false`: TIM1
+    /// keeps switching the last duty through a halt, up to the IWDG's reset (~250 ms, not
+    /// frozen), whose floating pins let the bridge's pull-downs switch it off. Stopped
+    /// (`true`, the earlier setting), TIM1 holds PA8 at its idle level, low, while the
+    /// enable (a GPIO) stays high: the G2 then brakes a spinning cam with its back-EMF over
+    /// the winding alone, about 17 A at 15 Hz, beyond the ACS714-05's +-5 A, in the
+    /// direction COMP3 does not watch (`rig sim faults debug-halt` shows both).
+    pub const TIM1_STOPS_IN_DEBUG: bool = false;
+
     /// Highest supply the H-bridge is rated for, V: the Pololu G2 24v13's operating range
     /// ends at 40 V.
     pub const BRIDGE_MAX_V: f64 = 40.0;

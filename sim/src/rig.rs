@@ -328,18 +328,26 @@ impl SimRig {
         }
     }
 
-    /// A debug probe halts the core, as the board's halt state leaves the bridge: no control
-    /// step runs; TIM1 (frozen in debug, `DBG_TIM1_STOP`) puts PA8 at its idle level, low,
-    /// and the bridge enable, a GPIO, stays as it was. On the Pololu G2 (braking decay) PWM
-    /// low with the enable high brakes the motor: both low sides short the winding, so a
-    /// spinning cam drives its back-EMF over the winding resistance alone (about 17 A at
-    /// 15 Hz), which the plant models as the drive enabled at duty 0.
+    /// A debug probe halts the core, leaving the bridge in the board's halt state
+    /// ([`SimRig::debug_halt_with`] the firmware's `TIM1_STOPS_IN_DEBUG`).
     pub fn debug_halt(&mut self) {
+        self.debug_halt_with(model::hardware::board::TIM1_STOPS_IN_DEBUG);
+    }
+
+    /// A debug probe halts the core: no control step runs. With `tim1_stops`
+    /// (DBG_TIM1_STOP set) TIM1 puts PA8 at its idle level, low, and the bridge enable, a
+    /// GPIO, stays as it was: on the Pololu G2 (braking decay) PWM low with the enable high
+    /// shorts the winding through both low sides, so a spinning cam drives its back-EMF over
+    /// the winding resistance alone (about 17 A at 15 Hz), modelled as the drive enabled at
+    /// duty 0. Without (the firmware's setting), TIM1 keeps switching the last duty.
+    pub fn debug_halt_with(&mut self, tim1_stops: bool) {
         self.halted = true;
-        self.drive = Drive {
-            duty: 0.0,
-            enabled: self.drive.enabled,
-        };
+        if tim1_stops {
+            self.drive = Drive {
+                duty: 0.0,
+                enabled: self.drive.enabled,
+            };
+        }
     }
 
     /// The IWDG (not frozen in debug) resets the chip ~250 ms into a halt: the pins float,

@@ -841,6 +841,8 @@ RCC_APB2RSTR = 0x4002_1040
 # GPIOA_OSPEEDR: PA8's speed in bits 16..17 (00 low).
 GPIOA_OSPEEDR = 0x4800_0008
 NVIC_IPR = 0xE000_E400
+# DBGMCU_APB2FZR (RM0440 46.16.4): bit 11 DBG_TIM1_STOP.
+DBGMCU_APB2FZR = 0xE004_2010
 # The review's margin between the lowest stack pointer at boot and the stack guard, bytes.
 STACK_MARGIN_MIN = 2048
 COMP3_CSR = 0x4001_0208
@@ -984,6 +986,10 @@ def boot_checks(writes, symbols, final, enable_bsrr, enable_bit, lowest_stack=No
     add("trip interrupt above the core lock's ceiling (TIM1_BRK P0, UART4 executor P6 = "
         "BASEPRI ceiling)", brk is not None and ctl == 0x60 and brk < ctl,
         f"TIM1_BRK IPR {brk}, UART4 IPR {ctl}")
+    fz = final.get(DBGMCU_APB2FZR)
+    add("debug halt: TIM1 not stopped (DBGMCU_APB2FZR.DBG_TIM1_STOP clear): a halt never "
+        "brakes the motor", fz is not None and not fz >> 11 & 1,
+        f"APB2FZR {fz if fz is None else hex(fz)}")
     enable_low = first(lambda a, v: a == enable_bsrr and v >> enable_bit & 1)
     pwm_af = first(lambda a, v: a == 0x4800_0000 and v >> 16 & 3 == 2)
     add("bridge enable driven low before PA8 becomes TIM1's output",

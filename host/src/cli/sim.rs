@@ -341,18 +341,24 @@ fn fault_drills(a: FaultArgs) -> Result<ExitCode, RigError> {
         for o in &outcomes {
             writeln!(
                 out,
-                "  {:<16} motor off: {:<5} latched: {:<5} safe after {} faults: {}",
+                "  {:<16} motor off: {:<5} latched: {:<5} safe after {} peak {:.2} A{} faults: {}",
                 o.name,
                 o.motor_off,
                 o.fault_latched,
                 o.time_to_safe_s
                     .map(|t| format!("{t:.3} s"))
                     .unwrap_or_else(|| "never".into()),
+                o.peak_current_a,
+                if o.peak_within_sensor_range {
+                    ""
+                } else {
+                    " (beyond the sensor's range)"
+                },
                 o.faults.join(",")
             )?;
         }
     }
-    let all_safe = outcomes.iter().all(|o| o.motor_off && o.fault_latched);
+    let all_safe = outcomes.iter().all(faults::FaultOutcome::ends_safe);
     Ok(if all_safe {
         ExitCode::SUCCESS
     } else {

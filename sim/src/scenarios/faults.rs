@@ -53,6 +53,17 @@ pub struct FaultOutcome {
     pub decay: &'static str,
 }
 
+impl FaultOutcome {
+    /// Whether the drill ended safe: the motor off with a fault latched (for `debug-halt`,
+    /// where the halted core latches nothing, the IWDG's reset is the safe state), and the
+    /// current never beyond the sensor's range.
+    pub fn ends_safe(&self) -> bool {
+        self.motor_off
+            && (self.fault_latched || self.name == "debug-halt")
+            && self.peak_within_sensor_range
+    }
+}
+
 /// Runs the named drills (all of [`DRILLS`] when empty).
 pub fn run(names: &[String], seed: u64) -> Result<Vec<FaultOutcome>, SimError> {
     let names: Vec<String> = if names.is_empty() {
@@ -248,5 +259,45 @@ fn decay_name(link: &SimLink) -> &'static str {
         "brake"
     } else {
         "coast"
+    }
+}
+
+/// The debug-halt drill's peak current with TIM1 stopped (`true`, the old setting) or
+/// running (`false`, the firmware's) through a 250 ms halt at 15 Hz on the default
+/// (braking) rig, A.
+pub fn debug_halt_peak_a(tim1_stops: bool, seed: u64) -> Result<f64, SimError> {
+    let mut link = rig(seed, |_| {})?;
+    release(&mut link, 15.0)?;
+    link.wait(1.5);
+    let mut peak = link.rig.plant().state().current.abs();
+    link.rig.debug_halt_with(tim1_stops);
+    for _ in 0..(HALT_UNTIL_IWDG_S / 1e-4).round() as u32 {
+        link.rig.advance(1e-4);
+        peak = peak.max(link.rig.plant().state().current.abs());
+    }
+    Ok(peak)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_debug_halt_never_brakes_beyond_the_sensors_range() {
+        // The review's case: the G2 braking a 15 Hz cam on a halt (TIM1 stopped, PA8 low,
+        // the enable high) drives far beyond the ACS714-05's 5 A; with TIM1 left running
+        // (the firmware's setting) the halt keeps the last duty's current.
+        let range = model::hardware::acs714::RANGE_A;
+        let stopped = debug_halt_peak_a(true, 1).unwrap();
+        assert!(stopped > 2.0 * range, "{stopped} A with TIM1 stopped");
+        let running = debug_halt_peak_a(false, 1).unwrap();
+        assert!(running < range, "{running} A with TIM1 running");
+        assert!(!model::hardware::board::TIM1_STOPS_IN_DEBUG);
+        let o = run(&["debug-halt".into(), "overvoltage".into()], 1).unwrap();
+        for d in &o {
+            assert_eq!(d.decay, "brake", "{d:?}");
+            assert!(d.ends_safe(), "{d:?}");
+            assert!(d.peak_current_a < range, "{d:?}");
+        }
     }
 }
