@@ -21,10 +21,11 @@ fn rig() -> Command {
     c
 }
 
-/// The board's drive as a fitted model states it (the sweep CSV's `# drive:` line:
-/// no regenerative decay, kappa = -1/2), so the rig file's plant is the `--sim` device's.
+/// The board's drive as a fitted model states it (the sweep CSV's `# drive:` line: the
+/// G2's braking decay, kappa = -(1 + 0.8 x 0.8) / 2 = -0.82), so the rig file's plant is
+/// the `--sim` device's.
 const DRIVE: &str =
-    "[[model.effects]]\nname = \"inertia-rectification\"\nparams = { kappa = -0.5 }\n";
+    "[[model.effects]]\nname = \"inertia-rectification\"\nparams = { kappa = -0.82 }\n";
 
 /// A rig file whose fitted [model] is the paper's (mu) with `effects`.
 fn model_file(path: &Path, effects: &str) {
