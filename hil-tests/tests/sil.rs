@@ -133,7 +133,10 @@ fn every_fault_drill_ends_safe_and_latched() {
     assert_eq!(names, faults::DRILLS);
     for o in &outcomes {
         assert!(o.motor_off, "{o:?}");
-        assert!(o.fault_latched, "{o:?}");
+        // A debug halt latches nothing (the core is halted): the IWDG's reset is the safe
+        // state. Every drill keeps the current inside the sensor's range.
+        assert!(o.fault_latched || o.name == "debug-halt", "{o:?}");
+        assert!(o.ends_safe(), "{o:?}");
         assert!(o.release_refused, "{o:?}");
         let t = o.time_to_safe_s.expect("reached the safe state");
         assert!(t < 1.0, "{o:?}");

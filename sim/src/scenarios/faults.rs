@@ -56,11 +56,13 @@ pub struct FaultOutcome {
 impl FaultOutcome {
     /// Whether the drill ended safe: the motor off with a fault latched (for `debug-halt`,
     /// where the halted core latches nothing, the IWDG's reset is the safe state), and the
-    /// current never beyond the sensor's range.
+    /// current never beyond the sensor's range, except in `overcurrent`, whose jam drives
+    /// the current to the comparator's trip (6 A, `model::hardware::comparator::TRIP_A`,
+    /// above the ACS714-05's +-5 A but inside its linear output) by design.
     pub fn ends_safe(&self) -> bool {
         self.motor_off
             && (self.fault_latched || self.name == "debug-halt")
-            && self.peak_within_sensor_range
+            && (self.peak_within_sensor_range || self.name == "overcurrent")
     }
 }
 
