@@ -21,8 +21,7 @@ use sim::scenarios::sweep;
 /// The simulated drive is the board's: the G2 brakes and returns the carrier's power
 /// through the gearhead (kappa = -(1 + eta_f eta_b) / 2 = -0.82; a coasting build: -1/2).
 /// That is part of the rig, so the starting model says so.
-const BOARD_KAPPA: f64 =
-    model::effects::drive_kappa(model::hardware::board::REGENERATIVE_DECAY);
+const BOARD_KAPPA: f64 = model::effects::drive_kappa(model::hardware::board::REGENERATIVE_DECAY);
 
 fn rig_model() -> RigFile {
     let mut params = BTreeMap::new();

@@ -453,8 +453,8 @@ mod tests {
             (KAPPA_BRAKING_DRIVE + 0.82).abs() < 1e-12,
             "{KAPPA_BRAKING_DRIVE}"
         );
-        assert!(KAPPA_POWER_RETURNED < KAPPA_BRAKING_DRIVE);
-        assert!(KAPPA_BRAKING_DRIVE < KAPPA_POWER_NOT_RETURNED);
+        const { assert!(KAPPA_POWER_RETURNED < KAPPA_BRAKING_DRIVE) };
+        const { assert!(KAPPA_BRAKING_DRIVE < KAPPA_POWER_NOT_RETURNED) };
         assert_eq!(braking_kappa(1.0, 1.0), KAPPA_POWER_RETURNED);
         assert_eq!(braking_kappa(0.8, 0.0), KAPPA_POWER_NOT_RETURNED);
         assert_eq!(drive_kappa(true), KAPPA_BRAKING_DRIVE);

@@ -294,7 +294,7 @@ mod tests {
         assert!(stopped > 2.0 * range, "{stopped} A with TIM1 stopped");
         let running = debug_halt_peak_a(false, 1).unwrap();
         assert!(running < range, "{running} A with TIM1 running");
-        assert!(!model::hardware::board::TIM1_STOPS_IN_DEBUG);
+        const { assert!(!model::hardware::board::TIM1_STOPS_IN_DEBUG) };
         let o = run(&["debug-halt".into(), "overvoltage".into()], 1).unwrap();
         for d in &o {
             assert_eq!(d.decay, "brake", "{d:?}");
