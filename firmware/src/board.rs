@@ -160,7 +160,7 @@ const PWM_FULL_DUTY: u16 = PWM_ARR + 1;
 /// ADC DMA ring: two control steps, so one is read while the DMA fills the other.
 const ADC_DMA_LEN: usize = 2 * analog::BLOCK_LEN;
 /// Baud rate of the host link over the ST-LINK virtual COM port.
-pub const HOST_BAUD_RATE: u32 = 921_600;
+pub const HOST_BAUD_RATE: u32 = crate::HOST_BAUD;
 /// UART receive DMA ring: 44 ms of back-to-back bytes at [`HOST_BAUD_RATE`] (10 bits a
 /// byte), more than thread mode stalls in a calibration save ([`SAVE_STALL_MAX_US`]), so a
 /// request sent during a save waits in the ring and is answered after it.
@@ -252,19 +252,29 @@ pub const OUTPUT_ENCODER: Option<firmware_core::OutputEncoderConfig> =
         speed_window_us: 50_000,
     });
 
-/// Clock tree: 170 MHz SYSCLK from HSI16 (16 MHz / 4 × 85 / 2), range-1 boost, ADC12 on SYSCLK.
-///
-/// HSI16 (±1 %) is well inside the UART's clock tolerance and needs nothing on the board; the
-/// Nucleo's 24 MHz HSE crystal would be `source: HSE, prediv: DIV6` with the same PLL.
-/// APB1 and APB2 run undivided (170 MHz): the WWDG's timing assumes it.
+/// The Nucleo-G474RE's HSE crystal (X3, MB1367), Hz.
+pub const HSE_HZ: u32 = 24_000_000;
+
+/// Clock tree: 170 MHz SYSCLK from the Nucleo's 24 MHz HSE crystal (24 MHz / 6 × 85 / 2),
+/// range-1 boost, ADC12 on SYSCLK. USART2 runs on PCLK1 (170 MHz, undivided), so the host
+/// link's clock is the crystal's (tens of ppm) instead of HSI16's ±1 %: what is left is
+/// the divider's quantisation, [`crate::HOST_BAUD_ERROR_PPM`] (+0.25 %: BRR 184 gives
+/// 923,913 Bd for 921,600), logged at boot. APB1 and APB2 run undivided (170 MHz): the
+/// WWDG's timing assumes it.
 pub fn config() -> Config {
-    use embassy_stm32::rcc::{Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk, mux};
+    use embassy_stm32::rcc::{
+        Hse, HseMode, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk, mux,
+    };
+    use embassy_stm32::time::Hertz;
 
     let mut config = Config::default();
-    config.rcc.hsi = true;
+    config.rcc.hse = Some(Hse {
+        freq: Hertz(HSE_HZ),
+        mode: HseMode::Oscillator,
+    });
     config.rcc.pll = Some(Pll {
-        source: PllSource::HSI,
-        prediv: PllPreDiv::DIV4,
+        source: PllSource::HSE,
+        prediv: PllPreDiv::DIV6,
         mul: PllMul::MUL85,
         divp: None,
         divq: None,

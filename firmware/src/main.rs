@@ -114,6 +114,31 @@ fn duty_compare(duty: f32, full_scale: f32) -> Option<u32> {
     Some((duty.abs().min(1.0) * full_scale) as u32)
 }
 
+/// The host link's baud rate, Bd (USART2 at 921,600 8N1 on the ST-LINK's VCP).
+#[cfg(any(target_os = "none", test))]
+const HOST_BAUD: u32 = 921_600;
+
+/// USART2's kernel clock, Hz: PCLK1 = SYSCLK, 170 MHz from the HSE crystal.
+#[cfg(any(target_os = "none", test))]
+const USART_KERNEL_HZ: u32 = 170_000_000;
+
+/// USART2's BRR for `baud` at `kernel_hz` as embassy-stm32 rounds it (16x oversampling)
+/// and the baud rate that gives, Bd.
+#[cfg(any(target_os = "none", test))]
+const fn usart_baud(kernel_hz: u32, baud: u32) -> (u32, u32) {
+    let brr = (kernel_hz + baud / 2) / baud;
+    (brr, (kernel_hz + brr / 2) / brr)
+}
+
+/// The host link's baud error from the divider alone, ppm (the crystal adds tens of ppm;
+/// HSI16 would have added up to ±10,000): +2,509 ppm, BRR 184, 923,913 Bd.
+#[cfg(any(target_os = "none", test))]
+const HOST_BAUD_ERROR_PPM: i32 = {
+    let (_, actual) = usart_baud(USART_KERNEL_HZ, HOST_BAUD);
+    // Both below 2^31: the difference times 1e6 fits i64.
+    ((actual as i64 - HOST_BAUD as i64) * 1_000_000 / HOST_BAUD as i64) as i32
+};
+
 #[cfg(any(target_os = "none", test))]
 mod analog;
 #[cfg(target_os = "none")]
@@ -319,7 +344,7 @@ mod app {
             unwrap!(cortex_m::singleton!(: SharedCore = Mutex::new(RefCell::new(core_ref))));
 
         info!(
-            "board up: motor off (max duty {}), {} ({}), encoder at {}; current sampled in step with the PWM at {} ({} Hz); overcurrent trip at {} A (DAC {}); host link @ {} Bd",
+            "board up: motor off (max duty {}), {} ({} decay), encoder at {}; current sampled in step with the PWM at {} ({} Hz); overcurrent trip at {} A (DAC {}); host link @ {} Bd ({} ppm from the divider, HSE clock)",
             motor.max_duty(),
             board::BRIDGE.name,
             board::BRIDGE.decay.name(),
@@ -329,6 +354,7 @@ mod app {
             trip.limit_a(),
             trip.threshold_counts(),
             board::HOST_BAUD_RATE,
+            crate::HOST_BAUD_ERROR_PPM,
         );
         if motor.sampling_point() == SamplingPoint::Unknown {
             error!("TIM1 does not count: no current samples will come");
@@ -673,6 +699,19 @@ mod app {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_host_links_baud_error_is_the_dividers_a_quarter_percent() {
+        // 170 MHz / 921,600 = 184.46: BRR 184, 923,913 Bd, +0.25 %, inside the UART's
+        // ~2 % tolerance with the crystal's ppm on top; HSI16's +-1 % would have added up
+        // to 1.25 %.
+        assert_eq!(usart_baud(USART_KERNEL_HZ, HOST_BAUD), (184, 923_913));
+        assert_eq!(HOST_BAUD_ERROR_PPM, 2_509);
+        assert_eq!(
+            u64::from(USART_KERNEL_HZ),
+            model::hardware::board::SYSCLK_HZ as u64
+        );
+    }
 
     #[test]
     fn a_non_finite_duty_is_refused_never_full_drive() {

@@ -176,7 +176,8 @@ pub mod amt102 {
 pub mod board {
     /// PWM frequency of the H-bridge (TIM1 CH1), Hz.
     pub const PWM_FREQUENCY_HZ: f64 = 20_000.0;
-    /// The STM32G474's system clock as the firmware sets its clock tree (HSI16 / 4 x 85 / 2),
+    /// The STM32G474's system clock as the firmware sets its clock tree (the Nucleo's 24 MHz
+    /// HSE crystal / 6 x 85 / 2),
     /// Hz; APB1 and APB2, and the timers on them (TIM1, the WWDG), run undivided.
     pub const SYSCLK_HZ: f64 = 170_000_000.0;
     /// H-bridge supply, V.

@@ -161,5 +161,7 @@ pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 /// supply, temperature and timing fields. v3: `DeviceInfo::time_scale`, the request window
 /// ([`REQUEST_WINDOW`]), and a device that refuses
 /// (never silently replaces) a value it cannot use. v4: capture samples carry the output
-/// encoder (`CaptureSample::output_count`), 20 samples per chunk.
+/// encoder (`CaptureSample::output_count`), at most [`CAPTURE_CHUNK_SAMPLES`] per chunk (the
+/// firmware sends `firmware_core`'s `UPLOAD_CHUNK_SAMPLES`, fewer, to keep a chunk's framing
+/// short under its core lock; a host takes chunks of any length up to the maximum).
 pub const PROTOCOL_VERSION: u16 = 4;
