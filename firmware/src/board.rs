@@ -205,11 +205,11 @@ pub struct BridgeBoard {
 /// 13 A continuous, PWM to 100 kHz, 1.8–5 V logic. Sign-magnitude: PWM high drives in DIR's
 /// direction, PWM low brakes low (both outputs to ground), SLP low puts the outputs in high
 /// impedance. So [`Decay::Brake`] while enabled, coast when the enable (SLP) is low, which is
-/// the safe state: build its image with `--features bridge-brake-decay`. Check the board's
-/// SLP default before wiring: where it is pulled up on the board, the 10 kΩ pull-down must be
-/// sized to win (¹). Without the feature the image is built for a bridge that coasts in the
-/// off-time ([`Decay::Coast`], e.g. PWM on its enable), the drive the virtual rig and the
-/// paper's bench supply have.
+/// the safe state: the default image is built for it. Check the board's SLP default before
+/// wiring: where it is pulled up on the board, the 10 kΩ pull-down must be sized to win (¹).
+/// With the feature `bridge-coast-decay` the image is built for a bridge that coasts in the
+/// off-time ([`Decay::Coast`], e.g. PWM on its enable), the drive the paper's bench supply
+/// had.
 ///
 /// Braking decay takes power back: when the cam overruns the drive (the carrier pushing
 /// back once a turn, a deceleration) the current reverses and flows into the supply in the
