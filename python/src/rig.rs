@@ -109,7 +109,9 @@ impl NativeRig {
         let port = session.port().to_owned();
         let in_process = session.device.is_some();
         let stop = Arc::new(AtomicBool::new(false));
-        let (tx, thread) = worker::spawn(DeviceBench::new(session), stop.clone())?;
+        // KeyboardInterrupt raises `stop`: a procedure's rest ends at once, not at its end.
+        let bench = DeviceBench::new(session).stopped_by(stop.clone());
+        let (tx, thread) = worker::spawn(bench, stop.clone())?;
         Ok(Self {
             jobs: Mutex::new(Some(tx)),
             thread: Mutex::new(Some(thread)),

@@ -20,7 +20,8 @@ use crate::RigError;
 use crate::calibrate::operator::{TerminalOperator, VirtualOperator};
 use crate::calibrate::plot::{self, FitPlot};
 use crate::calibrate::{
-    self, CalibrationResult, GaugeOperator, GaugeUnit, Measurements, Plan, Progress, Setup,
+    self, CalibrationResult, CalibrationSchedule, GaugeOperator, GaugeUnit, Measurements, Progress,
+    Setup,
 };
 use rigfile::{RigFile, paper_units};
 
@@ -126,7 +127,7 @@ pub fn default_out_dir(now: SystemTime) -> PathBuf {
 
 /// Runs `rig calibrate`.
 pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
-    let plan = Plan::default();
+    let plan = CalibrationSchedule::default();
     let unit = gauge_unit(&a)?;
     // Check the inputs before anything moves.
     let gauge = a
@@ -206,7 +207,7 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
 /// and how to measure the rest.
 fn partial_refit(
     m: &Measurements,
-    plan: &Plan,
+    plan: &CalibrationSchedule,
     from: Option<&Path>,
     fit_error: RigError,
 ) -> RigError {
@@ -257,7 +258,7 @@ fn partial_refit(
 fn measure(
     session: &mut Connection,
     a: &CalibrateArgs,
-    plan: &Plan,
+    plan: &CalibrationSchedule,
     gauge: Option<Vec<f64>>,
     unit: GaugeUnit,
     out: &Path,
@@ -350,7 +351,7 @@ fn write_points(dir: &Path, m: &Measurements) -> Result<PathBuf, RigError> {
     Ok(path)
 }
 
-fn progress_bar(plan: &Plan, json: bool) -> ProgressBar {
+fn progress_bar(plan: &CalibrationSchedule, json: bool) -> ProgressBar {
     if json || !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();
     }
