@@ -20,15 +20,19 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
+
+if TYPE_CHECKING:  # pandas is imported where a DataFrame is made, not at import time
+    import pandas as pd
 
 from . import _native
 from ._native import (
     BadValueError,
     DeviceFaultError,
     LinkError,
+    MissingFileError,
     NoReplyError,
     RefusedError,
     RigClosedError,
@@ -49,6 +53,7 @@ __all__ = [
     "TELEMETRY_COLUMNS",
     "RigError",
     "BadValueError",
+    "MissingFileError",
     "RefusedError",
     "NoReplyError",
     "VersionMismatchError",
@@ -56,6 +61,10 @@ __all__ = [
     "DeviceFaultError",
     "RigClosedError",
 ]
+
+#: What a recording or a capture returns: a DataFrame, or with ``pandas=False`` a dict of
+#: numpy arrays (a capture's also has its ``"summary"`` dict).
+Frame = Union["pd.DataFrame", Dict[str, Any]]
 
 #: The columns of ``rig monitor --csv`` (telemetry), in order; ``record`` adds ``seq``.
 TELEMETRY_COLUMNS: List[str] = list(_native.TELEMETRY_COLUMNS)
@@ -89,7 +98,7 @@ def _report(text: str) -> Any:
     return value
 
 
-def _frame(columns: Sequence[Any], pandas: bool):
+def _frame(columns: Sequence[Any], pandas: bool) -> Frame:
     """Columns (name, dtype, bytes or list) to a DataFrame or a dict of numpy arrays."""
     data: Dict[str, np.ndarray] = {}
     for name, dtype, value in columns:
@@ -229,15 +238,15 @@ class Recorder:
         if err is not None:
             raise RigError(f"the recording stopped: {err}")
 
-    def take(self, pandas: bool = True):
+    def take(self, pandas: bool = True) -> Frame:
         """The samples recorded since the last take (the buffer is emptied)."""
         return self._result(self._native.columns(True), pandas)
 
-    def data(self, pandas: bool = True):
+    def data(self, pandas: bool = True) -> Frame:
         """All samples held (the buffer is kept)."""
         return self._result(self._native.columns(False), pandas)
 
-    def _result(self, columns, pandas: bool):
+    def _result(self, columns: Any, pandas: bool) -> Frame:
         out = _frame(columns, pandas)
         if pandas:
             out.attrs["lost"] = self.lost
@@ -294,7 +303,8 @@ class Rig:
 
     @property
     def port(self) -> str:
-        """The port's name (a pseudo-terminal for a virtual rig)."""
+        """The port's path: the board's serial port, or the pseudo-terminal of a virtual
+        rig (``/dev/pts/N``)."""
         return self._native.port
 
     def info(self) -> Report:
@@ -330,6 +340,8 @@ class Rig:
             try:
                 with open(path, "r", encoding="utf-8") as f:
                     text = f.read()
+            except FileNotFoundError as e:
+                raise MissingFileError(f"rig file {path}: cannot read it ({e})") from None
             except OSError as e:
                 raise BadValueError(f"rig file {path}: cannot read it ({e})") from None
             return _report(self._native.set_parameters(text, path))
@@ -365,7 +377,7 @@ class Rig:
         divided by a whole number) for ``seconds`` of device time, or until ``stop()``."""
         return Recorder(self, self._native.start_recording(int(rate_hz), seconds))
 
-    def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True):
+    def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True) -> Frame:
         """Telemetry for ``seconds`` of device time at ``rate_hz``: a DataFrame (or a dict
         of numpy arrays) with ``rig monitor --csv``'s columns and units, plus ``seq``;
         ``attrs["lost"]`` and ``attrs["gaps"]`` report samples lost on the link."""
@@ -376,7 +388,7 @@ class Rig:
             rec.stop()
         return rec.take(pandas)
 
-    def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True):
+    def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True) -> Frame:
         """The raw burst (``rig capture``): ``seconds`` at ``rate_hz`` recorded on the device
         and uploaded; ``rig capture --csv``'s columns (index, t_s, current_adc, current_a,
         encoder_count, cam_angle_rad, output_count, output_angle_rad; the output's are NaN
@@ -396,7 +408,7 @@ class Rig:
         quick: bool = False,
         window: str = "start",
         plan_toml: Optional[str] = None,
-    ):
+    ) -> "pd.DataFrame":
         """The required-torque test of Figs. 8-9 (``rig experiment torque-sweep``): ``plan``
         ``"paper"`` (150 runs, the default), ``"quick"`` (30; or ``quick=True``) or a plan
         file's path (docs/plans.md); or ``plan_toml``, a plan's text (as ``explain(...,
@@ -471,7 +483,7 @@ class Rig:
         freq_hz: float = _FIG5["freq_hz"],
         release_s: float = _FIG5["release_s"],
         after_s: float = _FIG5["after_s"],
-    ):
+    ) -> "pd.DataFrame":
         """Fig. 5 (``rig experiment hold-release``): hold ``load_nm`` without vibration for
         ``hold_s``, release at ``freq_hz`` for ``release_s``, record ``after_s`` more (the
         defaults are the CLI's: 1.0 kg on the 75 mm pulley, 14.5 s, 5 Hz, 2 s, 1.5 s;
@@ -581,6 +593,9 @@ def design(
     unknown = sorted(set(rig) - allowed)
     if unknown:
         raise BadValueError(f"design: unknown option(s) {', '.join(unknown)} (options: {', '.join(sorted(allowed))})")
+    for name, values, what in (("z", z, "tooth counts Z1, Z2, Z3, Z4"), ("x", x, "profile shifts x1, x2, x3, x4")):
+        if values is not None and len(values) != 4:
+            raise BadValueError(f"design: {name} {list(values)}: give four {what} (e.g. z=[49, 51, 50, 50])")
     return _report(
         _native.design(
             None if z is None else [int(v) for v in z],

@@ -10,22 +10,25 @@ DEFAULT_BAUD_RATE: int
 HOLD_RELEASE_DEFAULTS: Dict[str, Optional[float]]
 
 class RigError(Exception):
-    """Any error of the rig library; the message is the CLI's."""
+    """Any error of the rig library; the message is the CLI's. The base of every other."""
 
-class BadValueError(RigError):
-    """A value the device or the library does not take; the message names it and the range."""
+class BadValueError(RigError, ValueError):
+    """A value the device or the library does not take; the message names it and the range. Also a ValueError."""
+
+class MissingFileError(BadValueError, FileNotFoundError):
+    """A file given does not exist; the message names it. Also a BadValueError and a FileNotFoundError."""
 
 class RefusedError(RigError):
     """The device refused a request (a Nack); the message says why and what to do."""
 
-class NoReplyError(RigError):
-    """The device did not answer (after retries); the message says what to check."""
+class NoReplyError(RigError, TimeoutError):
+    """The device did not answer (after retries); the message says what to check. Also a TimeoutError."""
 
 class VersionMismatchError(RigError):
     """The device speaks another protocol version or schema; the message says which side to update."""
 
-class LinkError(RigError):
-    """The port could not be opened or failed (busy, gone, not a device)."""
+class LinkError(RigError, OSError):
+    """The port could not be opened or failed (busy, gone, not a device). Also an OSError."""
 
 class DeviceFaultError(RigError):
     """The device latched a fault; the message names it."""

@@ -100,13 +100,20 @@ pub struct NativeRig {
     jobs: Mutex<Option<Sender<Job>>>,
     thread: Mutex<Option<std::thread::JoinHandle<()>>>,
     stop: Arc<AtomicBool>,
+    /// The port as messages name it (`the virtual device (/dev/pts/3)` for a virtual rig).
     port: String,
+    /// The port's path (`/dev/pts/3`, `/dev/ttyACM0`).
+    port_path: String,
     in_process: bool,
 }
 
 impl NativeRig {
     fn start(session: Connection) -> Result<Self, RigError> {
         let port = session.port().to_owned();
+        let port_path = session
+            .device
+            .as_ref()
+            .map_or_else(|| port.clone(), |d| d.port_name().to_owned());
         let in_process = session.device.is_some();
         let stop = Arc::new(AtomicBool::new(false));
         // KeyboardInterrupt raises `stop`: a procedure's rest ends at once, not at its end.
@@ -117,6 +124,7 @@ impl NativeRig {
             thread: Mutex::new(Some(thread)),
             stop,
             port,
+            port_path,
             in_process,
         })
     }
@@ -221,10 +229,10 @@ impl NativeRig {
         .map_err(to_py)
     }
 
-    /// The port's name.
+    /// The port's path (a pseudo-terminal for a virtual rig).
     #[getter]
     fn port(&self) -> String {
-        self.port.clone()
+        self.port_path.clone()
     }
 
     /// `rig info --json`.

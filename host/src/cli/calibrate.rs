@@ -356,7 +356,9 @@ fn progress_bar(plan: &CalibrationSchedule, json: bool) -> ProgressBar {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(plan.steps() as u64);
-    if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} steps  {msg}") {
+    if let Ok(style) = ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} steps, {elapsed} elapsed, about {eta} left  {msg}",
+    ) {
         bar.set_style(style);
     }
     bar
