@@ -74,6 +74,9 @@ pub struct Comparison {
     pub gap_mean_model_a: Option<f64>,
     /// The plot, when written.
     pub svg: Option<String>,
+    /// The plot in `--format` (PNG or PDF beside the SVG), when asked for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub figure: Option<String>,
     /// Per test point.
     pub rows: Vec<GapRow>,
 }
@@ -274,6 +277,7 @@ pub fn compare(
             .as_ref()
             .map(|_| mean(rows.iter().filter_map(|r| r.gap_model_a))),
         svg: None,
+        figure: None,
         rows,
     })
 }

@@ -30,6 +30,14 @@ impl Progress {
     }
 }
 
+/// The points done and all points (`12`, `150`) of a line that carries a
+/// [`Progress::line`]; `None` for any other line.
+pub fn counts(line: &str) -> Option<(usize, usize)> {
+    let head = &line[..line.find(" done, ")?];
+    let (done, total) = head.rsplit(' ').next()?.split_once('/')?;
+    Some((done.parse().ok()?, total.parse().ok()?))
+}
+
 /// [`Progress::line`] for `elapsed` wall time since this run's start.
 fn progress_text(elapsed: Duration, done: usize, done_before: usize, total: usize) -> String {
     let here = done.saturating_sub(done_before);
@@ -77,5 +85,11 @@ mod tests {
         assert!(progress_text(Duration::ZERO, 0, 0, 5).ends_with("time left not known yet"));
         assert!(progress_text(Duration::from_secs(5), 5, 0, 5).ends_with("done"));
         assert_eq!(duration_text(3900.0), "1 h 05 min");
+        let line = format!(
+            "point 3/150: 1.1 N m, 6.2 V: i = 1.234 A; {}",
+            progress_text(Duration::from_secs(39), 3, 0, 150)
+        );
+        assert_eq!(counts(&line), Some((3, 150)));
+        assert_eq!(counts("round 2: 12 test points (proposed)"), None);
     }
 }

@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -65,6 +65,34 @@ __all__ = [
 #: What a recording or a capture returns: a DataFrame, or with ``pandas=False`` a dict of
 #: numpy arrays (a capture's also has its ``"summary"`` dict).
 Frame = Union["pd.DataFrame", Dict[str, Any]]
+
+#: A long procedure's progress callback: ``progress(done, total, line)`` with the points
+#: done and all points (None on a line without them) and the line ``rig`` prints, which
+#: ends with the time elapsed and an estimate of the time left.
+Progress = Callable[[Optional[int], Optional[int], str], None]
+
+
+def _progress(progress: Union[Progress, bool, None], what: str) -> Tuple[Optional[Progress], Callable[[], None]]:
+    """The callback a procedure reports to, and what closes it: ``progress`` itself; by
+    default (None or True) a tqdm bar when tqdm is installed, else nothing; False: nothing."""
+    if callable(progress):
+        return progress, lambda: None
+    if progress is False:
+        return None, lambda: None
+    try:
+        from tqdm.auto import tqdm  # type: ignore[import-untyped, unused-ignore]
+    except ImportError:
+        return None, lambda: None
+    bar = tqdm(desc=what, unit="point")
+
+    def update(done: Optional[int], total: Optional[int], line: str) -> None:
+        if done is None or total is None:
+            return
+        bar.total = total
+        bar.update(done - bar.n)
+
+    return update, bar.close
+
 
 #: The columns of ``rig monitor --csv`` (telemetry), in order; ``record`` adds ``seq``.
 TELEMETRY_COLUMNS: List[str] = list(_native.TELEMETRY_COLUMNS)
@@ -408,13 +436,16 @@ class Rig:
         quick: bool = False,
         window: str = "start",
         plan_toml: Optional[str] = None,
+        progress: Union[Progress, bool, None] = None,
     ) -> "pd.DataFrame":
         """The required-torque test of Figs. 8-9 (``rig experiment torque-sweep``): ``plan``
         ``"paper"`` (150 runs, the default), ``"quick"`` (30; or ``quick=True``) or a plan
         file's path (docs/plans.md); or ``plan_toml``, a plan's text (as ``explain(...,
         propose=True).proposal["plan_toml"]`` gives it). Returns a DataFrame with the sweep CSV's columns
         (``rig explain`` reads them); ``attrs`` has the summary (``planned``, ``written``,
-        ``skipped``) and ``provenance`` (the CSV's ``#`` header)."""
+        ``skipped``) and ``provenance`` (the CSV's ``#`` header). ``progress``: called
+        after every point as ``progress(done, total, line)`` (``Progress``); by default a
+        tqdm bar when tqdm is installed (``progress=False``: none)."""
         import pandas as pd
 
         if window not in ("start", "revolutions"):
@@ -438,7 +469,11 @@ class Rig:
                     text = f.read()
             except OSError as e:
                 raise BadValueError(f"plan {name}: cannot read it ({e})") from None
-        summary, provenance = self._native.torque_sweep(text, name, window == "revolutions")
+        report, close = _progress(progress, "torque sweep")
+        try:
+            summary, provenance = self._native.torque_sweep(text, name, window == "revolutions", report)
+        finally:
+            close()
         outcome = json.loads(summary)
         rows = outcome.pop("rows")
         df = pd.DataFrame(rows, columns=_SWEEP_COLUMNS)
@@ -457,6 +492,7 @@ class Rig:
         replicates: int = 200,
         model: Optional[PathLike] = None,
         force: bool = False,
+        progress: Union[Progress, bool, None] = None,
     ) -> Report:
         """The closed discovery loop on this rig (``rig discover --json``, the same code):
         a quick sweep, ``explain``, the test points its proposal names, repeated until the
@@ -464,17 +500,23 @@ class Rig:
         appended to ``csv`` (a new file; an existing one is refused, and left as it is,
         unless ``force``). ``model``: a rig file (the paper's rig by default). Keys: the
         explanation's (``verdict``, ``effects``, ...) and ``points_used``, ``max_points``,
-        ``settled``, ``csv``, ``rounds``."""
-        return _report(
-            self._native.discover(
-                os.fspath(csv),
-                int(max_points),
-                int(seed),
-                int(replicates),
-                None if model is None else os.fspath(model),
-                bool(force),
+        ``settled``, ``csv``, ``rounds``. ``progress``: as ``torque_sweep``'s, for each
+        round's points."""
+        report, close = _progress(progress, "discover")
+        try:
+            return _report(
+                self._native.discover(
+                    os.fspath(csv),
+                    int(max_points),
+                    int(seed),
+                    int(replicates),
+                    None if model is None else os.fspath(model),
+                    bool(force),
+                    report,
+                )
             )
-        )
+        finally:
+            close()
 
     def hold_release(
         self,

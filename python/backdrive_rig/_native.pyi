@@ -3,7 +3,7 @@ tests/test_stubs.py). Use the `backdrive_rig` package; this layer returns JSON t
 column bytes that the package turns into objects, arrays and DataFrames."""
 
 from os import PathLike
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 TELEMETRY_COLUMNS: List[str]
 DEFAULT_BAUD_RATE: int
@@ -35,6 +35,10 @@ class DeviceFaultError(RigError):
 
 class RigClosedError(RigError):
     """The rig was closed (its port's thread has ended)."""
+
+#: A procedure's progress: (points done, all points, the line `rig` prints); the counts
+#: are None on a line without them.
+Progress = Callable[[Optional[int], Optional[int], str], None]
 
 #: (name, dtype, little-endian bytes or list of str) per column.
 Columns = List[Tuple[str, str, Union[bytes, List[str]]]]
@@ -92,7 +96,11 @@ class NativeRig:
     def wait_recording(self, recording: NativeRecording) -> None: ...
     def capture(self, seconds: float, rate_hz: int) -> Tuple[str, Columns]: ...
     def torque_sweep(
-        self, plan: str, plan_name: str, window_revolutions: bool = False
+        self,
+        plan: str,
+        plan_name: str,
+        window_revolutions: bool = False,
+        progress: Optional[Progress] = None,
     ) -> Tuple[str, str]: ...
     def discover(
         self,
@@ -102,6 +110,7 @@ class NativeRig:
         replicates: int = 200,
         model: Optional[str] = None,
         force: bool = False,
+        progress: Optional[Progress] = None,
     ) -> str: ...
     def hold_release(
         self,

@@ -436,13 +436,14 @@ impl NativeRig {
     /// `rig experiment torque-sweep` with `plan` (`paper`, `quick`, or a plan file's TOML
     /// text named `plan_name`), no CSV: returns (the outcome's JSON with `rows`, the
     /// provenance header).
-    #[pyo3(signature = (plan, plan_name, window_revolutions = false))]
+    #[pyo3(signature = (plan, plan_name, window_revolutions = false, progress = None))]
     fn torque_sweep(
         &self,
         py: Python<'_>,
         plan: String,
         plan_name: String,
         window_revolutions: bool,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<(String, String)> {
         self.call(py, move |w| {
             // A plan that cannot run is refused first, whatever else stands in the way.
@@ -466,7 +467,9 @@ impl NativeRig {
             let mut operator = Operator::scripted(b"", false);
             operator.stop = w.stop.clone();
             let provenance = sweep::provenance(&mut w.bench, &setup)?;
-            let outcome = sweep::run_to(&mut w.bench, &mut operator, &setup, None, &mut |_| {})?;
+            let outcome = sweep::run_to(&mut w.bench, &mut operator, &setup, None, &mut |l| {
+                report_progress(progress.as_ref(), l);
+            })?;
             let mut value = serde_json::to_value(&outcome)?;
             if let Some(map) = value.as_object_mut() {
                 map.insert("rows".into(), serde_json::to_value(&outcome.rows)?);
@@ -478,7 +481,7 @@ impl NativeRig {
     /// `rig discover` on this rig: the closed loop of sweeps and explanations
     /// ([`host::discover::discover`], the CLI's own), every round's rows appended to `csv`
     /// (a new file; an existing one only with `force`). Returns the CLI's `--json`.
-    #[pyo3(signature = (csv, max_points = 60, seed = 1, replicates = 200, model = None, force = false))]
+    #[pyo3(signature = (csv, max_points = 60, seed = 1, replicates = 200, model = None, force = false, progress = None))]
     #[allow(clippy::too_many_arguments)]
     fn discover(
         &self,
@@ -489,6 +492,7 @@ impl NativeRig {
         replicates: u32,
         model: Option<PathBuf>,
         force: bool,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<String> {
         self.call(py, move |w| {
             // The CLI's checks (`--max-points`, `--replicates`), named as Python spells them.
@@ -514,9 +518,10 @@ impl NativeRig {
             };
             let mut operator = Operator::scripted(b"", false);
             operator.stop = w.stop.clone();
-            let found =
-                host::discover::discover(&mut w.bench, &mut operator, &rig, &setup, &|_| {})
-                    .map_err(|stopped| stopped.error)?;
+            let found = host::discover::discover(&mut w.bench, &mut operator, &rig, &setup, &|l| {
+                report_progress(progress.as_ref(), l);
+            })
+            .map_err(|stopped| stopped.error)?;
             json(&found.json(&setup))
         })
     }
@@ -679,4 +684,20 @@ impl NativeRecording {
         };
         crate::columns::telemetry(py, &rows)
     }
+}
+
+/// Hands a procedure's progress line to Python's `progress(done, total, line)` (`done`
+/// and `total`: the points, `None` on a line without them), on the port's thread with the
+/// GIL taken for the call. An exception in the callback is printed, not raised: the
+/// procedure (and the gear's safety) does not depend on it.
+fn report_progress(progress: Option<&Py<PyAny>>, line: &str) {
+    let Some(callback) = progress else {
+        return;
+    };
+    let (done, total) = host::progress::counts(line).unzip();
+    Python::attach(|py| {
+        if let Err(e) = callback.call1(py, (done, total, line.trim_start())) {
+            e.print(py);
+        }
+    });
 }

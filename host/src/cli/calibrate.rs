@@ -68,6 +68,13 @@ pub struct CalibrateArgs {
     /// the others measured (the set-up prompts start at the first missing step).
     #[arg(long, requires = "out", conflicts_with_all = ["from_points", "dry_run"])]
     resume: bool,
+    /// Figure format of the two fit plots: svg, png (resvg) or pdf (svg2pdf); the SVG is
+    /// always kept too.
+    #[arg(long, default_value = "svg", value_parser = super::demo::parse_format)]
+    format: reporting::figure::Format,
+    /// Figure width: pixels of a PNG, points of a PDF [default: the figure's own size].
+    #[arg(long, value_name = "WIDTH", value_parser = reporting::figure::parse_width)]
+    size: Option<u32>,
 }
 
 /// `rig calibrate --gauge`.
@@ -90,6 +97,9 @@ pub struct CalibrationFiles {
     pub no_load_plot: String,
     /// Measured points.
     pub points: String,
+    /// The fit plots in `--format` when it is not SVG (PNG or PDF beside each SVG).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub figures: Vec<String>,
 }
 
 /// What `rig calibrate --json` prints.
@@ -176,7 +186,18 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let files = if a.dry_run {
         None
     } else {
-        Some(write_files(&out, &result, &measurements, &base, &port)?)
+        let mut files = write_files(&out, &result, &measurements, &base, &port)?;
+        let options = reporting::figure::FigureOptions {
+            format: a.format,
+            width: a.size,
+        };
+        if a.format != reporting::figure::Format::Svg {
+            for plot in [&files.torque_plot, &files.no_load_plot] {
+                let written = reporting::figure::export(Path::new(plot), &options)?;
+                files.figures.push(written.display().to_string());
+            }
+        }
+        Some(files)
     };
     let new_cal = result.apply_to(&base);
     let write = decide_write(
@@ -427,6 +448,7 @@ pub fn write_files(
         torque_plot: s(&torque_plot),
         no_load_plot: s(&no_load_plot),
         points: s(&points_path),
+        figures: Vec::new(),
     })
 }
 
@@ -501,8 +523,15 @@ fn print_text(
     match files {
         Some(f) => writeln!(
             out,
-            "  wrote {}, {}, {}, {}",
-            f.calibration, f.torque_plot, f.no_load_plot, f.points
+            "  wrote {}, {}, {}, {}{}",
+            f.calibration,
+            f.torque_plot,
+            f.no_load_plot,
+            f.points,
+            f.figures
+                .iter()
+                .map(|p| format!(", {p}"))
+                .collect::<String>()
         )?,
         None if dry_run => writeln!(out, "  dry run: no files written, the device unchanged")?,
         None => {}
