@@ -127,7 +127,7 @@ fn a_load_left_falling_lands_and_the_rig_recovers() {
     // Clear what the fall latched and watch the output for a device second, until it
     // stands still (the monitor refuses to start while a fault is latched).
     let mut still = false;
-    for _ in 0..60 {
+    for _ in 0..120 {
         rig(port).arg("clear").output().unwrap();
         let out = rig(port)
             .args(["monitor", "--json", "--seconds", "1"])
