@@ -20,7 +20,26 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from typing import TYPE_CHECKING, Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from types import TracebackType
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    Callable,
+    Dict,
+    Iterable,
+    List,
+    Mapping,
+    Optional,
+    Sequence,
+    Tuple,
+    Type,
+    Union,
+    overload,
+)
+
+from typing import Literal
+
+
 
 import numpy as np
 
@@ -103,7 +122,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 _FIG5: Dict[str, Any] = dict(_native.HOLD_RELEASE_DEFAULTS)
 
 
-class Report(dict):
+class Report(Dict[str, Any]):
     """A result as the CLI's ``--json`` prints it: a dict with the same keys, also
     readable as attributes (``report.verdict`` is ``report["verdict"]``)."""
 
@@ -117,13 +136,20 @@ class Report(dict):
         return list(super().__dir__()) + [k for k in self.keys() if isinstance(k, str)]
 
 
-def _report(text: str) -> Any:
+def _report(text: str) -> Report:
+    """The library's JSON object as a Report."""
     value = json.loads(text)
-    if isinstance(value, dict):
-        return Report(value)
-    if isinstance(value, list):
-        return [Report(v) if isinstance(v, dict) else v for v in value]
-    return value
+    if not isinstance(value, dict):
+        raise RigError(f"the library returned {type(value).__name__}, not an object: report this")
+    return Report(value)
+
+
+def _reports(text: str) -> List[Report]:
+    """The library's JSON array of objects as Reports."""
+    value = json.loads(text)
+    if not isinstance(value, list):
+        raise RigError(f"the library returned {type(value).__name__}, not a list: report this")
+    return [Report(v) for v in value]
 
 
 def _frame(columns: Sequence[Any], pandas: bool) -> Frame:
@@ -149,6 +175,16 @@ def versions() -> Dict[str, str]:
 
 
 __version__ = _native.versions()[0]
+
+
+class _Required:
+    """The default of an argument that must be given (``None`` is a value there)."""
+
+    def __repr__(self) -> str:
+        return "<required>"
+
+
+_REQUIRED = _Required()
 
 
 class Release:
@@ -188,19 +224,25 @@ class Release:
     @property
     def live(self) -> bool:
         """Whether the release is still live."""
-        return self._status.live
+        return bool(self._status.live)
 
     @property
     def ended_by(self) -> Optional[str]:
         """How it ended: ``duration``, ``stop``, ``exception``, ``keep-alive`` (not
         confirmed in time), ``rig closed``; None while live."""
-        return self._status.ended_by
+        ended: Optional[str] = self._status.ended_by
+        return ended
 
     def __enter__(self) -> "Release":
         # A release started with start() may be handed to `with` to get its locking.
         return self if self.live else self.start()
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(
+        self,
+        exc_type: Optional[Type[BaseException]],
+        exc: Optional[BaseException],
+        tb: Optional[TracebackType],
+    ) -> Literal[False]:
         why = "stop" if exc_type is None else "exception"
         try:
             self._rig._native.stop_release(why)
@@ -230,20 +272,20 @@ class Recorder:
     @property
     def rate_hz(self) -> int:
         """Telemetry rate, Hz."""
-        return self._native.rate_hz
+        return int(self._native.rate_hz)
 
     @property
     def done(self) -> bool:
         """Whether the recording has ended."""
-        return self._native.done
+        return bool(self._native.done)
 
     @property
     def lost(self) -> int:
         """Samples missing from the stream so far."""
-        return self._native.lost
+        return int(self._native.lost)
 
     @property
-    def gaps(self) -> List[tuple]:
+    def gaps(self) -> List[Tuple[int, int]]:
         """(sequence number before, after) of each gap."""
         return list(self._native.gaps)
 
@@ -266,16 +308,28 @@ class Recorder:
         if err is not None:
             raise RigError(f"the recording stopped: {err}")
 
+    @overload
+    def take(self, pandas: Literal[True] = True) -> "pd.DataFrame": ...
+    @overload
+    def take(self, pandas: Literal[False]) -> Dict[str, Any]: ...
+    @overload
+    def take(self, pandas: bool) -> Frame: ...
     def take(self, pandas: bool = True) -> Frame:
         """The samples recorded since the last take (the buffer is emptied)."""
         return self._result(self._native.columns(True), pandas)
 
+    @overload
+    def data(self, pandas: Literal[True] = True) -> "pd.DataFrame": ...
+    @overload
+    def data(self, pandas: Literal[False]) -> Dict[str, Any]: ...
+    @overload
+    def data(self, pandas: bool) -> Frame: ...
     def data(self, pandas: bool = True) -> Frame:
         """All samples held (the buffer is kept)."""
         return self._result(self._native.columns(False), pandas)
 
     def _result(self, columns: Any, pandas: bool) -> Frame:
-        out = _frame(columns, pandas)
+        out: Any = _frame(columns, pandas)
         if pandas:
             out.attrs["lost"] = self.lost
             out.attrs["gaps"] = self.gaps
@@ -285,7 +339,12 @@ class Recorder:
     def __enter__(self) -> "Recorder":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(
+        self,
+        exc_type: Optional[Type[BaseException]],
+        exc: Optional[BaseException],
+        tb: Optional[TracebackType],
+    ) -> Literal[False]:
         self.stop()
         return False
 
@@ -333,7 +392,7 @@ class Rig:
     def port(self) -> str:
         """The port's path: the board's serial port, or the pseudo-terminal of a virtual
         rig (``/dev/pts/N``)."""
-        return self._native.port
+        return str(self._native.port)
 
     def info(self) -> Report:
         """Device identity and versions: ``rig info --json``'s keys."""
@@ -350,7 +409,8 @@ class Rig:
     def parameters(self) -> Dict[str, Dict[str, Any]]:
         """The device's calibration record as the rig file's sections (docs/rig-file.md):
         ``{"gear": {...}, "calibration": {...}, "limits": {...}, ...}``."""
-        return json.loads(self._native.parameters())
+        sections: Dict[str, Dict[str, Any]] = json.loads(self._native.parameters())
+        return sections
 
     def set_parameters(
         self, rig_file: Optional[PathLike] = None, **sections: Mapping[str, Any]
@@ -385,12 +445,15 @@ class Rig:
         return _report(self._native.set_parameters(_toml(merged), "set_parameters"))
 
     def release(
-        self, freq_hz: float = 10.0, seconds: Optional[float] = ..., confirm_s: Optional[float] = None
+        self,
+        freq_hz: float = 10.0,
+        seconds: Union[float, None, "_Required"] = _REQUIRED,
+        confirm_s: Optional[float] = None,
     ) -> Release:
         """A release at ``freq_hz`` for ``seconds`` of device time (required: pass
         ``seconds=None, confirm_s=...`` to opt out of a duration, then call
         ``Release.confirm()`` within every ``confirm_s`` device seconds). Use with ``with``."""
-        if seconds is ...:
+        if isinstance(seconds, _Required):
             raise BadValueError(
                 "release: give seconds (the release's duration, device s), or seconds=None with confirm_s to keep it by Release.confirm()"
             )
@@ -405,6 +468,12 @@ class Rig:
         divided by a whole number) for ``seconds`` of device time, or until ``stop()``."""
         return Recorder(self, self._native.start_recording(int(rate_hz), seconds))
 
+    @overload
+    def record(self, seconds: float, rate_hz: int = 1000, pandas: Literal[True] = True) -> "pd.DataFrame": ...
+    @overload
+    def record(self, seconds: float, rate_hz: int = 1000, *, pandas: Literal[False]) -> Dict[str, Any]: ...
+    @overload
+    def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True) -> Frame: ...
     def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True) -> Frame:
         """Telemetry for ``seconds`` of device time at ``rate_hz``: a DataFrame (or a dict
         of numpy arrays) with ``rig monitor --csv``'s columns and units, plus ``seq``;
@@ -416,6 +485,12 @@ class Rig:
             rec.stop()
         return rec.take(pandas)
 
+    @overload
+    def capture(self, seconds: float, rate_hz: int = 10000, pandas: Literal[True] = True) -> "pd.DataFrame": ...
+    @overload
+    def capture(self, seconds: float, rate_hz: int = 10000, *, pandas: Literal[False]) -> Dict[str, Any]: ...
+    @overload
+    def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True) -> Frame: ...
     def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True) -> Frame:
         """The raw burst (``rig capture``): ``seconds`` at ``rate_hz`` recorded on the device
         and uploaded; ``rig capture --csv``'s columns (index, t_s, current_adc, current_a,
@@ -423,7 +498,7 @@ class Rig:
         on a device without an output encoder). ``attrs`` (or the dict's ``"summary"``) has the
         counters: ``dropped``, ``gaps``, ``completed``."""
         summary, columns = self._native.capture(float(seconds), int(rate_hz))
-        out = _frame(columns, pandas)
+        out: Any = _frame(columns, pandas)
         if pandas:
             out.attrs.update(json.loads(summary))
         else:
@@ -552,7 +627,12 @@ class Rig:
     def __enter__(self) -> "Rig":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(
+        self,
+        exc_type: Optional[Type[BaseException]],
+        exc: Optional[BaseException],
+        tb: Optional[TracebackType],
+    ) -> Literal[False]:
         self.close()
         return False
 
@@ -607,13 +687,34 @@ def _toml(sections: Mapping[str, Mapping[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+@overload
+def design(
+    z: Optional[Sequence[int]] = None,
+    x: Optional[Sequence[float]] = None,
+    table1: Literal[False] = False,
+    eta_gross: Optional[float] = None,
+    **rig: float,
+) -> Report: ...
+
+
+@overload
+def design(
+    z: None = None,
+    x: None = None,
+    *,
+    table1: Literal[True],
+    eta_gross: Optional[float] = None,
+    **rig: float,
+) -> List[Report]: ...
+
+
 def design(
     z: Optional[Sequence[int]] = None,
     x: Optional[Sequence[float]] = None,
     table1: bool = False,
     eta_gross: Optional[float] = None,
     **rig: float,
-):
+) -> Union[Report, List[Report]]:
     """The design calculator (``rig design --json``): tooth counts ``z`` = (Z1, Z2, Z3,
     Z4) (default the paper's rig), profile shifts ``x``, ``eta_gross`` (adds
     ``mu_from_eta``), or ``table1=True`` for the six sets of Table 1 (a list). Rig values
@@ -638,15 +739,14 @@ def design(
     for name, values, what in (("z", z, "tooth counts Z1, Z2, Z3, Z4"), ("x", x, "profile shifts x1, x2, x3, x4")):
         if values is not None and len(values) != 4:
             raise BadValueError(f"design: {name} {list(values)}: give four {what} (e.g. z=[49, 51, 50, 50])")
-    return _report(
-        _native.design(
-            None if z is None else [int(v) for v in z],
-            None if x is None else [float(v) for v in x],
-            table1,
-            eta_gross,
-            **{k: float(v) for k, v in rig.items()},
-        )
+    text = _native.design(
+        None if z is None else [int(v) for v in z],
+        None if x is None else [float(v) for v in x],
+        table1,
+        eta_gross,
+        **{k: float(v) for k, v in rig.items()},
     )
+    return _reports(text) if table1 else _report(text)
 
 
 def explain(
