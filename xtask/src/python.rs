@@ -193,9 +193,19 @@ pub fn run(root: &Path, target_dir: &Path, rig: &Path) -> Result<(), String> {
     // The public API's types, strictly (python/pyproject.toml's [tool.mypy]), over the
     // package's source and the plain-script example: what a user's type checker sees.
     let mut c = Command::new(&python);
-    c.args(["-m", "mypy", "--config-file", "pyproject.toml", "backdrive_rig"])
-        .arg(root.join("docs").join("examples").join("backdrive_rig_script.py"))
-        .current_dir(root.join("python"));
+    c.args([
+        "-m",
+        "mypy",
+        "--config-file",
+        "pyproject.toml",
+        "backdrive_rig",
+    ])
+    .arg(
+        root.join("docs")
+            .join("examples")
+            .join("backdrive_rig_script.py"),
+    )
+    .current_dir(root.join("python"));
     status("mypy --strict (backdrive_rig and the script example)", c)?;
     let notebook = root
         .join("docs")

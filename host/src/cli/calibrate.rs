@@ -416,7 +416,7 @@ pub fn write_files(
     plot::draw(
         &torque_plot,
         &FitPlot {
-            title: "Torque-current: |tau_cam| = C1 i_in + C2 (Eq. 15)",
+            title: "Torque-current: |τ_cam| = C1 i_in + C2 (Eq. 15)",
             x_label: "current i_in, A",
             y_label: "gauge torque, N mm",
             points: &torque_points,
@@ -434,8 +434,8 @@ pub fn write_files(
     plot::draw(
         &no_load_plot,
         &FitPlot {
-            title: "No-load current: |i_loss| = C5 w_n + C6 (Eq. 17)",
-            x_label: "cam speed w_n, rad/s",
+            title: "No-load current: |i_loss| = C5 ω_n + C6 (Eq. 17)",
+            x_label: "cam speed ω_n, rad/s",
             y_label: "current, A",
             points: &no_load_points,
             fit: &r.no_load_fit,
