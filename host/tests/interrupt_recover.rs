@@ -133,11 +133,18 @@ fn a_load_left_falling_lands_and_the_rig_recovers() {
             .args(["monitor", "--json", "--seconds", "1"])
             .output()
             .unwrap();
-        let speeds: Vec<f64> = String::from_utf8_lossy(&out.stdout)
+        let rows: Vec<Value> = String::from_utf8_lossy(&out.stdout)
             .lines()
-            .filter_map(|l| serde_json::from_str::<Value>(l).ok()?["output_rad_s"].as_f64())
+            .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+            .collect();
+        let speeds: Vec<f64> = rows
+            .iter()
+            .filter_map(|r| r["output_rad_s"].as_f64())
             .collect();
         if speeds.len() > 10 && speeds.iter().all(|w| w.abs() < 0.01) {
+            // It rests where its 2 m of rope ends: 26.7 rad below where it was hung.
+            let angle = rows.last().unwrap()["output_rad"].as_f64().unwrap();
+            assert!((25.0..30.0).contains(&angle.abs()), "rests at {angle} rad");
             still = true;
             break;
         }
