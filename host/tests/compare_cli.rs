@@ -124,7 +124,7 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
     let plot = std::fs::read_to_string(&svg).unwrap();
     assert!(plot.contains("<svg") && plot.contains("base model"));
     // Short legend entries (beside the plot, clear of the points), the numbers in the caption.
-    assert!(plot.contains(">fitted model<") && plot.contains("mA with the base model"));
+    assert!(plot.contains("\nfitted model\n") && plot.contains("mA with the base model"));
     // Without a model: the base gap only.
     let b = json(
         rig()
