@@ -284,23 +284,25 @@ fn stale_and_unsolicited_frames_do_not_answer_requests() {
 
 #[test]
 fn heartbeats_keep_a_release_alive_while_waiting() {
-    // The fake device counts the heartbeats it reads, and those it reads after the lock:
-    // requests reach it in the order they were sent, so a heartbeat still in flight when
-    // `release(false)` is sent is counted before the lock, never after it, whatever the
-    // machine's load.
+    // The fake device counts the heartbeats it reads before the lock, and those it reads
+    // after a marker request the host sends once the lock has returned. Requests reach it
+    // in the order they were sent, so the counts do not race a reply in flight: a heartbeat
+    // sent while the lock's reply was on its way is read before the marker, and only a
+    // client that went on heartbeating after the lock is counted after it.
     let beats = Arc::new(AtomicU32::new(0));
-    let after_lock = Arc::new(AtomicU32::new(0));
-    let (counter, late) = (Arc::clone(&beats), Arc::clone(&after_lock));
-    let mut locked = false;
+    let after_marker = Arc::new(AtomicU32::new(0));
+    let (counter, late) = (Arc::clone(&beats), Arc::clone(&after_marker));
+    let (mut locked, mut marked) = (false, false);
     let mut c = fake_device(move |seq, req| {
         match req {
-            Request::Heartbeat if locked => {
+            Request::Heartbeat if marked => {
                 late.fetch_add(1, Ordering::SeqCst);
             }
-            Request::Heartbeat => {
+            Request::Heartbeat if !locked => {
                 counter.fetch_add(1, Ordering::SeqCst);
             }
             Request::Release { on: false, .. } => locked = true,
+            Request::GetFaults if locked => marked = true,
             _ => {}
         }
         good_answer(seq, req)
@@ -315,16 +317,17 @@ fn heartbeats_keep_a_release_alive_while_waiting() {
     let due = waited.elapsed().as_secs_f64() / c.opts.heartbeat_interval().as_secs_f64();
     assert_eq!(c.stats().stale_replies, 0, "heartbeat acks are expected");
     c.release(false, 0.0).unwrap();
-    // The lock's reply came back, so every heartbeat sent before it has been read.
+    // The lock's reply came back, so every heartbeat sent before the lock has been read.
     let n = beats.load(Ordering::SeqCst);
     assert!(
         n >= 3 && f64::from(n) <= due + 2.0,
         "{n} heartbeats, {due:.1} due"
     );
+    c.faults().unwrap(); // the marker
     c.recv(Duration::from_millis(100)).unwrap();
-    c.faults().unwrap(); // a request after the wait: the device has read all before it
+    c.faults().unwrap(); // read after every request sent in the wait
     assert_eq!(
-        after_lock.load(Ordering::SeqCst),
+        after_marker.load(Ordering::SeqCst),
         0,
         "heartbeats after the lock"
     );
