@@ -93,9 +93,10 @@ pub trait GaugeOperator {
     ) -> Result<Reading, RigError>;
 }
 
-/// The voltages and timing of the procedure.
+/// The calibration's schedule: the voltages it drives and how long it waits and averages
+/// at each (not a test plan: that is [`rigfile::plan::Plan`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Plan {
+pub struct CalibrationSchedule {
     /// No-load sweep voltages, V, in the order driven.
     pub sweep_volts: Vec<f64>,
     /// Torque step voltages, V (the shaft is blocked: i = V / R, about 2.4-4.2 A).
@@ -110,7 +111,7 @@ pub struct Plan {
     pub telemetry_hz: u16,
 }
 
-impl Default for Plan {
+impl Default for CalibrationSchedule {
     fn default() -> Self {
         Self {
             sweep_volts: (0..10).map(|k| 1.9 - 0.1 * f64::from(k)).collect(),
@@ -123,7 +124,7 @@ impl Default for Plan {
     }
 }
 
-impl Plan {
+impl CalibrationSchedule {
     /// Number of measured steps.
     pub fn steps(&self) -> usize {
         self.sweep_volts.len() + self.torque_volts.len()
@@ -187,7 +188,7 @@ pub enum Progress {
 pub fn measure<T: Read + Write>(
     client: &mut Client<T>,
     bench: &mut dyn GaugeOperator,
-    plan: &Plan,
+    plan: &CalibrationSchedule,
     taken: &mut Measurements,
     progress: &mut dyn FnMut(Progress, &Measurements),
     interrupted: &dyn Fn() -> bool,
@@ -213,7 +214,7 @@ pub fn interrupted_error() -> RigError {
 fn measure_inner<T: Read + Write>(
     client: &mut Client<T>,
     bench: &mut dyn GaugeOperator,
-    plan: &Plan,
+    plan: &CalibrationSchedule,
     taken: &mut Measurements,
     progress: &mut dyn FnMut(Progress, &Measurements),
     interrupted: &dyn Fn() -> bool,
@@ -340,7 +341,7 @@ fn average<T: Read + Write>(
     client: &mut Client<T>,
     volts: f64,
     settle_s: f64,
-    plan: &Plan,
+    plan: &CalibrationSchedule,
     interrupted: &dyn Fn() -> bool,
     in_window: &mut dyn FnMut(),
 ) -> Result<StepMeasurement, RigError> {

@@ -74,6 +74,9 @@ pub struct Comparison {
     pub gap_mean_model_a: Option<f64>,
     /// The plot, when written.
     pub svg: Option<String>,
+    /// The plot in `--format` (PNG or PDF beside the SVG), when asked for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub figure: Option<String>,
     /// Per test point.
     pub rows: Vec<GapRow>,
 }
@@ -274,6 +277,7 @@ pub fn compare(
             .as_ref()
             .map(|_| mean(rows.iter().filter_map(|r| r.gap_model_a))),
         svg: None,
+        figure: None,
         rows,
     })
 }
@@ -332,11 +336,13 @@ pub fn gap_figure(path: &Path, c: &Comparison) -> Result<(), RigError> {
                 .map(|(j, r)| ((j + 1) as f64, r.gap_base_a * 1e3))
                 .collect(),
         )
-        .labelled(format!(
-            "base model (rms {:.1} mA)",
-            c.gap_rmse_base_a * 1e3
-        )),
+        .labelled("base model"),
     ];
+    // Short legend entries beside the plot; the numbers and the effects in the caption.
+    let mut caption = format!(
+        "measured − simulated mean current: rms {:.1} mA with the base model",
+        c.gap_rmse_base_a * 1e3
+    );
     if let Some(m) = c.gap_rmse_model_a {
         series.push(
             Series::points(
@@ -348,24 +354,27 @@ pub fn gap_figure(path: &Path, c: &Comparison) -> Result<(), RigError> {
                     .filter_map(|(j, r)| Some(((j + 1) as f64, r.gap_model_a? * 1e3)))
                     .collect(),
             )
-            .labelled(format!(
-                "with {} (rms {:.1} mA)",
-                if c.model_effects.is_empty() {
-                    "the fitted model".to_string()
-                } else {
-                    c.model_effects.join(", ")
-                },
-                m * 1e3
-            )),
+            .labelled("fitted model"),
+        );
+        caption += &format!(
+            ", {:.1} mA with {}",
+            m * 1e3,
+            if c.model_effects.is_empty() {
+                "the fitted model".to_string()
+            } else {
+                c.model_effects.join(", ")
+            }
         );
     }
     let panel = XyPanel {
-        caption: Some("measured minus simulated mean current".into()),
+        caption: Some(caption),
         x_label: "test point (run order)".into(),
         y_label: "gap, mA".into(),
         series,
         include_zero_y: true,
-        legend: Some(Legend::UpperRight),
+        // Beside the plot: inside it covered points.
+        legend: Some(Legend::Outside),
+        whole_x: true,
         ..XyPanel::default()
     };
     columns_figure(

@@ -545,6 +545,14 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
     busy_beyond_window(&mut s)?;
     s.safe_state("safe-state-after-load")?;
     if motion {
+        if simulation {
+            // The motion checks' precondition, an unloaded output (a load left falling by
+            // an earlier client would latch OUTPUT_OVERSPEED in them): a virtual rig's
+            // operator unhooks it; a real rig's operator was asked to (RIG_ALLOW_MOTION).
+            let _ = s.request(&Request::Simulation(protocol::SimCommand::SetLoad {
+                tau_rot_nm: 0.0,
+            }))?;
+        }
         heartbeat_and_faults(&mut s, parameters.map_or(10.0, |p| p.max_freq_hz.min(10.0)))?;
     } else {
         for name in [
@@ -809,10 +817,19 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
         target_hz: hz,
     })?;
     if ack != Some(Reply::Ack) {
+        // Say which precondition failed: a fault that would not clear (its cause is
+        // still there: a load still moving, a blocked cam) or another refusal.
+        let latched = match s.request(&Request::GetFaults)? {
+            Some(Reply::Faults { latched, .. }) if !latched.is_empty() => format!(
+                " with {} latched after ClearFaults: its cause is still there (the output must be unloaded and still, the cam free); fix it, `rig clear`, and run conformance again",
+                latched.names().collect::<Vec<_>>().join(", ")
+            ),
+            _ => String::new(),
+        };
         s.record(
             "heartbeat-timeout",
             false,
-            format!("Release at {hz} Hz got {}", describe(&ack)),
+            format!("Release at {hz} Hz got {}{latched}", describe(&ack)),
         );
         let _ = s.request(&Request::StopTelemetry)?;
         return Ok(());

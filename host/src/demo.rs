@@ -10,7 +10,9 @@ use model::paper;
 use serde::Serialize;
 
 use crate::RigError;
-use crate::calibrate::{self, CalibrationResult, Measurements, Plan, operator::VirtualOperator};
+use crate::calibrate::{
+    self, CalibrationResult, CalibrationSchedule, Measurements, operator::VirtualOperator,
+};
 use crate::connection::{Connection, DeviceOpts};
 use crate::design::{self, DesignReport, RigParams};
 use sim::scenarios::{faults, fig5, sweep, table1};
@@ -276,7 +278,7 @@ fn calibrate_virtual(
     };
     let mut session = dev.connect()?;
     let base = session.client.calibration()?;
-    let plan = Plan::default();
+    let plan = CalibrationSchedule::default();
     let Connection { client, device, .. } = &mut session;
     let device = device
         .as_ref()

@@ -31,6 +31,7 @@ pub mod limits;
 pub mod monitor;
 pub mod output_paths;
 pub mod ports;
+pub mod progress;
 pub mod provenance;
 pub mod signals;
 pub mod sweep_report;

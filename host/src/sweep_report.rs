@@ -20,9 +20,25 @@ fn voltages(points: &[Row]) -> Vec<f64> {
     v
 }
 
+/// The current panel's caption: it promises bars of ±1 SD only when some point (a drive
+/// and a load) was measured more than once, so has them.
+fn current_caption(points: impl Iterator<Item = (Option<f64>, f64)>) -> String {
+    let mut seen: Vec<(Option<f64>, f64)> = Vec::new();
+    let mut repeated = false;
+    for p in points {
+        repeated |= seen.contains(&p);
+        seen.push(p);
+    }
+    if repeated {
+        "current (Fig. 8): mean, bars ±1 SD over repeats".into()
+    } else {
+        "current (Fig. 8): one run per point".into()
+    }
+}
+
 /// The three panels of the sweep figure: Fig. 8's current and cam speed, and Fig. 9's cam
 /// torque with Eq. (10) at the mean cam speed, per supply voltage; repeats as their means
-/// with bars of +-1 standard deviation ([`plot::mean_with_spread`]).
+/// with bars of ±1 standard deviation ([`plot::mean_with_spread`]).
 pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     let volts = voltages(points);
     let at = |v: f64| points.iter().filter(move |p| p.v_in == Some(v));
@@ -44,9 +60,9 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
             .collect()
     };
     let current = XyPanel {
-        caption: Some("current (Fig. 8): mean, bars +-1 sd over repeats".into()),
-        x_label: "tau_rot [N m]".into(),
-        y_label: "i_in [A]".into(),
+        caption: Some(current_caption(points.iter().map(|p| (p.v_in, p.tau_rot)))),
+        x_label: "τ_rot, N m".into(),
+        y_label: "i_in, A".into(),
         series: per_voltage(&|p| p.i_in, true),
         x_range: Some(x),
         legend: Some(Legend::Outside),
@@ -55,8 +71,8 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     };
     let speed = XyPanel {
         caption: Some("cam speed (Fig. 8)".into()),
-        x_label: "tau_rot [N m]".into(),
-        y_label: "w_n [rad/s]".into(),
+        x_label: "τ_rot, N m".into(),
+        y_label: "ω_n, rad/s".into(),
         series: per_voltage(&|p| Some(p.omega_n), false),
         x_range: Some(x),
         fine_grid: true,
@@ -94,8 +110,8 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     }
     let torque = XyPanel {
         caption: Some("cam torque (Fig. 9): points measured, lines Eq. (10)".into()),
-        x_label: "tau_rot [N m]".into(),
-        y_label: "tau_cam [N mm]".into(),
+        x_label: "τ_rot, N m".into(),
+        y_label: "τ_cam, N mm".into(),
         series: torque,
         x_range: Some(x),
         legend: Some(Legend::Outside),
@@ -148,7 +164,7 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
         }
         XyPanel {
             caption: Some(caption.into()),
-            x_label: "tau_rot [N m]".into(),
+            x_label: "τ_rot, N m".into(),
             y_label: y.into(),
             series,
             x_range: Some(x),
@@ -159,11 +175,11 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
     };
     [
         panel(
-            "current (Fig. 8): mean, bars +-1 sd over repeats",
-            "i_in [A]",
+            &current_caption(rows.iter().map(|r| (Some(drive(r)), r.tau_rot))),
+            "i_in, A",
             &|r| r.i_in,
         ),
-        panel("cam speed (Fig. 8)", "w_n [rad/s]", &|r| Some(r.omega_n)),
+        panel("cam speed (Fig. 8)", "ω_n, rad/s", &|r| Some(r.omega_n)),
     ]
 }
 
@@ -225,6 +241,7 @@ mod tests {
             points.push(p);
         }
         let [current, ..] = sweep_panels(&points);
+        assert!(current.caption.as_deref().unwrap().contains("bars ±1 SD"));
         // A bar and the mean point.
         assert_eq!(current.series.len(), 2);
         let mean = &current.series[1].points;
@@ -265,14 +282,19 @@ mod tests {
             "Fig. 9",
             "3.6 V",
             "8.8 V",
-            "tau_cam [N mm]",
-            "i_in [A]",
+            "τ_cam, N mm",
+            "i_in, A",
             "cam speed",
             "Eq. (10)",
             "(a)",
             "(c)",
         ] {
             assert!(svg.contains(want), "missing {want}");
+        }
+        // One run per point: no bars, and the caption promises none; symbols as printed.
+        assert!(svg.contains("one run per point") && !svg.contains("bars"));
+        for ascii in ["tau_", "w_n", "+-", "["] {
+            assert!(!svg.contains(ascii), "{ascii} in the figure");
         }
     }
 }

@@ -10,7 +10,7 @@
 use std::time::Duration;
 
 use host::calibrate::operator::VirtualOperator;
-use host::calibrate::{Measurements, Plan, analyse, measure};
+use host::calibrate::{CalibrationSchedule, Measurements, analyse, measure};
 use host::client::{Client, ClientOptions, open_serial};
 use host::virtual_device::VirtualDevice;
 
@@ -35,7 +35,7 @@ fn calibrate_c4(seed: u64, speed: f64) -> (f64, f64, [f64; 2]) {
     measure(
         &mut client,
         &mut bench,
-        &Plan::default(),
+        &CalibrationSchedule::default(),
         &mut taken,
         &mut |_, _| {},
         &|| false,

@@ -153,6 +153,7 @@ fn an_implausible_fit_is_not_written_without_force_and_refits_from_points() {
             .arg(&points)
             .arg("--out")
             .arg(&out)
+            .args(["--format", "png"])
             .assert()
             .success()
             .get_output()
@@ -161,6 +162,14 @@ fn an_implausible_fit_is_not_written_without_force_and_refits_from_points() {
     .unwrap();
     assert_eq!(v["written_to_device"], false, "{v}");
     assert!(out.join("calibration.toml").exists());
+    // The fit plots also as PNG (`--format`), the SVGs kept.
+    let figures = v["files"]["figures"].as_array().unwrap();
+    assert_eq!(figures.len(), 2, "{v}");
+    for f in figures {
+        let png = std::fs::read(f.as_str().unwrap()).unwrap();
+        assert!(png.starts_with(b"\x89PNG"), "{f}");
+    }
+    assert!(out.join("torque_current.svg").exists() && out.join("no_load.svg").exists());
 
     // A dry run refits offline, without a device.
     let good = dir.path().join("good.csv");

@@ -93,9 +93,14 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
             .arg("--model")
             .arg(&model)
             .arg("--svg")
-            .arg(&svg),
+            .arg(&svg)
+            .args(["--format", "pdf"]),
     );
     assert_eq!(c["points"], 30, "{c}");
+    // The plot also as a PDF beside the SVG (`--format`, as every verb that draws).
+    let pdf = dir.path().join("gap.pdf");
+    assert_eq!(c["figure"], pdf.display().to_string(), "{c}");
+    assert!(std::fs::read(&pdf).unwrap().starts_with(b"%PDF"));
     assert_eq!(c["rows"].as_array().unwrap().len(), 30);
     let base = c["gap_rmse_base_a"].as_f64().unwrap();
     let with = c["gap_rmse_model_a"].as_f64().unwrap();
@@ -118,6 +123,8 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
     );
     let plot = std::fs::read_to_string(&svg).unwrap();
     assert!(plot.contains("<svg") && plot.contains("base model"));
+    // Short legend entries (beside the plot, clear of the points), the numbers in the caption.
+    assert!(plot.contains("\nfitted model\n") && plot.contains("mA with the base model"));
     // Without a model: the base gap only.
     let b = json(
         rig()

@@ -329,6 +329,19 @@ impl Default for MotorConstants {
     }
 }
 
+/// The bench around the rig: what a load can do before something stops it.
+pub mod bench {
+    use crate::paper;
+
+    /// Height a load hung on the output pulley falls before it rests on the floor, m (a
+    /// rig on a frame above the floor; long enough that a sweep's point, re-hung before
+    /// each run, ends or trips OUTPUT_OVERSPEED at 20 rad/s before its load lands).
+    pub const LOAD_DROP_M: f64 = 2.0;
+    /// The output's travel from where the load was hung to where it rests, rad: the drop
+    /// unwound from the pulley of radius [`paper::R_OUT`] (26.7 rad).
+    pub const OUTPUT_TRAVEL_RAD: f64 = LOAD_DROP_M / paper::R_OUT;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -20,15 +20,38 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
+from types import TracebackType
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    Callable,
+    Dict,
+    Iterable,
+    List,
+    Mapping,
+    Optional,
+    Sequence,
+    Tuple,
+    Type,
+    Union,
+    overload,
+)
+
+from typing import Literal
+
+
 
 import numpy as np
+
+if TYPE_CHECKING:  # pandas is imported where a DataFrame is made, not at import time
+    import pandas as pd
 
 from . import _native
 from ._native import (
     BadValueError,
     DeviceFaultError,
     LinkError,
+    MissingFileError,
     NoReplyError,
     RefusedError,
     RigClosedError,
@@ -49,6 +72,7 @@ __all__ = [
     "TELEMETRY_COLUMNS",
     "RigError",
     "BadValueError",
+    "MissingFileError",
     "RefusedError",
     "NoReplyError",
     "VersionMismatchError",
@@ -56,6 +80,38 @@ __all__ = [
     "DeviceFaultError",
     "RigClosedError",
 ]
+
+#: What a recording or a capture returns: a DataFrame, or with ``pandas=False`` a dict of
+#: numpy arrays (a capture's also has its ``"summary"`` dict).
+Frame = Union["pd.DataFrame", Dict[str, Any]]
+
+#: A long procedure's progress callback: ``progress(done, total, line)`` with the points
+#: done and all points (None on a line without them) and the line ``rig`` prints, which
+#: ends with the time elapsed and an estimate of the time left.
+Progress = Callable[[Optional[int], Optional[int], str], None]
+
+
+def _progress(progress: Union[Progress, bool, None], what: str) -> Tuple[Optional[Progress], Callable[[], None]]:
+    """The callback a procedure reports to, and what closes it: ``progress`` itself; by
+    default (None or True) a tqdm bar when tqdm is installed, else nothing; False: nothing."""
+    if callable(progress):
+        return progress, lambda: None
+    if progress is False:
+        return None, lambda: None
+    try:
+        from tqdm.auto import tqdm  # type: ignore[import-untyped, unused-ignore]
+    except ImportError:
+        return None, lambda: None
+    bar = tqdm(desc=what, unit="point")
+
+    def update(done: Optional[int], total: Optional[int], line: str) -> None:
+        if done is None or total is None:
+            return
+        bar.total = total
+        bar.update(done - bar.n)
+
+    return update, bar.close
+
 
 #: The columns of ``rig monitor --csv`` (telemetry), in order; ``record`` adds ``seq``.
 TELEMETRY_COLUMNS: List[str] = list(_native.TELEMETRY_COLUMNS)
@@ -66,7 +122,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 _FIG5: Dict[str, Any] = dict(_native.HOLD_RELEASE_DEFAULTS)
 
 
-class Report(dict):
+class Report(Dict[str, Any]):
     """A result as the CLI's ``--json`` prints it: a dict with the same keys, also
     readable as attributes (``report.verdict`` is ``report["verdict"]``)."""
 
@@ -80,16 +136,23 @@ class Report(dict):
         return list(super().__dir__()) + [k for k in self.keys() if isinstance(k, str)]
 
 
-def _report(text: str) -> Any:
+def _report(text: str) -> Report:
+    """The library's JSON object as a Report."""
     value = json.loads(text)
-    if isinstance(value, dict):
-        return Report(value)
-    if isinstance(value, list):
-        return [Report(v) if isinstance(v, dict) else v for v in value]
-    return value
+    if not isinstance(value, dict):
+        raise RigError(f"the library returned {type(value).__name__}, not an object: report this")
+    return Report(value)
 
 
-def _frame(columns: Sequence[Any], pandas: bool):
+def _reports(text: str) -> List[Report]:
+    """The library's JSON array of objects as Reports."""
+    value = json.loads(text)
+    if not isinstance(value, list):
+        raise RigError(f"the library returned {type(value).__name__}, not a list: report this")
+    return [Report(v) for v in value]
+
+
+def _frame(columns: Sequence[Any], pandas: bool) -> Frame:
     """Columns (name, dtype, bytes or list) to a DataFrame or a dict of numpy arrays."""
     data: Dict[str, np.ndarray] = {}
     for name, dtype, value in columns:
@@ -112,6 +175,16 @@ def versions() -> Dict[str, str]:
 
 
 __version__ = _native.versions()[0]
+
+
+class _Required:
+    """The default of an argument that must be given (``None`` is a value there)."""
+
+    def __repr__(self) -> str:
+        return "<required>"
+
+
+_REQUIRED = _Required()
 
 
 class Release:
@@ -151,19 +224,25 @@ class Release:
     @property
     def live(self) -> bool:
         """Whether the release is still live."""
-        return self._status.live
+        return bool(self._status.live)
 
     @property
     def ended_by(self) -> Optional[str]:
         """How it ended: ``duration``, ``stop``, ``exception``, ``keep-alive`` (not
         confirmed in time), ``rig closed``; None while live."""
-        return self._status.ended_by
+        ended: Optional[str] = self._status.ended_by
+        return ended
 
     def __enter__(self) -> "Release":
         # A release started with start() may be handed to `with` to get its locking.
         return self if self.live else self.start()
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(
+        self,
+        exc_type: Optional[Type[BaseException]],
+        exc: Optional[BaseException],
+        tb: Optional[TracebackType],
+    ) -> Literal[False]:
         why = "stop" if exc_type is None else "exception"
         try:
             self._rig._native.stop_release(why)
@@ -193,20 +272,20 @@ class Recorder:
     @property
     def rate_hz(self) -> int:
         """Telemetry rate, Hz."""
-        return self._native.rate_hz
+        return int(self._native.rate_hz)
 
     @property
     def done(self) -> bool:
         """Whether the recording has ended."""
-        return self._native.done
+        return bool(self._native.done)
 
     @property
     def lost(self) -> int:
         """Samples missing from the stream so far."""
-        return self._native.lost
+        return int(self._native.lost)
 
     @property
-    def gaps(self) -> List[tuple]:
+    def gaps(self) -> List[Tuple[int, int]]:
         """(sequence number before, after) of each gap."""
         return list(self._native.gaps)
 
@@ -229,16 +308,28 @@ class Recorder:
         if err is not None:
             raise RigError(f"the recording stopped: {err}")
 
-    def take(self, pandas: bool = True):
+    @overload
+    def take(self, pandas: Literal[True] = True) -> "pd.DataFrame": ...
+    @overload
+    def take(self, pandas: Literal[False]) -> Dict[str, Any]: ...
+    @overload
+    def take(self, pandas: bool) -> Frame: ...
+    def take(self, pandas: bool = True) -> Frame:
         """The samples recorded since the last take (the buffer is emptied)."""
         return self._result(self._native.columns(True), pandas)
 
-    def data(self, pandas: bool = True):
+    @overload
+    def data(self, pandas: Literal[True] = True) -> "pd.DataFrame": ...
+    @overload
+    def data(self, pandas: Literal[False]) -> Dict[str, Any]: ...
+    @overload
+    def data(self, pandas: bool) -> Frame: ...
+    def data(self, pandas: bool = True) -> Frame:
         """All samples held (the buffer is kept)."""
         return self._result(self._native.columns(False), pandas)
 
-    def _result(self, columns, pandas: bool):
-        out = _frame(columns, pandas)
+    def _result(self, columns: Any, pandas: bool) -> Frame:
+        out: Any = _frame(columns, pandas)
         if pandas:
             out.attrs["lost"] = self.lost
             out.attrs["gaps"] = self.gaps
@@ -248,7 +339,12 @@ class Recorder:
     def __enter__(self) -> "Recorder":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(
+        self,
+        exc_type: Optional[Type[BaseException]],
+        exc: Optional[BaseException],
+        tb: Optional[TracebackType],
+    ) -> Literal[False]:
         self.stop()
         return False
 
@@ -294,8 +390,9 @@ class Rig:
 
     @property
     def port(self) -> str:
-        """The port's name (a pseudo-terminal for a virtual rig)."""
-        return self._native.port
+        """The port's path: the board's serial port, or the pseudo-terminal of a virtual
+        rig (``/dev/pts/N``)."""
+        return str(self._native.port)
 
     def info(self) -> Report:
         """Device identity and versions: ``rig info --json``'s keys."""
@@ -312,7 +409,8 @@ class Rig:
     def parameters(self) -> Dict[str, Dict[str, Any]]:
         """The device's calibration record as the rig file's sections (docs/rig-file.md):
         ``{"gear": {...}, "calibration": {...}, "limits": {...}, ...}``."""
-        return json.loads(self._native.parameters())
+        sections: Dict[str, Dict[str, Any]] = json.loads(self._native.parameters())
+        return sections
 
     def set_parameters(
         self, rig_file: Optional[PathLike] = None, **sections: Mapping[str, Any]
@@ -330,6 +428,8 @@ class Rig:
             try:
                 with open(path, "r", encoding="utf-8") as f:
                     text = f.read()
+            except FileNotFoundError as e:
+                raise MissingFileError(f"rig file {path}: cannot read it ({e})") from None
             except OSError as e:
                 raise BadValueError(f"rig file {path}: cannot read it ({e})") from None
             return _report(self._native.set_parameters(text, path))
@@ -345,12 +445,15 @@ class Rig:
         return _report(self._native.set_parameters(_toml(merged), "set_parameters"))
 
     def release(
-        self, freq_hz: float = 10.0, seconds: Optional[float] = ..., confirm_s: Optional[float] = None
+        self,
+        freq_hz: float = 10.0,
+        seconds: Union[float, None, "_Required"] = _REQUIRED,
+        confirm_s: Optional[float] = None,
     ) -> Release:
         """A release at ``freq_hz`` for ``seconds`` of device time (required: pass
         ``seconds=None, confirm_s=...`` to opt out of a duration, then call
         ``Release.confirm()`` within every ``confirm_s`` device seconds). Use with ``with``."""
-        if seconds is ...:
+        if isinstance(seconds, _Required):
             raise BadValueError(
                 "release: give seconds (the release's duration, device s), or seconds=None with confirm_s to keep it by Release.confirm()"
             )
@@ -365,7 +468,13 @@ class Rig:
         divided by a whole number) for ``seconds`` of device time, or until ``stop()``."""
         return Recorder(self, self._native.start_recording(int(rate_hz), seconds))
 
-    def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True):
+    @overload
+    def record(self, seconds: float, rate_hz: int = 1000, pandas: Literal[True] = True) -> "pd.DataFrame": ...
+    @overload
+    def record(self, seconds: float, rate_hz: int = 1000, *, pandas: Literal[False]) -> Dict[str, Any]: ...
+    @overload
+    def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True) -> Frame: ...
+    def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True) -> Frame:
         """Telemetry for ``seconds`` of device time at ``rate_hz``: a DataFrame (or a dict
         of numpy arrays) with ``rig monitor --csv``'s columns and units, plus ``seq``;
         ``attrs["lost"]`` and ``attrs["gaps"]`` report samples lost on the link."""
@@ -376,14 +485,20 @@ class Rig:
             rec.stop()
         return rec.take(pandas)
 
-    def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True):
+    @overload
+    def capture(self, seconds: float, rate_hz: int = 10000, pandas: Literal[True] = True) -> "pd.DataFrame": ...
+    @overload
+    def capture(self, seconds: float, rate_hz: int = 10000, *, pandas: Literal[False]) -> Dict[str, Any]: ...
+    @overload
+    def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True) -> Frame: ...
+    def capture(self, seconds: float, rate_hz: int = 10000, pandas: bool = True) -> Frame:
         """The raw burst (``rig capture``): ``seconds`` at ``rate_hz`` recorded on the device
         and uploaded; ``rig capture --csv``'s columns (index, t_s, current_adc, current_a,
         encoder_count, cam_angle_rad, output_count, output_angle_rad; the output's are NaN
         on a device without an output encoder). ``attrs`` (or the dict's ``"summary"``) has the
         counters: ``dropped``, ``gaps``, ``completed``."""
         summary, columns = self._native.capture(float(seconds), int(rate_hz))
-        out = _frame(columns, pandas)
+        out: Any = _frame(columns, pandas)
         if pandas:
             out.attrs.update(json.loads(summary))
         else:
@@ -396,13 +511,16 @@ class Rig:
         quick: bool = False,
         window: str = "start",
         plan_toml: Optional[str] = None,
-    ):
+        progress: Union[Progress, bool, None] = None,
+    ) -> "pd.DataFrame":
         """The required-torque test of Figs. 8-9 (``rig experiment torque-sweep``): ``plan``
         ``"paper"`` (150 runs, the default), ``"quick"`` (30; or ``quick=True``) or a plan
         file's path (docs/plans.md); or ``plan_toml``, a plan's text (as ``explain(...,
         propose=True).proposal["plan_toml"]`` gives it). Returns a DataFrame with the sweep CSV's columns
         (``rig explain`` reads them); ``attrs`` has the summary (``planned``, ``written``,
-        ``skipped``) and ``provenance`` (the CSV's ``#`` header)."""
+        ``skipped``) and ``provenance`` (the CSV's ``#`` header). ``progress``: called
+        after every point as ``progress(done, total, line)`` (``Progress``); by default a
+        tqdm bar when tqdm is installed (``progress=False``: none)."""
         import pandas as pd
 
         if window not in ("start", "revolutions"):
@@ -426,7 +544,11 @@ class Rig:
                     text = f.read()
             except OSError as e:
                 raise BadValueError(f"plan {name}: cannot read it ({e})") from None
-        summary, provenance = self._native.torque_sweep(text, name, window == "revolutions")
+        report, close = _progress(progress, "torque sweep")
+        try:
+            summary, provenance = self._native.torque_sweep(text, name, window == "revolutions", report)
+        finally:
+            close()
         outcome = json.loads(summary)
         rows = outcome.pop("rows")
         df = pd.DataFrame(rows, columns=_SWEEP_COLUMNS)
@@ -445,6 +567,7 @@ class Rig:
         replicates: int = 200,
         model: Optional[PathLike] = None,
         force: bool = False,
+        progress: Union[Progress, bool, None] = None,
     ) -> Report:
         """The closed discovery loop on this rig (``rig discover --json``, the same code):
         a quick sweep, ``explain``, the test points its proposal names, repeated until the
@@ -452,17 +575,23 @@ class Rig:
         appended to ``csv`` (a new file; an existing one is refused, and left as it is,
         unless ``force``). ``model``: a rig file (the paper's rig by default). Keys: the
         explanation's (``verdict``, ``effects``, ...) and ``points_used``, ``max_points``,
-        ``settled``, ``csv``, ``rounds``."""
-        return _report(
-            self._native.discover(
-                os.fspath(csv),
-                int(max_points),
-                int(seed),
-                int(replicates),
-                None if model is None else os.fspath(model),
-                bool(force),
+        ``settled``, ``csv``, ``rounds``. ``progress``: as ``torque_sweep``'s, for each
+        round's points."""
+        report, close = _progress(progress, "discover")
+        try:
+            return _report(
+                self._native.discover(
+                    os.fspath(csv),
+                    int(max_points),
+                    int(seed),
+                    int(replicates),
+                    None if model is None else os.fspath(model),
+                    bool(force),
+                    report,
+                )
             )
-        )
+        finally:
+            close()
 
     def hold_release(
         self,
@@ -471,7 +600,7 @@ class Rig:
         freq_hz: float = _FIG5["freq_hz"],
         release_s: float = _FIG5["release_s"],
         after_s: float = _FIG5["after_s"],
-    ):
+    ) -> "pd.DataFrame":
         """Fig. 5 (``rig experiment hold-release``): hold ``load_nm`` without vibration for
         ``hold_s``, release at ``freq_hz`` for ``release_s``, record ``after_s`` more (the
         defaults are the CLI's: 1.0 kg on the 75 mm pulley, 14.5 s, 5 Hz, 2 s, 1.5 s;
@@ -498,7 +627,12 @@ class Rig:
     def __enter__(self) -> "Rig":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(
+        self,
+        exc_type: Optional[Type[BaseException]],
+        exc: Optional[BaseException],
+        tb: Optional[TracebackType],
+    ) -> Literal[False]:
         self.close()
         return False
 
@@ -553,13 +687,34 @@ def _toml(sections: Mapping[str, Mapping[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+@overload
+def design(
+    z: Optional[Sequence[int]] = None,
+    x: Optional[Sequence[float]] = None,
+    table1: Literal[False] = False,
+    eta_gross: Optional[float] = None,
+    **rig: float,
+) -> Report: ...
+
+
+@overload
+def design(
+    z: None = None,
+    x: None = None,
+    *,
+    table1: Literal[True],
+    eta_gross: Optional[float] = None,
+    **rig: float,
+) -> List[Report]: ...
+
+
 def design(
     z: Optional[Sequence[int]] = None,
     x: Optional[Sequence[float]] = None,
     table1: bool = False,
     eta_gross: Optional[float] = None,
     **rig: float,
-):
+) -> Union[Report, List[Report]]:
     """The design calculator (``rig design --json``): tooth counts ``z`` = (Z1, Z2, Z3,
     Z4) (default the paper's rig), profile shifts ``x``, ``eta_gross`` (adds
     ``mu_from_eta``), or ``table1=True`` for the six sets of Table 1 (a list). Rig values
@@ -581,15 +736,17 @@ def design(
     unknown = sorted(set(rig) - allowed)
     if unknown:
         raise BadValueError(f"design: unknown option(s) {', '.join(unknown)} (options: {', '.join(sorted(allowed))})")
-    return _report(
-        _native.design(
-            None if z is None else [int(v) for v in z],
-            None if x is None else [float(v) for v in x],
-            table1,
-            eta_gross,
-            **{k: float(v) for k, v in rig.items()},
-        )
+    for name, values, what in (("z", z, "tooth counts Z1, Z2, Z3, Z4"), ("x", x, "profile shifts x1, x2, x3, x4")):
+        if values is not None and len(values) != 4:
+            raise BadValueError(f"design: {name} {list(values)}: give four {what} (e.g. z=[49, 51, 50, 50])")
+    text = _native.design(
+        None if z is None else [int(v) for v in z],
+        None if x is None else [float(v) for v in x],
+        table1,
+        eta_gross,
+        **{k: float(v) for k, v in rig.items()},
     )
+    return _reports(text) if table1 else _report(text)
 
 
 def explain(

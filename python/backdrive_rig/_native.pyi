@@ -3,35 +3,42 @@ tests/test_stubs.py). Use the `backdrive_rig` package; this layer returns JSON t
 column bytes that the package turns into objects, arrays and DataFrames."""
 
 from os import PathLike
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 TELEMETRY_COLUMNS: List[str]
 DEFAULT_BAUD_RATE: int
 HOLD_RELEASE_DEFAULTS: Dict[str, Optional[float]]
 
 class RigError(Exception):
-    """Any error of the rig library; the message is the CLI's."""
+    """Any error of the rig library; the message is the CLI's. The base of every other."""
 
-class BadValueError(RigError):
-    """A value the device or the library does not take; the message names it and the range."""
+class BadValueError(RigError, ValueError):
+    """A value the device or the library does not take; the message names it and the range. Also a ValueError."""
+
+class MissingFileError(BadValueError, FileNotFoundError):
+    """A file given does not exist; the message names it. Also a BadValueError and a FileNotFoundError."""
 
 class RefusedError(RigError):
     """The device refused a request (a Nack); the message says why and what to do."""
 
-class NoReplyError(RigError):
-    """The device did not answer (after retries); the message says what to check."""
+class NoReplyError(RigError, TimeoutError):
+    """The device did not answer (after retries); the message says what to check. Also a TimeoutError."""
 
 class VersionMismatchError(RigError):
     """The device speaks another protocol version or schema; the message says which side to update."""
 
-class LinkError(RigError):
-    """The port could not be opened or failed (busy, gone, not a device)."""
+class LinkError(RigError, OSError):
+    """The port could not be opened or failed (busy, gone, not a device). Also an OSError."""
 
 class DeviceFaultError(RigError):
     """The device latched a fault; the message names it."""
 
 class RigClosedError(RigError):
     """The rig was closed (its port's thread has ended)."""
+
+#: A procedure's progress: (points done, all points, the line `rig` prints); the counts
+#: are None on a line without them.
+Progress = Callable[[Optional[int], Optional[int], str], None]
 
 #: (name, dtype, little-endian bytes or list of str) per column.
 Columns = List[Tuple[str, str, Union[bytes, List[str]]]]
@@ -89,7 +96,11 @@ class NativeRig:
     def wait_recording(self, recording: NativeRecording) -> None: ...
     def capture(self, seconds: float, rate_hz: int) -> Tuple[str, Columns]: ...
     def torque_sweep(
-        self, plan: str, plan_name: str, window_revolutions: bool = False
+        self,
+        plan: str,
+        plan_name: str,
+        window_revolutions: bool = False,
+        progress: Optional[Progress] = None,
     ) -> Tuple[str, str]: ...
     def discover(
         self,
@@ -99,6 +110,7 @@ class NativeRig:
         replicates: int = 200,
         model: Optional[str] = None,
         force: bool = False,
+        progress: Optional[Progress] = None,
     ) -> str: ...
     def hold_release(
         self,

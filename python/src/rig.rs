@@ -100,21 +100,31 @@ pub struct NativeRig {
     jobs: Mutex<Option<Sender<Job>>>,
     thread: Mutex<Option<std::thread::JoinHandle<()>>>,
     stop: Arc<AtomicBool>,
+    /// The port as messages name it (`the virtual device (/dev/pts/3)` for a virtual rig).
     port: String,
+    /// The port's path (`/dev/pts/3`, `/dev/ttyACM0`).
+    port_path: String,
     in_process: bool,
 }
 
 impl NativeRig {
     fn start(session: Connection) -> Result<Self, RigError> {
         let port = session.port().to_owned();
+        let port_path = session
+            .device
+            .as_ref()
+            .map_or_else(|| port.clone(), |d| d.port_name().to_owned());
         let in_process = session.device.is_some();
         let stop = Arc::new(AtomicBool::new(false));
-        let (tx, thread) = worker::spawn(DeviceBench::new(session), stop.clone())?;
+        // KeyboardInterrupt raises `stop`: a procedure's rest ends at once, not at its end.
+        let bench = DeviceBench::new(session).stopped_by(stop.clone());
+        let (tx, thread) = worker::spawn(bench, stop.clone())?;
         Ok(Self {
             jobs: Mutex::new(Some(tx)),
             thread: Mutex::new(Some(thread)),
             stop,
             port,
+            port_path,
             in_process,
         })
     }
@@ -219,10 +229,10 @@ impl NativeRig {
         .map_err(to_py)
     }
 
-    /// The port's name.
+    /// The port's path (a pseudo-terminal for a virtual rig).
     #[getter]
     fn port(&self) -> String {
-        self.port.clone()
+        self.port_path.clone()
     }
 
     /// `rig info --json`.
@@ -426,13 +436,14 @@ impl NativeRig {
     /// `rig experiment torque-sweep` with `plan` (`paper`, `quick`, or a plan file's TOML
     /// text named `plan_name`), no CSV: returns (the outcome's JSON with `rows`, the
     /// provenance header).
-    #[pyo3(signature = (plan, plan_name, window_revolutions = false))]
+    #[pyo3(signature = (plan, plan_name, window_revolutions = false, progress = None))]
     fn torque_sweep(
         &self,
         py: Python<'_>,
         plan: String,
         plan_name: String,
         window_revolutions: bool,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<(String, String)> {
         self.call(py, move |w| {
             // A plan that cannot run is refused first, whatever else stands in the way.
@@ -456,7 +467,9 @@ impl NativeRig {
             let mut operator = Operator::scripted(b"", false);
             operator.stop = w.stop.clone();
             let provenance = sweep::provenance(&mut w.bench, &setup)?;
-            let outcome = sweep::run_to(&mut w.bench, &mut operator, &setup, None, &mut |_| {})?;
+            let outcome = sweep::run_to(&mut w.bench, &mut operator, &setup, None, &mut |l| {
+                report_progress(progress.as_ref(), l);
+            })?;
             let mut value = serde_json::to_value(&outcome)?;
             if let Some(map) = value.as_object_mut() {
                 map.insert("rows".into(), serde_json::to_value(&outcome.rows)?);
@@ -468,7 +481,7 @@ impl NativeRig {
     /// `rig discover` on this rig: the closed loop of sweeps and explanations
     /// ([`host::discover::discover`], the CLI's own), every round's rows appended to `csv`
     /// (a new file; an existing one only with `force`). Returns the CLI's `--json`.
-    #[pyo3(signature = (csv, max_points = 60, seed = 1, replicates = 200, model = None, force = false))]
+    #[pyo3(signature = (csv, max_points = 60, seed = 1, replicates = 200, model = None, force = false, progress = None))]
     #[allow(clippy::too_many_arguments)]
     fn discover(
         &self,
@@ -479,6 +492,7 @@ impl NativeRig {
         replicates: u32,
         model: Option<PathBuf>,
         force: bool,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<String> {
         self.call(py, move |w| {
             // The CLI's checks (`--max-points`, `--replicates`), named as Python spells them.
@@ -504,9 +518,10 @@ impl NativeRig {
             };
             let mut operator = Operator::scripted(b"", false);
             operator.stop = w.stop.clone();
-            let found =
-                host::discover::discover(&mut w.bench, &mut operator, &rig, &setup, &|_| {})
-                    .map_err(|stopped| stopped.error)?;
+            let found = host::discover::discover(&mut w.bench, &mut operator, &rig, &setup, &|l| {
+                report_progress(progress.as_ref(), l);
+            })
+            .map_err(|stopped| stopped.error)?;
             json(&found.json(&setup))
         })
     }
@@ -669,4 +684,20 @@ impl NativeRecording {
         };
         crate::columns::telemetry(py, &rows)
     }
+}
+
+/// Hands a procedure's progress line to Python's `progress(done, total, line)` (`done`
+/// and `total`: the points, `None` on a line without them), on the port's thread with the
+/// GIL taken for the call. An exception in the callback is printed, not raised: the
+/// procedure (and the gear's safety) does not depend on it.
+fn report_progress(progress: Option<&Py<PyAny>>, line: &str) {
+    let Some(callback) = progress else {
+        return;
+    };
+    let (done, total) = host::progress::counts(line).unzip();
+    Python::attach(|py| {
+        if let Err(e) = callback.call1(py, (done, total, line.trim_start())) {
+            e.print(py);
+        }
+    });
 }

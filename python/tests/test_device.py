@@ -107,6 +107,41 @@ def test_virtual_rig_options_are_checked():
 def test_a_missing_port_is_a_link_error():
     with pytest.raises(LinkError, match="/dev/does-not-exist"):
         Rig.open("/dev/does-not-exist")
+    # A LinkError is an OSError: `except OSError` catches a port that is not there.
+    with pytest.raises(OSError):
+        Rig.open("/dev/does-not-exist")
+
+
+def test_errors_sit_under_the_standard_exceptions(tmp_path):
+    import traceback
+
+    import backdrive_rig as br
+
+    standard = {
+        br.BadValueError: ValueError,
+        br.MissingFileError: FileNotFoundError,
+        br.NoReplyError: TimeoutError,
+        br.LinkError: OSError,
+    }
+    for ours, std in standard.items():
+        assert issubclass(ours, std) and issubclass(ours, br.RigError), ours
+    for name in ("RefusedError", "VersionMismatchError", "DeviceFaultError", "RigClosedError"):
+        assert issubclass(getattr(br, name), br.RigError), name
+    assert issubclass(br.MissingFileError, br.BadValueError)
+    # Named as the package exports them, in tracebacks too.
+    for cls in standard:
+        assert cls.__module__ == "backdrive_rig" and cls.__qualname__ == cls.__name__
+    # A missing file is a FileNotFoundError wherever a path is given.
+    with pytest.raises(FileNotFoundError, match="missing.toml"):
+        Rig.virtual(model=tmp_path / "missing.toml")
+    with pytest.raises(FileNotFoundError, match="missing.csv"):
+        br.explain(tmp_path / "missing.csv")
+    # A gear of three tooth counts is a bad value like every other.
+    with pytest.raises(br.BadValueError, match="four tooth counts") as e:
+        br.design(z=[49, 51, 50])
+    line = traceback.format_exception_only(e.type, e.value)[-1]
+    assert line.startswith("backdrive_rig.BadValueError: design: z [49, 51, 50]"), line
+    assert "_native" not in line and "RigError_" not in line
 
 
 # Protocol v1's `Info` reply (protocol/src/compat.rs, from v1's golden bytes).

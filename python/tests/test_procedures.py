@@ -98,9 +98,14 @@ def test_explain_refuses_a_frame_without_the_columns():
 
 
 def test_quick_sweep_on_a_served_rig_names_the_hidden_effect(served_with_effect):
+    seen = []
     with Rig.open(served_with_effect.port) as rig:
-        df = rig.torque_sweep(quick=True)
+        df = rig.torque_sweep(quick=True, progress=lambda done, total, line: seen.append((done, total, line)))
     assert df.attrs["planned"] == 30 and df.attrs["written"] == 30
+    # A call after every point: points done of all, and the line with its estimate.
+    assert [d for d, _, _ in seen] == list(range(1, 31)), seen
+    assert all(t == 30 for _, t, _ in seen)
+    assert "elapsed" in seen[0][2] and "left" in seen[0][2] and seen[-1][2].endswith("done")
     assert list(df.columns)[:3] == ["point", "repeat", "t_s"]
     assert {"omega_n_rad_s", "tau_rot_nm", "i_in_a", "backdriven"} <= set(df.columns)
     assert df["i_in_a"].notna().all()

@@ -222,6 +222,9 @@ pub struct XyPanel {
     pub legend: Option<Legend>,
     /// Draw the fine grid lines between the labelled ones.
     pub fine_grid: bool,
+    /// The x values count things (run indices, test points): ticks labelled as whole
+    /// numbers (`20`, not `20.0`), none between them.
+    pub whole_x: bool,
 }
 
 impl XyPanel {
@@ -319,6 +322,16 @@ fn draw_axes(area: &Area<'_>, panel: &XyPanel, inside_legend: bool) -> Result<()
     let mut mesh = chart.configure_mesh();
     mesh.x_desc(panel.x_label.as_str())
         .y_desc(panel.y_label.as_str());
+    let whole = |x: &f64| {
+        if (x - x.round()).abs() < 1e-9 {
+            format!("{}", x.round() as i64)
+        } else {
+            String::new()
+        }
+    };
+    if panel.whole_x {
+        mesh.x_label_formatter(&whole);
+    }
     if !panel.fine_grid {
         mesh.light_line_style(WHITE);
     }

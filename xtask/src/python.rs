@@ -1,6 +1,7 @@
 //! `cargo xtask python`: the Python package `backdrive_rig` (crate `python/`) built as a
 //! wheel by maturin, installed into a fresh virtual environment, tested with pytest (the
-//! in-process and the served virtual rig) and the example notebook executed
+//! in-process and the served virtual rig), its types checked by mypy --strict, and the
+//! example notebook executed
 //! (`docs/examples/backdrive_rig.ipynb`). `cargo xtask test` runs it after the Rust tests.
 //!
 //! The Python tools are pinned ([`PINS`]) and come from PyPI once: `pip download` fills
@@ -14,7 +15,7 @@ use std::process::Command;
 use std::time::Instant;
 
 /// The Python tools, pinned (what the wheel is built and tested with).
-pub const PINS: [&str; 8] = [
+pub const PINS: [&str; 9] = [
     "maturin==1.16.0",
     "pytest==9.2.0",
     "numpy==2.4.6",
@@ -23,6 +24,7 @@ pub const PINS: [&str; 8] = [
     "nbclient==0.11.0",
     "nbformat==5.11.1",
     "ipykernel==7.4.0",
+    "mypy==2.4.1",
 ];
 
 /// Marks a complete wheelhouse (the pins it holds).
@@ -188,6 +190,23 @@ pub fn run(root: &Path, target_dir: &Path, rig: &Path) -> Result<(), String> {
         "pytest (backdrive_rig, in-process and served virtual rig)",
         c,
     )?;
+    // The public API's types, strictly (python/pyproject.toml's [tool.mypy]), over the
+    // package's source and the plain-script example: what a user's type checker sees.
+    let mut c = Command::new(&python);
+    c.args([
+        "-m",
+        "mypy",
+        "--config-file",
+        "pyproject.toml",
+        "backdrive_rig",
+    ])
+    .arg(
+        root.join("docs")
+            .join("examples")
+            .join("backdrive_rig_script.py"),
+    )
+    .current_dir(root.join("python"));
+    status("mypy --strict (backdrive_rig and the script example)", c)?;
     let notebook = root
         .join("docs")
         .join("examples")

@@ -239,7 +239,7 @@ pub fn write_points_csv<W: Write>(m: &Measurements, out: W) -> Result<(), csv::E
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Plan, TorquePoint};
+    use super::super::{CalibrationSchedule, TorquePoint};
     use super::*;
 
     fn step(volts: f64, current_a: f64, cam_speed_rad_s: f64) -> StepMeasurement {
@@ -290,7 +290,7 @@ mod tests {
         use model::plant::{CamSetup, Drive, Load, Plant, PlantParams};
         let gear = model::paper::RIG_GEARS;
         let mut plant = Plant::new(PlantParams::paper(gear, Load::Torque(0.0)), 7);
-        let plan = Plan::default();
+        let plan = CalibrationSchedule::default();
         let dt = 1e-4;
         let run = |plant: &mut Plant, volts: f64| {
             let drive = Drive {

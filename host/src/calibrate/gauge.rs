@@ -1,7 +1,7 @@
 //! Gauge readings: typed at the prompt (a torque, or a force and its arm), from a CSV file
 //! (`rig calibrate --gauge-csv`), and the measured points read back (`--from-points`).
 
-use super::{Measurements, Plan, StepMeasurement, TorquePoint};
+use super::{CalibrationSchedule, Measurements, StepMeasurement, TorquePoint};
 use crate::RigError;
 
 /// What the gauge shows (`rig calibrate --gauge torque|force`).
@@ -156,7 +156,10 @@ pub fn read_points_csv(path: &std::path::Path) -> Result<Measurements, RigError>
 
 /// Gauge readings from a CSV file: a `gauge_nmm` column (torque, N mm), one row per torque
 /// step in order; an optional `volts` column is checked against the plan.
-pub fn read_gauge_csv(path: &std::path::Path, plan: &Plan) -> Result<Vec<f64>, RigError> {
+pub fn read_gauge_csv(
+    path: &std::path::Path,
+    plan: &CalibrationSchedule,
+) -> Result<Vec<f64>, RigError> {
     let name = path.display().to_string();
     let bad = |why: String| RigError::MeasuredFile {
         file: name.clone(),
@@ -241,7 +244,7 @@ mod tests {
 
     #[test]
     fn gauge_csv_is_checked_against_the_plan() {
-        let plan = Plan::default();
+        let plan = CalibrationSchedule::default();
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("g.csv");
         let mut text = String::from("volts,gauge_nmm\n");

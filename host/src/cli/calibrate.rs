@@ -20,7 +20,8 @@ use crate::RigError;
 use crate::calibrate::operator::{TerminalOperator, VirtualOperator};
 use crate::calibrate::plot::{self, FitPlot};
 use crate::calibrate::{
-    self, CalibrationResult, GaugeOperator, GaugeUnit, Measurements, Plan, Progress, Setup,
+    self, CalibrationResult, CalibrationSchedule, GaugeOperator, GaugeUnit, Measurements, Progress,
+    Setup,
 };
 use rigfile::{RigFile, paper_units};
 
@@ -67,6 +68,13 @@ pub struct CalibrateArgs {
     /// the others measured (the set-up prompts start at the first missing step).
     #[arg(long, requires = "out", conflicts_with_all = ["from_points", "dry_run"])]
     resume: bool,
+    /// Figure format of the two fit plots: svg, png (resvg) or pdf (svg2pdf); the SVG is
+    /// always kept too.
+    #[arg(long, default_value = "svg", value_parser = super::demo::parse_format)]
+    format: reporting::figure::Format,
+    /// Figure width: pixels of a PNG, points of a PDF [default: the figure's own size].
+    #[arg(long, value_name = "WIDTH", value_parser = reporting::figure::parse_width)]
+    size: Option<u32>,
 }
 
 /// `rig calibrate --gauge`.
@@ -89,6 +97,9 @@ pub struct CalibrationFiles {
     pub no_load_plot: String,
     /// Measured points.
     pub points: String,
+    /// The fit plots in `--format` when it is not SVG (PNG or PDF beside each SVG).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub figures: Vec<String>,
 }
 
 /// What `rig calibrate --json` prints.
@@ -126,7 +137,7 @@ pub fn default_out_dir(now: SystemTime) -> PathBuf {
 
 /// Runs `rig calibrate`.
 pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
-    let plan = Plan::default();
+    let plan = CalibrationSchedule::default();
     let unit = gauge_unit(&a)?;
     // Check the inputs before anything moves.
     let gauge = a
@@ -175,7 +186,18 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let files = if a.dry_run {
         None
     } else {
-        Some(write_files(&out, &result, &measurements, &base, &port)?)
+        let mut files = write_files(&out, &result, &measurements, &base, &port)?;
+        let options = reporting::figure::FigureOptions {
+            format: a.format,
+            width: a.size,
+        };
+        if a.format != reporting::figure::Format::Svg {
+            for plot in [&files.torque_plot, &files.no_load_plot] {
+                let written = reporting::figure::export(Path::new(plot), &options)?;
+                files.figures.push(written.display().to_string());
+            }
+        }
+        Some(files)
     };
     let new_cal = result.apply_to(&base);
     let write = decide_write(
@@ -206,7 +228,7 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
 /// and how to measure the rest.
 fn partial_refit(
     m: &Measurements,
-    plan: &Plan,
+    plan: &CalibrationSchedule,
     from: Option<&Path>,
     fit_error: RigError,
 ) -> RigError {
@@ -257,7 +279,7 @@ fn partial_refit(
 fn measure(
     session: &mut Connection,
     a: &CalibrateArgs,
-    plan: &Plan,
+    plan: &CalibrationSchedule,
     gauge: Option<Vec<f64>>,
     unit: GaugeUnit,
     out: &Path,
@@ -350,12 +372,14 @@ fn write_points(dir: &Path, m: &Measurements) -> Result<PathBuf, RigError> {
     Ok(path)
 }
 
-fn progress_bar(plan: &Plan, json: bool) -> ProgressBar {
+fn progress_bar(plan: &CalibrationSchedule, json: bool) -> ProgressBar {
     if json || !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(plan.steps() as u64);
-    if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} steps  {msg}") {
+    if let Ok(style) = ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} steps, {elapsed} elapsed, about {eta} left  {msg}",
+    ) {
         bar.set_style(style);
     }
     bar
@@ -392,7 +416,7 @@ pub fn write_files(
     plot::draw(
         &torque_plot,
         &FitPlot {
-            title: "Torque-current: |tau_cam| = C1 i_in + C2 (Eq. 15)",
+            title: "Torque-current: |τ_cam| = C1 i_in + C2 (Eq. 15)",
             x_label: "current i_in, A",
             y_label: "gauge torque, N mm",
             points: &torque_points,
@@ -410,8 +434,8 @@ pub fn write_files(
     plot::draw(
         &no_load_plot,
         &FitPlot {
-            title: "No-load current: |i_loss| = C5 w_n + C6 (Eq. 17)",
-            x_label: "cam speed w_n, rad/s",
+            title: "No-load current: |i_loss| = C5 ω_n + C6 (Eq. 17)",
+            x_label: "cam speed ω_n, rad/s",
             y_label: "current, A",
             points: &no_load_points,
             fit: &r.no_load_fit,
@@ -424,6 +448,7 @@ pub fn write_files(
         torque_plot: s(&torque_plot),
         no_load_plot: s(&no_load_plot),
         points: s(&points_path),
+        figures: Vec::new(),
     })
 }
 
@@ -498,8 +523,15 @@ fn print_text(
     match files {
         Some(f) => writeln!(
             out,
-            "  wrote {}, {}, {}, {}",
-            f.calibration, f.torque_plot, f.no_load_plot, f.points
+            "  wrote {}, {}, {}, {}{}",
+            f.calibration,
+            f.torque_plot,
+            f.no_load_plot,
+            f.points,
+            f.figures
+                .iter()
+                .map(|p| format!(", {p}"))
+                .collect::<String>()
         )?,
         None if dry_run => writeln!(out, "  dry run: no files written, the device unchanged")?,
         None => {}

@@ -6,13 +6,14 @@ use std::fs::File;
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use clap::Args;
 use protocol::SupervisorState;
 use serde::Serialize;
 
-use super::connect::{Connection, DeviceOpts};
+use super::connect::{Connection, DeviceOpts, interrupt_flag};
 use crate::client::{CAPTURE_RATE_HZ, Capture};
 use crate::{RigError, args, limits};
 
@@ -59,21 +60,32 @@ pub struct CaptureReport {
     /// What the device did differently from what was asked (fewer samples than
     /// `--seconds` asked for: its buffer is full at that).
     pub warnings: Vec<String>,
+    /// The signal that stopped the burst (`Ctrl-C`, `SIGTERM`, ...; absent when it ran to
+    /// its end): the gear was locked at once and the samples recorded until then are kept.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interrupted_by: Option<&'static str>,
 }
 
 /// Releases at `hz` and waits until the cam runs at speed (the supervisor says vibrating).
-fn spin_up(s: &mut Connection, hz: f32) -> Result<(), RigError> {
+/// A signal (`stop`) during the spin-up locks the gear and ends it as an interruption.
+fn spin_up(s: &mut Connection, hz: f32, stop: &AtomicBool) -> Result<(), RigError> {
     s.client.start_telemetry(20)?;
     s.client.release(true, hz)?;
     let deadline = Instant::now() + Duration::from_secs_f64(5.0 / s.time_scale() + 2.0);
     let result = loop {
+        if stop.load(Ordering::SeqCst) {
+            break Err(RigError::Operator(format!(
+                "capture stopped by {} before the burst: the gear is locked, nothing recorded",
+                crate::signals::interrupt_name()
+            )));
+        }
         if Instant::now() > deadline {
             break Err(RigError::Protocol(format!(
                 "the cam did not reach {hz} Hz within 5 s on {}; check `rig faults`",
                 s.port()
             )));
         }
-        match s.client.next_telemetry(Duration::from_millis(100))? {
+        match s.client.next_telemetry(Duration::from_millis(20))? {
             Some(t) if t.state == SupervisorState::Vibrating => break Ok(()),
             Some(t) if t.state == SupervisorState::Fault || !t.faults.is_empty() => {
                 break Err(RigError::DeviceFault {
@@ -92,21 +104,47 @@ fn spin_up(s: &mut Connection, hz: f32) -> Result<(), RigError> {
 }
 
 /// Records the burst on the device (released at `--release` first, locked after).
-fn record(a: &CaptureArgs, dev: &DeviceOpts, samples: u32) -> Result<Capture, RigError> {
+/// A signal (`stop`) locks the gear at once; the samples recorded until the upload ends
+/// are kept.
+fn record(
+    a: &CaptureArgs,
+    dev: &DeviceOpts,
+    samples: u32,
+    stop: &AtomicBool,
+) -> Result<Capture, RigError> {
     let mut s = dev.connect()?;
     let show = !a.json && std::io::stderr().is_terminal();
     if let Some(hz) = a.release {
         // The firmware would drive a frequency above the calibration's maximum at that maximum.
         let hz = limits::check_release_freq("--release", hz, &s.client.calibration()?)?;
-        spin_up(&mut s, hz)?;
+        spin_up(&mut s, hz, stop)?;
     }
-    let captured = s.client.capture(a.rate, samples, |p| {
-        if show {
-            eprint!("\ruploading {} / {} samples", p.received, p.total);
-        }
-    });
+    if !a.json {
+        // Said before the burst, so a person (and a test) knows the recording has begun.
+        eprintln!(
+            "recording {samples} samples at {} Hz; Ctrl-C locks the gear and keeps what was recorded",
+            a.rate
+        );
+    }
+    let captured = s.client.capture_until(
+        a.rate,
+        samples,
+        |p| {
+            if show {
+                eprint!("\ruploading {} / {} samples", p.received, p.total);
+            }
+        },
+        stop,
+    );
     if a.release.is_some() {
-        s.client.release(false, 0.0)?;
+        // Whatever ended the burst (its end, an error, a signal): the gear is locked.
+        let locked = s.client.release(false, 0.0);
+        let capture = captured?;
+        locked?;
+        if show {
+            eprintln!();
+        }
+        return Ok(capture);
     }
     let capture = captured?;
     if show {
@@ -170,9 +208,14 @@ fn warnings(a: &CaptureArgs, c: &Capture) -> Vec<String> {
 /// Records the capture; with `--csv`, atomically: the file is created (beside the target)
 /// before the device records, so a bad path fails first, and an existing file is replaced
 /// only by a full capture.
-fn record_to_file(a: &CaptureArgs, dev: &DeviceOpts, samples: u32) -> Result<Capture, RigError> {
+fn record_to_file(
+    a: &CaptureArgs,
+    dev: &DeviceOpts,
+    samples: u32,
+    stop: &AtomicBool,
+) -> Result<Capture, RigError> {
     let Some(path) = &a.csv else {
-        return record(a, dev, samples);
+        return record(a, dev, samples, stop);
     };
     let mut recorded = None;
     reporting::write_atomic_with(path, |tmp| -> Result<(), RigError> {
@@ -181,7 +224,7 @@ fn record_to_file(a: &CaptureArgs, dev: &DeviceOpts, samples: u32) -> Result<Cap
             path: path.display().to_string(),
             source,
         })?;
-        let capture = record(a, dev, samples)?;
+        let capture = record(a, dev, samples, stop)?;
         capture
             .write_csv(std::io::BufWriter::new(file))
             .map_err(|e| RigError::MeasuredFile {
@@ -224,7 +267,16 @@ fn print_text(out: &mut impl Write, report: &CaptureReport) -> Result<(), RigErr
 /// Runs `rig capture`.
 pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let samples = samples_asked(&a)?;
-    let capture = record_to_file(&a, dev, samples)?;
+    let stop = interrupt_flag();
+    let capture = match record_to_file(&a, dev, samples, &stop) {
+        // Stopped before the burst began: the gear is locked, there is nothing to keep.
+        Err(e) if stop.load(Ordering::SeqCst) => {
+            eprintln!("{e}");
+            return Ok(crate::signals::interrupt_exit_code());
+        }
+        captured => captured?,
+    };
+    let interrupted = stop.load(Ordering::SeqCst);
     let report = CaptureReport {
         received: capture.samples.len(),
         duration_s: capture.duration_s(),
@@ -233,6 +285,7 @@ pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         mean_output_speed_rad_s: capture.mean_output_speed_rad_s(),
         csv: a.csv.as_ref().map(|p| p.display().to_string()),
         warnings: warnings(&a, &capture),
+        interrupted_by: interrupted.then(crate::signals::interrupt_name),
         capture,
     };
     let c = &report.capture;
@@ -256,6 +309,13 @@ pub fn run(a: CaptureArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         );
     } else if !a.json {
         writeln!(out, "  no samples dropped")?;
+    }
+    if let Some(signal) = report.interrupted_by {
+        eprintln!(
+            "capture stopped by {signal}: the gear was locked at once; the {} samples recorded are kept",
+            report.received
+        );
+        return Ok(crate::signals::interrupt_exit_code());
     }
     Ok(ExitCode::SUCCESS)
 }

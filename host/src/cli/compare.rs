@@ -34,6 +34,13 @@ pub struct CompareArgs {
     /// Plot both gaps per test point to this SVG.
     #[arg(long, value_name = "FILE.svg")]
     pub svg: Option<PathBuf>,
+    /// Also write the --svg plot as png (resvg) or pdf (svg2pdf) beside it (svg: only the
+    /// SVG).
+    #[arg(long, default_value = "svg", value_parser = super::demo::parse_format, requires = "svg")]
+    pub format: reporting::figure::Format,
+    /// Figure width: pixels of a PNG, points of a PDF [default: the figure's own size].
+    #[arg(long, value_name = "WIDTH", value_parser = reporting::figure::parse_width, requires = "svg")]
+    pub size: Option<u32>,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -72,6 +79,17 @@ pub fn run(a: CompareArgs) -> Result<ExitCode, RigError> {
     if let Some(svg) = &a.svg {
         gap_figure(svg, &c)?;
         c.svg = Some(svg.display().to_string());
+        if a.format != reporting::figure::Format::Svg {
+            let options = reporting::figure::FigureOptions {
+                format: a.format,
+                width: a.size,
+            };
+            c.figure = Some(
+                reporting::figure::export(svg, &options)?
+                    .display()
+                    .to_string(),
+            );
+        }
     }
     let mut out = std::io::stdout().lock();
     if a.json {
@@ -124,6 +142,9 @@ fn write_text(out: &mut impl Write, c: &Comparison) -> std::io::Result<()> {
     }
     if let Some(s) = &c.svg {
         writeln!(out, "  plot: {s}")?;
+    }
+    if let Some(f) = &c.figure {
+        writeln!(out, "  plot: {f}")?;
     }
     Ok(())
 }

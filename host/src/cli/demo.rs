@@ -33,7 +33,8 @@ pub struct DemoArgs {
     pub size: Option<u32>,
 }
 
-fn parse_format(s: &str) -> Result<reporting::figure::Format, String> {
+/// A `--format` value this build can write (shared by every verb that draws).
+pub(super) fn parse_format(s: &str) -> Result<reporting::figure::Format, String> {
     let f: reporting::figure::Format = s.parse()?;
     f.check_available()?;
     Ok(f)

@@ -84,8 +84,13 @@ pub struct DiscoverArgs {
 }
 
 /// The bench of the options: the in-process virtual rig (virtual time) with --sim, else
-/// the device (a real rig or a served virtual one).
-fn bench_for(a: &DiscoverArgs, dev: &DeviceOpts) -> Result<Box<dyn Bench>, RigError> {
+/// the device (a real rig or a served virtual one), whose rests `stop` (a signal's flag)
+/// ends.
+fn bench_for(
+    a: &DiscoverArgs,
+    dev: &DeviceOpts,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> Result<Box<dyn Bench>, RigError> {
     if dev.sim {
         let preset = sim::Preset::by_name(a.preset.as_deref().unwrap_or(DEFAULT_PRESET))?;
         // The simulator's own rig (`rig sim torque-sweep`'s): backdrive is read from the
@@ -104,7 +109,7 @@ fn bench_for(a: &DiscoverArgs, dev: &DeviceOpts) -> Result<Box<dyn Bench>, RigEr
             why: "they configure the in-process virtual rig: add --sim, or give them to `rig sim serve`".into(),
         });
     }
-    Ok(Box::new(DeviceBench::new(dev.connect()?)))
+    Ok(Box::new(DeviceBench::new(dev.connect()?).stopped_by(stop)))
 }
 
 // The library's ranges ([`DiscoverySetup::check_max_points`], `check_replicates`), which
@@ -122,8 +127,9 @@ pub fn run(a: DiscoverArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let rig = starting_rig(a.model.as_deref())?;
     // An existing CSV is refused before the rig moves, and never truncated.
     sweep::check_output(&a.csv, false, a.force)?;
-    let mut operator = Operator::stdin(false, interrupt_flag());
-    let mut bench = bench_for(&a, dev)?;
+    let stop = interrupt_flag();
+    let mut operator = Operator::stdin(false, std::sync::Arc::clone(&stop));
+    let mut bench = bench_for(&a, dev, stop)?;
     let setup = DiscoverySetup {
         csv: a.csv.clone(),
         force: a.force,

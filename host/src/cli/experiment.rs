@@ -6,6 +6,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 
 use clap::{Args, Subcommand};
 
@@ -169,7 +170,7 @@ fn plan_of(a: &SweepArgs) -> Result<Plan, RigError> {
 /// Runs `rig experiment`.
 pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let stop = interrupt_flag();
-    let mut operator = Operator::stdin(a.operator, stop);
+    let mut operator = Operator::stdin(a.operator, Arc::clone(&stop));
     // Check the arguments before the rig moves.
     let plan = match &a.procedure {
         Procedure::TorqueSweep(s) => {
@@ -182,7 +183,7 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         }
         _ => None,
     };
-    let mut bench = DeviceBench::new(dev.connect()?);
+    let mut bench = DeviceBench::new(dev.connect()?).stopped_by(stop);
     let mut out = std::io::stdout().lock();
     // Every error of the procedure, so Ctrl-C anywhere ends with exit 130.
     let result = match a.procedure {

@@ -408,7 +408,7 @@ fn proposal_text(p: &Proposal, written: Option<&Path>, source: &str) -> String {
     match written {
         Some(path) => {
             t += &format!(
-                "Plan written to {}: run `rig experiment torque-sweep --plan {} --csv MORE.csv`, then explain {source} and MORE.csv together.\n",
+                "Plan written to {}: run `rig experiment torque-sweep --plan {} --csv MORE.csv`, then explain the old and new rows in one file (`--measured` reads one): `(cat {source}; tail -n +2 MORE.csv) > ALL.csv && rig explain --measured ALL.csv`.\n",
                 path.display(),
                 path.display()
             );

@@ -345,12 +345,20 @@ fn render_chart(
                 .bounds([-MonitorView::WINDOW_S, 0.0])
                 .labels([format!("-{:.0} s", MonitorView::WINDOW_S), "now".into()]),
         )
-        .y_axis(
-            Axis::default()
-                .bounds([lo, hi])
-                .labels([format!("{lo:.2}"), format!("{hi:.2}")]),
-        );
+        .y_axis(Axis::default().bounds([lo, hi]).labels(axis_labels(lo, hi)));
     frame.render_widget(chart, area);
+}
+
+/// A chart's y-axis ends with as many decimals as their span needs to tell them apart
+/// (tau_cam of a few mN m read `0.00` and `0.00` at two decimals).
+fn axis_labels(lo: f64, hi: f64) -> [String; 2] {
+    let span = (hi - lo).abs();
+    let decimals = if span > 0.0 && span.is_finite() {
+        (1.0 - span.log10().floor()).clamp(2.0, 6.0) as usize
+    } else {
+        2
+    };
+    [format!("{lo:.decimals$}"), format!("{hi:.decimals$}")]
 }
 
 /// Runs `rig monitor`.
@@ -786,5 +794,14 @@ mod tests {
         assert_eq!((row[10].as_str(), row[12].as_str()), ("-0.25000", "12.050"));
         // Not sensed (NaN) and not measured (0 cycles): empty.
         assert_eq!((row[13].as_str(), row[14].as_str()), ("", ""));
+    }
+
+    #[test]
+    fn chart_axis_ends_are_told_apart() {
+        // A cam torque of 14-15 mN m, padded: two decimals read 0.01 and 0.02 at best.
+        let [lo, hi] = axis_labels(0.0139, 0.0153);
+        assert_eq!((lo.as_str(), hi.as_str()), ("0.0139", "0.0153"));
+        let [lo, hi] = axis_labels(-0.5, 2.5);
+        assert_eq!((lo.as_str(), hi.as_str()), ("-0.50", "2.50"));
     }
 }

@@ -206,7 +206,8 @@ fn hold(
                 break;
             }
         }
-        let Some(t) = s.client.next_telemetry(Duration::from_millis(100))? else {
+        // Short waits: a signal locks the gear within one of them.
+        let Some(t) = s.client.next_telemetry(Duration::from_millis(20))? else {
             continue;
         };
         let start = *t0.get_or_insert(t.device_time_us);

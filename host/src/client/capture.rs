@@ -2,6 +2,7 @@
 //! continuity here, and converted to amps and radians with the board's scale factors.
 
 use std::io::{Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use model::plant::SensorParams;
@@ -15,6 +16,9 @@ pub const CAPTURE_RATE_HZ: u16 = 10_000;
 
 /// How long an upload may stall between chunks before the capture is given up, wall clock.
 const CHUNK_STALL: Duration = Duration::from_secs(2);
+
+/// How often a capture looks at its stop flag while it waits, wall clock.
+const STOP_POLL: Duration = Duration::from_millis(20);
 
 /// The board's sensor chain, the one place its scale factors live: ACS714 at 185 mV/A with
 /// its zero at Vcc/2 of 5 V, a 2/3 divider into the 3.3 V 12-bit ADC, and the AMT102-V
@@ -206,7 +210,20 @@ impl<T: Read + Write> Client<T> {
         &mut self,
         sample_rate_hz: u16,
         samples: u32,
+        progress: impl FnMut(CaptureProgress),
+    ) -> Result<Capture, RigError> {
+        self.capture_until(sample_rate_hz, samples, progress, &AtomicBool::new(false))
+    }
+
+    /// As [`Client::capture`], stopped by `stop` (a signal's flag): once it is raised the
+    /// gear is locked at once (`Release(off)`: vibration off) and the upload goes on, so
+    /// every sample the device recorded, the lock's transient included, is kept.
+    pub fn capture_until(
+        &mut self,
+        sample_rate_hz: u16,
+        samples: u32,
         mut progress: impl FnMut(CaptureProgress),
+        stop: &AtomicBool,
     ) -> Result<Capture, RigError> {
         self.ack(&Request::StartCapture {
             sample_rate_hz,
@@ -232,9 +249,16 @@ impl<T: Read + Write> Client<T> {
             next: 0,
             id: None,
         };
+        let mut locked = false;
         loop {
+            if !locked && stop.load(Ordering::SeqCst) {
+                locked = true;
+                self.release(false, 0.0)?;
+            }
             let left = deadline.saturating_duration_since(Instant::now());
-            match self.recv(left)? {
+            // Short waits, so a raised `stop` locks the gear within one of them.
+            let wait = left.min(STOP_POLL);
+            match self.recv(wait)? {
                 Some(DeviceMessage::CaptureChunk(chunk)) => {
                     assembly.add(chunk);
                     deadline = Instant::now() + CHUNK_STALL;
@@ -251,6 +275,7 @@ impl<T: Read + Write> Client<T> {
                     return Ok(assembly.finish(Some(total_samples), Some(sample_rate_hz)));
                 }
                 Some(_) => {}
+                None if wait < left => {}
                 None if assembly.id.is_some() => {
                     // The upload stalled: keep what came, the missing tail counts as dropped.
                     return Ok(assembly.finish(None, None));

@@ -332,7 +332,7 @@ pub fn render_table(r: &SearchResult) -> String {
         "aw34 deg",
         "mu_s*Lam",
         "mu_d*Lam",
-        "tau_cam N mm",
+        "τ_cam, N mm",
         "strength"
     );
     if r.designs.is_empty() {
@@ -380,7 +380,7 @@ pub fn plot(path: &std::path::Path, r: &SearchResult) -> Result<(), crate::RigEr
         XyPanel {
             caption: Some("required cam torque (Eq. 10)".into()),
             x_label: "|rho|".into(),
-            y_label: "tau_cam N mm".into(),
+            y_label: "τ_cam, N mm".into(),
             series: vec![Series::points(PALETTE[0], 4, cam)],
             ..XyPanel::default()
         },

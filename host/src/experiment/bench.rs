@@ -276,7 +276,13 @@ pub struct DeviceBench {
     /// The device time of the newest telemetry sample received, s (its
     /// [`RigLink::clock_s`]).
     device_time_s: Option<f64>,
+    /// Raised by a signal (Ctrl-C): a rest or settle ([`Bench::wait`]) ends within
+    /// [`STOP_POLL`] with [`interrupted`].
+    stop: Option<Arc<AtomicBool>>,
 }
+
+/// How often a wait looks at the stop flag, wall clock.
+const STOP_POLL: Duration = Duration::from_millis(20);
 
 impl DeviceBench {
     /// Wraps an open session.
@@ -285,7 +291,15 @@ impl DeviceBench {
             session,
             temp_c: None,
             device_time_s: None,
+            stop: None,
         }
+    }
+
+    /// This bench with its waits ended by `stop` (the flag a signal raises): a rest of
+    /// 10 s answers Ctrl-C within 20 ms, not at its end.
+    pub fn stopped_by(mut self, stop: Arc<AtomicBool>) -> Self {
+        self.stop = Some(stop);
+        self
     }
 
     fn note(&mut self, msg: &DeviceMessage) {
@@ -324,11 +338,14 @@ impl RigLink for DeviceBench {
         let scale = self.session.time_scale().max(1e-9);
         let deadline = Instant::now() + Duration::from_secs_f64((seconds / scale).max(0.0));
         loop {
+            if self.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst)) {
+                return Err(interrupted());
+            }
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
                 return Ok(());
             }
-            if let Some(msg) = self.session.client.recv(left)? {
+            if let Some(msg) = self.session.client.recv(left.min(STOP_POLL))? {
                 self.note(&msg);
             }
         }

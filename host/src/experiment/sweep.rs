@@ -318,6 +318,7 @@ pub fn run_to<B: Bench + ?Sized>(
         .iter()
         .filter(|r| !done.iter().any(|d| d.point == Some(r.index)))
         .collect();
+    let eta = crate::progress::Progress::start(runs.len(), resumed);
     let result = (|| {
         for run in todo {
             if operator.interrupted() {
@@ -393,7 +394,9 @@ pub fn run_to<B: Bench + ?Sized>(
                         }
                     }
                 } else {
-                    progress(&summary);
+                    // Points done (this one included), time elapsed, and the end's estimate.
+                    let done = resumed + outcome.written + outcome.skipped + 1;
+                    progress(&format!("{summary}; {}", eta.line(done)));
                 }
                 if let Some(out) = out.as_mut() {
                     out.write(&csv_line(&row)?)?;

@@ -168,10 +168,13 @@ impl VirtualDevice {
         Self::start(Self::paper_config(&sim::Preset::paper()), speed)
     }
 
-    /// The paper's (49, 50) rig with `preset`, reporting itself as board `virtual`.
+    /// The paper's (49, 50) rig with `preset`, reporting itself as board `virtual`; its
+    /// load rests on the floor after [`model::hardware::bench::OUTPUT_TRAVEL_RAD`] (a hung
+    /// load that keeps falling, mu_d Lambda < 1, lands as on a bench and stops).
     pub fn paper_config(preset: &sim::Preset) -> SimConfig {
         let mut config = SimConfig::paper().virtual_board();
         config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
+        config.plant.output_travel = Some(model::hardware::bench::OUTPUT_TRAVEL_RAD);
         preset.apply(&mut config.plant);
         config
     }
@@ -188,6 +191,7 @@ impl VirtualDevice {
     ) -> Result<SimConfig, RigError> {
         let mut config = SimConfig::from_rig_file(rig)?.virtual_board();
         config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
+        config.plant.output_travel = Some(model::hardware::bench::OUTPUT_TRAVEL_RAD);
         if rig.model.is_none() {
             preset.apply(&mut config.plant);
         } else {

@@ -94,6 +94,13 @@ pub struct PlantParams {
     pub sensors: SensorParams,
     /// Effects beyond the paper's model.
     pub effects: PlantEffects,
+    /// How far the output may turn either way from where the load was hung before the
+    /// load rests (a hanging mass on the floor, a brake arm on its end stop), rad; `None`:
+    /// no end (the paper's equations alone). Resting, the load's torque is carried by the
+    /// floor, not the gear ([`Plant::load_resting`]); hanging it again
+    /// ([`Plant::stop_output`]) starts a new travel from where the output is.
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub output_travel: Option<f64>,
 }
 
 impl PlantParams {
@@ -120,6 +127,7 @@ impl PlantParams {
             cam: CamSetup::Coupled,
             sensors: SensorParams::default(),
             effects: PlantEffects::default(),
+            output_travel: None,
         }
     }
 
@@ -187,6 +195,8 @@ pub struct EnergyLedger {
     pub load_work: f64,
     /// Lost in the output's friction.
     pub output_friction: f64,
+    /// Lost when the load lands on its floor or end stop (its kinetic energy).
+    pub end_stop: f64,
     /// Inertial power of the carrier the drive could not take back (no regeneration).
     pub unreturned: f64,
 }
@@ -262,6 +272,10 @@ pub struct Plant {
     /// angle, seconds and torque integral.
     cam_ledger: CamTorqueLedger,
     cam_rev: (f64, f64, f64),
+    /// The output angle where the load was hung ([`PlantParams::output_travel`] counts
+    /// from it), and whether it rests on its floor or end stop.
+    hung_at: f64,
+    resting: bool,
 }
 
 impl Plant {
@@ -299,6 +313,8 @@ impl Plant {
             inv_i_hat: 1.0 / params.output_shaft().i_hat,
             cam_ledger: CamTorqueLedger::default(),
             cam_rev: (0.0, 0.0, 0.0),
+            hung_at: 0.0,
+            resting: false,
             params,
         }
     }
@@ -372,15 +388,24 @@ impl Plant {
         }
     }
 
-    /// Stops the output where it is (the operator steadies the load, or hangs it again).
+    /// Stops the output where it is (the operator steadies the load, or hangs it again):
+    /// the load's travel starts again from here.
     pub fn stop_output(&mut self) {
         self.state.output_speed = 0.0;
+        self.hung_at = self.state.output_angle;
+        self.resting = false;
     }
 
     /// Stops the output and puts it back at angle zero (the operator resets the load).
     pub fn reset_output(&mut self) {
         self.state.output_angle = 0.0;
-        self.state.output_speed = 0.0;
+        self.stop_output();
+    }
+
+    /// The load rests on its floor or end stop ([`PlantParams::output_travel`]): the
+    /// output stands still and the gear carries none of the load's torque.
+    pub fn load_resting(&self) -> bool {
+        self.resting
     }
 
     /// The physical state.
@@ -570,7 +595,14 @@ impl Plant {
         // Mechanical, cam shaft.
         let ktf = p.effects.torque_constant_factor(temp, m.ambient_c);
         let t_motor = m.torque_per_amp * ktf * i_mean;
-        let tau_rot = p.load.torque();
+        // A load resting on its floor pulls on a slack rope: the gear carries none of it
+        // until it is hung again or pulls away from the stop.
+        let tau_rot = match (self.resting, p.output_travel) {
+            (true, Some(_)) if (self.state.output_angle - self.hung_at) * p.load.torque() > 0.0 => {
+                0.0
+            }
+            _ => p.load.torque(),
+        };
         let e = p.drive.eccentricity;
         let coupled = p.cam == CamSetup::Coupled;
         let mass = if coupled { p.drive.carrier_mass } else { 0.0 };
@@ -719,6 +751,18 @@ impl Plant {
         self.state.cam_angle += dtheta;
         self.state.output_speed = new_wt;
         self.state.output_angle += wt_mean * dt;
+        if let Some(travel) = p.output_travel {
+            let from_hang = self.state.output_angle - self.hung_at;
+            if from_hang.abs() >= travel {
+                // Landed: the floor (or end stop) takes the load's kinetic energy.
+                self.energy.end_stop += 0.5 * self.shaft.i_hat * new_wt * new_wt;
+                self.state.output_angle = self.hung_at + travel.copysign(from_hang);
+                self.state.output_speed = 0.0;
+                self.resting = true;
+            } else if self.resting && from_hang.abs() < travel {
+                self.resting = false;
+            }
+        }
         self.state.motor_voltage = v_motor;
         self.state.bus_voltage = if self.params.bus_capacitance > 0.0 {
             // The bridge draws d i from the bus in the on-time (negative: returns it).

@@ -552,3 +552,56 @@ fn the_cam_speed_settles_with_the_motors_mechanical_time_constant() {
         "after one time constant {left:.4} of the step is left"
     );
 }
+
+#[test]
+fn a_falling_load_lands_on_its_floor_and_is_hung_again() {
+    // Table 1's n = 2 gear (mu_s Lambda = 0.668) does not hold Fig. 5's load: it falls
+    // with the vibrator off until it has unwound its travel, then rests there.
+    let mut params = PlantParams::paper(GearSet::paper(TABLE1[2]).unwrap(), paper::FIG5_LOAD);
+    params.output_travel = Some(1.0);
+    let mut p = Plant::new(params, 7);
+    let off = Drive::default();
+    let mut peak: f64 = 0.0;
+    for _ in 0..(8.0 / DT) as usize {
+        p.step(DT, off);
+        peak = peak.max(p.state().output_speed.abs());
+    }
+    assert!(peak > 0.5, "it fell ({peak} rad/s at most)");
+    assert!(p.load_resting(), "{:?}", p.state());
+    assert_eq!(p.state().output_angle.abs(), 1.0, "it rests at the floor");
+    assert_eq!(p.state().output_speed, 0.0);
+    // The floor took the load's kinetic energy: the output's ledger still balances.
+    let l = *p.energy();
+    assert!(l.end_stop > 0.0);
+    let balance = l.load_work - l.output_friction - l.end_stop;
+    assert!(
+        balance.abs() < 0.002 * l.load_work.abs(),
+        "output imbalance {balance} of {}",
+        l.load_work
+    );
+    // Resting, the gear carries none of the load: the vibrator turning does not move it.
+    run(&mut p, 6.2, 1.0);
+    assert_eq!(p.state().output_angle.abs(), 1.0);
+    // Hung again where it lies, it falls another travel.
+    p.stop_output();
+    assert!(!p.load_resting());
+    for _ in 0..(8.0 / DT) as usize {
+        p.step(DT, off);
+    }
+    assert!(p.load_resting());
+    assert!((p.state().output_angle.abs() - 2.0).abs() < 1e-12);
+}
+
+#[test]
+fn without_a_travel_the_load_falls_on() {
+    let p0 = PlantParams::paper(GearSet::paper(TABLE1[2]).unwrap(), paper::FIG5_LOAD);
+    assert_eq!(
+        p0.output_travel, None,
+        "the paper's equations alone have no floor"
+    );
+    let mut p = Plant::new(p0, 7);
+    for _ in 0..(8.0 / DT) as usize {
+        p.step(DT, Drive::default());
+    }
+    assert!(p.state().output_angle.abs() > 1.0 && !p.load_resting());
+}
