@@ -146,7 +146,7 @@ pub use link::{
     MAX_TELEMETRY_RATE_HZ, REQUEST_WINDOW,
 };
 pub use parameters::{ParameterField, ParameterRejection, RejectReason, RigParameters};
-pub use request::{ReplyKind, Request, SimCommand};
+pub use request::{ReplyKind, Request, SessionId, SimCommand};
 pub use schema::SCHEMA_HASH;
 pub use sequence::SeqTracker;
 pub use sizes::{
@@ -161,5 +161,6 @@ pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 /// supply, temperature and timing fields. v3: `DeviceInfo::time_scale`, the request window
 /// ([`REQUEST_WINDOW`]), and a device that refuses
 /// (never silently replaces) a value it cannot use. v4: capture samples carry the output
-/// encoder (`CaptureSample::output_count`), 20 samples per chunk.
-pub const PROTOCOL_VERSION: u16 = 4;
+/// encoder (`CaptureSample::output_count`), 20 samples per chunk. v5: drive requests carry
+/// the host session ([`SessionId`]); only the owner's requests keep a release alive.
+pub const PROTOCOL_VERSION: u16 = 5;

@@ -6,9 +6,10 @@
 //! out of its type's range (a bool of 2) with `BadArgument`. A request that arrives while
 //! [`protocol::REQUEST_WINDOW`] replies still wait in the transmit queue is refused with
 //! `Busy` and has no effect. A value the device cannot use exactly is refused with
-//! `BadArgument`, never replaced by a nearby one. Only accepted requests (anything
-//! answered but a `Nack`) refresh the release heartbeat: a stream of refused requests or
-//! undecodable frames must not keep the motor vibrating. `Simulation` commands are for the
+//! `BadArgument`, never replaced by a nearby one. Only the drive owner's accepted drive
+//! requests (`Release`, `OpenLoop`, `Heartbeat` carrying its session, answered but not with
+//! a `Nack`) refresh the release heartbeat: a stream of refused requests, undecodable
+//! frames or another process's requests must not keep the motor vibrating. `Simulation` commands are for the
 //! virtual rig: [`Core::receive`] refuses them with `SimulationOnly`, and the simulator
 //! serves them through [`Core::receive_with`].
 
@@ -90,9 +91,10 @@ impl Core {
                 Some(Ok(Frame { seq, msg })) => {
                     if self.tx.queued_replies() >= REQUEST_WINDOW {
                         // Beyond the window: refused before it acts.
-                        self.answer(now_us, seq, Answer::nack(NackCode::Busy));
+                        self.answer(now_us, seq, Answer::nack(NackCode::Busy), None);
                         continue;
                     }
+                    let session = msg.session();
                     let answer = match msg {
                         // An operator's action on the virtual rig, allowed in a fault hold.
                         Request::Simulation(command) => match simulation(command) {
@@ -101,7 +103,7 @@ impl Core {
                         },
                         other => self.handle(now_us, seq, other),
                     };
-                    self.answer(now_us, seq, answer);
+                    self.answer(now_us, seq, answer, session);
                 }
                 Some(Err(Error::Decode { seq: Some(seq) })) => {
                     let known = self
@@ -115,7 +117,7 @@ impl Core {
                     } else {
                         NackCode::UnknownMessage
                     };
-                    self.answer(now_us, seq, Answer::nack(code));
+                    self.answer(now_us, seq, Answer::nack(code), None);
                 }
                 // Counted in the deframer's stats; nothing to answer.
                 Some(Err(_)) | None => {}
@@ -123,9 +125,10 @@ impl Core {
         }
     }
 
-    /// Sends the answer to request `seq`; an accepted request refreshes the heartbeat.
-    fn answer(&mut self, now_us: u64, seq: u16, answer: Answer) {
-        if answer.accepted() {
+    /// Sends the answer to request `seq`; an accepted drive request of the drive's owner
+    /// (`session`) refreshes the heartbeat.
+    fn answer(&mut self, now_us: u64, seq: u16, answer: Answer, session: Option<u32>) {
+        if answer.accepted() && session.is_some_and(|s| self.release.refreshed_by(s)) {
             self.release.last_request_us = now_us;
         }
         match answer {
@@ -192,7 +195,7 @@ impl Core {
                 | Request::GetFaults
                 | Request::ClearFaults
                 | Request::Release { on: false, .. }
-        ) || matches!(msg, Request::OpenLoop { volts } if volts == 0.0);
+        ) || matches!(msg, Request::OpenLoop { volts, .. } if volts == 0.0);
         if !status_or_clear && self.faults.in_hold(now) {
             return Answer::nack(NackCode::InFaultHold);
         }
@@ -202,15 +205,19 @@ impl Core {
                 schema_hash,
             } => hello(protocol_version, schema_hash, self.info(now)),
             Request::GetInfo => Answer::Now(Reply::Info(self.info(now))),
-            Request::Release { on, target_hz } => {
+            Request::Release {
+                on,
+                target_hz,
+                session,
+            } => {
                 let limits = self.drive_limits();
-                release::release(&mut self.release, &limits, on, target_hz).into()
+                release::release(&mut self.release, &limits, on, target_hz, session).into()
             }
-            Request::OpenLoop { volts } => {
+            Request::OpenLoop { volts, session } => {
                 let limits = self.drive_limits();
-                release::open_loop(&mut self.release, &limits, volts).into()
+                release::open_loop(&mut self.release, &limits, volts, session).into()
             }
-            Request::Heartbeat => Answer::Now(Reply::Ack),
+            Request::Heartbeat { .. } => Answer::Now(Reply::Ack),
             Request::GetParameters => Answer::Now(Reply::Parameters(self.parameters)),
             Request::SetParameters(parameters) => {
                 let idle = self.motor_idle();

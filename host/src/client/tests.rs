@@ -287,7 +287,7 @@ fn heartbeats_keep_a_release_alive_while_waiting() {
     let beats = Arc::new(AtomicU32::new(0));
     let counter = Arc::clone(&beats);
     let mut c = fake_device(move |seq, req| {
-        if matches!(req, Request::Heartbeat) {
+        if matches!(req, Request::Heartbeat { .. }) {
             counter.fetch_add(1, Ordering::SeqCst);
         }
         good_answer(seq, req)
