@@ -249,7 +249,7 @@ impl<T: Read + Write> Suite<T> {
 
     /// Wall time for `device_s` of device time.
     fn wall(&self, device_s: f64) -> Duration {
-        Duration::from_secs_f64(device_s / self.scale)
+        crate::limits::wall_duration(device_s, self.scale)
     }
 
     fn request(&mut self, req: &Request) -> Result<Option<Reply>, RigError> {

@@ -327,8 +327,8 @@ impl RigLink for DeviceBench {
     }
 
     fn wait(&mut self, seconds: f64) -> Result<(), RigError> {
-        let scale = self.session.time_scale().max(1e-9);
-        let deadline = Instant::now() + Duration::from_secs_f64((seconds / scale).max(0.0));
+        let scale = self.session.time_scale();
+        let deadline = crate::limits::deadline_after(crate::limits::wall_duration(seconds, scale));
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
