@@ -107,3 +107,104 @@ fn resume_drops_a_row_cut_short_and_says_so() {
         assert_eq!(line.split(',').count(), columns, "{line}");
     }
 }
+
+/// Every text input the tools read is bounded: `/dev/zero`, a FIFO and a file without line
+/// ends are refused at once, naming the file, instead of read forever.
+#[test]
+fn unbounded_inputs_are_refused_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let lineless = dir.path().join("lineless.csv");
+    std::fs::write(&lineless, vec![b'7'; 200_000]).unwrap();
+    let fifo = dir.path().join("fifo");
+    let fifo_made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|s| s.success());
+    let out = dir.path().join("out");
+    let out_csv = dir.path().join("out.csv");
+    let cases: Vec<(Vec<String>, &std::path::Path, &str)> = {
+        let s = |x: &str| x.to_string();
+        let p = |x: &std::path::Path| x.display().to_string();
+        let mut cases = Vec::new();
+        for file in [std::path::Path::new("/dev/zero"), lineless.as_path()]
+            .into_iter()
+            .chain(fifo_made.then_some(fifo.as_path()))
+        {
+            let why = if file == lineless.as_path() {
+                "longer than 64 KiB"
+            } else {
+                "a pipe, socket or device"
+            };
+            cases.push((
+                vec![
+                    s("calibrate"),
+                    s("--from-points"),
+                    p(file),
+                    s("--out"),
+                    p(&out),
+                ],
+                file,
+                why,
+            ));
+            cases.push((
+                vec![s("--sim"), s("calibration"), s("set"), p(file)],
+                file,
+                why,
+            ));
+            cases.push((
+                vec![
+                    s("--sim"),
+                    s("experiment"),
+                    s("torque-sweep"),
+                    s("--plan"),
+                    p(file),
+                    s("--csv"),
+                    p(&out_csv),
+                ],
+                file,
+                why,
+            ));
+            cases.push((
+                vec![
+                    s("--sim"),
+                    s("calibrate"),
+                    s("--yes"),
+                    s("--gauge-csv"),
+                    p(file),
+                    s("--out"),
+                    p(&out),
+                ],
+                file,
+                why,
+            ));
+        }
+        cases.push((
+            vec![
+                s("--sim"),
+                s("experiment"),
+                s("torque-sweep"),
+                s("--quick"),
+                s("--resume"),
+                s("--csv"),
+                p(&lineless),
+            ],
+            lineless.as_path(),
+            "longer than 64 KiB",
+        ));
+        cases
+    };
+    for (args, file, why) in cases {
+        let out = rig()
+            .args(&args)
+            .timeout(Duration::from_secs(60))
+            .output()
+            .unwrap();
+        let err = text(&out.stderr);
+        assert!(!out.status.success(), "{args:?}: {err}");
+        assert!(
+            err.contains(&file.display().to_string()) && err.contains(why),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}

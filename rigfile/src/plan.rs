@@ -212,10 +212,14 @@ impl Plan {
 
     /// Reads and checks a plan file.
     pub fn read(path: &std::path::Path) -> Result<Self, RigFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| RigFileError::File {
-            action: "read",
-            path: path.display().to_string(),
-            source,
+        let text = crate::text_input::read_text(
+            path,
+            crate::text_input::MAX_PLAN_BYTES,
+            "a plan file (TOML, docs/plans.md)",
+        )
+        .map_err(|why| RigFileError::BadValue {
+            what: format!("plan file {}", path.display()),
+            why,
         })?;
         Self::parse(&text, &path.display().to_string())
     }

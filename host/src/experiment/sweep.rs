@@ -121,11 +121,12 @@ impl Window {
 
 /// The rows already in `path` and its plan line (for `--resume`).
 pub fn read_rows(path: &Path) -> Result<(Vec<Row>, Option<String>), RigError> {
-    let text = std::fs::read_to_string(path).map_err(|source| RigError::File {
-        action: "read",
-        path: path.display().to_string(),
-        source,
-    })?;
+    let text =
+        rigfile::text_input::read_text(path, rigfile::text_input::MAX_TABLE_BYTES, "a sweep CSV")
+            .map_err(|why| RigError::MeasuredFile {
+            file: path.display().to_string(),
+            why,
+        })?;
     let plan = Header::parse(&text).plan_line;
     let mut reader = csv::ReaderBuilder::new()
         .comment(Some(b'#'))
