@@ -43,7 +43,9 @@ pub use pty::PtyMaster;
 const MAX_TURN_WALL: f64 = 0.02;
 
 /// Device output held while the host is not reading, bytes (a UART's queue would also
-/// overflow): beyond it new output is dropped, as frames lost on the line.
+/// overflow): beyond it new output is dropped, as frames lost on the line. With no client
+/// on the port nothing is held: a board's UART sends its bytes into the void, so the next
+/// client starts with fresh frames, not old ones.
 const MAX_PENDING: usize = 1 << 20;
 
 /// Virtual time without a byte from the host after which an in-process device with a
@@ -358,6 +360,11 @@ fn run(
                 *lock(&shared.dropped_bytes) += (pending.len() - before) as u64;
                 pending.truncate(before);
             }
+            if master.hung_up() {
+                // Nobody reads the line: the output is gone, as on a board's UART.
+                *lock(&shared.dropped_bytes) += pending.len() as u64;
+                pending.clear();
+            }
         }
         let written = master.write_available(&pending);
         pending.drain(..written);
@@ -451,6 +458,29 @@ mod tests {
         client.recv(Duration::from_millis(200)).unwrap();
         assert!(client.faults().unwrap().latched.is_empty());
         client.release(false, 0.0).unwrap();
+    }
+
+    #[test]
+    fn output_nobody_reads_is_dropped_and_a_new_client_starts_fresh() {
+        // Issue 33: telemetry streamed to a client that went away piled up and reached the
+        // next client seconds old.
+        let dev = VirtualDevice::paper(5.0).unwrap();
+        let mut gone = connect(&dev);
+        gone.start_telemetry(1000).unwrap();
+        drop(gone);
+        let left_at = dev.time();
+        // Two device seconds of telemetry with nobody on the port (about 100 kB).
+        while dev.time() < left_at + 2.0 {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let came_at = dev.time();
+        let mut next = connect(&dev);
+        let first = next
+            .next_telemetry(Duration::from_secs(5))
+            .unwrap()
+            .expect("the stream still runs");
+        let age_s = came_at - first.device_time_us as f64 * 1e-6;
+        assert!(age_s < 0.1, "the first sample is {age_s} s old");
     }
 
     #[test]
