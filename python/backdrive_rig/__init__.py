@@ -317,7 +317,7 @@ class Rig:
         """Starts the in-process virtual rig (the firmware's control core and the plant):
         ``preset`` ``paper`` or ``ideal``, hidden ``effects`` as ``NAME[:k=v,...]`` (``rig
         explain``'s names), ``model`` a rig file, ``speed`` virtual seconds per wall
-        second (at most 1000). As ``rig sim serve``'s options."""
+        second (at most 100). As ``rig sim serve``'s options."""
         return cls(
             _native.NativeRig.virtual_rig(
                 str(preset),

@@ -185,10 +185,11 @@ impl NativeRig {
         seed: u64,
     ) -> PyResult<Self> {
         py.detach(|| {
-            if !(speed.is_finite() && speed > 0.0 && speed <= 1000.0) {
+            let max = host::virtual_device::MAX_SPEED;
+            if !(speed.is_finite() && speed > 0.0 && speed <= max) {
                 return Err(bad(
                     format!("speed {speed}"),
-                    "not a speed factor: give a number above 0 and at most 1000 (1 = real time)",
+                    format!("not a speed the simulation can keep: give a number above 0 and at most {max} (1 = real time)"),
                 ));
             }
             let preset_value = sim::Preset::by_name(&preset)?;

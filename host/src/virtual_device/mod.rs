@@ -42,6 +42,19 @@ pub use pty::PtyMaster;
 /// simulation slows down (and says so) instead of jumping past the host's bytes.
 const MAX_TURN_WALL: f64 = 0.02;
 
+/// Longest device time one loop turn may step, s: half the slack between a heartbeat and
+/// the comms timeout (0.5 - 0.15 s), so a step never jumps past a host's next heartbeat.
+/// A turn that would step more slows the simulation down (counted in `behind_s`).
+const MAX_TURN_DEVICE_S: f64 =
+    (protocol::COMMS_TIMEOUT_MS - protocol::HEARTBEAT_INTERVAL_MS) as f64 / 2000.0;
+
+/// Fastest simulation speed a virtual device takes (device seconds per wall second): a
+/// host's heartbeats are `HEARTBEAT_INTERVAL_MS / speed` apart in wall time, and a loaded
+/// machine delays a process by a few milliseconds; at 100x a 3.5 ms delay already uses the
+/// whole slack before the comms timeout, so faster speeds would fail with `COMMS_TIMEOUT`
+/// (at 500x every sweep did) and are refused.
+pub const MAX_SPEED: f64 = 100.0;
+
 /// Device output held while the host is not reading, bytes (a UART's queue would also
 /// overflow): beyond it new output is dropped, as frames lost on the line. With no client
 /// on the port nothing is held: a board's UART sends its bytes into the void, so the next
@@ -316,7 +329,7 @@ fn run(
         if noise_sent > 0 {
             *lock(&shared.noise_bytes) += noise_sent as u64;
         }
-        let turn_wall = wall_dt.min(MAX_TURN_WALL);
+        let turn_wall = wall_dt.min(MAX_TURN_WALL).min(MAX_TURN_DEVICE_S / speed);
         if wall_dt > turn_wall {
             *lock(&shared.behind_s) += (wall_dt - turn_wall) * speed;
         }
