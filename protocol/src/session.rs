@@ -44,8 +44,8 @@
 //! * At most [`REQUEST_WINDOW`] requests are outstanding at once (heartbeats included), the
 //!   device's window: [`Session::send`] of a request beyond it returns empty bytes and
 //!   keeps the frame until a reply (or a timeout) frees a place; it then comes out of
-//!   [`Session::poll_transmit`]. A heartbeat due while the window is full waits too (the
-//!   outstanding drive requests refresh the release when the device accepts them).
+//!   [`Session::poll_transmit`]. While heartbeats go out, one place in the window is kept
+//!   for them (other requests use the rest), so a heartbeat never waits behind queries.
 //! * Every `Release`, `OpenLoop` and `Heartbeat` carries the session's id
 //!   ([`Session::with_id`]): the device keeps a release alive only on its owner's.
 //! * [`Session::keep_alive`] sends a `Heartbeat` every interval (through
@@ -277,7 +277,7 @@ impl Session {
     pub fn send(&mut self, request: Request, now: Duration) -> (u16, Vec<u8>) {
         let request = request.with_session(self.id);
         let seq = self.take_seq();
-        if self.pending.len() >= REQUEST_WINDOW || !self.waiting.is_empty() {
+        if !self.has_room() || !self.waiting.is_empty() {
             self.waiting.push_back((seq, request));
             return (seq, Vec::new());
         }
@@ -304,9 +304,18 @@ impl Session {
         bytes
     }
 
+    /// Whether the window has room for a request: while heartbeats go out one place is kept
+    /// for them, since only the owner's drive requests keep a release alive and a heartbeat
+    /// must not wait behind a full window of queries.
+    fn has_room(&self) -> bool {
+        let reserved = usize::from(self.keep_alive.is_some());
+        let requests = self.pending.values().filter(|p| !p.heartbeat).count();
+        self.pending.len() < REQUEST_WINDOW && requests < REQUEST_WINDOW - reserved
+    }
+
     /// Sends waiting requests while the window has room.
     fn release_waiting(&mut self, now: Duration) {
-        while self.pending.len() < REQUEST_WINDOW {
+        while self.has_room() {
             let Some((seq, request)) = self.waiting.pop_front() else {
                 break;
             };
@@ -766,6 +775,25 @@ mod tests {
         s.receive(&dev.say(&DeviceMessage::ack(info)), ms(301));
         assert!(s.poll(ms(301)).is_none());
         assert_eq!(s.stats().stale_replies, 1);
+    }
+
+    #[test]
+    fn a_heartbeat_never_waits_behind_a_full_window_of_queries() {
+        let mut s = Session::default().with_id(5);
+        let mut dev = Device::default();
+        s.keep_alive(Some(ms(150)), ms(0));
+        let on_wire = (0..REQUEST_WINDOW)
+            .filter(|_| !s.send(Request::GetFaults, ms(0)).1.is_empty())
+            .count();
+        assert_eq!(on_wire, REQUEST_WINDOW - 1, "one place kept for heartbeats");
+        // No reply yet: the heartbeat still goes out when due.
+        let mut beats = 0;
+        while let Some(bytes) = s.poll_transmit(ms(150)) {
+            for f in dev.requests(&bytes) {
+                beats += usize::from(f.msg == Request::Heartbeat { session: 5 });
+            }
+        }
+        assert_eq!(beats, 1);
     }
 
     #[test]
