@@ -75,6 +75,14 @@ impl Release {
         !self.host_drive() || self.owner == session
     }
 
+    /// A drive request (`Release`, `OpenLoop`, `Heartbeat`) from `session` at `now`,
+    /// `accepted` or refused: the owner's accepted ones are the heartbeat.
+    pub fn beat(&mut self, now: u64, session: SessionId, accepted: bool) {
+        if accepted && self.refreshed_by(session) {
+            self.last_request_us = now;
+        }
+    }
+
     /// One step's update at `now` with the button's level. Returns whether a host drive
     /// lapsed for want of an accepted request within `comms_timeout_us` (it is dropped; the
     /// caller raises `COMMS_TIMEOUT`).

@@ -63,11 +63,6 @@ impl Answer {
     const fn nack(code: NackCode) -> Self {
         Self::Now(Reply::Nack(code))
     }
-
-    /// Whether the request was accepted (so it refreshes the release heartbeat).
-    const fn accepted(&self) -> bool {
-        !matches!(self, Self::Now(Reply::Nack(_)) | Self::LegacyV1Nack)
-    }
 }
 
 impl Core {
@@ -91,10 +86,9 @@ impl Core {
                 Some(Ok(Frame { seq, msg })) => {
                     if self.tx.queued_replies() >= REQUEST_WINDOW {
                         // Beyond the window: refused before it acts.
-                        self.answer(now_us, seq, Answer::nack(NackCode::Busy), None);
+                        self.answer(seq, Answer::nack(NackCode::Busy));
                         continue;
                     }
-                    let session = msg.session();
                     let answer = match msg {
                         // An operator's action on the virtual rig, allowed in a fault hold.
                         Request::Simulation(command) => match simulation(command) {
@@ -103,7 +97,7 @@ impl Core {
                         },
                         other => self.handle(now_us, seq, other),
                     };
-                    self.answer(now_us, seq, answer, session);
+                    self.answer(seq, answer);
                 }
                 Some(Err(Error::Decode { seq: Some(seq) })) => {
                     let known = self
@@ -117,7 +111,7 @@ impl Core {
                     } else {
                         NackCode::UnknownMessage
                     };
-                    self.answer(now_us, seq, Answer::nack(code), None);
+                    self.answer(seq, Answer::nack(code));
                 }
                 // Counted in the deframer's stats; nothing to answer.
                 Some(Err(_)) | None => {}
@@ -125,12 +119,9 @@ impl Core {
         }
     }
 
-    /// Sends the answer to request `seq`; an accepted drive request of the drive's owner
-    /// (`session`) refreshes the heartbeat.
-    fn answer(&mut self, now_us: u64, seq: u16, answer: Answer, session: Option<u32>) {
-        if answer.accepted() && session.is_some_and(|s| self.release.refreshed_by(s)) {
-            self.release.last_request_us = now_us;
-        }
+    /// Sends the answer to request `seq` (an accepted drive request of the drive's owner
+    /// refreshed the heartbeat in [`Core::handle`]).
+    fn answer(&mut self, seq: u16, answer: Answer) {
         match answer {
             Answer::Now(reply) => self.send_reply(seq, reply),
             Answer::Later => {}
@@ -211,13 +202,20 @@ impl Core {
                 session,
             } => {
                 let limits = self.drive_limits();
-                release::release(&mut self.release, &limits, on, target_hz, session).into()
+                let answer = release::release(&mut self.release, &limits, on, target_hz, session);
+                self.release.beat(now, session, answer.is_ok());
+                answer.into()
             }
             Request::OpenLoop { volts, session } => {
                 let limits = self.drive_limits();
-                release::open_loop(&mut self.release, &limits, volts, session).into()
+                let answer = release::open_loop(&mut self.release, &limits, volts, session);
+                self.release.beat(now, session, answer.is_ok());
+                answer.into()
             }
-            Request::Heartbeat { .. } => Answer::Now(Reply::Ack),
+            Request::Heartbeat { session } => {
+                self.release.beat(now, session, true);
+                Answer::Now(Reply::Ack)
+            }
             Request::GetParameters => Answer::Now(Reply::Parameters(self.parameters)),
             Request::SetParameters(parameters) => {
                 let idle = self.motor_idle();
