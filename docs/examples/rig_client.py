@@ -22,7 +22,7 @@ import sys
 import time
 import zlib
 
-PROTOCOL_VERSION = 4
+PROTOCOL_VERSION = 5
 
 
 # --- framing -------------------------------------------------------------------------

@@ -11,6 +11,7 @@
 //! million rows take about 60 MB; the CSV is parsed as it streams in, a block of whole lines
 //! (512 KiB) per core at a time.
 
+use rigfile::text_input::LineBounded;
 use std::io::Read;
 use std::path::Path;
 
@@ -36,7 +37,7 @@ pub const MIN_ROWS: usize = 10;
 /// Longest line of a measured file, bytes: a header of every column the tools write is
 /// about 100 bytes, so a longer line is not a table (a file without line ends, `/dev/zero`,
 /// a sparse file); reading stops there instead of buffering it whole.
-pub const MAX_LINE_BYTES: usize = 64 * 1024;
+pub use rigfile::text_input::MAX_LINE_BYTES;
 /// Most rows the column buffers reserve up front from the file's size (they grow beyond).
 const MAX_RESERVED_ROWS: u64 = 4_000_000;
 
@@ -52,77 +53,8 @@ fn shortened(text: &str, max: usize) -> String {
     }
 }
 
-/// A reader that fails once a line grows beyond `limit` bytes, so a file without line ends
-/// is refused after a bounded read (the CSV reader would otherwise buffer the line whole).
-struct LineBounded<R> {
-    inner: R,
-    since_newline: usize,
-    line: u64,
-    limit: usize,
-    /// The line found too long: every later read fails with it too.
-    refused: Option<u64>,
-}
-
-impl<R> LineBounded<R> {
-    /// `inner` with lines of at most [`MAX_LINE_BYTES`].
-    fn new(inner: R) -> Self {
-        Self {
-            inner,
-            since_newline: 0,
-            line: 0,
-            limit: MAX_LINE_BYTES,
-            refused: None,
-        }
-    }
-
-    /// The refusal of line `line`.
-    fn too_long(&self, line: u64) -> std::io::Error {
-        std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            format!(
-                "line {line} is longer than {} KiB: not a CSV table of test points (a file without line ends?); reading stopped there",
-                self.limit / 1024
-            ),
-        )
-    }
-}
-
-impl<R: Read> Read for LineBounded<R> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        if let Some(line) = self.refused {
-            return Err(self.too_long(line));
-        }
-        let n = self.inner.read(buf)?;
-        // Every line of the chunk is measured, not only its last: how the reads fall must
-        // not decide which lines pass.
-        let mut run = self.since_newline;
-        let mut too_long = None;
-        let mut start = 0;
-        for_each_line_end(&buf[..n], |end| {
-            self.line += 1;
-            if run + end - start > self.limit && too_long.is_none() {
-                too_long = Some(self.line);
-            }
-            run = 0;
-            start = end + 1;
-        });
-        run += n - start;
-        if run > self.limit && too_long.is_none() {
-            too_long = Some(self.line + 1);
-        }
-        self.since_newline = run;
-        if let Some(line) = too_long {
-            self.refused = Some(line);
-            return Err(self.too_long(line));
-        }
-        Ok(n)
-    }
-}
-
-/// Calls `f` with the position of every line end in `bytes`, in order.
-fn for_each_line_end(bytes: &[u8], f: impl FnMut(usize)) {
-    memchr::memchr_iter(b'\n', bytes).for_each(f);
-}
+/// What a measured file's line should be, for the bounded reader's refusal.
+const MEASURED_TEXT: &str = "a CSV table of test points";
 
 /// One test point: the rig tools' one measured-row type ([`rigfile::row`]), which every
 /// sweep CSV writes; explain uses its cam speed, load, current, time, supply, temperature
@@ -619,7 +551,7 @@ fn parse_blocks<R: Read>(
     bytes: u64,
     block_bytes: usize,
 ) -> Result<Dataset, ExplainError> {
-    let mut reader = LineBounded::new(reader);
+    let mut reader = LineBounded::new(reader, MEASURED_TEXT);
     let mut raw = RawColumns::with_capacity((bytes / 48).min(MAX_RESERVED_ROWS) as usize);
     // Whole lines of the next block, and the part line after them.
     // Whole lines of the next block, whether the input ended there, and whether the read
@@ -679,7 +611,7 @@ fn parse_blocks<R: Read>(
     let mut pending = vec![(first, body.line())];
     // The line the next block starts on: a block ends at its last line end, and the reader
     // has counted every line end so far.
-    let mut line = reader.line + 1;
+    let mut line = reader.lines_read() + 1;
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     loop {
         // Gather a block per thread, parse them together, append in file order.
@@ -692,7 +624,7 @@ fn parse_blocks<R: Read>(
                 break;
             }
             pending.push((block, line));
-            line = reader.line + 1;
+            line = reader.lines_read() + 1;
         }
         let parsed = crate::parallel::par_map(&pending, |(block, _)| parse_block(block, &layout));
         for ((_, first_line), block) in pending.drain(..).zip(parsed) {
@@ -774,19 +706,10 @@ impl Dataset {
     /// Reads a CSV file (see the module docs for the columns).
     pub fn read_csv(path: &Path) -> Result<Self, ExplainError> {
         // A FIFO or a device would block or never end: only regular files are read.
-        if let Ok(meta) = std::fs::metadata(path)
-            && !meta.is_file()
-        {
+        if let Some(why) = rigfile::text_input::not_a_regular_file(path) {
             return Err(ExplainError::MeasuredFile {
                 file: path.display().to_string(),
-                why: format!(
-                    "is not a regular file ({}): save the measurement to a file first",
-                    if meta.is_dir() {
-                        "a folder"
-                    } else {
-                        "a pipe, socket or device"
-                    }
-                ),
+                why,
             });
         }
         let file = std::fs::File::open(path).map_err(|source| ExplainError::File {
@@ -930,31 +853,9 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn line_ends_are_found_at_every_offset() {
-        // Every byte value next to line ends, at every offset and length.
-        let bytes: Vec<u8> = (0..600u32)
-            .map(|k| match k % 7 {
-                0 | 3 => b'\n',
-                1 => (k % 256) as u8,
-                2 => 0x0b,
-                _ => 0x09,
-            })
-            .collect();
-        for start in 0..9 {
-            for len in [0, 1, 7, 8, 9, 63, 64, 65, 590] {
-                let slice = &bytes[start..(start + len).min(bytes.len())];
-                let mut found = Vec::new();
-                for_each_line_end(slice, |i| found.push(i));
-                let naive: Vec<usize> = (0..slice.len()).filter(|&i| slice[i] == b'\n').collect();
-                assert_eq!(found, naive, "start {start}, len {len}");
-            }
-        }
-    }
-
     /// The file read as one stream (the reader before blocks): the oracle of the blocks.
     fn parse_stream(text: &str) -> Result<Dataset, ExplainError> {
-        let bounded = LineBounded::new(text.as_bytes());
+        let bounded = LineBounded::new(text.as_bytes(), MEASURED_TEXT);
         let mut csv = csv_reader(bounded, true);
         let headers = csv.headers().unwrap().clone();
         let layout = Layout::of(&headers, "measured.csv")?;

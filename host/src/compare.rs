@@ -81,9 +81,15 @@ pub struct Comparison {
     pub rows: Vec<GapRow>,
 }
 
-/// The replayed plan of `data` (rows with a current, in the order they were run) and each
-/// plan point's data row.
-fn replay_plan(data: &Dataset, header: &HeaderPlan) -> Result<(Plan, Vec<usize>), RigError> {
+/// The replayed plan of `data`: each tested cell (load, drive, temperature to 0.5 deg C)
+/// once, in the order first run, so the replay's cost grows with the cells, not the rows
+/// (a 2,000-row file of repeats replays its grid once); then the rows with a current in
+/// the order they were run, and each one's cell (its plan point).
+#[allow(clippy::type_complexity, reason = "a private helper's three results")]
+fn replay_plan(
+    data: &Dataset,
+    header: &HeaderPlan,
+) -> Result<(Plan, Vec<usize>, Vec<usize>), RigError> {
     let mut order: Vec<usize> = (0..data.len())
         .filter(|&k| data.i_in()[k].is_finite())
         .collect();
@@ -103,17 +109,36 @@ fn replay_plan(data: &Dataset, header: &HeaderPlan) -> Result<(Plan, Vec<usize>)
     } else {
         DriveMode::ClosedLoop
     };
-    let points = order
+    let point = |k: usize| PlanPoint {
+        load_nm: data.tau_rot()[k].abs(),
+        volts: volts.map(|v| v[k]),
+        hz: volts
+            .is_none()
+            .then(|| data.omega_n()[k] / (2.0 * std::f64::consts::PI)),
+        repeats: None,
+        duration_s: None,
+        // Half a degree: the motor's temperature, not its sensor's last digit.
+        temp_c: temps
+            .map(|t| t[k])
+            .filter(|t| t.is_finite())
+            .map(|t| (t * 2.0).round() / 2.0),
+    };
+    let mut points: Vec<PlanPoint> = Vec::new();
+    let mut cell_of = std::collections::HashMap::new();
+    let cells: Vec<usize> = order
         .iter()
-        .map(|&k| PlanPoint {
-            load_nm: data.tau_rot()[k].abs(),
-            volts: volts.map(|v| v[k]),
-            hz: volts
-                .is_none()
-                .then(|| data.omega_n()[k] / (2.0 * std::f64::consts::PI)),
-            repeats: None,
-            duration_s: None,
-            temp_c: temps.map(|t| t[k]).filter(|t| t.is_finite()),
+        .map(|&k| {
+            let p = point(k);
+            let key = (
+                p.load_nm.to_bits(),
+                p.volts.map(f64::to_bits),
+                p.hz.map(f64::to_bits),
+                p.temp_c.map(f64::to_bits),
+            );
+            *cell_of.entry(key).or_insert_with(|| {
+                points.push(p);
+                points.len() - 1
+            })
         })
         .collect();
     let plan = Plan {
@@ -128,7 +153,7 @@ fn replay_plan(data: &Dataset, header: &HeaderPlan) -> Result<(Plan, Vec<usize>)
         points,
     };
     plan.check("replay")?;
-    Ok((plan, order))
+    Ok((plan, order, cells))
 }
 
 /// What the measured file's provenance says about its plan.
@@ -228,13 +253,13 @@ pub fn compare(
     seed: u64,
 ) -> Result<Comparison, RigError> {
     let data = Dataset::read_csv(measured)?;
-    let (plan, order) = replay_plan(&data, &header_plan(measured))?;
+    let (plan, order, cells) = replay_plan(&data, &header_plan(measured))?;
     let base = simulate(virtual_rig(base_rig, false, seed)?, &plan)?;
     let fitted = match model_rig {
         Some(m) => Some(simulate(virtual_rig(m, true, seed)?, &plan)?),
         None => None,
     };
-    let (rows, skipped_rows) = gap_rows(&data, &order, &plan, &base, fitted.as_deref());
+    let (rows, skipped_rows) = gap_rows(&data, &order, &cells, &plan, &base, fitted.as_deref());
     if rows.is_empty() {
         return Err(RigError::BadValue {
             what: format!("--measured {}", measured.display()),
@@ -288,6 +313,7 @@ pub fn compare(
 fn gap_rows(
     data: &Dataset,
     order: &[usize],
+    cells: &[usize],
     plan: &Plan,
     base: &[Option<f64>],
     fitted: Option<&[Option<f64>]>,
@@ -296,7 +322,8 @@ fn gap_rows(
     let rows = order
         .iter()
         .enumerate()
-        .filter_map(|(j, &k)| {
+        .filter_map(|(n, &k)| {
+            let j = cells[n];
             let measured_a = data.i_in()[k];
             let base_a = base.get(j).copied().flatten();
             let model_a = fitted.map(|f| f.get(j).copied().flatten());
@@ -406,12 +433,12 @@ mod gap_tests {
         }
         std::fs::write(&path, text).unwrap();
         let data = Dataset::read_csv(&path).unwrap();
-        let (plan, order) = replay_plan(&data, &HeaderPlan::default()).unwrap();
+        let (plan, order, cells) = replay_plan(&data, &HeaderPlan::default()).unwrap();
         // The sweep ran every point but the third.
         let base: Vec<Option<f64>> = (0..plan.points.len())
             .map(|j| (j != 2).then_some(2.5))
             .collect();
-        let (rows, skipped) = gap_rows(&data, &order, &plan, &base, None);
+        let (rows, skipped) = gap_rows(&data, &order, &cells, &plan, &base, None);
         assert_eq!(skipped, [3]);
         assert_eq!(rows.len(), 9);
         assert!(rows.iter().all(|r| r.row != 3));
@@ -419,9 +446,59 @@ mod gap_tests {
         let fitted: Vec<Option<f64>> = (0..plan.points.len())
             .map(|j| (j != 5).then_some(2.55))
             .collect();
-        let (rows, skipped) = gap_rows(&data, &order, &plan, &base, Some(&fitted));
+        let (rows, skipped) = gap_rows(&data, &order, &cells, &plan, &base, Some(&fitted));
         assert_eq!(skipped, [3, 6]);
         assert_eq!(rows.len(), 8);
         assert!(rows.iter().all(|r| r.gap_model_a.is_some()));
+    }
+
+    /// Issue 33: the replay grew faster than the rows (1,000 rows 21 s, 2,000 rows 59 s):
+    /// each tested cell is replayed once, so repeats cost a lookup.
+    #[test]
+    fn repeats_of_a_cell_are_replayed_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.csv");
+        let mut text = String::from("t_s,v_in_v,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c\n");
+        for k in 0..2000 {
+            let load = [0.368, 0.736, 1.104][k % 3];
+            let temp = 25.0 + 0.1 * (k % 2) as f64;
+            text.push_str(&format!(
+                "{k},3.6,30.0,{load},{},{temp}\n",
+                2.6 + 1e-4 * k as f64
+            ));
+        }
+        std::fs::write(&path, text).unwrap();
+        let data = Dataset::read_csv(&path).unwrap();
+        let (plan, order, cells) = replay_plan(&data, &HeaderPlan::default()).unwrap();
+        assert_eq!(
+            plan.points.len(),
+            3,
+            "three cells (25.0 and 25.1 deg C are one)"
+        );
+        assert_eq!((order.len(), cells.len()), (2000, 2000));
+        assert!(cells.iter().enumerate().all(|(n, &c)| c == n % 3));
+        let base = vec![Some(2.5); 3];
+        let (rows, skipped) = gap_rows(&data, &order, &cells, &plan, &base, None);
+        assert!(skipped.is_empty());
+        assert_eq!(rows.len(), 2000);
+        assert!((rows[1999].gap_base_a - (2.6 + 0.1999 - 2.5)).abs() < 1e-9);
+    }
+
+    /// Absurd loads are refused by the plan's range before anything runs.
+    #[test]
+    fn absurd_loads_are_refused_before_replaying() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.csv");
+        let mut text = String::from("omega_n_rad_s,tau_rot_nm,i_in_a\n");
+        for k in 0..12 {
+            let load = if k == 4 { -1e300 } else { 0.4 };
+            text.push_str(&format!("62.8,{load},2.6\n"));
+        }
+        std::fs::write(&path, text).unwrap();
+        let data = Dataset::read_csv(&path).unwrap();
+        let e = replay_plan(&data, &HeaderPlan::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("load_nm"), "{e}");
     }
 }

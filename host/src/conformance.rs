@@ -249,7 +249,7 @@ impl<T: Read + Write> Suite<T> {
 
     /// Wall time for `device_s` of device time.
     fn wall(&self, device_s: f64) -> Duration {
-        Duration::from_secs_f64(device_s / self.scale)
+        crate::limits::wall_duration(device_s, self.scale)
     }
 
     fn request(&mut self, req: &Request) -> Result<Option<Reply>, RigError> {
@@ -279,6 +279,7 @@ impl<T: Read + Write> Suite<T> {
                     self.request(&Request::Release {
                         on: false,
                         target_hz: 0.0,
+                        session: 0,
                     })?;
                 }
             }
@@ -467,14 +468,27 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
             },
             NackCode::BadArgument,
         ),
-        (Request::OpenLoop { volts: f32::NAN }, NackCode::BadArgument),
-        (Request::OpenLoop { volts: 1e6 }, NackCode::BadArgument),
+        (
+            Request::OpenLoop {
+                volts: f32::NAN,
+                session: 0,
+            },
+            NackCode::BadArgument,
+        ),
+        (
+            Request::OpenLoop {
+                volts: 1e6,
+                session: 0,
+            },
+            NackCode::BadArgument,
+        ),
     ];
     if motion {
         cases.push((
             Request::Release {
                 on: true,
                 target_hz: f32::NAN,
+                session: 0,
             },
             NackCode::BadArgument,
         ));
@@ -482,6 +496,7 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
             Request::Release {
                 on: true,
                 target_hz: 1e6,
+                session: 0,
             },
             NackCode::BadArgument,
         ));
@@ -490,6 +505,7 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
                 Request::Release {
                     on: true,
                     target_hz: p.max_freq_hz + 0.5,
+                    session: 0,
                 },
                 NackCode::BadArgument,
             ));
@@ -512,7 +528,7 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
             "Release with a bool of 2",
         ),
         (
-            &[3, 0x55],
+            &[3, 0x01, 0x55],
             NackCode::BadArgument,
             "Heartbeat with a trailing byte",
         ),
@@ -557,6 +573,7 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
     } else {
         for name in [
             "heartbeat-timeout",
+            "release-owner",
             "fault-latch-hold-clear",
             "safe-state-after-faults",
         ] {
@@ -804,8 +821,13 @@ fn busy_beyond_window<T: Read + Write>(s: &mut Suite<T>) -> Result<(), RigError>
     Ok(())
 }
 
+/// A second host session on the same port: its requests are answered but keep no release
+/// alive, and its release is refused while another session's is live.
+const STRANGER_SESSION: protocol::SessionId = 0x0BAD_0BAD;
+
 /// A release whose heartbeats stop: vibration stops after the comms timeout (device and
-/// wall time), `COMMS_TIMEOUT` latches, a release is refused in the hold and while the
+/// wall time) although a second session keeps sending heartbeats and status requests and
+/// cannot take the release over (`release-owner`), `COMMS_TIMEOUT` latches, a release is refused in the hold and while the
 /// fault is latched, a lock never is, `ClearFaults` clears it, and the device ends in its
 /// safe state.
 fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<(), RigError> {
@@ -815,6 +837,7 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
     let ack = s.request(&Request::Release {
         on: true,
         target_hz: hz,
+        session: 0,
     })?;
     if ack != Some(Reply::Ack) {
         // Say which precondition failed: a fault that would not clear (its cause is
@@ -840,7 +863,7 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
     let mut last_device_us = 0u64;
     let mut heartbeats_ok = true;
     while Instant::now() < until {
-        let seq = s.link.send(&Request::Heartbeat)?;
+        let seq = s.link.send(&Request::Heartbeat { session: 0 })?;
         let step_end = Instant::now() + every;
         while Instant::now() < step_end {
             s.link.pump(Duration::from_millis(1))?;
@@ -856,12 +879,26 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
             last_device_us = t.device_time_us;
         }
     }
-    let seq = s.link.send(&Request::Heartbeat)?;
+    let seq = s.link.send(&Request::Heartbeat { session: 0 })?;
     let silent_from = Instant::now();
+    // The owner falls silent; a second session talks on, and asks to take over.
+    let takeover = s.link.send(&Request::Release {
+        on: true,
+        target_hz: hz,
+        session: STRANGER_SESSION,
+    })?;
+    let mut stranger_at = silent_from;
     let mut stopped_wall = None;
     let mut fault_us = None;
     let end = silent_from + s.wall(1.5) + Duration::from_millis(500);
     while Instant::now() < end && (stopped_wall.is_none() || fault_us.is_none()) {
+        if stopped_wall.is_none() && Instant::now() >= stranger_at {
+            s.link.send(&Request::Heartbeat {
+                session: STRANGER_SESSION,
+            })?;
+            s.link.send(&Request::GetFaults)?;
+            stranger_at += every;
+        }
         s.link.pump(Duration::from_millis(1))?;
         for (at, m) in s.link.take_unsolicited() {
             match m {
@@ -883,6 +920,7 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
         }
     }
     let _ = s.link.replies.remove(&seq);
+    let takeover = s.link.replies.remove(&takeover);
     let timeout_s = f64::from(protocol::COMMS_TIMEOUT_MS) / 1000.0;
     let period_s = 0.001;
     // The device-time bound: after the last heartbeat's acceptance, at most the timeout
@@ -903,6 +941,17 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
             timeout_s + period_s + 0.01 + 0.02 * s.scale
         ),
     );
+    s.record(
+        "release-owner",
+        takeover == Some(Reply::Nack(NackCode::Busy)) && device_ok && wall_ok,
+        format!(
+            "a second session's Release(on) during the first's release got {}; its heartbeats and GetFaults every {:.3} s wall kept nothing alive: vibration stopped {} after the owner's last heartbeat",
+            describe(&takeover),
+            every.as_secs_f64(),
+            stopped_wall.map_or("never".into(), |w| format!("{:.3} s wall", w.as_secs_f64())),
+        ),
+    );
+    s.link.clear_replies();
     let _ = s.request(&Request::StopTelemetry)?;
 
     // Latch, hold, clear.
@@ -914,6 +963,7 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
     let release = Request::Release {
         on: true,
         target_hz: hz,
+        session: 0,
     };
     let got = s.request(&release)?;
     if got != Some(Reply::Nack(NackCode::InFaultHold)) {
@@ -923,6 +973,7 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
     let got = s.request(&Request::Release {
         on: false,
         target_hz: 0.0,
+        session: 0,
     })?;
     if got != Some(Reply::Ack) {
         bad.push(format!("Release(off) in the hold: {}", describe(&got)));
@@ -942,13 +993,14 @@ fn heartbeat_and_faults<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<()
         other => bad.push(format!("ClearFaults: {}", describe(&other))),
     }
     // Cleared and past the hold: accepted again.
-    let got = s.request(&Request::Heartbeat)?;
+    let got = s.request(&Request::Heartbeat { session: 0 })?;
     if got != Some(Reply::Ack) {
         bad.push(format!("Heartbeat after the clear: {}", describe(&got)));
     }
     let got = s.request(&Request::Release {
         on: false,
         target_hz: 0.0,
+        session: 0,
     })?;
     if got != Some(Reply::Ack) {
         bad.push(format!("Release(off) after the clear: {}", describe(&got)));

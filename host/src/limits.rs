@@ -7,6 +7,8 @@
 //! what the firmware binary and the virtual device run), so host and firmware built from one
 //! checkout (the protocol's schema hash makes sure of that) agree.
 
+use std::time::{Duration, Instant};
+
 use firmware_core::CoreConfig;
 
 use crate::RigError;
@@ -134,6 +136,43 @@ pub fn check_telemetry_rate(option: &str, hz: u16) -> Result<(), RigError> {
     )
 }
 
+/// Longest duration a user may give anywhere (a plan's durations and rests, a Python
+/// release or recording), device seconds: an hour ([`rigfile::plan::MAX_SECONDS`]).
+pub const MAX_SECONDS: f64 = rigfile::plan::MAX_SECONDS;
+
+/// `seconds` for `field` if it is a positive duration of at most [`MAX_SECONDS`], else the
+/// error naming the field and the range.
+pub fn check_seconds(field: &str, seconds: f64) -> Result<f64, RigError> {
+    if seconds.is_finite() && seconds > 0.0 && seconds <= MAX_SECONDS {
+        Ok(seconds)
+    } else {
+        Err(RigError::BadValue {
+            what: format!("{field} {seconds}"),
+            why: format!("give a positive number of device seconds, at most {MAX_SECONDS}"),
+        })
+    }
+}
+
+/// Wall-clock time of `device_s` device seconds at `time_scale` device seconds per wall
+/// second. Never panics: NaN and negative give zero, too long saturates at a century.
+pub fn wall_duration(device_s: f64, time_scale: f64) -> Duration {
+    const CENTURY_S: f64 = 100.0 * 365.25 * 86_400.0;
+    let s = device_s / time_scale.max(1e-9);
+    if s.is_nan() || s <= 0.0 {
+        Duration::ZERO
+    } else {
+        Duration::from_secs_f64(s.min(CENTURY_S))
+    }
+}
+
+/// The instant `wait` from now, saturating far in the future instead of overflowing.
+pub fn deadline_after(wait: Duration) -> Instant {
+    let now = Instant::now();
+    now.checked_add(wait)
+        .or_else(|| now.checked_add(Duration::from_secs(86_400 * 365)))
+        .unwrap_or(now)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,5 +217,27 @@ mod tests {
         let e = check_telemetry_rate("--rate", 300).unwrap_err().to_string();
         assert!(e.contains("250 and 500 Hz"), "{e}");
         assert_eq!(capture_capacity(), 10_000);
+    }
+
+    #[test]
+    fn user_seconds_are_checked_and_wall_durations_never_panic() {
+        assert_eq!(check_seconds("seconds", 2.5).unwrap(), 2.5);
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, 1e300, 3600.001] {
+            let e = check_seconds("seconds", bad).unwrap_err().to_string();
+            assert!(e.contains("seconds") && e.contains("3600"), "{e}");
+        }
+        for (s, scale) in [
+            (1e300, 1.0),
+            (f64::NAN, 1.0),
+            (-5.0, 1.0),
+            (1.0, 0.0),
+            (1e18, 1e-9),
+        ] {
+            let d = wall_duration(s, scale);
+            assert!(d <= Duration::from_secs(3_200_000_000), "{d:?}");
+            let _ = deadline_after(d);
+        }
+        assert_eq!(wall_duration(2.0, 10.0), Duration::from_millis(200));
+        let _ = deadline_after(Duration::MAX);
     }
 }

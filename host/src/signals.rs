@@ -52,6 +52,22 @@ fn name_of(signal: usize) -> &'static str {
     }
 }
 
+/// Whether a stop signal arrived since the process started (after [`interrupt_flag`]).
+pub fn interrupted() -> bool {
+    last_signal().load(Ordering::SeqCst) != 0
+}
+
+/// `ExitCode::SUCCESS`, or 128 + the signal's number when a stop signal ended the verb:
+/// every verb that runs until stopped ends this way, so a script tells a signal from a
+/// normal end.
+pub fn exit_code() -> ExitCode {
+    if interrupted() {
+        interrupt_exit_code()
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
 /// The exit code of a procedure stopped by a signal: 128 + its number (130 for Ctrl-C).
 pub fn interrupt_exit_code() -> ExitCode {
     exit_code_of(last_signal().load(Ordering::SeqCst))

@@ -12,7 +12,7 @@ mod support {
 use support::served::Server;
 
 /// The checks every run lists (the motion ones run: a served rig is a simulation).
-const CHECKS: [&str; 14] = [
+const CHECKS: [&str; 15] = [
     "handshake",
     "version-refusal",
     "out-of-range-refused",
@@ -24,6 +24,7 @@ const CHECKS: [&str; 14] = [
     "busy-beyond-window",
     "safe-state-after-load",
     "heartbeat-timeout",
+    "release-owner",
     "fault-latch-hold-clear",
     "safe-state-after-faults",
     "device-frames-decode",

@@ -146,7 +146,7 @@ fn served_rig_keeps_calibration_and_faults_between_clients_and_stops_on_sigint()
     assert!(f["latched"].as_array().unwrap().is_empty(), "{f}");
 
     let status = server.interrupt();
-    assert_eq!(status.code(), Some(0), "SIGINT ends serve with exit 0");
+    assert_eq!(status.code(), Some(130), "SIGINT ends serve with 128 + 2");
 }
 
 /// A second client of a port one client holds is told the port is busy and who holds it,
@@ -199,7 +199,11 @@ fn a_second_client_is_told_the_port_is_busy_and_by_whom() {
         .unwrap();
     assert!(sent.success());
     let status = release.wait().unwrap();
-    assert!(status.success(), "Ctrl-C ends release on, locked: {status}");
+    assert_eq!(
+        status.code(),
+        Some(130),
+        "Ctrl-C ends release on, locked, with 128 + 2: {status}"
+    );
     let info = server.json(&["info", "--json"]);
     assert_eq!(
         info["board"], "virtual",
@@ -282,8 +286,8 @@ fn issue_12_done_when_served_rig_sweep_through_line_noise_explained() {
 
     assert_eq!(
         server.interrupt().code(),
-        Some(0),
-        "SIGINT ends serve with exit 0"
+        Some(130),
+        "SIGINT ends serve with 128 + 2"
     );
 }
 
@@ -298,7 +302,7 @@ fn a_client_works_through_line_noise() {
         assert!(f["latched"].as_array().unwrap().is_empty(), "{f}");
     }
     let status = server.interrupt();
-    assert_eq!(status.code(), Some(0));
+    assert_eq!(status.code(), Some(130));
 }
 
 #[test]
@@ -464,5 +468,5 @@ fn python_example_reads_info_and_telemetry() {
     assert_eq!(v["telemetry"]["state"], "locked", "{v}");
     // The rig serves the next client as before.
     assert_eq!(server.json(&["info", "--json"])["board"], "virtual");
-    assert_eq!(server.interrupt().code(), Some(0));
+    assert_eq!(server.interrupt().code(), Some(130));
 }

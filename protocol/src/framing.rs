@@ -219,7 +219,7 @@ mod tests {
     #[test]
     fn round_trip_and_delimiter() {
         let mut buf = [0u8; MAX_FRAME_SIZE];
-        let frame = encode_frame(7, &Request::Heartbeat, &mut buf).unwrap();
+        let frame = encode_frame(7, &Request::Heartbeat { session: 9 }, &mut buf).unwrap();
         assert_eq!(frame.first(), Some(&FRAME_DELIMITER));
         assert_eq!(frame.last(), Some(&FRAME_DELIMITER));
         assert!(!frame[1..frame.len() - 1].contains(&0));
@@ -229,7 +229,7 @@ mod tests {
             decoded,
             Frame {
                 seq: 7,
-                msg: Request::Heartbeat
+                msg: Request::Heartbeat { session: 9 }
             }
         );
     }

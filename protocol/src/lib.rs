@@ -146,7 +146,7 @@ pub use link::{
     MAX_TELEMETRY_RATE_HZ, REQUEST_WINDOW,
 };
 pub use parameters::{ParameterField, ParameterRejection, RejectReason, RigParameters};
-pub use request::{ReplyKind, Request, SimCommand};
+pub use request::{ReplyKind, Request, SessionId, SimCommand};
 pub use schema::SCHEMA_HASH;
 pub use sequence::SeqTracker;
 pub use sizes::{
@@ -164,4 +164,6 @@ pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 /// encoder (`CaptureSample::output_count`), at most [`CAPTURE_CHUNK_SAMPLES`] per chunk (the
 /// firmware sends `firmware_core`'s `UPLOAD_CHUNK_SAMPLES`, fewer, to keep a chunk's framing
 /// short under its core lock; a host takes chunks of any length up to the maximum).
-pub const PROTOCOL_VERSION: u16 = 4;
+/// v5: drive requests carry the host session ([`SessionId`]); only the owner's requests keep a
+/// release alive.
+pub const PROTOCOL_VERSION: u16 = 5;

@@ -25,8 +25,11 @@ pub enum Request {
     },
     /// Asks for `Info`.
     GetInfo,
-    /// Starts (`on`) or stops vibration. A release stays live only while accepted
-    /// requests (heartbeats) keep arriving within [`crate::COMMS_TIMEOUT_MS`].
+    /// Starts (`on`) or stops vibration. A release belongs to the session that started it
+    /// and stays live only while that session's `Release`, `OpenLoop` or `Heartbeat`
+    /// requests keep arriving within [`crate::COMMS_TIMEOUT_MS`]; another session's
+    /// `Release { on: true }` is refused with `Busy` while it is live. Any session may lock
+    /// (`on` false).
     Release {
         /// True to vibrate (make the gear backdrivable), false to lock.
         on: bool,
@@ -34,9 +37,15 @@ pub enum Request {
         /// parameters' `max_freq_hz` (at most the board's cap); outside it `BadArgument`,
         /// never clamped. Ignored when `on` is false.
         target_hz: f32,
+        /// The sending host session ([`SessionId`]): the release's owner.
+        session: SessionId,
     },
-    /// Keeps a release alive; answered by `Ack`.
-    Heartbeat,
+    /// Keeps the sending session's release or open-loop drive alive; answered by `Ack`
+    /// (another session's heartbeat is answered too, but keeps nothing alive).
+    Heartbeat {
+        /// The sending host session.
+        session: SessionId,
+    },
     /// Asks for the active [`RigParameters`]; answered by `Parameters`.
     GetParameters,
     /// Validates, stores and activates a parameter record; `Ack` once stored, or
@@ -73,11 +82,19 @@ pub enum Request {
     OpenLoop {
         /// Mean voltage across the motor, V (sign: direction).
         volts: f32,
+        /// The sending host session: the drive's owner, as for `Release`.
+        session: SessionId,
     },
     /// An operator action on the virtual rig (hang a load, change a supply). Real firmware
     /// answers `Nack(SimulationOnly)`; the virtual rig `Ack`.
     Simulation(SimCommand),
 }
+
+/// A host session's identity on a link shared by several processes: a number the host
+/// picks at random when it opens the session. The device keeps a release or open-loop drive
+/// alive only on requests carrying its owner's id, so a second process on the same port
+/// cannot keep a dead host's release vibrating (`protocol/LAYOUT.md`, "State rules").
+pub type SessionId = u32;
 
 /// The simulated operator's and bench's actions, for procedures that run unchanged on the
 /// real and the virtual rig (on a real rig the operator does them by hand).
@@ -167,6 +184,30 @@ impl Request {
         }
     }
 
+    /// The session a drive request (`Release`, `Heartbeat`, `OpenLoop`) carries; `None` for
+    /// the others.
+    pub const fn session(&self) -> Option<SessionId> {
+        match self {
+            Self::Release { session, .. }
+            | Self::Heartbeat { session }
+            | Self::OpenLoop { session, .. } => Some(*session),
+            _ => None,
+        }
+    }
+
+    /// The request with `id` as the session of a drive request (the others unchanged): how
+    /// a host session stamps its own id on what it sends.
+    #[must_use]
+    pub fn with_session(mut self, id: SessionId) -> Self {
+        if let Self::Release { session, .. }
+        | Self::Heartbeat { session }
+        | Self::OpenLoop { session, .. } = &mut self
+        {
+            *session = id;
+        }
+        self
+    }
+
     /// The request's name for messages: the variant, with `Release(on)` / `Release(off)`
     /// and `Simulation(SetLoad)` etc. spelled out.
     pub const fn name(&self) -> &'static str {
@@ -175,7 +216,7 @@ impl Request {
             Self::GetInfo => "GetInfo",
             Self::Release { on: true, .. } => "Release(on)",
             Self::Release { on: false, .. } => "Release(off)",
-            Self::Heartbeat => "Heartbeat",
+            Self::Heartbeat { .. } => "Heartbeat",
             Self::GetParameters => "GetParameters",
             Self::SetParameters(_) => "SetParameters",
             Self::StartTelemetry { .. } => "StartTelemetry",
@@ -198,7 +239,7 @@ impl Request {
             Self::GetFaults | Self::ClearFaults => ReplyKind::Faults,
             Self::GetParameters => ReplyKind::Parameters,
             Self::Release { .. }
-            | Self::Heartbeat
+            | Self::Heartbeat { .. }
             | Self::SetParameters(_)
             | Self::StartTelemetry { .. }
             | Self::StopTelemetry

@@ -44,8 +44,10 @@
 //! * At most [`REQUEST_WINDOW`] requests are outstanding at once (heartbeats included), the
 //!   device's window: [`Session::send`] of a request beyond it returns empty bytes and
 //!   keeps the frame until a reply (or a timeout) frees a place; it then comes out of
-//!   [`Session::poll_transmit`]. A heartbeat due while the window is full waits too (the
-//!   outstanding requests refresh the release when the device accepts them).
+//!   [`Session::poll_transmit`]. While heartbeats go out, one place in the window is kept
+//!   for them (other requests use the rest), so a heartbeat never waits behind queries.
+//! * Every `Release`, `OpenLoop` and `Heartbeat` carries the session's id
+//!   ([`Session::with_id`]): the device keeps a release alive only on its owner's.
 //! * [`Session::keep_alive`] sends a `Heartbeat` every interval (through
 //!   [`Session::poll_transmit`]) while a release or an open-loop drive is live. Their
 //!   replies are consumed here; refusals are counted.
@@ -63,7 +65,7 @@ use crate::compat::{PeerIdentity, check_peer, identify_peer};
 use crate::{
     CaptureChunk, DeviceDeframer, DeviceInfo, DeviceMessage, Error, FRAME_DELIMITER, FaultFlags,
     HealthSample, NackCode, PROTOCOL_VERSION, REQUEST_WINDOW, Reply, Request, SCHEMA_HASH,
-    SeqTracker, TelemetrySample, encode_frame_vec,
+    SeqTracker, SessionId, TelemetrySample, encode_frame_vec,
 };
 
 /// Events kept while the driver does not poll; beyond this the oldest are dropped.
@@ -199,6 +201,8 @@ pub struct Session {
     transmit: VecDeque<Vec<u8>>,
     /// Heartbeat interval and when the last one went out.
     keep_alive: Option<(Duration, Duration)>,
+    /// This session's id, stamped on every drive request it sends.
+    id: SessionId,
     device_seq: SeqTracker,
     last_telemetry_seq: Option<u32>,
     stats: SessionStats,
@@ -222,10 +226,26 @@ impl Session {
             events: VecDeque::new(),
             transmit: VecDeque::new(),
             keep_alive: None,
+            id: 0,
             device_seq: SeqTracker::new(),
             last_telemetry_seq: None,
             stats: SessionStats::default(),
         }
+    }
+
+    /// The session with `id` as its [`SessionId`] (0 until set): every `Release`,
+    /// `OpenLoop` and `Heartbeat` it sends carries it, whatever the caller put there. A host
+    /// picks it at random when it opens a port, so two processes on one port differ and
+    /// only the one that released keeps the release alive.
+    #[must_use]
+    pub fn with_id(mut self, id: SessionId) -> Self {
+        self.id = id;
+        self
+    }
+
+    /// This session's id.
+    pub fn id(&self) -> SessionId {
+        self.id
     }
 
     /// Bytes to write once after opening a port: a lone delimiter ends any half frame the
@@ -255,8 +275,9 @@ impl Session {
     /// outstanding the bytes are empty: the frame waits for a free place and then comes
     /// out of [`Session::poll_transmit`].
     pub fn send(&mut self, request: Request, now: Duration) -> (u16, Vec<u8>) {
+        let request = request.with_session(self.id);
         let seq = self.take_seq();
-        if self.pending.len() >= REQUEST_WINDOW || !self.waiting.is_empty() {
+        if !self.has_room() || !self.waiting.is_empty() {
             self.waiting.push_back((seq, request));
             return (seq, Vec::new());
         }
@@ -283,9 +304,18 @@ impl Session {
         bytes
     }
 
+    /// Whether the window has room for a request: while heartbeats go out one place is kept
+    /// for them, since only the owner's drive requests keep a release alive and a heartbeat
+    /// must not wait behind a full window of queries.
+    fn has_room(&self) -> bool {
+        let reserved = usize::from(self.keep_alive.is_some());
+        let requests = self.pending.values().filter(|p| !p.heartbeat).count();
+        self.pending.len() < REQUEST_WINDOW && requests < REQUEST_WINDOW - reserved
+    }
+
     /// Sends waiting requests while the window has room.
     fn release_waiting(&mut self, now: Duration) {
-        while self.pending.len() < REQUEST_WINDOW {
+        while self.has_room() {
             let Some((seq, request)) = self.waiting.pop_front() else {
                 break;
             };
@@ -507,11 +537,12 @@ impl Session {
         {
             self.keep_alive = Some((every, now));
             let seq = self.take_seq();
-            self.transmit.push_back(frame(seq, &Request::Heartbeat));
+            let heartbeat = Request::Heartbeat { session: self.id };
+            self.transmit.push_back(frame(seq, &heartbeat));
             self.pending.insert(
                 seq,
                 Pending {
-                    request: Request::Heartbeat,
+                    request: heartbeat,
                     sent_at: now,
                     tries: 1,
                     heartbeat: true,
@@ -747,15 +778,34 @@ mod tests {
     }
 
     #[test]
+    fn a_heartbeat_never_waits_behind_a_full_window_of_queries() {
+        let mut s = Session::default().with_id(5);
+        let mut dev = Device::default();
+        s.keep_alive(Some(ms(150)), ms(0));
+        let on_wire = (0..REQUEST_WINDOW)
+            .filter(|_| !s.send(Request::GetFaults, ms(0)).1.is_empty())
+            .count();
+        assert_eq!(on_wire, REQUEST_WINDOW - 1, "one place kept for heartbeats");
+        // No reply yet: the heartbeat still goes out when due.
+        let mut beats = 0;
+        while let Some(bytes) = s.poll_transmit(ms(150)) {
+            for f in dev.requests(&bytes) {
+                beats += usize::from(f.msg == Request::Heartbeat { session: 5 });
+            }
+        }
+        assert_eq!(beats, 1);
+    }
+
+    #[test]
     fn heartbeats_go_out_while_kept_alive_and_their_replies_stay_inside() {
-        let mut s = Session::default();
+        let mut s = Session::default().with_id(0xA11CE);
         let mut dev = Device::default();
         s.keep_alive(Some(ms(150)), ms(0));
         let mut beats = Vec::new();
         for t in (0..=1000).step_by(10) {
             while let Some(bytes) = s.poll_transmit(ms(t)) {
                 for f in dev.requests(&bytes) {
-                    assert_eq!(f.msg, Request::Heartbeat);
+                    assert_eq!(f.msg, Request::Heartbeat { session: 0xA11CE });
                     beats.push(t);
                     // The device refuses every other one.
                     let reply = if beats.len() % 2 == 0 {
@@ -829,7 +879,7 @@ mod tests {
     fn noise_between_frames_costs_no_frame_and_is_reported() {
         let mut s = Session::default();
         let mut dev = Device::default();
-        let (seq, _) = s.send(Request::Heartbeat, ms(0));
+        let (seq, _) = s.send(Request::Heartbeat { session: 0 }, ms(0));
         let mut wire = vec![0x37, 0x99];
         wire.extend(dev.say(&telemetry(1)));
         wire.extend([0x12, 0x00, 0x55]);
@@ -849,7 +899,7 @@ mod tests {
         assert_eq!(desyncs, 4, "{got:?}");
         assert!(got.contains(&Event::Reply {
             seq,
-            request: Request::Heartbeat,
+            request: Request::Heartbeat { session: 0 },
             reply: Reply::Ack
         }));
         let stats = s.stats();

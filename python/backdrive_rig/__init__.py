@@ -18,8 +18,10 @@ torque-sweep --csv``).
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
+import threading
 from types import TracebackType
 from typing import (
     TYPE_CHECKING,
@@ -122,6 +124,32 @@ PathLike = Union[str, "os.PathLike[str]"]
 _FIG5: Dict[str, Any] = dict(_native.HOLD_RELEASE_DEFAULTS)
 
 
+def _int_arg(name: str, value: Any, lo: int, hi: int) -> int:
+    """``value`` as a whole number in ``[lo, hi]``, else BadValueError naming ``name``."""
+    if isinstance(value, bool):
+        raise BadValueError(f"{name} {value!r}: give a whole number from {lo} to {hi}")
+    try:
+        as_float = float(value)
+        whole = int(value)
+    except (TypeError, ValueError, OverflowError):
+        raise BadValueError(f"{name} {value!r}: give a whole number from {lo} to {hi}") from None
+    if not math.isfinite(as_float) or whole != as_float or not lo <= whole <= hi:
+        raise BadValueError(f"{name} {value!r}: give a whole number from {lo} to {hi}")
+    return whole
+
+
+def _float_arg(name: str, value: Any) -> float:
+    """``value`` as a finite float, else BadValueError naming ``name`` (the range is the
+    library's to check)."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise BadValueError(f"{name} {value!r}: give a number") from None
+    if not math.isfinite(out):
+        raise BadValueError(f"{name} {value!r}: give a finite number")
+    return out
+
+
 class Report(Dict[str, Any]):
     """A result as the CLI's ``--json`` prints it: a dict with the same keys, also
     readable as attributes (``report.verdict`` is ``report["verdict"]``)."""
@@ -203,9 +231,9 @@ class Release:
 
     def __init__(self, rig: "Rig", freq_hz: float, seconds: Optional[float], confirm_s: Optional[float]):
         self._rig = rig
-        self.freq_hz = float(freq_hz)
-        self.seconds = None if seconds is None else float(seconds)
-        self.confirm_s = None if confirm_s is None else float(confirm_s)
+        self.freq_hz = _float_arg("freq_hz", freq_hz)
+        self.seconds = None if seconds is None else _float_arg("seconds", seconds)
+        self.confirm_s = None if confirm_s is None else _float_arg("confirm_s", confirm_s)
         self._status = _native.NativeReleaseStatus()
 
     def start(self) -> "Release":
@@ -299,8 +327,12 @@ class Recorder:
         return self
 
     def stop(self) -> "Recorder":
-        """Stops the recording and the telemetry stream."""
-        self._rig._native.stop_recording(self._native)
+        """Stops the recording and the telemetry stream; a recorder another thread waits
+        for starts next."""
+        try:
+            self._rig._native.stop_recording(self._native)
+        finally:
+            self._rig._recording_ended(self)
         return self
 
     def _raise_error(self) -> None:
@@ -357,13 +389,17 @@ class Rig:
 
     def __init__(self, native: Any):
         self._native = native
+        # One recording at a time: other threads' recorders queue here (see recorder()).
+        self._recording_turn = threading.Condition()
+        self._recording_live: Optional[Recorder] = None
+        self._recording_thread: Optional[int] = None
 
     @classmethod
     def open(cls, port: str, baud: int = _native.DEFAULT_BAUD_RATE) -> "Rig":
         """Opens the board or served virtual rig on ``port`` and says Hello; a device of
         another protocol version or schema raises VersionMismatchError naming which side
         to update."""
-        return cls(_native.NativeRig.open(str(port), int(baud)))
+        return cls(_native.NativeRig.open(str(port), _int_arg("baud", baud, 1, 2**32 - 1)))
 
     @classmethod
     def virtual(
@@ -377,14 +413,14 @@ class Rig:
         """Starts the in-process virtual rig (the firmware's control core and the plant):
         ``preset`` ``paper`` or ``ideal``, hidden ``effects`` as ``NAME[:k=v,...]`` (``rig
         explain``'s names), ``model`` a rig file, ``speed`` virtual seconds per wall
-        second (at most 1000). As ``rig sim serve``'s options."""
+        second (at most 100). As ``rig sim serve``'s options."""
         return cls(
             _native.NativeRig.virtual_rig(
                 str(preset),
                 [str(e) for e in effects],
                 None if model is None else os.fspath(model),
-                float(speed),
-                int(seed),
+                _float_arg("speed", speed),
+                _int_arg("seed", seed, 0, 2**64 - 1),
             )
         )
 
@@ -465,8 +501,29 @@ class Rig:
 
     def recorder(self, rate_hz: int = 1000, seconds: Optional[float] = None) -> Recorder:
         """Starts a background telemetry recording at ``rate_hz`` (the device's 1 kHz
-        divided by a whole number) for ``seconds`` of device time, or until ``stop()``."""
-        return Recorder(self, self._native.start_recording(int(rate_hz), seconds))
+        divided by a whole number) for ``seconds`` of device time, or until ``stop()``.
+        One recording runs at a time: a call from another thread while one runs waits
+        (queues) until it ends or is stopped; the same thread gets BadValueError."""
+        rate = _int_arg("rate_hz", rate_hz, 1, 2**32 - 1)
+        secs = None if seconds is None else _float_arg("seconds", seconds)
+        me = threading.get_ident()
+        with self._recording_turn:
+            while self._recording_live is not None and not self._recording_live.done:
+                if self._recording_thread == me:
+                    raise BadValueError(
+                        "record: a recording is already running on this rig in this thread: stop it first"
+                    )
+                self._recording_turn.wait(0.05)
+            native = self._native.start_recording(rate, secs)
+            rec = Recorder(self, native)
+            self._recording_live, self._recording_thread = rec, me
+            return rec
+
+    def _recording_ended(self, rec: Recorder) -> None:
+        with self._recording_turn:
+            if self._recording_live is rec:
+                self._recording_live, self._recording_thread = None, None
+            self._recording_turn.notify_all()
 
     @overload
     def record(self, seconds: float, rate_hz: int = 1000, pandas: Literal[True] = True) -> "pd.DataFrame": ...
@@ -497,7 +554,9 @@ class Rig:
         encoder_count, cam_angle_rad, output_count, output_angle_rad; the output's are NaN
         on a device without an output encoder). ``attrs`` (or the dict's ``"summary"``) has the
         counters: ``dropped``, ``gaps``, ``completed``."""
-        summary, columns = self._native.capture(float(seconds), int(rate_hz))
+        summary, columns = self._native.capture(
+            _float_arg("seconds", seconds), _int_arg("rate_hz", rate_hz, 1, 2**32 - 1)
+        )
         out: Any = _frame(columns, pandas)
         if pandas:
             out.attrs.update(json.loads(summary))
@@ -737,14 +796,14 @@ def design(
     if unknown:
         raise BadValueError(f"design: unknown option(s) {', '.join(unknown)} (options: {', '.join(sorted(allowed))})")
     for name, values, what in (("z", z, "tooth counts Z1, Z2, Z3, Z4"), ("x", x, "profile shifts x1, x2, x3, x4")):
-        if values is not None and len(values) != 4:
-            raise BadValueError(f"design: {name} {list(values)}: give four {what} (e.g. z=[49, 51, 50, 50])")
+        if values is not None and (isinstance(values, (str, bytes)) or len(list(values)) != 4):
+            raise BadValueError(f"design: {name} {values!r}: give four {what} (e.g. z=[49, 51, 50, 50])")
     text = _native.design(
-        None if z is None else [int(v) for v in z],
-        None if x is None else [float(v) for v in x],
+        None if z is None else [_int_arg(f"z[{i}]", v, 1, 1000) for i, v in enumerate(z)],
+        None if x is None else [_float_arg(f"x[{i}]", v) for i, v in enumerate(x)],
         table1,
-        eta_gross,
-        **{k: float(v) for k, v in rig.items()},
+        None if eta_gross is None else _float_arg("eta_gross", eta_gross),
+        **{k: _float_arg(k, v) for k, v in rig.items()},
     )
     return _reports(text) if table1 else _report(text)
 

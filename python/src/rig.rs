@@ -195,10 +195,11 @@ impl NativeRig {
         seed: u64,
     ) -> PyResult<Self> {
         py.detach(|| {
-            if !(speed.is_finite() && speed > 0.0 && speed <= 1000.0) {
+            let max = host::virtual_device::MAX_SPEED;
+            if !(speed.is_finite() && speed > 0.0 && speed <= max) {
                 return Err(bad(
                     format!("speed {speed}"),
-                    "not a speed factor: give a number above 0 and at most 1000 (1 = real time)",
+                    format!("not a speed the simulation can keep: give a number above 0 and at most {max} (1 = real time)"),
                 ));
             }
             let preset_value = sim::Preset::by_name(&preset)?;
@@ -318,21 +319,19 @@ impl NativeRig {
                     "a release is already live on this rig: end it first (one `with rig.release(...)` at a time)",
                 ));
             }
-            if let Some(s) = seconds
-                && !(s.is_finite() && s > 0.0)
-            {
-                return Err(bad(format!("seconds {s}"), "give a positive duration (device seconds), or None for a release kept by confirm()"));
+            if let Some(s) = seconds {
+                host::limits::check_seconds("seconds", s)?;
             }
             let confirm_within = match (seconds, confirm_s) {
-                (None, Some(c)) if c.is_finite() && c > 0.0 => Some(w.wall(c)),
-                (None, _) => {
+                (None, Some(c)) => Some(w.wall(host::limits::check_seconds("confirm_s", c)?)),
+                (None, None) => {
                     return Err(bad("confirm_s", "a release without a duration needs a positive confirm_s (Python must confirm it within that)"));
                 }
                 (Some(_), _) => None,
             };
             let cal = w.bench.session.client.calibration()?;
             let hz = host::limits::check_release_freq("freq_hz", freq_hz, &cal)?;
-            let ends = seconds.map(|s| Instant::now() + w.wall(s));
+            let ends = seconds.map(|s| host::limits::deadline_after(w.wall(s)));
             w.bench.session.client.release(true, hz)?;
             {
                 let mut st = lock(&status);
@@ -364,19 +363,29 @@ impl NativeRig {
     ) -> PyResult<NativeRecording> {
         self.call(py, move |w| {
             if w.recording.is_some() {
-                return Err(bad("record", "a recording is already running on this rig: stop it first"));
+                return Err(bad(
+                    "record",
+                    "a recording is already running on this rig: stop it first",
+                ));
             }
-            let hz = u16::try_from(rate_hz).map_err(|_| bad(format!("rate_hz {rate_hz}"), "too high: the device sends telemetry at most at 1000 Hz"))?;
+            let hz = u16::try_from(rate_hz).map_err(|_| {
+                bad(
+                    format!("rate_hz {rate_hz}"),
+                    "too high: the device sends telemetry at most at 1000 Hz",
+                )
+            })?;
             host::limits::check_telemetry_rate("rate_hz", hz)?;
             let duration_us = match seconds {
-                Some(s) if s.is_finite() && s > 0.0 => Some((s * 1e6).round() as u64),
-                Some(s) => return Err(bad(format!("seconds {s}"), "give a positive duration (device seconds), or None to record until stopped")),
+                Some(s) => Some((host::limits::check_seconds("seconds", s)? * 1e6).round() as u64),
                 None => None,
             };
             let rec = Arc::new(Recording::new(duration_us));
             w.bench.session.client.start_telemetry(hz)?;
             w.recording = Some(rec.clone());
-            Ok(NativeRecording { inner: rec, rate_hz })
+            Ok(NativeRecording {
+                inner: rec,
+                rate_hz,
+            })
         })
     }
 
@@ -385,8 +394,11 @@ impl NativeRig {
         let rec = recording.inner.clone();
         self.call(py, move |w| {
             rec.done.store(true, Ordering::SeqCst);
-            if w.recording.as_ref().is_some_and(|r| Arc::ptr_eq(r, &rec)) {
-                w.recording = None;
+            match &w.recording {
+                Some(r) if Arc::ptr_eq(r, &rec) => w.recording = None,
+                // Another thread's recording runs now: its telemetry stays on.
+                Some(_) => return Ok(()),
+                None => {}
             }
             w.bench.session.client.stop_telemetry()
         })

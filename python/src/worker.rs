@@ -159,7 +159,7 @@ impl Worker {
 
     /// Wall time of `device_s` device seconds.
     pub fn wall(&self, device_s: f64) -> Duration {
-        Duration::from_secs_f64((device_s / self.time_scale()).max(0.0))
+        host::limits::wall_duration(device_s, self.time_scale())
     }
 
     /// Locks the gear and ends the live release (if any), saying why.

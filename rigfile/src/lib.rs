@@ -83,6 +83,7 @@ mod parse;
 pub mod plan;
 pub mod row;
 mod sections;
+pub mod text_input;
 pub mod wire;
 
 pub use effects::{PlantSetup, apply_params};

@@ -30,6 +30,27 @@ pub enum Order {
     AsListed,
 }
 
+/// Longest duration, rest or window a plan gives, s (an hour): user seconds beyond it are
+/// refused before anything moves, so no arithmetic on them can overflow.
+pub const MAX_SECONDS: f64 = 3600.0;
+/// Most repeats of one point.
+pub const MAX_REPEATS: u32 = 1000;
+/// Most runs a plan makes (points times repeats): the runs are listed before the first.
+pub const MAX_RUNS: u64 = 100_000;
+/// Most `[[points]]` tables.
+pub const MAX_POINTS: usize = 10_000;
+/// Highest open-loop supply a plan gives, V (twice the bridge's 12 V: the simulator's
+/// limit; a device refuses more than its own).
+pub const MAX_VOLTS: f64 = 24.0;
+/// Heaviest load a plan gives, N m: twice the paper's largest (what the simulator
+/// accepts).
+pub fn max_load_nm() -> f64 {
+    2.0 * model::paper::TAU_ROT_MAX
+}
+
+/// Highest vibration frequency a plan gives, Hz (a device refuses more than its own cap).
+pub const MAX_HZ: f64 = 1000.0;
+
 /// One test point of a plan.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -191,10 +212,14 @@ impl Plan {
 
     /// Reads and checks a plan file.
     pub fn read(path: &std::path::Path) -> Result<Self, RigFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| RigFileError::File {
-            action: "read",
-            path: path.display().to_string(),
-            source,
+        let text = crate::text_input::read_text(
+            path,
+            crate::text_input::MAX_PLAN_BYTES,
+            "a plan file (TOML, docs/plans.md)",
+        )
+        .map_err(|why| RigFileError::BadValue {
+            what: format!("plan file {}", path.display()),
+            why,
         })?;
         Self::parse(&text, &path.display().to_string())
     }
@@ -212,7 +237,8 @@ impl Plan {
         Ok(plan)
     }
 
-    /// Checks every value; errors name the key and what to give.
+    /// Checks every value against its stated range ([`MAX_SECONDS`], [`MAX_REPEATS`],
+    /// [`MAX_RUNS`]); errors name the key and what to give.
     pub fn check(&self, name: &str) -> Result<(), RigFileError> {
         let bad = |key: String, why: &str| RigFileError::BadValue {
             what: format!("plan {name}: {key}"),
@@ -221,27 +247,46 @@ impl Plan {
         if self.points.is_empty() {
             return Err(bad("points".into(), "give at least one [[points]] table"));
         }
-        if self.repeats == 0 {
-            return Err(bad("repeats".into(), "must be at least 1"));
+        let repeats_why = format!("must be 1 to {MAX_REPEATS}");
+        let seconds_why = format!("must be a positive number of seconds, at most {MAX_SECONDS}");
+        if !(1..=MAX_REPEATS).contains(&self.repeats) {
+            return Err(bad("repeats".into(), &repeats_why));
         }
-        if !(self.rest_s.is_finite() && self.rest_s >= 0.0) {
-            return Err(bad("rest_s".into(), "must be 0 or more seconds"));
-        }
-        if !(self.window_s.is_finite() && self.window_s > 0.0) {
+        if !(self.rest_s.is_finite() && (0.0..=MAX_SECONDS).contains(&self.rest_s)) {
             return Err(bad(
-                "window_s".into(),
-                "must be a positive number of seconds",
+                "rest_s".into(),
+                &format!("must be 0 to {MAX_SECONDS} seconds"),
+            ));
+        }
+        if !(self.window_s.is_finite() && self.window_s > 0.0 && self.window_s <= MAX_SECONDS) {
+            return Err(bad("window_s".into(), &seconds_why));
+        }
+        if self.points.len() > MAX_POINTS {
+            return Err(bad(
+                "points".into(),
+                &format!("{} tables: give at most {MAX_POINTS}", self.points.len()),
             ));
         }
         for (k, p) in self.points.iter().enumerate() {
             let key = |field: &str| format!("points[{}].{field}", k + 1);
-            if !(p.load_nm.is_finite() && p.load_nm >= 0.0) {
-                return Err(bad(key("load_nm"), "must be 0 or more N m"));
+            if !(p.load_nm.is_finite() && (0.0..=max_load_nm()).contains(&p.load_nm)) {
+                return Err(bad(
+                    key("load_nm"),
+                    &format!(
+                        "must be 0 to {} N m (twice the teeth's rated torque)",
+                        max_load_nm()
+                    ),
+                ));
             }
             match self.mode {
                 DriveMode::OpenLoop => match p.volts {
-                    Some(v) if v.is_finite() && v > 0.0 => {}
-                    Some(_) => return Err(bad(key("volts"), "must be a positive voltage")),
+                    Some(v) if v.is_finite() && v > 0.0 && v <= MAX_VOLTS => {}
+                    Some(_) => {
+                        return Err(bad(
+                            key("volts"),
+                            &format!("must be a positive voltage, at most {MAX_VOLTS} V"),
+                        ));
+                    }
                     None => {
                         return Err(bad(
                             key("volts"),
@@ -250,8 +295,13 @@ impl Plan {
                     }
                 },
                 DriveMode::ClosedLoop => match p.hz {
-                    Some(v) if v.is_finite() && v > 0.0 => {}
-                    Some(_) => return Err(bad(key("hz"), "must be a positive frequency")),
+                    Some(v) if v.is_finite() && v > 0.0 && v <= MAX_HZ => {}
+                    Some(_) => {
+                        return Err(bad(
+                            key("hz"),
+                            &format!("must be a positive frequency, at most {MAX_HZ} Hz"),
+                        ));
+                    }
                     None => {
                         return Err(bad(
                             key("hz"),
@@ -260,18 +310,35 @@ impl Plan {
                     }
                 },
             }
-            if p.repeats == Some(0) {
-                return Err(bad(key("repeats"), "must be at least 1"));
+            if p.repeats.is_some_and(|r| !(1..=MAX_REPEATS).contains(&r)) {
+                return Err(bad(key("repeats"), &repeats_why));
             }
-            if p.duration_s.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
+            if p.duration_s
+                .is_some_and(|d| !(d.is_finite() && d > 0.0 && d <= MAX_SECONDS))
+            {
+                return Err(bad(key("duration_s"), &seconds_why));
+            }
+            if p.temp_c
+                .is_some_and(|t| !(t.is_finite() && t.abs() <= 1000.0))
+            {
                 return Err(bad(
-                    key("duration_s"),
-                    "must be a positive number of seconds",
+                    key("temp_c"),
+                    "must be a temperature in deg C (-1000 to 1000)",
                 ));
             }
-            if p.temp_c.is_some_and(|t| !t.is_finite()) {
-                return Err(bad(key("temp_c"), "must be a temperature in deg C"));
-            }
+        }
+        let runs: u64 = self
+            .points
+            .iter()
+            .map(|p| u64::from(p.repeats.unwrap_or(self.repeats)))
+            .sum();
+        if runs > MAX_RUNS {
+            return Err(bad(
+                "repeats".into(),
+                &format!(
+                    "the plan makes {runs} runs: give at most {MAX_RUNS} (fewer points or repeats)"
+                ),
+            ));
         }
         Ok(())
     }

@@ -101,6 +101,9 @@ fn steps_to_s(steps: u32, step_s: f64) -> f64 {
     }
 }
 
+/// The session id of the simulator's host session.
+pub const SIM_SESSION_ID: protocol::SessionId = 0x5133_0001;
+
 impl SimLink {
     /// Opens a session on `rig`.
     pub fn new(rig: SimRig) -> Self {
@@ -110,7 +113,8 @@ impl SimLink {
         };
         let mut link = Self {
             rig,
-            session: Session::new(config),
+            // One host per virtual rig: a fixed id keeps runs reproducible.
+            session: Session::new(config).with_id(SIM_SESSION_ID),
             rx: Vec::new(),
             outcomes: BTreeMap::new(),
             last_telemetry: None,

@@ -116,6 +116,7 @@ pub fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), L::Erro
     let req = Request::Release {
         on: true,
         target_hz: hz,
+        session: 0,
     };
     match link.request(&req)? {
         Reply::Ack => {
@@ -131,6 +132,7 @@ pub fn lock<L: RigLink + ?Sized>(link: &mut L) -> Result<(), L::Error> {
     let req = Request::Release {
         on: false,
         target_hz: 0.0,
+        session: 0,
     };
     match link.request(&req)? {
         Reply::Ack => {

@@ -29,7 +29,8 @@ fn hw_overcurrent_clears_once_its_cause_is_gone() {
     assert_eq!(
         link.request(&Request::Release {
             on: false,
-            target_hz: 0.0
+            target_hz: 0.0,
+            session: 0
         })
         .ok(),
         Some(Reply::Ack)

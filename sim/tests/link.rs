@@ -76,7 +76,7 @@ fn simulation_commands_work_during_a_fault_hold_and_do_not_block_the_firmware() 
     assert_eq!(link.request(&req).unwrap(), Reply::Ack);
     // The firmware's own requests are still refused in the hold.
     assert_eq!(
-        link.request(&Request::Heartbeat).unwrap(),
+        link.request(&Request::Heartbeat { session: 0 }).unwrap(),
         Reply::Nack(NackCode::InFaultHold)
     );
 }

@@ -14,8 +14,9 @@
 //! * the bridge drives the motor only while a release (or open-loop drive) that the device
 //!   accepted is live: no lock, no fault and no comms lapse since, and the device's release
 //!   state is what the wire says it is;
-//! * without an accepted request for the comms timeout (+ one control period) a live
-//!   release ends in the safe state with `COMMS_TIMEOUT` latched, and never earlier;
+//! * without an accepted drive request (`Release`, `OpenLoop`, `Heartbeat`: every client
+//!   here is one session) for the comms timeout (+ one control period) a live release
+//!   ends in the safe state with `COMMS_TIMEOUT` latched, and never earlier;
 //! * latched faults only grow while time passes and drop only at an accepted `ClearFaults`;
 //!   every fault that rises is announced by a `FaultEvent` in the same control period;
 //! * the session keeps at most the window outstanding, ends every request it sent exactly
@@ -526,15 +527,19 @@ impl World {
             );
         }
         let accepted = !matches!(reply, Reply::Nack(_));
-        if accepted {
+        // Only drive requests refresh a release (the owner's: every client here is session 0).
+        let drive = d.request.as_ref().and_then(Request::session).is_some();
+        if accepted && drive {
             self.last_accepted_us = self.last_accepted_us.max(d.at_us);
+        }
+        if accepted {
             match d.request {
                 Some(Request::Release { on: true, .. }) => self.host_release = true,
                 Some(Request::Release { on: false, .. }) => {
                     self.host_release = false;
                     self.open_loop = false;
                 }
-                Some(Request::OpenLoop { volts }) => self.open_loop = volts != 0.0,
+                Some(Request::OpenLoop { volts, .. }) => self.open_loop = volts != 0.0,
                 _ => {}
             }
         }
@@ -697,14 +702,14 @@ fn request() -> impl Strategy<Value = Request> {
     ];
     let load = prop_oneof![Just(0.0f32), Just(0.5), Just(1.84), Just(3.68), Just(-5.0)];
     prop_oneof![
-        6 => Just(Request::Heartbeat),
+        6 => Just(Request::Heartbeat { session: 0 }),
         1 => Just(Request::GetInfo),
         2 => Just(Request::GetFaults),
         3 => Just(Request::ClearFaults),
         1 => Just(Session::hello()),
         1 => Just(Request::Hello { protocol_version: protocol::PROTOCOL_VERSION + 1, schema_hash: 7 }),
-        6 => (any::<bool>(), hz).prop_map(|(on, target_hz)| Request::Release { on, target_hz }),
-        2 => volts.prop_map(|volts| Request::OpenLoop { volts }),
+        6 => (any::<bool>(), hz).prop_map(|(on, target_hz)| Request::Release { on, target_hz, session: 0 }),
+        2 => volts.prop_map(|volts| Request::OpenLoop { volts, session: 0 }),
         1 => prop_oneof![Just(1u16), Just(100), Just(1000), Just(300), Just(0)]
             .prop_map(|rate_hz| Request::StartTelemetry { rate_hz }),
         1 => Just(Request::StopTelemetry),
@@ -797,6 +802,7 @@ fn a_known_script_exercises_every_rule() {
     let release = Request::Release {
         on: true,
         target_hz: 10.0,
+        session: 0,
     };
     let script = [
         Op::Send(release.clone()),

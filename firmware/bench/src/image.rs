@@ -183,6 +183,7 @@ impl Bench {
         let req = Request::Release {
             on: hz > 0.0,
             target_hz: hz,
+            session: 0,
         };
         self.request(&req, request_kind::RELEASE)?;
         self.keep_alive = hz > 0.0;
@@ -265,7 +266,7 @@ impl Bench {
         self.host_tx(now);
         if self.keep_alive && now - self.last_heartbeat_us >= HEARTBEAT_US {
             self.last_heartbeat_us = now;
-            self.request(&Request::Heartbeat, request_kind::HEARTBEAT)?;
+            self.request(&Request::Heartbeat { session: 0 }, request_kind::HEARTBEAT)?;
         }
         Ok(())
     }

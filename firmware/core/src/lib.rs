@@ -44,7 +44,8 @@
 //!
 //! # Safety policy
 //! The motor runs only in `SpinUp` and `Vibrating`, only while a release is live (a host
-//! `Release` kept alive by any accepted request within `comms_timeout_us`, or the held
+//! `Release` kept alive by its owner session's accepted drive requests within
+//! `comms_timeout_us`, or the held
 //! button), and never while a fault is latched. Faults latch until `ClearFaults`, which clears
 //! only those whose condition is gone; for `fault_hold_us` after a fault every request
 //! other than `Hello`, `GetInfo`, `GetFaults` and `ClearFaults` is refused.

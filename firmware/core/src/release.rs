@@ -1,12 +1,14 @@
 //! The release requests: what may make the motor run (the safety policy in the crate
 //! documentation). A host `Release` or an open-loop drive, kept alive by the heartbeat of
-//! accepted requests, or the held button, let go once since boot or the last fault.
+//! its owner's accepted drive requests, or the held button, let go once since boot or the
+//! last fault. A host drive belongs to the session that started it: another session's
+//! requests cannot refresh it, and its `Release { on: true }` is refused while it is live.
 //!
 //! [`Release`] holds that state; the requests that change it ([`release`], [`open_loop`])
 //! are plain functions of the state and what they are checked against ([`DriveLimits`]), as
 //! the other request handlers in `crate::server` are.
 
-use protocol::{NackCode, Reply};
+use protocol::{NackCode, Reply, SessionId};
 
 /// Why a drive request was refused, or `Ok` with what it did.
 pub(crate) type DriveAnswer = Result<Reply, NackCode>;
@@ -22,7 +24,9 @@ pub(crate) struct Release {
     pub open_loop_volts: Option<f32>,
     /// Whether the open-loop drive has settled ([`OpenLoopSettle`]).
     pub open_loop: OpenLoopSettle,
-    /// When the last accepted request arrived: the heartbeat, us.
+    /// The session whose request started the host drive (meaningful while one is live).
+    pub owner: SessionId,
+    /// When the owner's last accepted drive request arrived: the heartbeat, us.
     pub last_request_us: u64,
     /// The button releases now: held, and let go once since boot or the last fault.
     pub button_held: bool,
@@ -38,6 +42,7 @@ impl Release {
             host_target_hz: default_hz,
             open_loop_volts: None,
             open_loop: OpenLoopSettle::default(),
+            owner: 0,
             last_request_us: 0,
             button_held: false,
             button_armed: false,
@@ -57,6 +62,25 @@ impl Release {
     pub fn stop_host(&mut self) {
         self.host = false;
         self.open_loop_volts = None;
+    }
+
+    /// Whether a host drive (a release or an open-loop drive) is live.
+    pub fn host_drive(&self) -> bool {
+        self.host || self.open_loop_volts.is_some()
+    }
+
+    /// Whether a request from `session` may refresh the heartbeat: it owns the live host
+    /// drive, or none is live (then the heartbeat matters to nobody).
+    pub fn refreshed_by(&self, session: SessionId) -> bool {
+        !self.host_drive() || self.owner == session
+    }
+
+    /// A drive request (`Release`, `OpenLoop`, `Heartbeat`) from `session` at `now`,
+    /// `accepted` or refused: the owner's accepted ones are the heartbeat.
+    pub fn beat(&mut self, now: u64, session: SessionId, accepted: bool) {
+        if accepted && self.refreshed_by(session) {
+            self.last_request_us = now;
+        }
     }
 
     /// One step's update at `now` with the button's level. Returns whether a host drive
@@ -100,14 +124,16 @@ pub(crate) struct DriveLimits {
     pub locked: bool,
 }
 
-/// `Release { on, target_hz }`: off stops every host drive; on starts a release at exactly
-/// `target_hz` (refused, never clamped, outside the limits), unless something is locked or
-/// an open-loop drive runs.
+/// `Release { on, target_hz, session }`: off (from any session) stops every host drive; on
+/// starts a release at exactly `target_hz` (refused, never clamped, outside the limits)
+/// owned by `session`, unless something is locked, an open-loop drive runs or another
+/// session's release is live.
 pub(crate) fn release(
     r: &mut Release,
     limits: &DriveLimits,
     on: bool,
     target_hz: f32,
+    session: SessionId,
 ) -> DriveAnswer {
     if !on {
         r.stop_host();
@@ -117,18 +143,25 @@ pub(crate) fn release(
         Err(NackCode::BadArgument)
     } else if limits.locked {
         Err(NackCode::InFaultHold)
-    } else if r.open_loop_volts.is_some() {
+    } else if r.open_loop_volts.is_some() || (r.host && r.owner != session) {
         Err(NackCode::Busy)
     } else {
         r.host = true;
+        r.owner = session;
         r.host_target_hz = target_hz;
         Ok(Reply::Ack)
     }
 }
 
-/// `OpenLoop { volts }`: 0 stops an open-loop drive; otherwise a fixed bridge voltage of at
-/// most [`DriveLimits::max_volts`], unless something is locked or a release is live.
-pub(crate) fn open_loop(r: &mut Release, limits: &DriveLimits, volts: f32) -> DriveAnswer {
+/// `OpenLoop { volts, session }`: 0 (from any session) stops an open-loop drive; otherwise
+/// a fixed bridge voltage of at most [`DriveLimits::max_volts`] owned by `session`, unless
+/// something is locked, a release is live or another session's open-loop drive runs.
+pub(crate) fn open_loop(
+    r: &mut Release,
+    limits: &DriveLimits,
+    volts: f32,
+    session: SessionId,
+) -> DriveAnswer {
     if volts == 0.0 {
         r.open_loop_volts = None;
         Ok(Reply::Ack)
@@ -136,10 +169,11 @@ pub(crate) fn open_loop(r: &mut Release, limits: &DriveLimits, volts: f32) -> Dr
         Err(NackCode::BadArgument)
     } else if limits.locked {
         Err(NackCode::InFaultHold)
-    } else if r.host || r.button_held {
+    } else if r.host || r.button_held || (r.open_loop_volts.is_some() && r.owner != session) {
         Err(NackCode::Busy)
     } else {
         r.open_loop_volts = Some(volts);
+        r.owner = session;
         Ok(Reply::Ack)
     }
 }
@@ -216,15 +250,15 @@ mod tests {
         let mut r = Release::new(10.0);
         assert_eq!(r.requested_hz(10.0), 10.0);
         assert_eq!(
-            release(&mut r, &LIMITS, true, 20.5),
+            release(&mut r, &LIMITS, true, 20.5, 7),
             Err(NackCode::BadArgument)
         );
         assert_eq!(
-            release(&mut r, &LIMITS, true, f32::NAN),
+            release(&mut r, &LIMITS, true, f32::NAN, 7),
             Err(NackCode::BadArgument)
         );
         assert!(!r.host);
-        assert_eq!(release(&mut r, &LIMITS, true, 12.5), Ok(Reply::Ack));
+        assert_eq!(release(&mut r, &LIMITS, true, 12.5, 7), Ok(Reply::Ack));
         assert!(r.host && r.requested_hz(10.0) == 12.5);
         let locked = DriveLimits {
             locked: true,
@@ -232,25 +266,53 @@ mod tests {
         };
         let mut l = Release::new(10.0);
         assert_eq!(
-            release(&mut l, &locked, true, 12.5),
+            release(&mut l, &locked, true, 12.5, 7),
             Err(NackCode::InFaultHold)
         );
         // Off is always accepted, locked or not, and stops an open-loop drive too.
         l.open_loop_volts = Some(3.0);
-        assert_eq!(release(&mut l, &locked, false, f32::NAN), Ok(Reply::Ack));
+        assert_eq!(release(&mut l, &locked, false, f32::NAN, 7), Ok(Reply::Ack));
         assert_eq!(l.open_loop_volts, None);
     }
 
     #[test]
     fn open_loop_and_release_exclude_each_other() {
         let mut r = Release::new(10.0);
-        assert_eq!(open_loop(&mut r, &LIMITS, 11.5), Err(NackCode::BadArgument));
-        assert_eq!(open_loop(&mut r, &LIMITS, -6.2), Ok(Reply::Ack));
+        assert_eq!(
+            open_loop(&mut r, &LIMITS, 11.5, 7),
+            Err(NackCode::BadArgument)
+        );
+        assert_eq!(open_loop(&mut r, &LIMITS, -6.2, 7), Ok(Reply::Ack));
         assert_eq!(r.open_loop_volts, Some(-6.2));
-        assert_eq!(release(&mut r, &LIMITS, true, 10.0), Err(NackCode::Busy));
-        assert_eq!(open_loop(&mut r, &LIMITS, 0.0), Ok(Reply::Ack));
-        assert_eq!(release(&mut r, &LIMITS, true, 10.0), Ok(Reply::Ack));
-        assert_eq!(open_loop(&mut r, &LIMITS, 3.6), Err(NackCode::Busy));
+        assert_eq!(release(&mut r, &LIMITS, true, 10.0, 7), Err(NackCode::Busy));
+        assert_eq!(open_loop(&mut r, &LIMITS, 0.0, 7), Ok(Reply::Ack));
+        assert_eq!(release(&mut r, &LIMITS, true, 10.0, 7), Ok(Reply::Ack));
+        assert_eq!(open_loop(&mut r, &LIMITS, 3.6, 7), Err(NackCode::Busy));
+    }
+
+    #[test]
+    fn a_drive_belongs_to_the_session_that_started_it() {
+        let mut r = Release::new(10.0);
+        assert!(r.refreshed_by(1) && r.refreshed_by(2), "nothing live");
+        assert_eq!(release(&mut r, &LIMITS, true, 10.0, 1), Ok(Reply::Ack));
+        assert!(r.refreshed_by(1) && !r.refreshed_by(2));
+        // A second session can neither take it over nor start an open-loop drive.
+        assert_eq!(release(&mut r, &LIMITS, true, 12.0, 2), Err(NackCode::Busy));
+        assert_eq!(r.requested_hz(10.0), 10.0);
+        // The owner may change its frequency.
+        assert_eq!(release(&mut r, &LIMITS, true, 12.0, 1), Ok(Reply::Ack));
+        // Anyone may lock.
+        assert_eq!(release(&mut r, &LIMITS, false, 0.0, 2), Ok(Reply::Ack));
+        assert!(!r.host_drive());
+        assert_eq!(open_loop(&mut r, &LIMITS, 3.0, 2), Ok(Reply::Ack));
+        assert!(!r.refreshed_by(1));
+        assert_eq!(open_loop(&mut r, &LIMITS, 4.0, 1), Err(NackCode::Busy));
+        assert_eq!(open_loop(&mut r, &LIMITS, 0.0, 1), Ok(Reply::Ack));
+        // Once lapsed, another session may release.
+        assert_eq!(release(&mut r, &LIMITS, true, 10.0, 3), Ok(Reply::Ack));
+        r.last_request_us = 0;
+        assert!(r.update(600_000, false, 500_000));
+        assert_eq!(release(&mut r, &LIMITS, true, 10.0, 4), Ok(Reply::Ack));
     }
 
     #[test]

@@ -6,9 +6,10 @@
 //! out of its type's range (a bool of 2) with `BadArgument`. A request that arrives while
 //! [`protocol::REQUEST_WINDOW`] replies still wait in the transmit queue is refused with
 //! `Busy` and has no effect. A value the device cannot use exactly is refused with
-//! `BadArgument`, never replaced by a nearby one. Only accepted requests (anything
-//! answered but a `Nack`) refresh the release heartbeat: a stream of refused requests or
-//! undecodable frames must not keep the motor vibrating. `Simulation` commands are for the
+//! `BadArgument`, never replaced by a nearby one. Only the drive owner's accepted drive
+//! requests (`Release`, `OpenLoop`, `Heartbeat` carrying its session, answered but not with
+//! a `Nack`) refresh the release heartbeat: a stream of refused requests, undecodable
+//! frames or another process's requests must not keep the motor vibrating. `Simulation` commands are for the
 //! virtual rig: [`Core::receive`] refuses them with `SimulationOnly`, and the simulator
 //! serves them through [`Core::receive_with`].
 
@@ -62,11 +63,6 @@ impl Answer {
     const fn nack(code: NackCode) -> Self {
         Self::Now(Reply::Nack(code))
     }
-
-    /// Whether the request was accepted (so it refreshes the release heartbeat).
-    const fn accepted(&self) -> bool {
-        !matches!(self, Self::Now(Reply::Nack(_)) | Self::LegacyV1Nack)
-    }
 }
 
 impl Core {
@@ -90,7 +86,7 @@ impl Core {
                 Some(Ok(Frame { seq, msg })) => {
                     if self.tx.queued_replies() >= REQUEST_WINDOW {
                         // Beyond the window: refused before it acts.
-                        self.answer(now_us, seq, Answer::nack(NackCode::Busy));
+                        self.answer(seq, Answer::nack(NackCode::Busy));
                         continue;
                     }
                     let answer = match msg {
@@ -101,7 +97,7 @@ impl Core {
                         },
                         other => self.handle(now_us, seq, other),
                     };
-                    self.answer(now_us, seq, answer);
+                    self.answer(seq, answer);
                 }
                 Some(Err(Error::Decode { seq: Some(seq) })) => {
                     let known = self
@@ -115,7 +111,7 @@ impl Core {
                     } else {
                         NackCode::UnknownMessage
                     };
-                    self.answer(now_us, seq, Answer::nack(code));
+                    self.answer(seq, Answer::nack(code));
                 }
                 // Counted in the deframer's stats; nothing to answer.
                 Some(Err(_)) | None => {}
@@ -123,11 +119,9 @@ impl Core {
         }
     }
 
-    /// Sends the answer to request `seq`; an accepted request refreshes the heartbeat.
-    fn answer(&mut self, now_us: u64, seq: u16, answer: Answer) {
-        if answer.accepted() {
-            self.release.last_request_us = now_us;
-        }
+    /// Sends the answer to request `seq` (an accepted drive request of the drive's owner
+    /// refreshed the heartbeat in [`Core::handle`]).
+    fn answer(&mut self, seq: u16, answer: Answer) {
         match answer {
             Answer::Now(reply) => self.send_reply(seq, reply),
             Answer::Later => {}
@@ -192,7 +186,7 @@ impl Core {
                 | Request::GetFaults
                 | Request::ClearFaults
                 | Request::Release { on: false, .. }
-        ) || matches!(msg, Request::OpenLoop { volts } if volts == 0.0);
+        ) || matches!(msg, Request::OpenLoop { volts, .. } if volts == 0.0);
         if !status_or_clear && self.faults.in_hold(now) {
             return Answer::nack(NackCode::InFaultHold);
         }
@@ -202,15 +196,26 @@ impl Core {
                 schema_hash,
             } => hello(protocol_version, schema_hash, self.info(now)),
             Request::GetInfo => Answer::Now(Reply::Info(self.info(now))),
-            Request::Release { on, target_hz } => {
+            Request::Release {
+                on,
+                target_hz,
+                session,
+            } => {
                 let limits = self.drive_limits();
-                release::release(&mut self.release, &limits, on, target_hz).into()
+                let answer = release::release(&mut self.release, &limits, on, target_hz, session);
+                self.release.beat(now, session, answer.is_ok());
+                answer.into()
             }
-            Request::OpenLoop { volts } => {
+            Request::OpenLoop { volts, session } => {
                 let limits = self.drive_limits();
-                release::open_loop(&mut self.release, &limits, volts).into()
+                let answer = release::open_loop(&mut self.release, &limits, volts, session);
+                self.release.beat(now, session, answer.is_ok());
+                answer.into()
             }
-            Request::Heartbeat => Answer::Now(Reply::Ack),
+            Request::Heartbeat { session } => {
+                self.release.beat(now, session, true);
+                Answer::Now(Reply::Ack)
+            }
             Request::GetParameters => Answer::Now(Reply::Parameters(self.parameters)),
             Request::SetParameters(parameters) => {
                 let idle = self.motor_idle();

@@ -42,10 +42,12 @@ pub fn parse(text: &str, file: &str) -> Result<Loaded, RigError> {
 /// Reads calibration file `path` (see [`parse`]).
 pub fn read(path: &Path) -> Result<Loaded, RigError> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| RigError::CalibrationFile {
-        file: name.clone(),
-        why: format!("cannot read it ({e})"),
-    })?;
+    let text =
+        rigfile::text_input::read_text(path, rigfile::MAX_RIG_FILE_BYTES, "a rig file (TOML)")
+            .map_err(|why| RigError::CalibrationFile {
+                file: name.clone(),
+                why,
+            })?;
     parse(&text, &name)
 }
 

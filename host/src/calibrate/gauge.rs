@@ -74,12 +74,15 @@ pub fn parse_reading(text: &str, unit: GaugeUnit) -> Result<f64, String> {
 fn open_csv(
     path: &std::path::Path,
     bad: &dyn Fn(String) -> RigError,
-) -> Result<(csv::Reader<std::fs::File>, csv::StringRecord), RigError> {
+) -> Result<(csv::Reader<std::io::Cursor<String>>, csv::StringRecord), RigError> {
+    // Bounded: a FIFO, a device or a file without line ends is refused, not read forever.
+    let text =
+        rigfile::text_input::read_text(path, rigfile::text_input::MAX_TABLE_BYTES, "a CSV table")
+            .map_err(bad)?;
     let mut r = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .comment(Some(b'#'))
-        .from_path(path)
-        .map_err(|e| bad(format!("cannot read it ({e})")))?;
+        .from_reader(std::io::Cursor::new(text));
     let headers = r
         .headers()
         .map_err(|e| bad(format!("no header row ({e})")))?

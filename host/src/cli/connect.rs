@@ -207,9 +207,10 @@ pub fn parse_baud(s: &str) -> Result<u32, String> {
 /// Parses a simulation speed factor.
 pub fn parse_speed(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 && v <= 1000.0 => Ok(v),
+        Ok(v) if v.is_finite() && v > 0.0 && v <= crate::virtual_device::MAX_SPEED => Ok(v),
         _ => Err(format!(
-            "'{s}' is not a speed factor: give a number above 0 and at most 1000 (1 = real time)"
+            "'{s}' is not a speed the simulation can keep: give a number above 0 and at most {} (1 = real time; faster, the host's heartbeats cannot keep inside the comms timeout)",
+            crate::virtual_device::MAX_SPEED
         )),
     }
 }
@@ -237,6 +238,9 @@ mod tests {
         assert!(parse_baud("0").unwrap_err().contains("50 to 12000000"));
         assert!(parse_baud("fast").unwrap_err().contains("not a baud rate"));
         assert_eq!(parse_speed("20"), Ok(20.0));
+        assert_eq!(parse_speed("100"), Ok(100.0));
+        // Issue 33: at 500x every sweep failed with COMMS_TIMEOUT.
+        assert!(parse_speed("500").unwrap_err().contains("at most 100"));
         assert!(parse_speed("0").is_err());
         assert!(parse_speed("nan").is_err());
     }

@@ -55,8 +55,9 @@ pub struct SweepArgs {
     /// Continue an interrupted run in the same CSV with the same plan.
     #[arg(long, conflicts_with = "force")]
     pub resume: bool,
-    /// Replace an existing CSV (without it, or --resume, an existing file is refused and
-    /// left unchanged).
+    /// Replace an existing CSV once the new sweep is complete: until then it is written to
+    /// FILE.new and the old file stays whole (without it, or --resume, an existing file is
+    /// refused and left unchanged).
     #[arg(long)]
     pub force: bool,
     /// Averaging window: `start` (the paper: window_s from constant rotation) or
@@ -244,11 +245,23 @@ fn torque_sweep(
             Ok(())
         }
         Err(e) => {
-            let kept = sweep::read_rows(&s.csv).map(|r| r.0.len()).unwrap_or(0);
+            // `--force` wrote beside the old file, which stays as it was.
+            let new = sweep::forced_path(&s.csv);
+            let written = if s.force && new.exists() {
+                &new
+            } else {
+                &s.csv
+            };
+            let kept = sweep::read_rows(written).map(|r| r.0.len()).unwrap_or(0);
+            let old = if written == &new {
+                format!("; {} was left as it was", s.csv.display())
+            } else {
+                String::new()
+            };
             eprintln!(
-                "stopped: {kept} completed rows kept in {}; continue with `rig experiment torque-sweep --resume --csv {}` and the same plan",
-                s.csv.display(),
-                s.csv.display()
+                "stopped: {kept} completed rows kept in {}{old}; continue with `rig experiment torque-sweep --resume --csv {}` and the same plan",
+                written.display(),
+                written.display()
             );
             Err(e)
         }

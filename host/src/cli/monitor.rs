@@ -412,7 +412,8 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
         })?,
         None => watch(&a, dev, None, &mut 0)?,
     }
-    Ok(ExitCode::SUCCESS)
+    // Ended by SIGTERM, SIGHUP or Ctrl-C (not `q`): 128 + the signal's number.
+    Ok(crate::signals::exit_code())
 }
 
 /// The monitor itself: connects, streams telemetry until done, logs every sample to `csv`

@@ -132,7 +132,8 @@ pub fn run(a: ReleaseArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
             faults: held.faults,
         });
     }
-    Ok(ExitCode::SUCCESS)
+    // Stopped by SIGTERM, SIGHUP or Ctrl-C: 128 + the signal's number.
+    Ok(crate::signals::exit_code())
 }
 
 /// `rig release off`: locks and reports how the output behaves after.

@@ -130,5 +130,6 @@ pub fn run(a: ServeArgs) -> Result<ExitCode, RigError> {
         }
     }
     drop(dev);
-    Ok(ExitCode::SUCCESS)
+    // Served until a signal: 128 + its number, as every verb.
+    Ok(crate::signals::exit_code())
 }

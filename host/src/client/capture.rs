@@ -231,7 +231,7 @@ impl<T: Read + Write> Client<T> {
         })?;
         let recording = f64::from(samples) / f64::from(sample_rate_hz.max(1));
         let mut deadline = Instant::now()
-            + Duration::from_secs_f64(recording / self.options().time_scale.max(1e-3))
+            + crate::limits::wall_duration(recording, self.options().time_scale.max(1e-3))
             + CHUNK_STALL
             + self.options().reply_timeout;
         let mut assembly = Assembly {

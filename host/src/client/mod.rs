@@ -78,12 +78,29 @@ impl<T: Read + Write> std::fmt::Debug for Client<T> {
     }
 }
 
+/// A session id no other process on the port is likely to hold: the standard library's
+/// randomly keyed hasher over the time, the process id and a count of sessions opened.
+fn new_session_id() -> protocol::SessionId {
+    use std::hash::{BuildHasher, Hasher};
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static OPENED: AtomicU32 = AtomicU32::new(0);
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    let since_epoch = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    h.write_u128(since_epoch.as_nanos());
+    h.write_u32(std::process::id());
+    h.write_u32(OPENED.fetch_add(1, Ordering::Relaxed));
+    // The low half of the hash; never 0 (what a request carries before a session stamps it).
+    (h.finish() & 0xFFFF_FFFF) as u32 | 1
+}
+
 impl<T: Read + Write> Client<T> {
     /// A client over `io` that has not said `Hello` yet (see [`Client::connect`]).
     pub fn new(io: T, opts: ClientOptions) -> Self {
         Self {
             io,
-            session: Session::new(opts.session_config()),
+            session: Session::new(opts.session_config()).with_id(new_session_id()),
             opts,
             epoch: Instant::now(),
             outcomes: HashMap::new(),

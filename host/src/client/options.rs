@@ -41,7 +41,7 @@ impl ClientOptions {
     /// Wall-clock time between heartbeats: the protocol's interval in device time.
     pub(super) fn heartbeat_interval(&self) -> Duration {
         let device_s = f64::from(protocol::HEARTBEAT_INTERVAL_MS) / 1000.0;
-        Duration::from_secs_f64(device_s / self.time_scale.max(1e-3))
+        crate::limits::wall_duration(device_s, self.time_scale.max(1e-3))
     }
 }
 

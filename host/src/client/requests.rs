@@ -67,7 +67,11 @@ impl<T: Read + Write> Client<T> {
     /// Starts (`on`) vibration at `target_hz`, or stops it. While on, the client keeps the
     /// release alive with heartbeats during every wait.
     pub fn release(&mut self, on: bool, target_hz: f32) -> Result<(), RigError> {
-        self.ack(&Request::Release { on, target_hz })?;
+        self.ack(&Request::Release {
+            on,
+            target_hz,
+            session: 0,
+        })?;
         self.set_keep_alive(on);
         Ok(())
     }
@@ -75,14 +79,14 @@ impl<T: Read + Write> Client<T> {
     /// Drives the vibrator with a fixed voltage `volts` (open loop, for calibration); 0
     /// stops it. Kept alive by heartbeats like a release.
     pub fn open_loop(&mut self, volts: f32) -> Result<(), RigError> {
-        self.ack(&Request::OpenLoop { volts })?;
+        self.ack(&Request::OpenLoop { volts, session: 0 })?;
         self.set_keep_alive(volts != 0.0);
         Ok(())
     }
 
     /// Sends one heartbeat and waits for its `Ack`.
     pub fn heartbeat(&mut self) -> Result<(), RigError> {
-        self.ack(&Request::Heartbeat)
+        self.ack(&Request::Heartbeat { session: 0 })
     }
 
     /// Whether the client is keeping a release (or open-loop drive) alive.

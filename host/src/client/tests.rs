@@ -295,10 +295,10 @@ fn heartbeats_keep_a_release_alive_while_waiting() {
     let (mut locked, mut marked) = (false, false);
     let mut c = fake_device(move |seq, req| {
         match req {
-            Request::Heartbeat if marked => {
+            Request::Heartbeat { .. } if marked => {
                 late.fetch_add(1, Ordering::SeqCst);
             }
-            Request::Heartbeat if !locked => {
+            Request::Heartbeat { .. } if !locked => {
                 counter.fetch_add(1, Ordering::SeqCst);
             }
             Request::Release { on: false, .. } => locked = true,

@@ -95,6 +95,7 @@ pub trait Bench: RigLink<Error = RigError> {
     fn open_loop(&mut self, volts: f64) -> Result<(), RigError> {
         self.ack(&Request::OpenLoop {
             volts: volts as f32,
+            session: 0,
         })?;
         self.keep_alive(volts != 0.0);
         Ok(())
@@ -105,6 +106,7 @@ pub trait Bench: RigLink<Error = RigError> {
         self.ack(&Request::Release {
             on,
             target_hz: if on { hz as f32 } else { 0.0 },
+            session: 0,
         })?;
         self.keep_alive(on);
         Ok(())
@@ -113,10 +115,14 @@ pub trait Bench: RigLink<Error = RigError> {
     /// Locks the gear whatever runs: open loop off, release off, heartbeats off. Best
     /// effort (the device stops at its comms timeout anyway).
     fn lock_gear(&mut self) {
-        let _ = self.request(&Request::OpenLoop { volts: 0.0 });
+        let _ = self.request(&Request::OpenLoop {
+            volts: 0.0,
+            session: 0,
+        });
         let _ = self.request(&Request::Release {
             on: false,
             target_hz: 0.0,
+            session: 0,
         });
         self.keep_alive(false);
     }
@@ -335,8 +341,8 @@ impl RigLink for DeviceBench {
     }
 
     fn wait(&mut self, seconds: f64) -> Result<(), RigError> {
-        let scale = self.session.time_scale().max(1e-9);
-        let deadline = Instant::now() + Duration::from_secs_f64((seconds / scale).max(0.0));
+        let scale = self.session.time_scale();
+        let deadline = crate::limits::deadline_after(crate::limits::wall_duration(seconds, scale));
         loop {
             if self.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst)) {
                 return Err(interrupted());

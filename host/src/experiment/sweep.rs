@@ -124,11 +124,12 @@ impl Window {
 
 /// The rows already in `path` and its plan line (for `--resume`).
 pub fn read_rows(path: &Path) -> Result<(Vec<Row>, Option<String>), RigError> {
-    let text = std::fs::read_to_string(path).map_err(|source| RigError::File {
-        action: "read",
-        path: path.display().to_string(),
-        source,
-    })?;
+    let text =
+        rigfile::text_input::read_text(path, rigfile::text_input::MAX_TABLE_BYTES, "a sweep CSV")
+            .map_err(|why| RigError::MeasuredFile {
+            file: path.display().to_string(),
+            why,
+        })?;
     let plan = Header::parse(&text).plan_line;
     let mut reader = csv::ReaderBuilder::new()
         .comment(Some(b'#'))
@@ -251,21 +252,54 @@ pub fn create_new(path: &Path, force: bool) -> Result<std::fs::File, RigError> {
     })
 }
 
-/// An append-only CSV whose every write is synced to disk.
+/// Where `--force` writes a sweep while the file it replaces stays whole: `FILE.new`,
+/// renamed over `FILE` once every planned run is done.
+pub fn forced_path(csv: &Path) -> std::path::PathBuf {
+    let mut name = csv.as_os_str().to_owned();
+    name.push(".new");
+    name.into()
+}
+
+/// An append-only CSV whose every write is synced to disk, and whose rows are whole or
+/// absent: a write that fails (a full disk) is cut back to the last whole row.
 struct Appender {
     file: std::fs::File,
     path: String,
+    /// Bytes of whole rows in the file.
+    len: u64,
 }
 
 impl Appender {
+    fn new(file: std::fs::File, path: String) -> Result<Self, RigError> {
+        let len = file
+            .metadata()
+            .map_err(|source| RigError::File {
+                action: "read",
+                path: path.clone(),
+                source,
+            })?
+            .len();
+        Ok(Self { file, path, len })
+    }
+
     fn write(&mut self, text: &str) -> Result<(), RigError> {
         let fail = |source| RigError::File {
             action: "write",
             path: self.path.clone(),
             source,
         };
-        self.file.write_all(text.as_bytes()).map_err(fail)?;
-        self.file.sync_data().map_err(fail)
+        let written = self
+            .file
+            .write_all(text.as_bytes())
+            .and_then(|()| self.file.sync_data());
+        if let Err(e) = written {
+            // No half row stays behind for `--resume` to keep or `explain` to refuse.
+            let _ = self.file.set_len(self.len);
+            let _ = self.file.sync_data();
+            return Err(fail(e));
+        }
+        self.len += text.len() as u64;
+        Ok(())
     }
 }
 
@@ -295,12 +329,12 @@ pub fn run_to<B: Bench + ?Sized>(
     check_plan(&setup.plan, &calibration)?;
     let top = runs.iter().map(|r| r.load_nm).fold(0.0, f64::max);
     super::bench::allow_load(bench, top)?;
-    let (done, mut out) = match csv {
+    let (done, mut out, replaces) = match csv {
         Some(csv) => {
-            let (done, out) = open_csv(bench, setup, csv)?;
-            (done, Some(out))
+            let (done, out, replaces) = open_csv(bench, setup, csv, progress)?;
+            (done, Some(out), replaces)
         }
-        None => (Vec::new(), None),
+        None => (Vec::new(), None, None),
     };
     let resumed = done.len();
     let mut outcome = SweepOutcome {
@@ -411,7 +445,17 @@ pub fn run_to<B: Bench + ?Sized>(
     })();
     bench.lock_gear();
     let _ = bench.stop_telemetry();
-    result.map(|()| outcome)
+    result?;
+    // `--force`: the new sweep is complete, so it replaces the old file (in one rename).
+    if let (Some((new, old)), Some(out)) = (replaces, out) {
+        drop(out);
+        std::fs::rename(&new, &old).map_err(|source| RigError::File {
+            action: "replace",
+            path: old.display().to_string(),
+            source,
+        })?;
+    }
+    Ok(outcome)
 }
 
 /// Runs an operator prompt with the telemetry stopped (the drive is already off and the
@@ -493,11 +537,23 @@ fn drive_text(run: &Run) -> String {
     }
 }
 
+/// The sweep's CSV, opened to append: the rows already done (`--resume`), the writer, and
+/// with `--force` over an existing file, (the file written, the file it replaces once
+/// complete).
+#[allow(clippy::type_complexity, reason = "a private helper's three results")]
 fn open_csv<B: Bench + ?Sized>(
     bench: &mut B,
     setup: &SweepSetup,
     csv: &Path,
-) -> Result<(Vec<Row>, Appender), RigError> {
+    progress: &mut dyn FnMut(&str),
+) -> Result<
+    (
+        Vec<Row>,
+        Appender,
+        Option<(std::path::PathBuf, std::path::PathBuf)>,
+    ),
+    RigError,
+> {
     let path = csv.display().to_string();
     if setup.resume && csv.exists() {
         let (rows, plan) = read_rows(csv)?;
@@ -507,8 +563,10 @@ fn open_csv<B: Bench + ?Sized>(
                 why: "the file was written with another plan (its `# plan:` line differs): give the same --plan/--quick as the interrupted run, or a new --csv".into(),
             });
         }
-        // Drop a partial last line so appended rows start on their own line.
-        let text = std::fs::read_to_string(csv).unwrap_or_default();
+        // A row cut short (a crash or a full disk mid-write) is dropped, and said so, so
+        // appended rows start on their own line and the file stays readable.
+        let text = std::fs::read(csv).unwrap_or_default();
+        let whole = text.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
         let file = std::fs::OpenOptions::new()
             .append(true)
             .open(csv)
@@ -517,20 +575,33 @@ fn open_csv<B: Bench + ?Sized>(
                 path: path.clone(),
                 source,
             })?;
-        let mut out = Appender { file, path };
-        if !text.is_empty() && !text.ends_with('\n') {
-            out.write("\n")?;
+        if whole < text.len() {
+            file.set_len(whole as u64)
+                .and_then(|()| file.sync_data())
+                .map_err(|source| RigError::File {
+                    action: "write",
+                    path: path.clone(),
+                    source,
+                })?;
+            progress(&format!(
+                "dropped an incomplete last row ({} bytes, cut short by a crash or a full disk) from {path}",
+                text.len() - whole
+            ));
         }
-        return Ok((rows, out));
+        let out = Appender::new(file, path)?;
+        return Ok((rows, out, None));
     }
     check_output(csv, false, setup.force)?;
     let head = provenance(bench, setup)? + &EXPERIMENT_SWEEP.header();
-    let mut out = Appender {
-        file: create_new(csv, setup.force)?,
-        path,
-    };
+    // `--force` over an existing file: the old one stays whole until the new one is done.
+    let replaces = (setup.force && csv.exists()).then(|| (forced_path(csv), csv.to_path_buf()));
+    let target = replaces.as_ref().map_or(csv, |(new, _)| new.as_path());
+    let mut out = Appender::new(
+        create_new(target, setup.force)?,
+        target.display().to_string(),
+    )?;
     out.write(&head)?;
-    Ok((Vec::new(), out))
+    Ok((Vec::new(), out, replaces))
 }
 
 fn wait_for_temperature<B: Bench + ?Sized>(

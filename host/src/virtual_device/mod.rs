@@ -42,8 +42,23 @@ pub use pty::PtyMaster;
 /// simulation slows down (and says so) instead of jumping past the host's bytes.
 const MAX_TURN_WALL: f64 = 0.02;
 
+/// Longest device time one loop turn may step, s: half the slack between a heartbeat and
+/// the comms timeout (0.5 - 0.15 s), so a step never jumps past a host's next heartbeat.
+/// A turn that would step more slows the simulation down (counted in `behind_s`).
+const MAX_TURN_DEVICE_S: f64 =
+    (protocol::COMMS_TIMEOUT_MS - protocol::HEARTBEAT_INTERVAL_MS) as f64 / 2000.0;
+
+/// Fastest simulation speed a virtual device takes (device seconds per wall second): a
+/// host's heartbeats are `HEARTBEAT_INTERVAL_MS / speed` apart in wall time, and a loaded
+/// machine delays a process by a few milliseconds; at 100x a 3.5 ms delay already uses the
+/// whole slack before the comms timeout, so faster speeds would fail with `COMMS_TIMEOUT`
+/// (at 500x every sweep did) and are refused.
+pub const MAX_SPEED: f64 = 100.0;
+
 /// Device output held while the host is not reading, bytes (a UART's queue would also
-/// overflow): beyond it new output is dropped, as frames lost on the line.
+/// overflow): beyond it new output is dropped, as frames lost on the line. With no client
+/// on the port nothing is held: a board's UART sends its bytes into the void, so the next
+/// client starts with fresh frames, not old ones.
 const MAX_PENDING: usize = 1 << 20;
 
 /// Virtual time without a byte from the host after which an in-process device with a
@@ -318,7 +333,7 @@ fn run(
         if noise_sent > 0 {
             *lock(&shared.noise_bytes) += noise_sent as u64;
         }
-        let turn_wall = wall_dt.min(MAX_TURN_WALL);
+        let turn_wall = wall_dt.min(MAX_TURN_WALL).min(MAX_TURN_DEVICE_S / speed);
         if wall_dt > turn_wall {
             *lock(&shared.behind_s) += (wall_dt - turn_wall) * speed;
         }
@@ -361,6 +376,11 @@ fn run(
             if pending.len() > MAX_PENDING {
                 *lock(&shared.dropped_bytes) += (pending.len() - before) as u64;
                 pending.truncate(before);
+            }
+            if master.hung_up() {
+                // Nobody reads the line: the output is gone, as on a board's UART.
+                *lock(&shared.dropped_bytes) += pending.len() as u64;
+                pending.clear();
             }
         }
         let written = master.write_available(&pending);
@@ -455,6 +475,29 @@ mod tests {
         client.recv(Duration::from_millis(200)).unwrap();
         assert!(client.faults().unwrap().latched.is_empty());
         client.release(false, 0.0).unwrap();
+    }
+
+    #[test]
+    fn output_nobody_reads_is_dropped_and_a_new_client_starts_fresh() {
+        // Issue 33: telemetry streamed to a client that went away piled up and reached the
+        // next client seconds old.
+        let dev = VirtualDevice::paper(5.0).unwrap();
+        let mut gone = connect(&dev);
+        gone.start_telemetry(1000).unwrap();
+        drop(gone);
+        let left_at = dev.time();
+        // Two device seconds of telemetry with nobody on the port (about 100 kB).
+        while dev.time() < left_at + 2.0 {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let came_at = dev.time();
+        let mut next = connect(&dev);
+        let first = next
+            .next_telemetry(Duration::from_secs(5))
+            .unwrap()
+            .expect("the stream still runs");
+        let age_s = came_at - first.device_time_us as f64 * 1e-6;
+        assert!(age_s < 0.1, "the first sample is {age_s} s old");
     }
 
     #[test]

@@ -56,7 +56,7 @@ pub(crate) fn worst_case_chunk() -> CaptureChunk {
 
 pub(crate) fn device_info() -> DeviceInfo {
     DeviceInfo {
-        protocol_version: 4,
+        protocol_version: 5,
         schema_hash: 0xDEAD_BEEF,
         firmware_version: FirmwareVersion {
             major: 0,
@@ -90,9 +90,15 @@ pub(crate) fn requests() -> std::vec::Vec<Named<Request>> {
             Release {
                 on: true,
                 target_hz: 10.0,
+                session: 0x5EED_0001,
             },
         ),
-        ("Request::Heartbeat", Heartbeat),
+        (
+            "Request::Heartbeat",
+            Heartbeat {
+                session: 0x5EED_0001,
+            },
+        ),
         ("Request::GetParameters", GetParameters),
         (
             "Request::SetParameters",
@@ -110,7 +116,13 @@ pub(crate) fn requests() -> std::vec::Vec<Named<Request>> {
         ("Request::GetFaults", GetFaults),
         ("Request::ClearFaults", ClearFaults),
         ("Request::RezeroCurrent", RezeroCurrent),
-        ("Request::OpenLoop", OpenLoop { volts: 3.6 }),
+        (
+            "Request::OpenLoop",
+            OpenLoop {
+                volts: 3.6,
+                session: 0x5EED_0001,
+            },
+        ),
         (
             "Request::Simulation(SimCommand::SetLoad)",
             Simulation(SimCommand::SetLoad { tau_rot_nm: 0.368 }),
@@ -133,7 +145,7 @@ pub(crate) fn request_index(r: &Request) -> usize {
         Hello { .. } => 0,
         GetInfo => 1,
         Release { .. } => 2,
-        Heartbeat => 3,
+        Heartbeat { .. } => 3,
         GetParameters => 4,
         SetParameters(_) => 5,
         StartTelemetry { .. } => 6,

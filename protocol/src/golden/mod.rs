@@ -243,7 +243,9 @@ fn request_facts_agree_with_the_replies() {
     }
     use Request::*;
     let safe = |r: Request| r.retry_safe();
-    assert!(safe(GetInfo) && safe(GetFaults) && safe(Heartbeat) && safe(GetParameters));
+    assert!(
+        safe(GetInfo) && safe(GetFaults) && safe(Heartbeat { session: 1 }) && safe(GetParameters)
+    );
     assert!(!safe(SetParameters(RigParameters::paper())));
     assert!(!safe(StartCapture {
         sample_rate_hz: 1,
@@ -253,7 +255,8 @@ fn request_facts_agree_with_the_replies() {
     assert_eq!(
         Release {
             on: false,
-            target_hz: 0.0
+            target_hz: 0.0,
+            session: 0
         }
         .name(),
         "Release(off)"
@@ -265,7 +268,7 @@ fn request_facts_agree_with_the_replies() {
     assert_eq!(GetInfo.reply_kind(), ReplyKind::Info);
     assert_eq!(ClearFaults.reply_kind(), ReplyKind::Faults);
     assert_eq!(GetParameters.reply_kind(), ReplyKind::Parameters);
-    assert_eq!(Heartbeat.reply_kind(), ReplyKind::Ack);
+    assert_eq!(Heartbeat { session: 1 }.reply_kind(), ReplyKind::Ack);
     // Replies name the request they answer; nothing else does.
     for (name, m) in device_messages() {
         assert_eq!(
@@ -450,6 +453,11 @@ fn other_variants_fit_the_budget() {
         Request::Release {
             on: true,
             target_hz: f32::MAX,
+            session: u32::MAX,
+        },
+        Request::OpenLoop {
+            volts: f32::MAX,
+            session: u32::MAX,
         },
         Request::StartTelemetry { rate_hz: u16::MAX },
         Request::StartCapture {

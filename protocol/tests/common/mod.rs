@@ -205,9 +205,14 @@ pub fn request() -> impl Strategy<Value = Request> {
             schema_hash
         }),
         Just(Request::GetInfo),
-        (any::<bool>(), any::<f32>())
-            .prop_map(|(on, target_hz)| Request::Release { on, target_hz }),
-        Just(Request::Heartbeat),
+        (any::<bool>(), any::<f32>(), any::<u32>()).prop_map(|(on, target_hz, session)| {
+            Request::Release {
+                on,
+                target_hz,
+                session,
+            }
+        }),
+        any::<u32>().prop_map(|session| Request::Heartbeat { session }),
         Just(Request::GetParameters),
         parameters().prop_map(Request::SetParameters),
         any::<u16>().prop_map(|rate_hz| Request::StartTelemetry { rate_hz }),
@@ -221,7 +226,8 @@ pub fn request() -> impl Strategy<Value = Request> {
         Just(Request::GetFaults),
         Just(Request::ClearFaults),
         Just(Request::RezeroCurrent),
-        any::<f32>().prop_map(|volts| Request::OpenLoop { volts }),
+        (any::<f32>(), any::<u32>())
+            .prop_map(|(volts, session)| Request::OpenLoop { volts, session }),
         sim_command().prop_map(Request::Simulation),
     ]
 }

@@ -237,7 +237,8 @@ fn run_one(name: &str, seed: u64) -> Result<FaultOutcome, SimError> {
     let release_refused = !matches!(
         link.request(&Request::Release {
             on: true,
-            target_hz: 10.0
+            target_hz: 10.0,
+            session: 0
         })?,
         Reply::Ack
     );

@@ -29,7 +29,7 @@ fn inject_while_vibrating(rig: &mut Rig, inject: impl FnOnce(&mut Rig), max_ms: 
     inject(rig);
     for k in 0..max_ms {
         if k % 150 == 0 {
-            rig.send(&Request::Heartbeat);
+            rig.send(&Request::Heartbeat { session: 0 });
         }
         let out = rig.step();
         if !out.enable {
@@ -131,7 +131,8 @@ fn implausible_current_zero_at_boot_and_rezero() {
     assert_eq!(
         rig.ack(&Request::Release {
             on: true,
-            target_hz: 10.0
+            target_hz: 10.0,
+            session: 0
         }),
         Err(NackCode::InFaultHold)
     );
@@ -178,7 +179,8 @@ fn invalid_stored_calibration_latches_until_a_valid_one_is_set() {
     assert_eq!(
         rig.ack(&Request::Release {
             on: true,
-            target_hz: 10.0
+            target_hz: 10.0,
+            session: 0
         }),
         Err(NackCode::InFaultHold)
     );
@@ -257,13 +259,14 @@ fn fault_hold_refuses_commands_for_500_ms() {
     assert_eq!(events[0].0, FaultFlags::OVERCURRENT);
 
     for request in [
-        Request::Heartbeat,
+        Request::Heartbeat { session: 0 },
         Request::GetParameters,
         Request::StartTelemetry { rate_hz: 10 },
         Request::RezeroCurrent,
         Request::Release {
             on: true,
             target_hz: 10.0,
+            session: 0,
         },
     ] {
         assert_eq!(rig.ack(&request), Err(NackCode::InFaultHold), "{request:?}");
@@ -272,11 +275,18 @@ fn fault_hold_refuses_commands_for_500_ms() {
     assert_eq!(
         rig.ack(&Request::Release {
             on: false,
-            target_hz: 0.0
+            target_hz: 0.0,
+            session: 0
         }),
         Ok(())
     );
-    assert_eq!(rig.ack(&Request::OpenLoop { volts: 0.0 }), Ok(()));
+    assert_eq!(
+        rig.ack(&Request::OpenLoop {
+            volts: 0.0,
+            session: 0
+        }),
+        Ok(())
+    );
     // Status and clear are always answered.
     assert!(matches!(
         rig.request(&Request::GetInfo)[..],
@@ -296,12 +306,13 @@ fn fault_hold_refuses_commands_for_500_ms() {
     while rig.now_us < hold_end {
         rig.step();
     }
-    assert_eq!(rig.ack(&Request::Heartbeat), Ok(()));
+    assert_eq!(rig.ack(&Request::Heartbeat { session: 0 }), Ok(()));
     // Still latched: no release until cleared.
     assert_eq!(
         rig.ack(&Request::Release {
             on: true,
-            target_hz: 10.0
+            target_hz: 10.0,
+            session: 0
         }),
         Err(NackCode::InFaultHold)
     );
@@ -310,7 +321,8 @@ fn fault_hold_refuses_commands_for_500_ms() {
     assert_eq!(
         rig.ack(&Request::Release {
             on: true,
-            target_hz: 10.0
+            target_hz: 10.0,
+            session: 0
         }),
         Ok(())
     );
@@ -349,6 +361,7 @@ fn reversed_encoder_latches_and_stops() {
     rig.ack(&Request::Release {
         on: true,
         target_hz: 10.0,
+        session: 0,
     })
     .unwrap();
     let t = rig.run_until(3000, true, |s| !s.latched_faults.is_empty());
@@ -365,7 +378,8 @@ fn a_normal_release_never_sees_a_reversed_encoder() {
     assert_eq!(
         rig.ack(&Request::Release {
             on: false,
-            target_hz: 10.0
+            target_hz: 10.0,
+            session: 0
         }),
         Ok(())
     );

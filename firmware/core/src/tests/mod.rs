@@ -188,7 +188,7 @@ impl Rig {
     pub fn run_ms_alive(&mut self, ms: u64) {
         for k in 0..ms {
             if k % 150 == 0 {
-                self.send(&Request::Heartbeat);
+                self.send(&Request::Heartbeat { session: 0 });
             }
             self.step();
         }
@@ -203,7 +203,7 @@ impl Rig {
     ) -> Option<u64> {
         for k in 0..ms {
             if alive && k % 150 == 0 {
-                self.send(&Request::Heartbeat);
+                self.send(&Request::Heartbeat { session: 0 });
             }
             self.step();
             if done(&self.core.status()) {
@@ -288,7 +288,8 @@ impl Rig {
         assert_eq!(
             self.ack(&Request::Release {
                 on: true,
-                target_hz: hz
+                target_hz: hz,
+                session: 0
             }),
             Ok(())
         );

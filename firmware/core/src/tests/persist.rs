@@ -31,7 +31,11 @@ fn requests_sent_during_a_save_are_answered_after_it() {
     let mut sent = Vec::new();
     // Sequence numbers of their own, apart from the rig's.
     let mut seq = 1000u16;
-    let schedule = [Request::Heartbeat, Request::GetInfo, Request::Heartbeat];
+    let schedule = [
+        Request::Heartbeat { session: 0 },
+        Request::GetInfo,
+        Request::Heartbeat { session: 0 },
+    ];
     assert_eq!(schedule.len(), protocol::REQUEST_WINDOW - 1);
     let mut next = schedule.iter().cloned();
     for ms in 0..SAVE_STALL_MS {

@@ -28,7 +28,7 @@ fn every_request_is_answered() {
         (hello(), Box::new(info)),
         (Request::GetInfo, Box::new(info)),
         (
-            Request::Heartbeat,
+            Request::Heartbeat { session: 0 },
             Box::new(|m| {
                 matches!(
                     m,
@@ -118,6 +118,7 @@ fn every_request_is_answered() {
             Request::Release {
                 on: false,
                 target_hz: 0.0,
+                session: 0,
             },
             Box::new(|m| {
                 matches!(
@@ -178,7 +179,8 @@ fn release_arguments_are_checked_never_clamped() {
         assert_eq!(
             rig.ack(&Request::Release {
                 on: true,
-                target_hz: hz
+                target_hz: hz,
+                session: 0
             }),
             Err(NackCode::BadArgument),
             "{hz}"
@@ -189,7 +191,8 @@ fn release_arguments_are_checked_never_clamped() {
     assert_eq!(
         rig.ack(&Request::Release {
             on: true,
-            target_hz: 18.0
+            target_hz: 18.0,
+            session: 0
         }),
         Err(NackCode::BadArgument)
     );
@@ -204,7 +207,8 @@ fn release_arguments_are_checked_never_clamped() {
     assert_eq!(
         rig.ack(&Request::Release {
             on: true,
-            target_hz: 15.0
+            target_hz: 15.0,
+            session: 0
         }),
         Ok(())
     );
@@ -344,13 +348,20 @@ fn limits_and_constants_the_host_cannot_lift() {
 fn release_off_stops_an_open_loop_drive() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(1200);
-    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    assert_eq!(
+        rig.ack(&Request::OpenLoop {
+            volts: 6.2,
+            session: 0
+        }),
+        Ok(())
+    );
     rig.run_ms_alive(800);
     assert!(rig.core.status().enabled);
     assert_eq!(
         rig.ack(&Request::Release {
             on: false,
-            target_hz: 10.0
+            target_hz: 10.0,
+            session: 0
         }),
         Ok(())
     );
@@ -470,7 +481,7 @@ fn capture_uploads_while_telemetry_and_replies_continue() {
     let mut done_at = None;
     for ms in 0..3000 {
         if ms % 150 == 0 {
-            rig.send(&protocol::Request::Heartbeat);
+            rig.send(&protocol::Request::Heartbeat { session: 0 });
         }
         rig.step();
         if rig.received[start..]
@@ -610,16 +621,23 @@ fn open_loop_drives_a_fixed_voltage_while_kept_alive() {
     rig.run_ms(1200);
     for volts in [f32::NAN, 30.0, -30.0] {
         assert_eq!(
-            rig.ack(&Request::OpenLoop { volts }),
+            rig.ack(&Request::OpenLoop { volts, session: 0 }),
             Err(NackCode::BadArgument)
         );
     }
-    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    assert_eq!(
+        rig.ack(&Request::OpenLoop {
+            volts: 6.2,
+            session: 0
+        }),
+        Ok(())
+    );
     // Exclusive with a speed-controlled release.
     assert_eq!(
         rig.ack(&Request::Release {
             on: true,
-            target_hz: 10.0
+            target_hz: 10.0,
+            session: 0
         }),
         Err(NackCode::Busy)
     );
@@ -637,7 +655,13 @@ fn open_loop_drives_a_fixed_voltage_while_kept_alive() {
     // The per-revolution load estimate sees the 2 N m load.
     assert!((s.tau_rot_nm - 2.0).abs() < 0.15, "{}", s.tau_rot_nm);
     // 0 V ends it; the cam coasts to rest and the core locks.
-    assert_eq!(rig.ack(&Request::OpenLoop { volts: 0.0 }), Ok(()));
+    assert_eq!(
+        rig.ack(&Request::OpenLoop {
+            volts: 0.0,
+            session: 0
+        }),
+        Ok(())
+    );
     let t = rig.run_until(3000, false, |s| s.state == SupervisorState::Locked);
     assert!(t.is_some());
     assert!(rig.core.status().latched_faults.is_empty());
@@ -647,7 +671,13 @@ fn open_loop_drives_a_fixed_voltage_while_kept_alive() {
 fn open_loop_without_heartbeat_times_out_to_safe() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(1200);
-    assert_eq!(rig.ack(&Request::OpenLoop { volts: 3.6 }), Ok(()));
+    assert_eq!(
+        rig.ack(&Request::OpenLoop {
+            volts: 3.6,
+            session: 0
+        }),
+        Ok(())
+    );
     let t = rig.run_until(2000, false, |s| !s.enabled && !s.latched_faults.is_empty());
     assert!(t.is_some());
     let s = rig.core.status();
@@ -666,7 +696,7 @@ fn refused_requests_do_not_keep_a_release_alive() {
     // timeout as if the host had gone.
     let mut rig = Rig::new(0.3);
     rig.vibrate(10.0);
-    assert_eq!(rig.ack(&Request::Heartbeat), Ok(()));
+    assert_eq!(rig.ack(&Request::Heartbeat { session: 0 }), Ok(()));
     let last_accepted = rig.now_us;
     let bad = RigParameters {
         mu_d: 0.5,
@@ -710,21 +740,78 @@ fn refused_requests_do_not_keep_a_release_alive() {
 }
 
 #[test]
-fn accepted_requests_of_any_kind_keep_a_release_alive() {
+fn the_owners_heartbeats_keep_a_release_alive_not_other_requests() {
     let mut rig = Rig::new(0.3);
     rig.vibrate(10.0);
     for k in 0..1500 {
+        if k % 150 == 0 {
+            assert_eq!(rig.ack(&Request::Heartbeat { session: 0 }), Ok(()));
+        }
+        rig.step();
+    }
+    assert_eq!(rig.state(), SupervisorState::Vibrating);
+    assert!(rig.latched().is_empty());
+    // Accepted but not a drive request: a status query keeps nothing alive.
+    let last_beat = rig.now_us;
+    assert_eq!(rig.ack(&Request::Heartbeat { session: 0 }), Ok(()));
+    let lapsed = (0..1500).find(|k| {
         if k % 100 == 0 {
-            // Not a heartbeat, but accepted: it refreshes the release.
             assert!(matches!(
                 rig.reply(&Request::GetFaults),
                 Reply::Faults { .. }
             ));
         }
         rig.step();
+        rig.latched().contains(FaultFlags::COMMS_TIMEOUT)
+    });
+    let after_us = lapsed.map(|_| rig.now_us - last_beat);
+    assert!(
+        after_us.is_some_and(|us| (500_000..=502_000).contains(&us)),
+        "{after_us:?}"
+    );
+}
+
+#[test]
+fn a_second_session_cannot_keep_a_dead_hosts_release_alive_or_take_it_over() {
+    // Issue 33's case: `rig release on` (session 0) is killed; a second process on the
+    // port (session 77) sends GetFaults and heartbeats every 0.3 s and asks to release.
+    let mut rig = Rig::new(0.3);
+    rig.vibrate(10.0);
+    assert_eq!(rig.ack(&Request::Heartbeat { session: 0 }), Ok(()));
+    let owner_gone = rig.now_us;
+    let stranger = Request::Release {
+        on: true,
+        target_hz: 12.0,
+        session: 77,
+    };
+    assert_eq!(rig.ack(&stranger), Err(NackCode::Busy), "no take-over");
+    let mut lapsed_at = None;
+    for k in 0..3000 {
+        if k % 300 == 0 {
+            assert!(matches!(
+                rig.reply(&Request::GetFaults),
+                Reply::Faults { .. }
+            ));
+            // Answered, but it keeps nothing alive.
+            let _ = rig.ack(&Request::Heartbeat { session: 77 });
+        }
+        if !rig.step().enable && lapsed_at.is_none() {
+            lapsed_at = Some(rig.now_us);
+        }
     }
-    assert_eq!(rig.state(), SupervisorState::Vibrating);
-    assert!(rig.latched().is_empty());
+    assert!(rig.latched().contains(FaultFlags::COMMS_TIMEOUT));
+    let after_us = lapsed_at.expect("the release lapsed") - owner_gone;
+    assert!((500_000..=502_000).contains(&after_us), "{after_us} us");
+    assert_ne!(rig.state(), SupervisorState::Vibrating);
+    // Any session may lock, and after the lapse (faults cleared) the stranger may release.
+    assert_eq!(
+        rig.ack(&Request::Release {
+            on: false,
+            target_hz: 0.0,
+            session: 77
+        }),
+        Ok(())
+    );
 }
 
 #[test]
@@ -857,7 +944,13 @@ fn measured_bus_voltage_sets_the_open_loop_duty_and_is_reported() {
         ..Default::default()
     });
     rig.run_ms(1200);
-    assert_eq!(rig.ack(&Request::OpenLoop { volts: 6.2 }), Ok(()));
+    assert_eq!(
+        rig.ack(&Request::OpenLoop {
+            volts: 6.2,
+            session: 0
+        }),
+        Ok(())
+    );
     rig.run_ms_alive(2500);
     // duty = volts / Vbus: 0.62 on a 10 V bus, not 6.2 / 12.
     let s = rig.core.status();
@@ -957,7 +1050,7 @@ fn requests_beyond_the_window_are_refused_busy_and_have_no_effect() {
     assert_eq!(rig.count(|m| matches!(m, DeviceMessage::Telemetry(_))), 0);
     // With the replies sent, the window is open again.
     rig.link_budget = None;
-    assert_eq!(rig.ack(&Request::Heartbeat), Ok(()));
+    assert_eq!(rig.ack(&Request::Heartbeat { session: 0 }), Ok(()));
 }
 
 #[test]
@@ -996,7 +1089,7 @@ fn a_known_request_with_a_bad_field_is_a_bad_argument() {
     );
     // A trailing byte after a `Heartbeat`.
     assert_eq!(
-        send_body(&mut rig, 41, &[3, 0x55]),
+        send_body(&mut rig, 41, &[3, 0x01, 0x55]),
         [Reply::Nack(NackCode::BadArgument)]
     );
     // An unknown request and an unknown simulation command.

@@ -13,12 +13,14 @@ fn release(hz: f32) -> Request {
     Request::Release {
         on: true,
         target_hz: hz,
+        session: 0,
     }
 }
 
 const STOP: Request = Request::Release {
     on: false,
     target_hz: 0.0,
+    session: 0,
 };
 
 fn boot_with(calibration: RigParameters) -> BootInfo {
@@ -210,7 +212,7 @@ fn weak_cam_torque_raises_the_frequency_then_cannot_release() {
     let mut targets = vec![rig.core.status().target_hz];
     for k in 0..8000 {
         if k % 150 == 0 {
-            rig.send(&Request::Heartbeat);
+            rig.send(&Request::Heartbeat { session: 0 });
         }
         rig.step();
         let s = rig.core.status();
