@@ -72,9 +72,17 @@ def served_realtime():
     s.stop()
 
 
+#: Speed of the served rigs whose host runs a whole sweep: a served rig keeps the board's
+#: time, so the host's wall-clock slack before the comms timeout is (500 - 150) ms / speed.
+#: At 10x that is 35 ms, which a machine loaded with twice as many busy processes as cores
+#: can take from the host's port thread (COMMS_TIMEOUT, seen 2 of 48 at load 8); at 3x it
+#: is 117 ms.
+SWEEP_SPEED = 3.0
+
+
 @pytest.fixture
 def served_with_effect():
-    s = Served("--preset", "ideal", "--effect", "speed-dependent-axial-friction")
+    s = Served("--preset", "ideal", "--effect", "speed-dependent-axial-friction", speed=SWEEP_SPEED)
     yield s
     s.stop()
 
