@@ -106,25 +106,26 @@ fn logistic(w: &[f64; FEATURES], x: &[f64; FEATURES]) -> f64 {
 /// on `explain/tests/explain_open_world.rs`'s `fit_confidence_map` batch: 544 data sets (the
 /// paper's rig and one with gears (50, 50, 51, 49), a 1.2 mm stroke and a 4.2 kg carrier;
 /// two plans; 3-40 mA; out-of-library truths, library effects, pairs and effect-free sets;
-/// seeds 80 000 and up), its `explained` verdicts (session 9, with the pair step).
+/// seeds 80 000 and up), its `explained` verdicts (refitted in session 10 with the limits
+/// judged by their intervals).
 pub const CONFIDENCE_MODEL: CalibrationModel = CalibrationModel {
-    weights: [-0.13, 0.60, 1.66, 1.07, -3.00],
+    weights: [-0.07, 0.64, 1.54, 1.11, -2.96],
     cases: 247,
 };
 
 /// The probability that every effect a `partly-explained` or `ambiguous` verdict names is
 /// part of the truth, fitted by [`fit_logistic`] on the same batch's such verdicts.
 pub const PARTIAL_MODEL: CalibrationModel = CalibrationModel {
-    weights: [-1.22, 0.21, 2.99, 1.40, -5.53],
-    cases: 0,
+    weights: [-1.63, 0.25, 0.37, 0.74, -1.97],
+    cases: 168,
 };
 
 /// The probability that a named effect is part of the truth when the finding that names it
 /// is not right, fitted by [`fit_logistic`] on the same batch: every effect named by a
 /// finding that was not right ([`coherent_inclusion`] adds the finding's confidence).
 pub const INCLUSION_MODEL: CalibrationModel = CalibrationModel {
-    weights: [-1.22, 0.21, 2.99, 1.40, -5.53],
-    cases: 680,
+    weights: [-4.34, 0.05, 0.86, -0.48, -1.08],
+    cases: 377,
 };
 
 /// The probability that an `explained` verdict with this evidence is right

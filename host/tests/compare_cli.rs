@@ -180,18 +180,21 @@ fn model_runs_in_the_simulators_procedures_or_names_what_it_cannot() {
         .assert()
         .success();
     // An effect the plant cannot run is named.
-    let tooth = dir.path().join("tooth.toml");
-    hidden(&tooth, "tooth-compliance", "");
+    let timed = dir.path().join("timed.toml");
+    hidden(&timed, "thermal-drift", "k_per_s = 1e-6");
     let out = rig()
         .args(["sim", "table1", "--model"])
-        .arg(&tooth)
+        .arg(&timed)
         .assert()
         .failure()
         .get_output()
         .stderr
         .clone();
     let err = String::from_utf8_lossy(&out);
-    assert!(err.contains("cannot run tooth-compliance"), "{err}");
+    assert!(
+        err.contains("cannot run thermal-drift against time"),
+        "{err}"
+    );
     // A rig file without a fitted model is refused with what to do.
     let plain = dir.path().join("plain.toml");
     std::fs::write(&plain, "[friction]\nmu_s = 0.271\n").unwrap();
