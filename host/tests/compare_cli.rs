@@ -60,9 +60,9 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
         .assert()
         .success();
     let model = dir.path().join("fitted.toml");
-    // `rig sim torque-sweep`'s CSV has no provenance, so the drive's inertia term (the
-    // board's non-regenerating decay, which the sweep CSVs of `rig experiment` state in a
-    // `# drive:` line) is given the documented way: in the rig file's [model].
+    // `rig sim torque-sweep`'s CSV states its drive in a `# drive:` line; the rig file's
+    // [model] gives the same inertia term the other documented way (a model that fits the
+    // inertia term keeps it over the CSV's line).
     let board = dir.path().join("board.toml");
     hidden(&board, "inertia-rectification", "kappa = -0.5");
     let e = json(

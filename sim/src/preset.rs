@@ -186,9 +186,10 @@ impl EffectSpec {
             bush_hold_torque: PAPER_BUSH_HOLD_NM,
             bush_corner_speed: PAPER_BUSH_OMEGA_RAD_S,
             rectification: -0.5,
-            // Seed 004's few micrometres per newton would hide under the noise: 20 um/N
-            // shortens the stroke by about a tenth at the largest load.
-            tooth_compliance: 20e-6,
+            // Seed 004's few micrometres per newton: 2 um/N shortens the 1 mm stroke by
+            // about a seventh at the paper's largest load (68 N axially), inside the
+            // library's limit of a quarter.
+            tooth_compliance: 2e-6,
             // Seed 003's mesh friction ripples by about a tenth over a mesh cycle.
             mesh_ripple_rms: 0.1,
             ..EffectParams::default()

@@ -93,14 +93,15 @@ impl MeshRipple {
         }
     }
 
-    /// The factor on the teeth's friction force at output angle `output_rad` for a ripple of
-    /// relative rms `ripple_rms`: 1 + ripple_rms m(phase), m the mesh friction's deviation
-    /// from its mean in units of its rms (unit rms over a cycle); 1 without a ripple.
-    pub fn friction_factor(&self, ripple_rms: f64, output_rad: f64) -> f64 {
+    /// The factor on the teeth's friction force at output angle `output_rad` (from a mesh
+    /// phase `phase0`, in mesh cycles, at angle zero) for a ripple of relative rms
+    /// `ripple_rms`: 1 + ripple_rms m(phase), m the mesh friction's deviation from its mean
+    /// in units of its rms (unit rms over a cycle); 1 without a ripple.
+    pub fn friction_factor(&self, ripple_rms: f64, output_rad: f64, phase0: f64) -> f64 {
         if ripple_rms <= 0.0 || self.rms <= 0.0 || self.mean <= 0.0 {
             return 1.0;
         }
-        let phase = self.teeth_per_rad * output_rad;
+        let phase = phase0 + self.teeth_per_rad * output_rad;
         let m = (crate::effects::mesh_friction(
             phase,
             self.contact_ratio,
@@ -222,12 +223,12 @@ mod tests {
     fn the_mesh_ripple_has_the_asked_rms_about_a_mean_of_one() {
         let gear = crate::GearSet::paper([49, 51, 50, 50]).unwrap();
         let mesh = MeshRipple::of(&gear);
-        assert_eq!(mesh.friction_factor(0.0, 1.0), 1.0);
+        assert_eq!(mesh.friction_factor(0.0, 1.0, 0.3), 1.0);
         // Over one mesh cycle of the output (one tooth pitch of the output gear).
         let n = 2000;
         let pitch = 1.0 / mesh.teeth_per_rad;
         let f: Vec<f64> = (0..n)
-            .map(|k| mesh.friction_factor(0.1, pitch * (k as f64 + 0.5) / n as f64))
+            .map(|k| mesh.friction_factor(0.1, pitch * (k as f64 + 0.5) / n as f64, 0.0))
             .collect();
         let mean = f.iter().sum::<f64>() / n as f64;
         let rms = (f.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64).sqrt();

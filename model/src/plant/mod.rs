@@ -234,6 +234,11 @@ pub struct Plant {
     axial_per_torque: f64,
     /// The output mesh's ripple of friction over the mesh angle, computed once.
     mesh: effects::MeshRipple,
+    /// Where the output mesh's cycle stood at output angle zero, in mesh cycles, drawn at
+    /// every load change ([`Plant::set_load`]): the operator hangs each test's weight with
+    /// the output wherever it came to rest, so each test meets the mesh ripple at a phase of
+    /// its own (drawn only with the ripple on, so every other plant's noise is unchanged).
+    mesh_phase: f64,
     /// 1 / thermal resistance and 1 / heat capacity of the winding.
     thermal: [f64; 2],
     /// The comparator tripped the timer's break: the bridge is off.
@@ -282,6 +287,7 @@ impl Plant {
             trig_cache: (0.0, 0.0, 1.0, 0),
             axial_per_torque: params.drive.gear.axial_force_per_torque(),
             mesh: effects::MeshRipple::of(&params.drive.gear),
+            mesh_phase: 0.0,
             thermal: [
                 1.0 / params.motor.thermal_resistance,
                 1.0 / params.motor.thermal_capacity,
@@ -363,6 +369,10 @@ impl Plant {
     /// Changes the load (the operator hangs another mass).
     pub fn set_load(&mut self, load: Load) {
         self.params.load = load;
+        // A new test: the output's mesh meets it at a phase of its own.
+        if self.params.effects.mesh_ripple_rms > 0.0 {
+            self.mesh_phase = self.rng.uniform();
+        }
         self.shaft = self.params.output_shaft();
         self.inv_i_hat = 1.0 / self.shaft.i_hat;
     }
@@ -588,9 +598,11 @@ impl Plant {
             let teeth = mu_ax
                 * tau_rot.abs()
                 * self.axial_per_torque
-                * self
-                    .mesh
-                    .friction_factor(p.effects.mesh_ripple_rms, self.state.output_angle);
+                * self.mesh.friction_factor(
+                    p.effects.mesh_ripple_rms,
+                    self.state.output_angle,
+                    self.mesh_phase,
+                );
             (teeth * compliant_stroke(e, p.effects.tooth_compliance, teeth)
                 + p.effects.bush_friction * e)
                 * s.abs()
