@@ -350,7 +350,11 @@ fn paper_preset_sweep_shows_what_the_paper_measured() {
         .arg(&csv)
         .assert()
         .success();
-    let mut r = csv::Reader::from_path(&csv).unwrap();
+    // The provenance (`#` lines: the command, the drive) comes before the column names.
+    let mut r = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(&csv)
+        .unwrap();
     let head = r.headers().unwrap().clone();
     let col = |name: &str| head.iter().position(|h| h == name).unwrap();
     let (v, tau, meas, eq10, back) = (
