@@ -117,10 +117,12 @@ pub struct EffectReport {
     pub holdout_rmse_a: Option<f64>,
     /// What the effect means at the fitted values.
     pub description: String,
-    /// The probability that the effect is part of the truth: the share of the block-bootstrap
-    /// replicates that select it, calibrated with its driver check and the final model's
-    /// lack of fit on generated batches with truths outside the library
-    /// ([`calibration::calibrated_inclusion`]); null without a bootstrap.
+    /// The probability that the effect is part of the truth: the finding's `confidence` plus,
+    /// for the finding not being right, the calibrated probability that the effect is part
+    /// of the truth all the same (from the share of the block-bootstrap replicates that
+    /// select it, its driver check and the final model's lack of fit, fitted on generated
+    /// batches with truths outside the library; [`calibration::coherent_inclusion`]), so
+    /// never below the confidence of the finding that names it; null without a bootstrap.
     pub inclusion_probability: Option<f64>,
     /// Share of the block-bootstrap replicates of the whole selection that select it (null
     /// without a bootstrap).
@@ -273,10 +275,11 @@ pub struct Explanation {
     /// For `explained`: the probability that the named set of effects is exactly right,
     /// calibrated on generated batches with truths outside the library from
     /// `confidence_raw`, the weakest driver check and the lack of fit
-    /// ([`calibration::calibrated`] of [`Explanation::evidence`]). For the other verdicts: the
-    /// bootstrap share (`confidence_raw`), times the weight of each named effect whose
-    /// driver a generic shape in another variable matches against that shape
-    /// ([`drivers::DriverCheck::weight`]). Null without a bootstrap.
+    /// ([`calibration::calibrated`] of [`Explanation::evidence`]). For `partly-explained` and
+    /// `ambiguous`: the probability that every effect it names is part of the truth,
+    /// calibrated the same way ([`calibration::calibrated_partial`]). For `unexplained` and
+    /// `no-missing-effect`: the bootstrap share (`confidence_raw`). Each named effect's
+    /// `inclusion_probability` is at least this. Null without a bootstrap.
     pub confidence: Option<f64>,
     /// Share of the block-bootstrap replicates of the whole selection that reach the same set
     /// of effects (none, for `no-missing-effect`); null without a bootstrap.
@@ -1181,7 +1184,7 @@ fn judge(
     options: &Options,
 ) -> Judgement {
     let after = &selection.end;
-    let mut effects = effect_reports(points, selection, weights_by_step, resampled);
+    let effects = effect_reports(points, selection, weights_by_step, resampled);
     let named = selection.added();
     let named_names: Vec<String> = named.iter().map(|c| c.name(points).to_string()).collect();
     let competitors = competitors(points, &named_names, known_names);
@@ -1207,11 +1210,6 @@ fn judge(
         &gap_after,
         options.stated_noise_a,
     );
-    for f in &mut effects {
-        f.inclusion_probability = f
-            .evidence(lack_of_fit.p_value)
-            .map(|e| calibration::calibrated_inclusion(&e));
-    }
     let verdict = verdict_of(
         !effects.is_empty(),
         &lack_of_fit,
@@ -1273,12 +1271,6 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
                 inclusion_probabilities.insert(name.clone(), p);
             }
         }
-        // A named effect's entry is its calibrated probability, as in `effects`.
-        for f in &j.effects {
-            if let Some(p) = f.inclusion_probability {
-                inclusion_probabilities.insert(f.name.clone(), p);
-            }
-        }
     }
     let steps = step_reports(
         &points,
@@ -1295,11 +1287,31 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         Verdict::Explained => {
             calibration::calibrated(&finding_evidence(s, &j.effects, j.lack_of_fit.p_value))
         }
+        Verdict::PartlyExplained | Verdict::Ambiguous => {
+            calibration::calibrated_partial(&finding_evidence(s, &j.effects, j.lack_of_fit.p_value))
+        }
         _ => s * j.driver_weight,
     });
+    // Each named effect: its finding's confidence plus, when the finding is not right, the
+    // calibrated chance that it is part of the truth all the same.
+    let mut effects = j.effects;
+    for f in &mut effects {
+        f.inclusion_probability =
+            f.evidence(j.lack_of_fit.p_value)
+                .zip(confidence)
+                .map(|(e, c)| {
+                    calibration::coherent_inclusion(c, calibration::calibrated_inclusion(&e))
+                });
+    }
+    // A named effect's entry is its calibrated probability, as in `effects`.
+    for f in &effects {
+        if let Some(p) = f.inclusion_probability {
+            inclusion_probabilities.insert(f.name.clone(), p);
+        }
+    }
     let mut explanation = Explanation {
         verdict,
-        effects: j.effects,
+        effects,
         ambiguous: j
             .ambiguous_candidates
             .iter()

@@ -4,6 +4,14 @@
 //! against the edges of their search. A fit that needs a value beyond a limit (the value
 //! outside and its 95 % interval, where it has one, too) or whose shape sits on the edge of
 //! its search does not name its effect; the report says which limit and why.
+//!
+//! A value a little past a limit whose interval still reaches into the physical region is a
+//! fit that wandered out of it, not a law that does not apply: the law is plausible and the
+//! check says `at_limit` (the reported value is then the limit itself, with the fitted value
+//! kept as `fitted`). The same holds for a law that a bound of the fit stopped on its limit.
+//! Every limit with a parameter that has a standard error is judged with its interval; the
+//! load-dependent return's kappa at the largest load (kappa + kappa_per_nm |tau|) gets its
+//! interval from the fit's covariance of the two.
 
 use model::effects::{Effect, LimitContext, LimitKind, MU_PHYSICAL, PhysicalLimit};
 use serde::Serialize;
@@ -25,8 +33,16 @@ pub struct LimitCheck {
     pub value: f64,
     /// The limit in words.
     pub limit: String,
-    /// Whether the fit stays within it.
+    /// Whether the fit stays within it (its value, or its 95 % interval).
     pub within: bool,
+    /// Whether the law sits at the physical limit: its fitted value is on the limit or past
+    /// it by less than its interval reaches (then `value` is the limit and `fitted` the
+    /// fitted value).
+    pub at_limit: bool,
+    /// The fitted value when it lies past the limit it is at; null otherwise.
+    pub fitted: Option<f64>,
+    /// The 95 % interval the check read, when the parameter has one.
+    pub interval: Option<[f64; 2]>,
     /// Why the limit is there.
     pub why: String,
     /// Whether it is the edge of a shape's search rather than a physical limit.
@@ -50,6 +66,17 @@ impl Plausibility {
         self.checks.iter().all(|c| c.within || !c.search_edge)
     }
 
+    /// The limits at which the fit sits, in words ("kappa at its physical limit -1 (fitted
+    /// -1.007, 95 % interval reaching into kappa within [-1, 1])").
+    pub fn at_limits(&self) -> String {
+        self.checks
+            .iter()
+            .filter(|c| c.within && c.at_limit)
+            .map(LimitCheck::at_limit_text)
+            .collect::<Vec<_>>()
+            .join("; ")
+    }
+
     /// The limits that fail, in words ("kappa = 2.4 is beyond kappa within [-1, 1]: why").
     pub fn failures(&self) -> String {
         self.checks
@@ -66,6 +93,28 @@ impl Plausibility {
             })
             .collect::<Vec<_>>()
             .join("; ")
+    }
+}
+
+impl LimitCheck {
+    /// "kappa at its physical limit -1 (fitted -1.007, its 95 % interval reaches kappa within
+    /// [-1, 1])".
+    pub fn at_limit_text(&self) -> String {
+        match self.fitted {
+            Some(f) => format!(
+                "{} at its physical limit {} (fitted {}, its 95 % interval reaches {})",
+                self.param,
+                reporting::human(self.value),
+                reporting::human(f),
+                self.limit
+            ),
+            None => format!(
+                "{} at its physical limit {} ({})",
+                self.param,
+                reporting::human(self.value),
+                self.limit
+            ),
+        }
     }
 }
 
@@ -114,11 +163,21 @@ fn check_limit(
     let inside = value >= lo - slack && value <= hi + slack;
     // The data does not need a value outside when its interval reaches into the range.
     let reaches = interval.is_some_and(|[a, b]| a <= hi && b >= lo);
+    let within = value.is_finite() && (inside || reaches);
+    // On a finite edge (a bound of the fit stopped it there), or past it within the interval:
+    // the law at its limit, reported at the limit.
+    let edge = |e: f64| e.is_finite() && (value - e).abs() <= 1e-6 * (1.0 + e.abs());
+    let past = within && !inside;
+    let at_limit = within && (past || edge(lo) || edge(hi));
+    let at = if value < lo { lo } else { hi };
     LimitCheck {
         param: limit.key.to_string(),
-        value,
+        value: if past { at } else { value },
         limit: describe(limit, ctx),
-        within: value.is_finite() && (inside || reaches),
+        within,
+        at_limit,
+        fitted: past.then_some(value),
+        interval,
         why: limit.why.to_string(),
         search_edge: false,
     }
@@ -159,7 +218,8 @@ pub fn check(points: &TestPoints, cand: Mechanism, fit: &Fit) -> Plausibility {
             .ops
             .iter()
             .fold(0.0f64, |m, op| m.max(op.tau_rot.abs()));
-        let mut at_max = check_limit(limit, k0 + k1 * tau_max, None, &ctx);
+        let interval = kappa_at_load_interval(fit, t, tau_max);
+        let mut at_max = check_limit(limit, k0 + k1 * tau_max, interval, &ctx);
         at_max.param = format!("kappa at {} N m", reporting::human(tau_max));
         checks.push(at_max);
     }
@@ -186,6 +246,9 @@ pub fn check(points: &TestPoints, cand: Mechanism, fit: &Fit) -> Plausibility {
                     p.unit
                 ),
                 within: !on_edge,
+                at_limit: false,
+                fitted: None,
+                interval: None,
                 search_edge: true,
                 why: "a shape on the edge of its search means the data asks for a bend outside the range it can place; the law only mimics the data".into(),
             });
@@ -195,6 +258,25 @@ pub fn check(points: &TestPoints, cand: Mechanism, fit: &Fit) -> Plausibility {
         plausible: checks.iter().all(|c| c.within),
         checks,
     }
+}
+
+/// The 95 % interval of the load-dependent return's kappa at `tau` (kappa + kappa_per_nm
+/// tau), from the fit's covariance of its two coordinates (`None` when either sits on a
+/// bound of the fit or `fit` does not carry term `t`).
+fn kappa_at_load_interval(fit: &Fit, t: usize, tau: f64) -> Option<[f64; 2]> {
+    let pos = fit.spec.terms.iter().position(|&x| x == t)?;
+    let x = fit.term_x.get(pos)?;
+    let (v00, v11, v01) = (
+        fit.term_cov(pos, 0, 0)?,
+        fit.term_cov(pos, 1, 1)?,
+        fit.term_cov(pos, 0, 1)?,
+    );
+    let var = v00 + tau * tau * v11 + 2.0 * tau * v01;
+    let v = x[0] + x[1] * tau;
+    (var.is_finite() && var >= 0.0).then(|| {
+        let h = 1.96 * var.sqrt();
+        [v - h, v + h]
+    })
 }
 
 /// The plausibility of every effect and term `fit` carries (and its mu): a model is

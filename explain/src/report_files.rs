@@ -136,6 +136,13 @@ fn confidence_text(e: &Explanation) -> String {
             b.replicates,
             b.blocks
         ),
+        (Some(c), Some(b)) if !e.effects.is_empty() => format!(
+            " Confidence {:.0} %: the probability that every effect named is part of the truth, calibrated on generated batches with truths outside the library ({:.0} % of {} resamples of {} blocks of consecutive test points reach the same finding).",
+            100.0 * c,
+            100.0 * e.confidence_raw.unwrap_or(c),
+            b.replicates,
+            b.blocks
+        ),
         (Some(c), Some(b)) => format!(
             " Confidence {:.0} %: the share of {} resamples of {} blocks of consecutive test points that reach the same finding.",
             100.0 * c,
@@ -379,6 +386,9 @@ pub fn render_text(e: &Explanation, source: &str) -> String {
             }
             if let Some(p) = &eff.named_in_pair_with {
                 let _ = writeln!(s, "    named as a pair with {p}");
+            }
+            for c in eff.limits.iter().filter(|c| c.within && c.at_limit) {
+                let _ = writeln!(s, "    {}", c.at_limit_text());
             }
             if let Some(d) = eff.driver_check.as_ref().filter(|d| !d.separated) {
                 let _ = writeln!(s, "    driver not settled: {}", d.summary(&eff.name));

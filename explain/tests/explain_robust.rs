@@ -187,19 +187,30 @@ fn named_effects_carry_inclusion_probabilities_and_a_confidence() {
     {
         let e = run(rows(&RigFile::paper(), Some(effect), &plan, 70 + k as u64));
         assert_eq!(e.verdict, Verdict::Explained, "{}", e.finding);
-        // Nearly every replicate selects it; its inclusion probability is that share
-        // calibrated with its driver check and the lack of fit (a law without a driver, the
-        // offset, is trusted less at the same share).
+        // Nearly every replicate selects it; its inclusion probability is the finding's
+        // confidence plus, for a finding not right, that share calibrated with its driver
+        // check and the lack of fit: never below the confidence.
         let f = &e.effects[0];
         let raw = f.inclusion_probability_raw.unwrap();
         assert!(raw >= 0.9, "{}: inclusion share {raw}", effect.name());
         let p = f.inclusion_probability.unwrap();
         let ev = f.evidence(e.lack_of_fit.p_value).unwrap();
         assert_eq!(ev.share, raw);
-        assert_eq!(p, explain::calibration::calibrated_inclusion(&ev));
-        // More likely in than not where the final model fits; the inertia set, whose final
-        // lack of fit has p = 0.009, reads 0.27 (a near-significant remainder is where wrong
-        // names sit in the calibration's batch), still well above a wrong name's.
+        let c = e.confidence.unwrap();
+        assert_eq!(
+            p,
+            explain::calibration::coherent_inclusion(
+                c,
+                explain::calibration::calibrated_inclusion(&ev)
+            )
+        );
+        assert!(
+            p >= c,
+            "{}: inclusion {p} below confidence {c}",
+            effect.name()
+        );
+        // More likely in than not where the final model fits; a near-significant final lack
+        // of fit (p < 0.01) is where wrong names sit in the calibration's batch.
         let floor = if e.lack_of_fit.p_value < 0.01 {
             0.2
         } else {

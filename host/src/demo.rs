@@ -214,7 +214,11 @@ pub fn run_simulated(
     };
     let points = crate::experiment::paper::torque_sweep(&sweep_opts)?;
     let csv_path = opts.out.join("torque_sweep.csv");
-    crate::sweep_report::write_csv(&points, &csv_path)?;
+    let header = crate::provenance::simulated_header(
+        "rig demo torque sweep",
+        &format!("preset paper, seed {}", opts.seed),
+    );
+    crate::sweep_report::write_csv(&points, &csv_path, &header)?;
     files.push(csv_path.display().to_string());
     let svg_path = opts.out.join("torque_sweep.svg");
     crate::sweep_report::sweep_figure(&svg_path, &points)?;

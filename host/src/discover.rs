@@ -33,14 +33,11 @@ pub const MIN_POINTS_FOR_NONE: usize = 36;
 /// Test points a round proposes at most.
 pub const ROUND_POINTS: usize = 12;
 
-/// Why a hidden effect cannot show in the rows `rig discover` logs, if it cannot.
+/// Why a hidden effect cannot show in the rows `rig discover` logs, if it cannot
+/// ([`sim::EffectSpec::unseen_through_firmware`]; a spec that does not parse: `None`, its
+/// error comes when it is applied).
 pub fn unseen_effect_note(spec: &str) -> Option<String> {
-    let name = spec.split(':').next().unwrap_or(spec).trim();
-    (name == model::effects::Effect::CurrentSensorOffset.name()).then(|| {
-        format!(
-            "--effect {name}: the virtual rig adds the offset to the sensor's reading, but the firmware zeroes its current reading with the motor off (as on the board), so the offset cancels in the rows `rig discover` logs through the firmware; it cannot be found this way. A separate logger on the sensor (as the paper's) would see it: try `rig explain --synthetic {name}`"
-        )
-    })
+    sim::EffectSpec::parse(spec).ok()?.unseen_through_firmware()
 }
 
 /// One round of the loop.

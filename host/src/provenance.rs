@@ -76,6 +76,49 @@ impl Provenance<'_> {
     }
 }
 
+/// The provenance header of a sweep measured on the simulated rig in virtual time (`rig sim
+/// torque-sweep`, `rig demo`): what ran it and the drive the plant ran, so `rig explain`
+/// builds its base model on that drive. `details` says which preset, model and seed.
+pub fn simulated_header(procedure: &str, details: &str) -> String {
+    format!(
+        "# {procedure} ({details})\n# host: rig {}\n# firmware: simulated (the firmware core on the virtual plant, virtual time)\n{}",
+        env!("CARGO_PKG_VERSION"),
+        drive_line(model::hardware::board::REGENERATIVE_DECAY),
+    )
+}
+
+/// `rig` with the drive of the measured CSV at `path` in its base model: the drive its
+/// provenance states; else, unless the rig file already fits the inertia term, the rig's
+/// drive (`[drive] decay`, the board's braking drive by default), with a warning that says which
+/// base was assumed and what changes with the other drive (returned second). Eq. (10) alone
+/// is neither drive, so a base without one would name the drive's own return as a missing
+/// effect.
+pub fn with_stated_drive(rig: rigfile::RigFile, path: &Path) -> (rigfile::RigFile, Option<String>) {
+    if let Some(regenerative) = Header::read(path).regenerative {
+        return (rig.with_drive_decay(regenerative), None);
+    }
+    // The rig file's drive: `[drive] decay`, the board's braking drive unless it says otherwise.
+    let assumed = rig.drive.decay.returns_power();
+    let with = rig.with_drive_decay(assumed);
+    if with == rig {
+        return (rig, None);
+    }
+    let (kappa, other) = (
+        model::effects::drive_kappa(assumed),
+        model::effects::drive_kappa(!assumed),
+    );
+    let warning = format!(
+        "{} states no drive (no `{}` line): the base model assumes the rig's drive ([drive] decay = \"{}\"), regenerative_decay = {assumed} (inertia term with kappa = {kappa}); with the other drive (regenerative_decay = {}, kappa = {other}) the base's inertia term changes by {} of Eq. (10)'s, and an inertia-rectification named with kappa near {other} is that drive's own return, not a missing effect: add the line `{}` to the CSV's header to explain it on that drive",
+        path.display(),
+        DRIVE_PREFIX.trim_end(),
+        rig.drive.decay.name(),
+        !assumed,
+        reporting::human((other - kappa).abs()),
+        drive_line(!assumed).trim_end()
+    );
+    (with, Some(warning))
+}
+
 /// The provenance line of the drive's decay mode, which `rig explain` reads
 /// ([`Header::regenerative`]).
 pub fn drive_line(regenerative: bool) -> String {

@@ -193,19 +193,21 @@ pub fn experiment_figure(path: &Path, rows: &[Row]) -> Result<(), RigError> {
     )?)
 }
 
-/// Writes the sweep points as CSV to `path`, atomically (a failed run keeps an existing file).
-pub fn write_csv(points: &[Row], path: &Path) -> Result<(), RigError> {
+/// Writes the sweep points as CSV to `path` after the provenance `header` (`#` lines, each
+/// ending in a newline: [`crate::provenance::simulated_header`]), atomically (a failed run
+/// keeps an existing file).
+pub fn write_csv(points: &[Row], path: &Path, header: &str) -> Result<(), RigError> {
     reporting::write_atomic_with(path, |tmp| {
-        let file = std::fs::File::create(tmp).map_err(|source| RigError::File {
+        let file_error = |source| RigError::File {
             action: "write",
             path: path.display().to_string(),
             source,
-        })?;
-        sim::scenarios::sweep::write_csv(points, std::io::BufWriter::new(file)).map_err(|e| {
-            RigError::BadValue {
-                what: path.display().to_string(),
-                why: format!("cannot write the CSV: {e}"),
-            }
+        };
+        let mut file = std::io::BufWriter::new(std::fs::File::create(tmp).map_err(file_error)?);
+        std::io::Write::write_all(&mut file, header.as_bytes()).map_err(file_error)?;
+        sim::scenarios::sweep::write_csv(points, file).map_err(|e| RigError::BadValue {
+            what: path.display().to_string(),
+            why: format!("cannot write the CSV: {e}"),
         })
     })
 }

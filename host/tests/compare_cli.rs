@@ -60,9 +60,9 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
         .assert()
         .success();
     let model = dir.path().join("fitted.toml");
-    // `rig sim torque-sweep`'s CSV has no provenance, so the drive's inertia term (the
-    // board's non-regenerating decay, which the sweep CSVs of `rig experiment` state in a
-    // `# drive:` line) is given the documented way: in the rig file's [model].
+    // `rig sim torque-sweep`'s CSV states its drive in a `# drive:` line; the rig file's
+    // [model] gives the same inertia term the other documented way (a model that fits the
+    // inertia term keeps it over the CSV's line).
     let board = dir.path().join("board.toml");
     hidden(&board, "inertia-rectification", "kappa = -0.5");
     let e = json(
@@ -187,18 +187,21 @@ fn model_runs_in_the_simulators_procedures_or_names_what_it_cannot() {
         .assert()
         .success();
     // An effect the plant cannot run is named.
-    let tooth = dir.path().join("tooth.toml");
-    hidden(&tooth, "tooth-compliance", "");
+    let timed = dir.path().join("timed.toml");
+    hidden(&timed, "thermal-drift", "k_per_s = 1e-6");
     let out = rig()
         .args(["sim", "table1", "--model"])
-        .arg(&tooth)
+        .arg(&timed)
         .assert()
         .failure()
         .get_output()
         .stderr
         .clone();
     let err = String::from_utf8_lossy(&out);
-    assert!(err.contains("cannot run tooth-compliance"), "{err}");
+    assert!(
+        err.contains("cannot run thermal-drift against time"),
+        "{err}"
+    );
     // A rig file without a fitted model is refused with what to do.
     let plain = dir.path().join("plain.toml");
     std::fs::write(&plain, "[friction]\nmu_s = 0.271\n").unwrap();

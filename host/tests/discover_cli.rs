@@ -103,6 +103,32 @@ fn discover_names_a_hidden_effect_on_the_in_process_virtual_rig() {
     assert_named(&v, "speed-dependent-axial-friction", &csv);
 }
 
+/// Seed 004's tooth compliance runs in the plant as physics of the teeth (the friction force
+/// slides over the stroke its deflection leaves): the loop names it.
+#[test]
+fn discover_names_the_seeds_tooth_compliance_hidden_in_the_plant() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("loop.csv");
+    let v = json(
+        rig()
+            .args([
+                "--sim",
+                "discover",
+                "--preset",
+                "ideal",
+                "--effect",
+                "tooth-compliance",
+                "--json",
+                "--no-report",
+                "--replicates",
+                "50",
+                "--csv",
+            ])
+            .arg(&csv),
+    );
+    assert_named(&v, "tooth-compliance", &csv);
+}
+
 /// The loop's JSON gives no finding: `no-missing-effect`, no effect named, every round
 /// without one, within the budget.
 fn assert_no_finding(v: &Value, csv: &Path) {

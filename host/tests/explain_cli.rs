@@ -425,3 +425,82 @@ fn a_sweep_of_the_other_drive_than_the_rig_file_is_refused_never_mixed() {
         .assert()
         .success();
 }
+
+/// The README's first example, `rig sim torque-sweep --csv sweep.csv && rig explain
+/// --measured sweep.csv`: the sweep states its provenance and the drive the plant ran, so the
+/// base model carries the drive's inertia term and the paper's speed-dependent axial friction
+/// is named first, with no drive effect (inertia-rectification) named at all; every named
+/// effect's inclusion probability is at least the finding's confidence.
+#[test]
+fn the_readme_first_example_names_the_axial_friction_and_no_drive_effect() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("sweep.csv");
+    rig()
+        .args(["sim", "torque-sweep", "--csv"])
+        .arg(&csv)
+        .assert()
+        .success();
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(
+        text.starts_with("# rig sim torque-sweep (preset paper"),
+        "{text:.300}"
+    );
+    assert!(
+        text.contains("\n# drive: regenerative_decay = "),
+        "{text:.400}"
+    );
+    let e = json(&[
+        "explain",
+        "--json",
+        "--no-report",
+        "--measured",
+        csv.to_str().unwrap(),
+    ]);
+    let names: Vec<&str> = e["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names.first(),
+        Some(&"speed-dependent-axial-friction"),
+        "{e}"
+    );
+    assert!(!names.contains(&"inertia-rectification"), "{names:?}");
+    assert!(
+        !e["warnings"].to_string().contains("states no drive"),
+        "{}",
+        e["warnings"]
+    );
+    if let Some(c) = e["confidence"].as_f64() {
+        for f in e["effects"].as_array().unwrap() {
+            let p = f["inclusion_probability"].as_f64().unwrap();
+            assert!(p >= c, "{} at {p} below the finding's {c}", f["name"]);
+        }
+    }
+    // Without the drive line the base assumes the board's drive and says so.
+    let bare = dir.path().join("bare.csv");
+    let rows: String = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&bare, rows).unwrap();
+    let e = json(&[
+        "explain",
+        "--json",
+        "--no-report",
+        "--measured",
+        bare.to_str().unwrap(),
+    ]);
+    assert!(
+        e["warnings"].to_string().contains("states no drive"),
+        "{}",
+        e["warnings"]
+    );
+    assert_eq!(
+        e["effects"][0]["name"], "speed-dependent-axial-friction",
+        "{e}"
+    );
+}

@@ -191,13 +191,13 @@ fn model_needs_sim_and_a_fitted_rig_file() {
         assert!(!e.contains("panicked") && !e.contains("RigFile {"), "{e}");
     }
     // An effect the plant cannot run is named.
-    let tooth = dir.path().join("tooth.toml");
+    let timed = dir.path().join("timed.toml");
     model_file(
-        &tooth,
-        "[[model.effects]]\nname = \"tooth-compliance\"\nparams = {}\n",
+        &timed,
+        "[[model.effects]]\nname = \"thermal-drift\"\nparams = { k_per_s = 1e-6 }\n",
     );
-    let e = said(rig().args(["--sim", "info", "--model"]).arg(&tooth));
-    assert!(e.contains("cannot run tooth-compliance"), "{e}");
+    let e = said(rig().args(["--sim", "info", "--model"]).arg(&timed));
+    assert!(e.contains("cannot run thermal-drift against time"), "{e}");
     // Verbs without a device, and the demo, refuse it with where it goes.
     let e = said(rig().arg("--model").arg(&good).args(["sim", "fig5"]));
     assert!(e.contains("rig sim") && e.contains("own --model"), "{e}");

@@ -127,15 +127,14 @@ fn explain_csv(
     py.detach(|| -> Result<String, RigError> {
         // The CLI's checks of each setting (`explain::options`), named as Python spells it.
         let options = ::explain::Options::checked(alpha, folds, replicates, stated_noise_ma)?;
-        let mut rig = match &model {
+        let rig = match &model {
             Some(p) => rigfile::RigFile::load(p)?,
             None => rigfile::RigFile::paper(),
         };
         let data = ::explain::Dataset::read_csv(&csv)?;
-        if let Some(regenerative) = host::provenance::Header::read(&csv).regenerative {
-            rig = rig.with_drive_decay(regenerative);
-        }
-        let outcome = ::explain::explain(&data, &rig, &options)?;
+        let (rig, drive_warning) = host::provenance::with_stated_drive(rig, &csv);
+        let mut outcome = ::explain::explain(&data, &rig, &options)?;
+        outcome.explanation.warnings.extend(drive_warning);
         // As the CLI: a proposal on request, and offered when the data cannot separate the
         // leaders or a discrepancy remains that no named effect explains.
         let offered = matches!(

@@ -194,7 +194,9 @@ impl NativeRig {
         speed: f64,
         seed: u64,
     ) -> PyResult<Self> {
-        py.detach(|| {
+        // Effects the firmware cancels: the rig runs them, Python is warned.
+        let mut unseen: Vec<String> = Vec::new();
+        let rig = py.detach(|| {
             let max = host::virtual_device::MAX_SPEED;
             if !(speed.is_finite() && speed > 0.0 && speed <= max) {
                 return Err(bad(
@@ -210,7 +212,11 @@ impl NativeRig {
                 None => VirtualDevice::paper_config(&preset_value),
             };
             for e in &effects {
-                sim::EffectSpec::parse(e)?.apply(&mut config.plant)?;
+                let spec = sim::EffectSpec::parse(e)?;
+                if let Some(why) = spec.unseen_through_firmware() {
+                    unseen.push(why);
+                }
+                spec.apply(&mut config.plant)?;
             }
             config.seed = seed;
             let device = VirtualDevice::start(config, speed)?;
@@ -227,7 +233,18 @@ impl NativeRig {
                 device: Some(device),
             })
         })
-        .map_err(to_py)
+        .map_err(to_py)?;
+        for why in unseen {
+            let message = std::ffi::CString::new(why.replace('\0', " "))
+                .expect("no NUL is left in the message");
+            PyErr::warn(
+                py,
+                &py.get_type::<pyo3::exceptions::PyUserWarning>(),
+                &message,
+                1,
+            )?;
+        }
+        Ok(rig)
     }
 
     /// The port's path (a pseudo-terminal for a virtual rig).

@@ -142,6 +142,20 @@ impl EffectSpec {
         Ok(Self { effect, params })
     }
 
+    /// Why the effect cannot show in the rows a client logs through the firmware (a served
+    /// rig, `Rig.virtual`, `rig discover`), or `None` when it can: the firmware zeroes its
+    /// current reading with the motor off (as on the board), so a current-sensor offset
+    /// cancels in every current it reports. Only a separate logger on the sensor (the
+    /// paper's) sees it.
+    pub fn unseen_through_firmware(&self) -> Option<String> {
+        let name = self.effect.name();
+        (self.effect == Effect::CurrentSensorOffset).then(|| {
+            format!(
+                "--effect {name}: the virtual rig adds the offset to the sensor's reading, but the firmware zeroes its current reading with the motor off (as on the board), so the offset cancels in the rows logged through the firmware (a served rig, Rig.virtual, `rig discover`) and `rig explain` on them ends no-missing-effect; it cannot be found this way. A separate logger on the sensor (as the paper's) would see it: try `rig explain --synthetic {name}`"
+            )
+        })
+    }
+
     /// Puts the effect into `plant` with its parameters (defaults: the paper preset's
     /// values for its two effects, otherwise a clearly visible strength).
     pub fn apply(&self, plant: &mut PlantParams) -> Result<(), SimError> {
@@ -180,6 +194,12 @@ impl EffectSpec {
             bush_hold_torque: PAPER_BUSH_HOLD_NM,
             bush_corner_speed: PAPER_BUSH_OMEGA_RAD_S,
             rectification: -0.5,
+            // Seed 004's few micrometres per newton: 2 um/N shortens the 1 mm stroke by
+            // about a seventh at the paper's largest load (68 N axially), inside the
+            // library's limit of a quarter.
+            tooth_compliance: 2e-6,
+            // Seed 003's mesh friction ripples by about a tenth over a mesh cycle.
+            mesh_ripple_rms: 0.1,
             ..EffectParams::default()
         };
         rigfile::apply_params(self.effect, &self.params, &mut p).map_err(bad)?;
@@ -204,13 +224,20 @@ impl EffectSpec {
                 plant.regeneration = model::effects::kappa_returns_power(p.rectification);
                 e.inertia_kappa = Some((p.rectification, 0.0));
             }
-            other => {
-                return Err(bad(format!(
-                    "the plant cannot represent {} (it runs: {})",
-                    other.name(),
-                    PLANT_EFFECTS.join(", ")
-                )));
+            Effect::ToothCompliance => {
+                if p.tooth_compliance <= 0.0 {
+                    return Err(bad("compliance_um_per_n must be above 0".into()));
+                }
+                e.tooth_compliance = p.tooth_compliance;
             }
+            Effect::MeshLoadSharingRipple => {
+                if !(p.mesh_ripple_rms > 0.0 && p.mesh_ripple_rms <= 1.0) {
+                    return Err(bad("ripple_rms must be above 0 and at most 1".into()));
+                }
+                e.mesh_ripple_rms = p.mesh_ripple_rms;
+            }
+            // Handled above, as the plant's variant of the law.
+            Effect::SpeedDependentAxialFriction => {}
         }
         Ok(())
     }
@@ -284,6 +311,9 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
                 effects.axial_friction_corner =
                     (params.axial_corner_speed > 0.0).then_some(params.axial_corner_speed);
             }
+            // Seed 004's and seed 003's physics of the teeth, at the fitted strength.
+            Effect::ToothCompliance => effects.tooth_compliance = params.tooth_compliance,
+            Effect::MeshLoadSharingRipple => effects.mesh_ripple_rms = params.mesh_ripple_rms,
             Effect::ThermalDrift => missing.push(format!(
                 "{} against time (k_per_s: the plant drifts with its winding temperature; log temp_c and refit)",
                 e.name()
@@ -310,7 +340,7 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
 }
 
 /// The effects the plant can run (`--effect`).
-pub const PLANT_EFFECTS: [&str; 7] = [
+pub const PLANT_EFFECTS: [&str; 9] = [
     "speed-dependent-axial-friction",
     "load-dependent-friction",
     "current-sensor-offset",
@@ -318,6 +348,8 @@ pub const PLANT_EFFECTS: [&str; 7] = [
     "vibrator-viscous-loss",
     "inertia-rectification",
     "linear-bush-friction",
+    "tooth-compliance",
+    "mesh-load-sharing-ripple",
 ];
 
 fn plant_keys(effect: Effect) -> Vec<&'static str> {
@@ -365,15 +397,26 @@ mod tests {
         // Eq. (40) with the fitted corner, the law `rig explain` fitted, not an approximation.
         assert_eq!(plant.effects.axial_friction_corner, Some(20.0));
         assert!(plant.effects.axial_friction_speed.is_none());
+        // A drift against time: the plant drifts with its winding temperature only.
+        let timed = rigfile::RigFile::paper().with_model(
+            0.25,
+            vec![rigfile::EffectEntry {
+                name: "thermal-drift".into(),
+                params: [("k_per_s".to_string(), 1e-6)].into(),
+            }],
+        );
+        let e = apply_model(&timed, &mut plant).unwrap_err().to_string();
+        assert!(e.contains("cannot run thermal-drift against time"), "{e}");
+        // The seeds' tooth compliance runs as the plant's physics, at its fitted value.
         let tooth = rigfile::RigFile::paper().with_model(
             0.25,
             vec![rigfile::EffectEntry {
                 name: "tooth-compliance".into(),
-                params: Default::default(),
+                params: [("compliance_um_per_n".to_string(), 15.0)].into(),
             }],
         );
-        let e = apply_model(&tooth, &mut plant).unwrap_err().to_string();
-        assert!(e.contains("cannot run tooth-compliance"), "{e}");
+        apply_model(&tooth, &mut plant).unwrap();
+        assert!((plant.effects.tooth_compliance - 15e-6).abs() < 1e-15);
     }
 
     #[test]
@@ -427,6 +470,16 @@ mod tests {
         );
         let mut plant = crate::SimConfig::paper().plant;
         let s = EffectSpec::parse("current-sensor-offset:offset_a=0.1").unwrap();
+        assert!(
+            s.unseen_through_firmware()
+                .is_some_and(|w| w.contains("zeroes its current reading"))
+        );
+        assert!(
+            EffectSpec::parse("thermal-drift")
+                .unwrap()
+                .unseen_through_firmware()
+                .is_none()
+        );
         s.apply(&mut plant).unwrap();
         assert!((plant.effects.current_offset - 0.1).abs() < 1e-12);
         EffectSpec::parse("speed-dependent-axial-friction")
@@ -440,11 +493,21 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("not a finite number"), "{e}");
-        let e = EffectSpec::parse("tooth-compliance")
+        // Every library effect runs in the plant, the seeds' two as physics of the teeth.
+        for effect in Effect::ALL {
+            let mut p = plant;
+            p.effects = PlantEffects::default();
+            EffectSpec::parse(effect.name())
+                .unwrap()
+                .apply(&mut p)
+                .unwrap_or_else(|e| panic!("{}: {e}", effect.name()));
+            assert_ne!(p.effects, PlantEffects::default(), "{}", effect.name());
+        }
+        let e = EffectSpec::parse("tooth-compliance:compliance_um_per_n=0")
             .unwrap()
             .apply(&mut plant)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("cannot represent"), "{e}");
+        assert!(e.contains("above 0"), "{e}");
     }
 }

@@ -122,6 +122,15 @@ impl Fit {
         self.std_error_at(offset + coord)
     }
 
+    /// Covariance of coordinates `a` and `b` of the `t`-th term of the spec (`None` when
+    /// either sits on a bound).
+    pub fn term_cov(&self, t: usize, a: usize, b: usize) -> Option<f64> {
+        let p = self.unknowns();
+        let offset = self.free.len() + self.term_x[..t].iter().map(Vec::len).sum::<usize>();
+        let v = *self.cov.get((offset + a) * p + offset + b)?;
+        v.is_finite().then_some(v)
+    }
+
     /// Noise standard deviation at `op`, A (the ripple scatters the friction term).
     pub fn sigma_at(&self, op: &OperatingPoint) -> f64 {
         self.sigma_with(&self.model.evaluator(), op)

@@ -179,6 +179,8 @@ struct Input {
     truth: Option<SyntheticTruth>,
     source: String,
     default_dir: Option<PathBuf>,
+    /// What the base model assumed about a drive the data do not state.
+    drive_warning: Option<String>,
 }
 
 /// Reads `--measured` (its provenance's drive into `rig`) or makes the `--synthetic` sweep
@@ -208,13 +210,16 @@ fn input(args: &ExplainArgs, rig: &mut RigFile) -> Result<Input, RigError> {
                     }
                     _ => rig.drive.decay = measured,
                 }
-                *rig = rig.clone().with_drive_decay(regenerative);
             }
+            // The stated drive (checked above) or, without a line, the rig's own drive, said.
+            let (with_drive, warning) = crate::provenance::with_stated_drive(rig.clone(), path);
+            *rig = with_drive;
             Ok(Input {
                 data,
                 truth: None,
                 source: path.display().to_string(),
                 default_dir: Some(default_report_dir(path)),
+                drive_warning: warning,
             })
         }
         (None, Some(Hidden(hidden))) => {
@@ -246,6 +251,7 @@ fn input(args: &ExplainArgs, rig: &mut RigFile) -> Result<Input, RigError> {
                 truth: Some(truth),
                 source,
                 default_dir: None,
+                drive_warning: None,
             })
         }
         (None, None) => Err(RigError::BadValue {
@@ -316,6 +322,10 @@ pub fn run(args: ExplainArgs) -> Result<ExitCode, RigError> {
     };
     let input = input(&args, &mut rig)?;
     let mut outcome = explain::explain(&input.data, &rig, &options(&args))?;
+    outcome
+        .explanation
+        .warnings
+        .extend(input.drive_warning.clone());
     if args.json {
         // The text output lists them itself.
         for w in &outcome.explanation.warnings {

@@ -31,7 +31,9 @@ pub struct ServeArgs {
     #[arg(long, default_value = "paper", value_parser = clap::builder::PossibleValuesParser::new(sim::preset::PRESETS))]
     pub preset: String,
     /// Hide an effect in the plant: NAME[:k=v,...] with `rig explain`'s effect and parameter
-    /// names (e.g. current-sensor-offset:offset_a=0.05); repeatable.
+    /// names (e.g. load-dependent-friction:exponent=0.3); repeatable. An effect the firmware
+    /// cancels (a current-sensor offset: it zeroes the sensor with the motor off) is served
+    /// with a warning: no client logging through the firmware can see it.
     #[arg(long = "effect", value_name = "NAME[:k=v,...]")]
     pub effects: Vec<String>,
     /// A rig file: the virtual rig is built from it (gear, friction, calibration stored in
@@ -60,6 +62,16 @@ pub struct Ready {
     pub effects: Vec<String>,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// Why an effect hidden cannot show to a client (the firmware cancels it).
+    pub warnings: Vec<String>,
+}
+
+/// Why each effect of `a` cannot show to a client logging through the firmware.
+pub fn unseen_warnings(a: &ServeArgs) -> Vec<String> {
+    a.effects
+        .iter()
+        .filter_map(|e| crate::discover::unseen_effect_note(e))
+        .collect()
 }
 
 /// The virtual rig the options describe.
@@ -86,6 +98,10 @@ pub fn run(a: ServeArgs) -> Result<ExitCode, RigError> {
         seed: a.seed,
     });
     let dev = VirtualDevice::start_with_noise(config, a.speed, noise)?;
+    let warnings = unseen_warnings(&a);
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let mut out = std::io::stdout().lock();
     if a.json {
         let ready = Ready {
@@ -94,6 +110,7 @@ pub fn run(a: ServeArgs) -> Result<ExitCode, RigError> {
             preset: a.preset.clone(),
             effects: a.effects.clone(),
             seed: a.seed,
+            warnings,
         };
         super::print_json_line(&mut out, &ready)?;
     } else {

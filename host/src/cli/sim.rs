@@ -293,7 +293,16 @@ fn torque_sweep(a: SweepArgs) -> Result<ExitCode, RigError> {
     let (points, estimate_rms_error_nm) =
         crate::experiment::paper::torque_sweep_with_error(&opts, fitted.as_ref())?;
     if let Some(path) = &a.csv {
-        crate::sweep_report::write_csv(&points, path)?;
+        let details = format!(
+            "preset {}, {}seed {}",
+            a.preset,
+            a.model
+                .as_ref()
+                .map_or(String::new(), |m| format!("model {}, ", m.display())),
+            a.seed
+        );
+        let header = crate::provenance::simulated_header("rig sim torque-sweep", &details);
+        crate::sweep_report::write_csv(&points, path, &header)?;
     }
     let summary = sweep::summarise(&points, &opts);
     if a.json {

@@ -415,13 +415,13 @@ mod tests {
         let c = VirtualDevice::rig_file_config(&plain, &paper).unwrap();
         assert_eq!(c.plant.effects, paper.effects);
         // An effect the plant cannot run is named.
-        let tooth = rig(
-            "[model]\nmu = 0.25\n\n[[model.effects]]\nname = \"tooth-compliance\"\nparams = {}\n",
+        let timed = rig(
+            "[model]\nmu = 0.25\n\n[[model.effects]]\nname = \"thermal-drift\"\nparams = { k_per_s = 1e-6 }\n",
         );
-        let e = VirtualDevice::rig_file_config(&tooth, &paper)
+        let e = VirtualDevice::rig_file_config(&timed, &paper)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("cannot run tooth-compliance"), "{e}");
+        assert!(e.contains("cannot run thermal-drift against time"), "{e}");
     }
 
     fn connect(dev: &VirtualDevice) -> Client<crate::client::SerialTransport> {

@@ -578,9 +578,9 @@ pub const EFFECTS: &[EffectInfo] = &[
         one_sided: true,
         likelihood_params: 1,
         plant: PlantTakes {
-            form: PlantForm::Absent,
-            setting: "",
-            note: "not modelled",
+            form: PlantForm::Same,
+            setting: "PlantEffects::tooth_compliance",
+            note: "the teeth's axial friction force F works over the stroke e - c F at every instant (plant::compliant_stroke), whose turn mean is this law",
         },
         limits: &[PhysicalLimit {
             key: "compliance_um_per_n",
@@ -612,9 +612,9 @@ pub const EFFECTS: &[EffectInfo] = &[
         one_sided: true,
         likelihood_params: 1,
         plant: PlantTakes {
-            form: PlantForm::Absent,
-            setting: "",
-            note: "not modelled",
+            form: PlantForm::Variant,
+            setting: "PlantEffects::mesh_ripple_rms",
+            note: "the teeth's friction force follows seed 003's load sharing over the output mesh's angle (plant::MeshRipple), relative rms ripple_rms: a test's window at its own mesh phase scatters the friction term as this law says",
         },
         limits: &[PhysicalLimit {
             key: "ripple_rms",

@@ -43,6 +43,74 @@ pub struct PlantEffects {
     /// kappa + kappa_per_nm |tau_rot| ([`crate::effects::carrier_inertia_torque_at_kappa`]),
     /// `(kappa, kappa_per_nm 1/(N m))`; `None`: the drive's own (`PlantParams::regeneration`).
     pub inertia_kappa: Option<(f64, f64)>,
+    /// `tooth-compliance` (seed 004, Xu & Zheng): the teeth deflect axially by c F before
+    /// they slide, so the axial friction force F of the teeth works over the stroke e - c F
+    /// ([`compliant_stroke`]; its turn mean is [`crate::effects::compliant_friction_torque`]).
+    /// `c` in m/N.
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub tooth_compliance: f64,
+    /// `mesh-load-sharing-ripple` (seed 003, Tian et al., Eq. 11): the teeth's friction
+    /// force follows the load sharing over the output mesh's angle, relative rms
+    /// `ripple_rms` about its mean ([`MeshRipple::friction_factor`]), so a test's window at
+    /// a mesh phase of its own sees a friction term that scatters from test to test.
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub mesh_ripple_rms: f64,
+}
+
+/// The stroke over which an axial friction force `force` (N) slides when the teeth first
+/// deflect by `compliance` x `force` (seed 004): e - c F, not below zero, m.
+#[inline]
+pub fn compliant_stroke(eccentricity: f64, compliance: f64, force: f64) -> f64 {
+    (eccentricity - compliance * force.abs()).max(0.0)
+}
+
+/// The output mesh's friction ripple over its angle (seed 003): the mesh's tooth count, its
+/// contact ratio and the mean and relative rms of [`crate::effects::mesh_friction`]
+/// there, computed once per plant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshRipple {
+    /// Teeth of the output gear that pass per radian of the output.
+    teeth_per_rad: f64,
+    /// Contact ratio of the output mesh.
+    contact_ratio: f64,
+    /// Mean of the mesh friction over a cycle.
+    mean: f64,
+    /// Relative rms of the mesh friction about its mean.
+    rms: f64,
+}
+
+impl MeshRipple {
+    /// The ripple of `gear`'s output mesh (Z3-Z4), with seed 003's local friction exponent.
+    pub fn of(gear: &crate::GearSet) -> Self {
+        let contact_ratio = gear.contact_ratio(4);
+        let (mean, rms) =
+            crate::effects::mesh_friction_stats(contact_ratio, crate::effects::ISO_LOAD_EXPONENT);
+        Self {
+            teeth_per_rad: f64::from(gear.z()[3]) / (2.0 * core::f64::consts::PI),
+            contact_ratio,
+            mean,
+            rms,
+        }
+    }
+
+    /// The factor on the teeth's friction force at output angle `output_rad` (from a mesh
+    /// phase `phase0`, in mesh cycles, at angle zero) for a ripple of relative rms
+    /// `ripple_rms`: 1 + ripple_rms m(phase), m the mesh friction's deviation from its mean
+    /// in units of its rms (unit rms over a cycle); 1 without a ripple.
+    pub fn friction_factor(&self, ripple_rms: f64, output_rad: f64, phase0: f64) -> f64 {
+        if ripple_rms <= 0.0 || self.rms <= 0.0 || self.mean <= 0.0 {
+            return 1.0;
+        }
+        let phase = phase0 + self.teeth_per_rad * output_rad;
+        let m = (crate::effects::mesh_friction(
+            phase,
+            self.contact_ratio,
+            crate::effects::ISO_LOAD_EXPONENT,
+        ) / self.mean
+            - 1.0)
+            / self.rms;
+        (1.0 + ripple_rms * m).max(0.0)
+    }
 }
 
 impl PlantEffects {
@@ -136,6 +204,36 @@ mod tests {
         };
         assert!((at_once.bush_hold_torque(0.0) - 1.0).abs() < 1e-12);
         assert_eq!(at_once.bush_hold_torque(1.0), 0.0);
+    }
+
+    #[test]
+    fn tooth_compliance_shortens_the_stroke_as_the_librarys_law() {
+        let (e, c) = (1.0e-3, 20e-6);
+        for f in [0.0, 10.0, 30.0, 60.0] {
+            // The turn mean of F (e - c F) |sin| is the library's compliant friction torque.
+            let mean = 2.0 / core::f64::consts::PI * f * compliant_stroke(e, c, f);
+            let law = crate::effects::compliant_friction_torque(f, e, c);
+            assert!((mean - law).abs() < 1e-15, "{f}: {mean} vs {law}");
+        }
+        assert_eq!(compliant_stroke(e, c, 100.0), 0.0);
+        assert_eq!(compliant_stroke(e, 0.0, 100.0), e);
+    }
+
+    #[test]
+    fn the_mesh_ripple_has_the_asked_rms_about_a_mean_of_one() {
+        let gear = crate::GearSet::paper([49, 51, 50, 50]).unwrap();
+        let mesh = MeshRipple::of(&gear);
+        assert_eq!(mesh.friction_factor(0.0, 1.0, 0.3), 1.0);
+        // Over one mesh cycle of the output (one tooth pitch of the output gear).
+        let n = 2000;
+        let pitch = 1.0 / mesh.teeth_per_rad;
+        let f: Vec<f64> = (0..n)
+            .map(|k| mesh.friction_factor(0.1, pitch * (k as f64 + 0.5) / n as f64, 0.0))
+            .collect();
+        let mean = f.iter().sum::<f64>() / n as f64;
+        let rms = (f.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64).sqrt();
+        assert!((mean - 1.0).abs() < 1e-3, "{mean}");
+        assert!((rms - 0.1).abs() < 2e-3, "{rms}");
     }
 
     #[test]

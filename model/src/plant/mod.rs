@@ -13,7 +13,7 @@ pub mod pwm;
 mod rng;
 mod sensors;
 
-pub use effects::PlantEffects;
+pub use effects::{MeshRipple, PlantEffects, compliant_stroke};
 pub use motor::MotorParams;
 pub use pwm::AdcSampling;
 pub use rng::NoiseSource;
@@ -242,6 +242,13 @@ pub struct Plant {
     trig_cache: (f64, f64, f64, u32),
     /// The gear's axial force per unit of output torque (Eq. 8), computed once.
     axial_per_torque: f64,
+    /// The output mesh's ripple of friction over the mesh angle, computed once.
+    mesh: effects::MeshRipple,
+    /// Where the output mesh's cycle stood at output angle zero, in mesh cycles, drawn at
+    /// every load change ([`Plant::set_load`]): the operator hangs each test's weight with
+    /// the output wherever it came to rest, so each test meets the mesh ripple at a phase of
+    /// its own (drawn only with the ripple on, so every other plant's noise is unchanged).
+    mesh_phase: f64,
     /// 1 / thermal resistance and 1 / heat capacity of the winding.
     thermal: [f64; 2],
     /// The comparator tripped the timer's break: the bridge is off.
@@ -293,6 +300,8 @@ impl Plant {
             decay_cache: (f64::NAN, 0, f64::NAN, [0.0; 4]),
             trig_cache: (0.0, 0.0, 1.0, 0),
             axial_per_torque: params.drive.gear.axial_force_per_torque(),
+            mesh: effects::MeshRipple::of(&params.drive.gear),
+            mesh_phase: 0.0,
             thermal: [
                 1.0 / params.motor.thermal_resistance,
                 1.0 / params.motor.thermal_capacity,
@@ -376,6 +385,10 @@ impl Plant {
     /// Changes the load (the operator hangs another mass).
     pub fn set_load(&mut self, load: Load) {
         self.params.load = load;
+        // A new test: the output's mesh meets it at a phase of its own.
+        if self.params.effects.mesh_ripple_rms > 0.0 {
+            self.mesh_phase = self.rng.uniform();
+        }
         self.shaft = self.params.output_shaft();
         self.inv_i_hat = 1.0 / self.shaft.i_hat;
     }
@@ -606,17 +619,28 @@ impl Plant {
         let e = p.drive.eccentricity;
         let coupled = p.cam == CamSetup::Coupled;
         let mass = if coupled { p.drive.carrier_mass } else { 0.0 };
-        let axial_force = if coupled {
+        // The teeth's axial friction force, rippling over the mesh angle (seed 003) and
+        // sliding over the stroke its tooth compliance leaves (seed 004), and the bush's.
+        let t_axial = if coupled {
             let mut mu_ax = p.effects.axial_mu(p.mu_ax, omega, tau_rot);
             if p.friction_split {
                 let corner = axial_corner_speed(self.state.output_speed, self.shaft.small_lambda);
                 mu_ax *= axial_friction_speed_factor(omega, corner);
             }
-            mu_ax * tau_rot.abs() * self.axial_per_torque + p.effects.bush_friction
+            let teeth = mu_ax
+                * tau_rot.abs()
+                * self.axial_per_torque
+                * self.mesh.friction_factor(
+                    p.effects.mesh_ripple_rms,
+                    self.state.output_angle,
+                    self.mesh_phase,
+                );
+            (teeth * compliant_stroke(e, p.effects.tooth_compliance, teeth)
+                + p.effects.bush_friction * e)
+                * s.abs()
         } else {
             0.0
         };
-        let t_axial = axial_force * e * s.abs();
         let kinetic = m.coulomb + m.running_loss;
         // The vibrator's viscous loss: C3's and the `vibrator-viscous-loss` effect's.
         let viscous_torque =
