@@ -890,9 +890,11 @@ fn wear_that_time_explains_as_well_is_not_named_as_thermal_drift() {
         e.ambiguous.first().map(String::as_str),
         Some(drift.name.as_str())
     );
-    // Lower confidence: the share times the drift's weight against the better alternative.
+    // Lower confidence than the bootstrap share: since v4 an ambiguous finding's confidence
+    // is the calibrated probability that every named effect is part of the truth
+    // (`calibration::PARTIAL_MODEL`), whose evidence carries the driver check's margin
+    // against the better alternative.
     let (c, raw) = (e.confidence.unwrap(), e.confidence_raw.unwrap());
-    assert!((c - raw * check.weight()).abs() < 1e-12, "{c} {raw}");
     assert!(c < 0.5 * raw, "{c} {raw}");
 }
 
@@ -1007,11 +1009,14 @@ fn two_effects_plausible_only_together_are_named_and_reported_as_such() {
     );
     assert!(e.effects.iter().all(|f| f.plausible), "{}", e.finding);
     assert!(e.steps[0].accepted && e.steps[1].accepted);
+    // Why the pair wins: before v4 the load-dependent form alone had values no rig can
+    // have; judged with its interval (v4) it may be plausible, and the pair then wins by
+    // more than the guard's critical value over it with any partner.
+    let reason = &e.steps[0].reason;
     assert!(
-        e.steps[0].reason.contains("values no rig can have")
-            && e.steps[0].reason.contains("named together"),
-        "{}",
-        e.steps[0].reason
+        reason.contains("named together")
+            && (reason.contains("values no rig can have") || reason.contains("with any partner")),
+        "{reason}"
     );
     assert!(
         e.finding.contains("only together") || e.finding.contains("named as a pair"),

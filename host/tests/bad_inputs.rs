@@ -330,7 +330,7 @@ fn option_values_and_combinations() {
     let e = fails(&["--speed", "10", "info"]);
     assert_says(&e, &["add --sim"]);
     let e = fails(&["--sim", "--speed", "0", "info"]);
-    assert_says(&e, &["not a speed factor"]);
+    assert_says(&e, &["not a speed the simulation can keep"]);
     let e = fails(&["--sim", "--port", "/dev/ttyACM0", "info"]);
     assert_says(&e, &["cannot be used with"]);
     let e = fails(&["--sim", "release", "sideways"]);

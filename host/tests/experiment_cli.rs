@@ -384,6 +384,17 @@ fn rig_sim_torque_sweep_is_the_procedure_with_its_keys_and_columns() {
         "{s}"
     );
     let body = std::fs::read_to_string(&csv).unwrap();
+    // Provenance first (`#` lines: the command, the drive), then the columns and 30 rows.
+    assert!(body.starts_with("# rig sim torque-sweep"), "{body:.300}");
+    assert!(
+        body.contains("\n# drive: regenerative_decay = "),
+        "{body:.400}"
+    );
+    let body: String = body
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| format!("{l}\n"))
+        .collect();
     assert_eq!(
         body.lines().next().unwrap(),
         "t_s,v_in_v,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c,repeat,tau_cam_est_nm,tau_cam_meas_nm,tau_cam_eq10_nm,backdriven"

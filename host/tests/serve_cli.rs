@@ -413,9 +413,17 @@ fn paper_preset_sweep_shows_what_the_paper_measured() {
         .iter()
         .filter_map(|f| f["name"].as_str())
         .collect();
-    for paper in ["speed-dependent-axial-friction", "linear-bush-friction"] {
-        assert!(named.contains(&paper), "{paper} not named: {e}");
-    }
+    // With the sweep's stated drive in the base (issue 31), the paper's speed-dependent
+    // axial friction is named first and the drive's own return never is; the bush
+    // friction (a few mA on this quick sweep) is in 8 % of the resamples and not named:
+    // session 10 left it to trace (it was named before the drive line, beside a
+    // load-dependent inertia form that took up the plant/law difference).
+    assert_eq!(
+        named.first(),
+        Some(&"speed-dependent-axial-friction"),
+        "{e}"
+    );
+    assert!(!named.contains(&"inertia-rectification"), "{e}");
 }
 
 /// `--preset ideal` is the paper's equations alone: every point is backdriven.

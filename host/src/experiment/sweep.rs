@@ -882,7 +882,7 @@ mod tests {
     #[test]
     fn a_plan_is_checked_whole_before_the_first_point() {
         let plan = Plan::parse(
-            "rest_s = 0.2\n[[points]]\nload_nm = 1.0\nvolts = 6.2\n[[points]]\nload_nm = 5.0\nvolts = 6.2\n[[points]]\nload_nm = 1.0\nvolts = 30.0\n",
+            "rest_s = 0.2\n[[points]]\nload_nm = 1.0\nvolts = 6.2\n[[points]]\nload_nm = 5.0\nvolts = 6.2\n[[points]]\nload_nm = 1.0\nvolts = 20.0\n",
             "p.toml",
         )
         .unwrap();
@@ -893,7 +893,7 @@ mod tests {
             e.contains("point 2: load_nm 5") && e.contains("3.68"),
             "{e}"
         );
-        assert!(e.contains("point 3: volts 30"), "{e}");
+        assert!(e.contains("point 3: volts 20"), "{e}");
         assert!(check_plan(&Plan::paper(), &cal).is_ok());
         let hz = Plan::parse(
             "mode = \"closed-loop\"\n[[points]]\nload_nm = 1.0\nhz = 20.0\n",
