@@ -41,7 +41,7 @@ def test_constructor_arguments_are_bad_values():
         Rig.open("/dev/null", baud=-1)
     with pytest.raises(BadValueError, match=r"z\[0\]"):
         design(z=[float("nan"), 51, 50, 50])
-    with pytest.raises(BadValueError, match="four values"):
+    with pytest.raises(BadValueError, match="give four"):
         design(z=[49, 51, 50])
 
 
