@@ -61,6 +61,10 @@ impl RigLink for AnyLink {
         }
     }
 
+    fn refusal(error: &host::RigError) -> Option<protocol::NackCode> {
+        error.refusal()
+    }
+
     fn state(&mut self) -> Result<protocol::SupervisorState, host::RigError> {
         match self {
             AnyLink::Simulated(l) => Ok(RigLink::state(l.as_mut())?),

@@ -569,9 +569,12 @@ pub fn run<T: Read + Write>(io: T, opts: &Options) -> Result<Report, RigError> {
                 tau_rot_nm: 0.0,
             }))?;
         }
-        heartbeat_and_faults(&mut s, parameters.map_or(10.0, |p| p.max_freq_hz.min(10.0)))?;
+        let hz = parameters.map_or(10.0, |p| p.max_freq_hz.min(10.0));
+        release_before_zero(&mut s, hz)?;
+        heartbeat_and_faults(&mut s, hz)?;
     } else {
         for name in [
+            "release-before-zero",
             "heartbeat-timeout",
             "release-owner",
             "fault-latch-hold-clear",
@@ -816,6 +819,46 @@ fn busy_beyond_window<T: Read + Write>(s: &mut Suite<T>) -> Result<(), RigError>
             } else {
                 other.join(", ")
             }
+        ),
+    );
+    Ok(())
+}
+
+/// A drive before the current sensor's zero is measured is refused with the reason: a
+/// `RezeroCurrent` and a `Release` in one write, so the release reaches the device well
+/// inside the zero's 100 ms. The zero's own reply must be `Ack`, the release's
+/// `Nack(CurrentZeroPending)`; whatever came back, the gear is locked again and the zero
+/// given time to end.
+fn release_before_zero<T: Read + Write>(s: &mut Suite<T>, hz: f32) -> Result<(), RigError> {
+    let (zero_seq, mut bytes) = s.link.frame(&Request::RezeroCurrent);
+    let (release_seq, release) = s.link.frame(&Request::Release {
+        on: true,
+        target_hz: hz,
+        session: 0,
+    });
+    bytes.extend_from_slice(&release);
+    s.link.write(&bytes)?;
+    let wait = s.reply_wait;
+    let zero = s.link.reply(zero_seq, wait)?;
+    let got = s.link.reply(release_seq, wait)?;
+    let lock = s.request(&Request::Release {
+        on: false,
+        target_hz: 0.0,
+        session: 0,
+    })?;
+    // The zero takes 100 ms of device time; a margin for the link.
+    s.link.pump(s.wall(0.3))?;
+    let ok = zero == Some(Reply::Ack)
+        && got == Some(Reply::Nack(NackCode::CurrentZeroPending))
+        && lock == Some(Reply::Ack);
+    s.record(
+        "release-before-zero",
+        ok,
+        format!(
+            "RezeroCurrent got {}; a Release in the same write got {} (want Nack(CurrentZeroPending)); Release(off) got {}",
+            describe(&zero),
+            describe(&got),
+            describe(&lock)
         ),
     );
     Ok(())

@@ -180,6 +180,19 @@ pub enum RigError {
     #[error("cannot start the virtual device: {0}")]
     VirtualDevice(String),
 }
+
+impl RigError {
+    /// The device's reason when this is its refusal (a `Nack`, from the device link or the
+    /// in-process virtual rig), `None` for any other error.
+    pub fn refusal(&self) -> Option<protocol::NackCode> {
+        match self {
+            Self::Refused { code, .. } | Self::Sim(sim::SimError::Refused { code, .. }) => {
+                Some(*code)
+            }
+            _ => None,
+        }
+    }
+}
 #[cfg(test)]
 mod tests {
     use super::*;

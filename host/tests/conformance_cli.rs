@@ -12,7 +12,7 @@ mod support {
 use support::served::Server;
 
 /// The checks every run lists (the motion ones run: a served rig is a simulation).
-const CHECKS: [&str; 15] = [
+const CHECKS: [&str; 16] = [
     "handshake",
     "version-refusal",
     "out-of-range-refused",
@@ -23,6 +23,7 @@ const CHECKS: [&str; 15] = [
     "one-reply-per-request-under-load",
     "busy-beyond-window",
     "safe-state-after-load",
+    "release-before-zero",
     "heartbeat-timeout",
     "release-owner",
     "fault-latch-hold-clear",

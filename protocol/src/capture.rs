@@ -6,10 +6,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::sizes::{I32, TAG, U16, U32};
 
-/// Samples per [`CaptureChunk`]; sets the largest frame of the protocol (18 samples with
-/// the output count keep that frame within v3's 32 samples without it, so no frame
-/// buffer grows).
-pub const CAPTURE_CHUNK_SAMPLES: usize = 18;
+/// Samples per [`CaptureChunk`], at most: what the firmware sends in every chunk but a
+/// capture's last. The one place this size is stated. Ten samples keep framing one chunk
+/// (done by the firmware in `Core::transmit`, under its core lock) within the Cortex-M4's
+/// lock budget of 10,000 cycles (`cargo xtask target-bench`); a host takes chunks of any
+/// length up to this.
+pub const CAPTURE_CHUNK_SAMPLES: usize = 10;
 
 /// One raw capture sample; the host converts with the board's scale factors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -18,8 +18,8 @@ use crate::{
 
 /// Device-to-host messages.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-// The device has no heap: a capture chunk (18 samples, 312 bytes in memory) is built in
-// place like every message.
+// The device has no heap: a capture chunk (`CAPTURE_CHUNK_SAMPLES`, 10 samples, 184 bytes in
+// memory) is built in place like every message.
 #[allow(clippy::large_enum_variant)]
 #[non_exhaustive]
 pub enum DeviceMessage {
@@ -190,6 +190,11 @@ pub enum NackCode {
     StorageFailed,
     /// A `Simulation` command reached real hardware.
     SimulationOnly,
+    /// A drive (`Release { on: true }`, `OpenLoop` with volts) before the current sensor's
+    /// zero is measured (about 100 ms after boot or a `RezeroCurrent`): the overcurrent trip
+    /// is centred on the measured zero, so nothing may drive before it exists. Ask again
+    /// once the zero is measured; the request had no effect.
+    CurrentZeroPending,
 }
 
 impl NackCode {
@@ -207,6 +212,7 @@ impl NackCode {
             Self::Busy => "Busy",
             Self::StorageFailed => "StorageFailed",
             Self::SimulationOnly => "SimulationOnly",
+            Self::CurrentZeroPending => "CurrentZeroPending",
         }
     }
 }
@@ -232,6 +238,9 @@ impl fmt::Display for NackCode {
             ),
             Self::StorageFailed => f.write_str("writing the parameters to flash failed"),
             Self::SimulationOnly => f.write_str("simulation commands work only on the virtual rig"),
+            Self::CurrentZeroPending => f.write_str(
+                "the current sensor's zero is still being measured (the overcurrent trip needs it)",
+            ),
         }
     }
 }

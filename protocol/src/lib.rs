@@ -161,9 +161,9 @@ pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 /// supply, temperature and timing fields. v3: `DeviceInfo::time_scale`, the request window
 /// ([`REQUEST_WINDOW`]), and a device that refuses
 /// (never silently replaces) a value it cannot use. v4: capture samples carry the output
-/// encoder (`CaptureSample::output_count`), at most [`CAPTURE_CHUNK_SAMPLES`] per chunk (the
-/// firmware sends `firmware_core`'s `UPLOAD_CHUNK_SAMPLES`, fewer, to keep a chunk's framing
-/// short under its core lock; a host takes chunks of any length up to the maximum).
+/// encoder (`CaptureSample::output_count`), at most 18 samples per chunk.
 /// v5: drive requests carry the host session ([`SessionId`]); only the owner's requests keep a
-/// release alive.
-pub const PROTOCOL_VERSION: u16 = 5;
+/// release alive. v6: a drive before the current sensor's zero is measured is refused with
+/// [`NackCode::CurrentZeroPending`]; a capture chunk holds at most 10 samples, what the
+/// firmware sends ([`CAPTURE_CHUNK_SAMPLES`], stated once).
+pub const PROTOCOL_VERSION: u16 = 6;

@@ -150,9 +150,10 @@ mod tests {
         // delimiter (one byte per frame) and grew the request to the same record; the
         // output shaft's angle and speed grew telemetry by 8 bytes, and the slow
         // quantities moved to the once-a-second health sample. v4's output count per
-        // capture sample came with 18 (not 32) samples per chunk: 4 bytes smaller.
-        assert_eq!(MAX_MESSAGE_SIZE, 270);
-        assert_eq!(MAX_FRAME_SIZE, 278);
+        // capture sample came with 18 (not 32) samples per chunk: 4 bytes smaller. v6's
+        // chunk of 10, what the firmware sends, took the largest frame from 278 to 165 bytes.
+        assert_eq!(MAX_MESSAGE_SIZE, 158);
+        assert_eq!(MAX_FRAME_SIZE, 165);
         assert_eq!(MAX_REQUEST_FRAME_SIZE, 83);
         assert_eq!(TELEMETRY_FRAME, 63);
         assert_eq!(TELEMETRY_FRAME_TYPICAL, 55);

@@ -22,7 +22,15 @@ pub enum SimError {
         /// What is wrong with it and what to give instead.
         why: String,
     },
-    /// The rig (simulated or real) broke the protocol, refused or did not answer.
+    /// The rig (simulated or real) broke the protocol or did not answer.
     #[error("device protocol: {0}")]
     Protocol(String),
+    /// The rig refused a request, with the device's reason.
+    #[error("device protocol: the rig refused {request}: {code} ({})", code.name())]
+    Refused {
+        /// The request's name.
+        request: &'static str,
+        /// The device's reason.
+        code: protocol::NackCode,
+    },
 }

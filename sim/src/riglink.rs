@@ -2,7 +2,7 @@
 //! simulated rig in virtual time ([`SimLink`]) or a real rig over its serial port (the
 //! host's device link). `hil-tests` runs them on either.
 
-use protocol::{FaultFlags, Reply, Request, SupervisorState};
+use protocol::{FaultFlags, NackCode, Reply, Request, SupervisorState};
 use serde::Serialize;
 
 use crate::{SimError, SimLink};
@@ -24,6 +24,8 @@ pub trait RigLink {
     fn keep_alive(&mut self, on: bool);
     /// Lets `seconds` pass (virtual or wall-clock), heartbeats going on when kept alive.
     fn wait(&mut self, seconds: f64) -> Result<(), Self::Error>;
+    /// The device's reason when `error` is a refusal (a `Nack`), `None` for any other error.
+    fn refusal(error: &Self::Error) -> Option<NackCode>;
     /// The supervisor state of the newest telemetry sample (a link may wait for a fresh
     /// one).
     fn state(&mut self) -> Result<SupervisorState, Self::Error>;
@@ -67,11 +69,10 @@ pub trait RigLink {
 /// (naming the device's reason) or a reply of another kind.
 pub fn unexpected(req: &Request, reply: &Reply) -> SimError {
     match reply {
-        Reply::Nack(code) => SimError::Protocol(format!(
-            "the rig refused {}: {code} ({})",
-            req.name(),
-            code.name()
-        )),
+        Reply::Nack(code) => SimError::Refused {
+            request: req.name(),
+            code: *code,
+        },
         other => SimError::Protocol(format!(
             "{} was answered with {} instead of {}",
             req.name(),
@@ -100,6 +101,13 @@ impl RigLink for SimLink {
         Ok(())
     }
 
+    fn refusal(error: &SimError) -> Option<NackCode> {
+        match error {
+            SimError::Refused { code, .. } => Some(*code),
+            _ => None,
+        }
+    }
+
     fn state(&mut self) -> Result<SupervisorState, SimError> {
         self.last_telemetry
             .map(|t| t.state)
@@ -111,19 +119,39 @@ impl RigLink for SimLink {
     }
 }
 
-/// Requests a release at `hz` and keeps it alive with heartbeats.
+/// How long a release waits for the rig's current-sensor zero, rig seconds (ten times the
+/// firmware's 100 ms measurement).
+pub const ZERO_WAIT_S: f64 = 1.0;
+/// How often a release refused with `CurrentZeroPending` is asked again, rig seconds.
+pub const ZERO_RETRY_S: f64 = 0.01;
+
+/// Requests a release at `hz` and keeps it alive with heartbeats. A rig still measuring its
+/// current sensor's zero (just booted) refuses with `CurrentZeroPending`: asked again every
+/// [`ZERO_RETRY_S`] for at most [`ZERO_WAIT_S`] of the rig's clock.
 pub fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), L::Error> {
     let req = Request::Release {
         on: true,
         target_hz: hz,
         session: 0,
     };
-    match link.request(&req)? {
-        Reply::Ack => {
-            link.keep_alive(true);
-            Ok(())
+    // Waits of ZERO_RETRY_S each (the link's own clock), so no reading of the clock is needed.
+    let mut waits = 0;
+    loop {
+        match link.request(&req) {
+            Ok(Reply::Ack) => {
+                link.keep_alive(true);
+                return Ok(());
+            }
+            Ok(other) => return Err(unexpected(&req, &other).into()),
+            Err(e)
+                if L::refusal(&e) == Some(NackCode::CurrentZeroPending)
+                    && f64::from(waits) * ZERO_RETRY_S < ZERO_WAIT_S =>
+            {
+                link.wait(ZERO_RETRY_S)?;
+                waits += 1;
+            }
+            Err(e) => return Err(e),
         }
-        other => Err(unexpected(&req, &other).into()),
     }
 }
 

@@ -21,11 +21,6 @@
 
 use protocol::{CAPTURE_CHUNK_SAMPLES, CaptureChunk, CaptureSample, DeviceMessage, NackCode};
 
-/// Samples per uploaded chunk: fewer than the protocol's [`CAPTURE_CHUNK_SAMPLES`] so that
-/// framing one chunk (in `Core::transmit`, under the binary's core lock) stays short on the
-/// Cortex-M4 (`cargo xtask target-bench`); the host takes chunks of any length.
-pub const UPLOAD_CHUNK_SAMPLES: usize = 10;
-const _: () = assert!(UPLOAD_CHUNK_SAMPLES <= CAPTURE_CHUNK_SAMPLES);
 
 /// Samples the capture buffer holds (1.0 s at 10 kHz).
 pub const CAPTURE_CAPACITY: usize = 10_000;
@@ -300,7 +295,7 @@ impl Capture {
             total_samples: self.total,
             samples: heapless::Vec::new(),
         };
-        let end = (self.sent as usize + UPLOAD_CHUNK_SAMPLES).min(self.total as usize);
+        let end = (self.sent as usize + CAPTURE_CHUNK_SAMPLES).min(self.total as usize);
         for (index, raw) in (self.sent..).zip(&self.buf[self.sent as usize..end]) {
             let delta = raw.encoder.wrapping_sub(self.upload_last_raw).cast_signed();
             self.upload_last_raw = raw.encoder;

@@ -91,7 +91,7 @@ mod tx_queue;
 )]
 mod tests;
 
-pub use capture::{CAPTURE_CAPACITY, MIN_SAMPLE_RATE_HZ, OUTPUT_GROUP_MIN, UPLOAD_CHUNK_SAMPLES};
+pub use capture::{CAPTURE_CAPACITY, MIN_SAMPLE_RATE_HZ, OUTPUT_GROUP_MIN};
 pub use config::{
     CoreConfig, CurrentSensorConfig, EstimatorConfig, FaultConfig, MotorConfig, MotorRules,
     SpeedLoopConfig, SupervisorConfig,

@@ -122,12 +122,15 @@ pub(crate) struct DriveLimits {
     pub max_volts: f32,
     /// A fault is latched or the parameter record is invalid: nothing may start.
     pub locked: bool,
+    /// The current sensor's zero is not measured yet (boot, or a `RezeroCurrent` running):
+    /// the overcurrent trip has no measured zero to be centred on, so nothing may start.
+    pub zero_pending: bool,
 }
 
 /// `Release { on, target_hz, session }`: off (from any session) stops every host drive; on
 /// starts a release at exactly `target_hz` (refused, never clamped, outside the limits)
-/// owned by `session`, unless something is locked, an open-loop drive runs or another
-/// session's release is live.
+/// owned by `session`, unless something is locked, the current sensor's zero is not
+/// measured yet, an open-loop drive runs or another session's release is live.
 pub(crate) fn release(
     r: &mut Release,
     limits: &DriveLimits,
@@ -143,6 +146,8 @@ pub(crate) fn release(
         Err(NackCode::BadArgument)
     } else if limits.locked {
         Err(NackCode::InFaultHold)
+    } else if limits.zero_pending {
+        Err(NackCode::CurrentZeroPending)
     } else if r.open_loop_volts.is_some() || (r.host && r.owner != session) {
         Err(NackCode::Busy)
     } else {
@@ -155,7 +160,8 @@ pub(crate) fn release(
 
 /// `OpenLoop { volts, session }`: 0 (from any session) stops an open-loop drive; otherwise
 /// a fixed bridge voltage of at most [`DriveLimits::max_volts`] owned by `session`, unless
-/// something is locked, a release is live or another session's open-loop drive runs.
+/// something is locked, the current sensor's zero is not measured yet, a release is live
+/// or another session's open-loop drive runs.
 pub(crate) fn open_loop(
     r: &mut Release,
     limits: &DriveLimits,
@@ -169,6 +175,8 @@ pub(crate) fn open_loop(
         Err(NackCode::BadArgument)
     } else if limits.locked {
         Err(NackCode::InFaultHold)
+    } else if limits.zero_pending {
+        Err(NackCode::CurrentZeroPending)
     } else if r.host || r.button_held || (r.open_loop_volts.is_some() && r.owner != session) {
         Err(NackCode::Busy)
     } else {
@@ -243,6 +251,7 @@ mod tests {
         max_hz: 20.0,
         max_volts: 11.4,
         locked: false,
+        zero_pending: false,
     };
 
     #[test]
@@ -273,6 +282,40 @@ mod tests {
         l.open_loop_volts = Some(3.0);
         assert_eq!(release(&mut l, &locked, false, f32::NAN, 7), Ok(Reply::Ack));
         assert_eq!(l.open_loop_volts, None);
+    }
+
+    #[test]
+    fn no_drive_starts_before_the_current_zero_is_measured() {
+        let pending = DriveLimits {
+            zero_pending: true,
+            ..LIMITS
+        };
+        let mut r = Release::new(10.0);
+        assert_eq!(
+            release(&mut r, &pending, true, 10.0, 7),
+            Err(NackCode::CurrentZeroPending)
+        );
+        assert_eq!(
+            open_loop(&mut r, &pending, 3.0, 7),
+            Err(NackCode::CurrentZeroPending)
+        );
+        assert!(!r.host_drive(), "a refused request has no effect");
+        // A bad argument is named first; stopping is always accepted.
+        assert_eq!(
+            release(&mut r, &pending, true, 99.0, 7),
+            Err(NackCode::BadArgument)
+        );
+        assert_eq!(release(&mut r, &pending, false, 0.0, 7), Ok(Reply::Ack));
+        assert_eq!(open_loop(&mut r, &pending, 0.0, 7), Ok(Reply::Ack));
+        // A latched fault is the reason given before the zero.
+        let both = DriveLimits {
+            locked: true,
+            ..pending
+        };
+        assert_eq!(
+            release(&mut r, &both, true, 10.0, 7),
+            Err(NackCode::InFaultHold)
+        );
     }
 
     #[test]

@@ -172,6 +172,7 @@ impl Core {
             max_volts: self.config.supply_v * self.config.motor.max_duty,
             locked: !self.faults.latched().is_empty()
                 || self.parameters_status == ParametersStatus::Invalid,
+            zero_pending: !self.zero_ready(),
         }
     }
 

@@ -6,11 +6,19 @@ use std::time::{Duration, Instant};
 
 use protocol::session::{Session, hello_outcome};
 use protocol::{
-    DeviceInfo, DeviceMessage, FaultFlags, Reply, Request, RigParameters, TelemetrySample,
+    DeviceInfo, DeviceMessage, FaultFlags, NackCode, Reply, Request, RigParameters,
+    TelemetrySample,
 };
 
 use super::{Client, FaultStatus, advice};
 use crate::RigError;
+
+/// How long a drive request waits for the device's current-sensor zero, device seconds:
+/// ten times the firmware's 100 ms measurement.
+pub const ZERO_WAIT_DEVICE_S: f64 = 1.0;
+/// How often a drive request refused with `CurrentZeroPending` is asked again, device
+/// seconds.
+pub const ZERO_RETRY_DEVICE_S: f64 = 0.01;
 
 impl<T: Read + Write> Client<T> {
     /// Says `Hello` and checks the versions (the device's `time_scale` then sets
@@ -66,8 +74,12 @@ impl<T: Read + Write> Client<T> {
 
     /// Starts (`on`) vibration at `target_hz`, or stops it. While on, the client keeps the
     /// release alive with heartbeats during every wait.
+    ///
+    /// A device still measuring its current sensor's zero (the first ~100 ms after boot or a
+    /// re-zero) refuses a drive with `CurrentZeroPending`; the client asks again until it is
+    /// accepted, for at most [`ZERO_WAIT_DEVICE_S`] of the device's time.
     pub fn release(&mut self, on: bool, target_hz: f32) -> Result<(), RigError> {
-        self.ack(&Request::Release {
+        self.drive(&Request::Release {
             on,
             target_hz,
             session: 0,
@@ -77,11 +89,38 @@ impl<T: Read + Write> Client<T> {
     }
 
     /// Drives the vibrator with a fixed voltage `volts` (open loop, for calibration); 0
-    /// stops it. Kept alive by heartbeats like a release.
+    /// stops it. Kept alive by heartbeats like a release; waits for the current zero as
+    /// [`Client::release`] does.
     pub fn open_loop(&mut self, volts: f32) -> Result<(), RigError> {
-        self.ack(&Request::OpenLoop { volts, session: 0 })?;
+        self.drive(&Request::OpenLoop { volts, session: 0 })?;
         self.set_keep_alive(volts != 0.0);
         Ok(())
+    }
+
+    /// Sends a drive request and requires an `Ack`, asking again while the device refuses
+    /// it with `CurrentZeroPending` (every [`ZERO_RETRY_DEVICE_S`] of device time, for at
+    /// most [`ZERO_WAIT_DEVICE_S`]); then that refusal stands, with its reason.
+    fn drive(&mut self, req: &Request) -> Result<(), RigError> {
+        let scale = self.opts.time_scale;
+        let give_up = crate::limits::deadline_after(crate::limits::wall_duration(
+            ZERO_WAIT_DEVICE_S,
+            scale,
+        ));
+        loop {
+            match self.exchange(req)? {
+                Reply::Nack(NackCode::CurrentZeroPending) if Instant::now() < give_up => {
+                    self.pause(crate::limits::wall_duration(ZERO_RETRY_DEVICE_S, scale))?;
+                }
+                Reply::Nack(code) => {
+                    return Err(match code {
+                        NackCode::InFaultHold => self.fault_hold_error(req, code),
+                        _ => advice::refused(req, code),
+                    });
+                }
+                Reply::Ack => return Ok(()),
+                other => return Err(advice::unexpected(req, &other, &self.opts.port_name)),
+            }
+        }
     }
 
     /// Sends one heartbeat and waits for its `Ack`.

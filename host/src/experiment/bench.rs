@@ -228,6 +228,10 @@ impl RigLink for InProcessBench {
         Ok(())
     }
 
+    fn refusal(error: &RigError) -> Option<protocol::NackCode> {
+        error.refusal()
+    }
+
     fn state(&mut self) -> Result<SupervisorState, RigError> {
         sampled_state(self)
     }
@@ -355,6 +359,10 @@ impl RigLink for DeviceBench {
                 self.note(&msg);
             }
         }
+    }
+
+    fn refusal(error: &RigError) -> Option<protocol::NackCode> {
+        error.refusal()
     }
 
     fn state(&mut self) -> Result<SupervisorState, RigError> {

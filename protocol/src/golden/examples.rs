@@ -56,7 +56,7 @@ pub(crate) fn worst_case_chunk() -> CaptureChunk {
 
 pub(crate) fn device_info() -> DeviceInfo {
     DeviceInfo {
-        protocol_version: 5,
+        protocol_version: 6,
         schema_hash: 0xDEAD_BEEF,
         firmware_version: FirmwareVersion {
             major: 0,
@@ -185,6 +185,7 @@ pub(crate) fn nack_codes() -> std::vec::Vec<Named<NackCode>> {
         ("Busy", Busy),
         ("StorageFailed", StorageFailed),
         ("SimulationOnly", SimulationOnly),
+        ("CurrentZeroPending", CurrentZeroPending),
     ]
 }
 
@@ -200,6 +201,7 @@ pub(crate) fn nack_index(c: &NackCode) -> usize {
         Busy => 5,
         StorageFailed => 6,
         SimulationOnly => 7,
+        CurrentZeroPending => 8,
     }
 }
 

@@ -141,6 +141,7 @@ fn nack_code() -> impl Strategy<Value = NackCode> {
         Just(NackCode::Busy),
         Just(NackCode::StorageFailed),
         Just(NackCode::SimulationOnly),
+        Just(NackCode::CurrentZeroPending),
     ]
 }
 

@@ -233,7 +233,13 @@ impl Core {
     /// nominal zero (at a 5.5 V sensor supply the nominal-zero trip fired at 4.2 A, below
     /// the software limit; at 4.5 V at 8.2 A).
     pub fn measured_current_zero_adc(&self) -> Option<f32> {
-        (self.current.zero_valid() && !self.current.zeroing()).then(|| self.current.zero_counts())
+        self.zero_ready().then(|| self.current.zero_counts())
+    }
+
+    /// Whether the current sensor's zero is measured and plausible, and no re-zero runs:
+    /// the supervisor leaves `Locked` and a drive request is accepted only then.
+    pub(crate) fn zero_ready(&self) -> bool {
+        self.current.zero_valid() && !self.current.zeroing()
     }
 
     /// The configuration.

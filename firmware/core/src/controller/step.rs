@@ -247,7 +247,7 @@ impl Core {
                 .requested_hz(self.config.supervisor.default_freq_hz)
                 .min(self.derived.max_hz),
             faulted: !self.faults.latched().is_empty(),
-            zero_ready: self.current.zero_valid() && !self.current.zeroing(),
+            zero_ready: self.zero_ready(),
             cam_speed_rad_s: speed,
         };
         let raised = self.supervisor.update(&inputs);

@@ -3,7 +3,7 @@
 use core::f32::consts::TAU;
 
 use protocol::{
-    FaultFlags, ParametersStatus, Request, RigParameters, StatusFlags, SupervisorState,
+    FaultFlags, NackCode, ParametersStatus, Request, RigParameters, StatusFlags, SupervisorState,
 };
 
 use super::{PAPER_Z, Rig};
@@ -42,25 +42,33 @@ fn boots_locked_and_waits_for_the_current_zero() {
     assert!(!out.enable);
     assert!(rig.core.status().zeroing);
     assert_eq!(rig.core.measured_current_zero_adc(), None);
-    assert_eq!(rig.ack(&release(10.0)), Ok(()));
-    // Zero takes 1000 samples (100 ms); the release waits for it.
-    for _ in 0..98 {
+    // A release before the zero exists is refused with the reason, and has no effect.
+    assert_eq!(
+        rig.ack(&release(10.0)),
+        Err(NackCode::CurrentZeroPending)
+    );
+    // Zero takes 1000 samples (100 ms): nothing drives meanwhile, and every release asked
+    // for meanwhile is refused.
+    let mut steps = 1;
+    while rig.core.measured_current_zero_adc().is_none() {
         assert!(!rig.step().enable);
         assert_eq!(rig.state(), SupervisorState::Locked);
-        // Never a drive without the trip's measured zero.
-        assert_eq!(rig.core.measured_current_zero_adc(), None);
-    }
-    // The first step that may drive comes after the zero is measured: the binary centres
-    // the trip on it in that same step, before `drive`.
-    for _ in 0..20 {
-        if rig.step().enable {
-            break;
+        steps += 1;
+        assert!(steps <= 120, "the zero took more than 120 steps");
+        if rig.core.measured_current_zero_adc().is_none() {
+            assert_eq!(
+                rig.ack(&release(10.0)),
+                Err(NackCode::CurrentZeroPending)
+            );
         }
     }
+    assert!(steps >= 99, "the zero took {steps} steps, fewer than its 1000 samples");
     let zero = rig
         .core
         .measured_current_zero_adc()
-        .expect("zero measured before a drive");
+        .expect("zero measured");
+    // Now the release is accepted: the trip is centred on the measured zero already.
+    assert_eq!(rig.ack(&release(10.0)), Ok(()));
     assert!((zero - 2068.0).abs() < 3.0, "{zero}");
     rig.run_ms_alive(5);
     let s = rig.core.status();
