@@ -61,7 +61,7 @@ impl RigLink for AnyLink {
         }
     }
 
-    fn refusal(error: &host::RigError) -> Option<protocol::NackCode> {
+    fn refusal(&self, error: &host::RigError) -> Option<protocol::NackCode> {
         error.refusal()
     }
 

@@ -25,7 +25,7 @@ pub trait RigLink {
     /// Lets `seconds` pass (virtual or wall-clock), heartbeats going on when kept alive.
     fn wait(&mut self, seconds: f64) -> Result<(), Self::Error>;
     /// The device's reason when `error` is a refusal (a `Nack`), `None` for any other error.
-    fn refusal(error: &Self::Error) -> Option<NackCode>;
+    fn refusal(&self, error: &Self::Error) -> Option<NackCode>;
     /// The supervisor state of the newest telemetry sample (a link may wait for a fresh
     /// one).
     fn state(&mut self) -> Result<SupervisorState, Self::Error>;
@@ -101,7 +101,7 @@ impl RigLink for SimLink {
         Ok(())
     }
 
-    fn refusal(error: &SimError) -> Option<NackCode> {
+    fn refusal(&self, error: &SimError) -> Option<NackCode> {
         match error {
             SimError::Refused { code, .. } => Some(*code),
             _ => None,
@@ -125,26 +125,34 @@ pub const ZERO_WAIT_S: f64 = 1.0;
 /// How often a release refused with `CurrentZeroPending` is asked again, rig seconds.
 pub const ZERO_RETRY_S: f64 = 0.01;
 
-/// Requests a release at `hz` and keeps it alive with heartbeats. A rig still measuring its
-/// current sensor's zero (just booted) refuses with `CurrentZeroPending`: asked again every
-/// [`ZERO_RETRY_S`] for at most [`ZERO_WAIT_S`] of the rig's clock.
+/// Requests a release at `hz` and keeps it alive with heartbeats (waiting for the current
+/// zero as [`drive`] does).
 pub fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), L::Error> {
-    let req = Request::Release {
-        on: true,
-        target_hz: hz,
-        session: 0,
-    };
+    drive(
+        link,
+        &Request::Release {
+            on: true,
+            target_hz: hz,
+            session: 0,
+        },
+    )?;
+    link.keep_alive(true);
+    Ok(())
+}
+
+/// Sends a drive request (`Release`, `OpenLoop`) and requires an `Ack`. A rig still
+/// measuring its current sensor's zero (just booted, or re-zeroing) refuses a drive with
+/// `CurrentZeroPending`: asked again every [`ZERO_RETRY_S`] for at most [`ZERO_WAIT_S`] of
+/// the rig's clock, then that refusal stands.
+pub fn drive<L: RigLink + ?Sized>(link: &mut L, req: &Request) -> Result<(), L::Error> {
     // Waits of ZERO_RETRY_S each (the link's own clock), so no reading of the clock is needed.
     let mut waits = 0;
     loop {
-        match link.request(&req) {
-            Ok(Reply::Ack) => {
-                link.keep_alive(true);
-                return Ok(());
-            }
-            Ok(other) => return Err(unexpected(&req, &other).into()),
+        match link.request(req) {
+            Ok(Reply::Ack) => return Ok(()),
+            Ok(other) => return Err(unexpected(req, &other).into()),
             Err(e)
-                if L::refusal(&e) == Some(NackCode::CurrentZeroPending)
+                if link.refusal(&e) == Some(NackCode::CurrentZeroPending)
                     && f64::from(waits) * ZERO_RETRY_S < ZERO_WAIT_S =>
             {
                 link.wait(ZERO_RETRY_S)?;

@@ -331,14 +331,16 @@ mod tests {
             next: 0,
             id: None,
         };
-        a.add(chunk(0, 18, 100));
-        a.add(chunk(18, 14, 100));
-        a.add(chunk(40, 18, 100)); // 8 lost
-        a.add(chunk(58, 14, 100));
-        a.add(chunk(70, 10, 100)); // 2 overlap
+        a.add(chunk(0, 10, 100));
+        a.add(chunk(10, 10, 100));
+        a.add(chunk(20, 7, 100));
+        a.add(chunk(35, 10, 100)); // 8 lost
+        a.add(chunk(45, 10, 100));
+        a.add(chunk(55, 10, 100));
+        a.add(chunk(63, 10, 100)); // 2 overlap
         let c = a.finish(Some(100), Some(10_000));
-        assert_eq!(c.samples.len(), 32 + 32 + 8);
-        assert_eq!(c.dropped, 8 + 20);
+        assert_eq!(c.samples.len(), 27 + 30 + 8);
+        assert_eq!(c.dropped, 8 + 27);
         assert_eq!(c.gaps, 2);
         assert_eq!(c.duplicates, 2);
         assert!(c.completed);

@@ -7,7 +7,7 @@ use std::thread;
 use std::time::Duration;
 
 use protocol::{
-    Capabilities, CaptureChunk, CaptureSample, DeviceInfo, DeviceMessage, FaultFlags,
+    CAPTURE_CHUNK_SAMPLES, Capabilities, CaptureChunk, CaptureSample, DeviceInfo, DeviceMessage, FaultFlags,
     FirmwareVersion, Frame, LegacyV1Nack, NackCode, PROTOCOL_VERSION, ParametersStatus, Reply,
     Request, RequestDeframer, ResetCause, SCHEMA_HASH,
 };
@@ -377,7 +377,7 @@ fn capture_is_assembled_and_drops_reported() {
                     capture_id: 9,
                     first_sample: first,
                     total_samples: samples,
-                    samples: (first..first + 18)
+                    samples: (first..first + CAPTURE_CHUNK_SAMPLES as u32)
                         .map(|i| CaptureSample {
                             current_adc: 2068 + 28,
                             encoder_count: i as i32,
@@ -387,8 +387,8 @@ fn capture_is_assembled_and_drops_reported() {
                 })
             };
             out.push((2, chunk(0)));
-            // Chunk 18..36 is lost on the way.
-            out.push((4, chunk(36)));
+            // Chunk 10..20 is lost on the way.
+            out.push((4, chunk(20)));
             out.push((
                 5,
                 DeviceMessage::CaptureDone {
@@ -401,11 +401,11 @@ fn capture_is_assembled_and_drops_reported() {
         out
     });
     let mut updates = 0;
-    let cap = c.capture(10_000, 54, |_| updates += 1).unwrap();
+    let cap = c.capture(10_000, 30, |_| updates += 1).unwrap();
     assert_eq!(updates, 2);
     assert!(cap.completed);
-    assert_eq!(cap.samples.len(), 36);
-    assert_eq!(cap.dropped, 18);
+    assert_eq!(cap.samples.len(), 20);
+    assert_eq!(cap.dropped, 10);
     assert_eq!(cap.gaps, 1);
     // 28 LSB of 6.5 mA above the zero: about 0.18 A.
     let i = cap.mean_current_a().unwrap();
@@ -419,4 +419,40 @@ fn broken_link_is_an_error_not_a_panic() {
     let mut c = Client::new(host, ClientOptions::new("test pipe"));
     let e = c.info().unwrap_err().to_string();
     assert!(e.contains("test pipe"), "{e}");
+}
+
+#[test]
+fn a_drive_waits_for_the_current_zero_and_then_names_it() {
+    // The device refuses the first three drives (its zero is being measured), then accepts.
+    let refused = Arc::new(AtomicU32::new(0));
+    let count = refused.clone();
+    let mut c = fake_device(move |seq, req| match req {
+        Request::Release { on: true, .. } | Request::OpenLoop { .. }
+            if count.fetch_add(1, Ordering::SeqCst) < 3 =>
+        {
+            let nack = Reply::Nack(NackCode::CurrentZeroPending);
+            vec![(seq, DeviceMessage::reply(seq, nack))]
+        }
+        other => good_answer(seq, other),
+    });
+    c.release(true, 10.0).unwrap();
+    assert_eq!(refused.load(Ordering::SeqCst), 4, "asked again until accepted");
+    assert!(c.keeping_alive());
+    c.release(false, 0.0).unwrap();
+
+    // A zero that never ends: the refusal stands after the wait, with its reason.
+    let mut c = fake_device(|seq, req| match req {
+        Request::OpenLoop { volts, .. } if volts != 0.0 => {
+            let nack = Reply::Nack(NackCode::CurrentZeroPending);
+            vec![(seq, DeviceMessage::reply(seq, nack))]
+        }
+        other => good_answer(seq, other),
+    });
+    // A virtual rig served 100x faster: 1 s of device time is 10 ms here.
+    c.opts.time_scale = 100.0;
+    let e = c.open_loop(3.0).unwrap_err();
+    assert_eq!(e.refusal(), Some(NackCode::CurrentZeroPending));
+    let text = e.to_string();
+    assert!(text.contains("zero") && text.contains("rig faults"), "{text}");
+    assert!(!c.keeping_alive(), "a refused drive keeps nothing alive");
 }

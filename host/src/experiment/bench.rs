@@ -91,23 +91,31 @@ pub trait Bench: RigLink<Error = RigError> {
         }
     }
 
-    /// Open-loop drive at `volts` (0 stops), kept alive while on.
+    /// Open-loop drive at `volts` (0 stops), kept alive while on; waits for the rig's
+    /// current zero ([`sim::riglink::drive`]).
     fn open_loop(&mut self, volts: f64) -> Result<(), RigError> {
-        self.ack(&Request::OpenLoop {
-            volts: volts as f32,
-            session: 0,
-        })?;
+        sim::riglink::drive(
+            self,
+            &Request::OpenLoop {
+                volts: volts as f32,
+                session: 0,
+            },
+        )?;
         self.keep_alive(volts != 0.0);
         Ok(())
     }
 
-    /// Release at `hz` (closed loop) or lock (`on` false), kept alive while on.
+    /// Release at `hz` (closed loop) or lock (`on` false), kept alive while on; waits for
+    /// the rig's current zero ([`sim::riglink::drive`]).
     fn release(&mut self, on: bool, hz: f64) -> Result<(), RigError> {
-        self.ack(&Request::Release {
-            on,
-            target_hz: if on { hz as f32 } else { 0.0 },
-            session: 0,
-        })?;
+        sim::riglink::drive(
+            self,
+            &Request::Release {
+                on,
+                target_hz: if on { hz as f32 } else { 0.0 },
+                session: 0,
+            },
+        )?;
         self.keep_alive(on);
         Ok(())
     }
@@ -228,7 +236,7 @@ impl RigLink for InProcessBench {
         Ok(())
     }
 
-    fn refusal(error: &RigError) -> Option<protocol::NackCode> {
+    fn refusal(&self, error: &RigError) -> Option<protocol::NackCode> {
         error.refusal()
     }
 
@@ -361,7 +369,7 @@ impl RigLink for DeviceBench {
         }
     }
 
-    fn refusal(error: &RigError) -> Option<protocol::NackCode> {
+    fn refusal(&self, error: &RigError) -> Option<protocol::NackCode> {
         error.refusal()
     }
 
