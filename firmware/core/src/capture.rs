@@ -21,7 +21,6 @@
 
 use protocol::{CAPTURE_CHUNK_SAMPLES, CaptureChunk, CaptureSample, DeviceMessage, NackCode};
 
-
 /// Samples the capture buffer holds (1.0 s at 10 kHz).
 pub const CAPTURE_CAPACITY: usize = 10_000;
 /// Lowest capture sample rate, Hz.

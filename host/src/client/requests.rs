@@ -6,8 +6,7 @@ use std::time::{Duration, Instant};
 
 use protocol::session::{Session, hello_outcome};
 use protocol::{
-    DeviceInfo, DeviceMessage, FaultFlags, NackCode, Reply, Request, RigParameters,
-    TelemetrySample,
+    DeviceInfo, DeviceMessage, FaultFlags, NackCode, Reply, Request, RigParameters, TelemetrySample,
 };
 
 use super::{Client, FaultStatus, advice};
@@ -102,10 +101,8 @@ impl<T: Read + Write> Client<T> {
     /// most [`ZERO_WAIT_DEVICE_S`]); then that refusal stands, with its reason.
     fn drive(&mut self, req: &Request) -> Result<(), RigError> {
         let scale = self.opts.time_scale;
-        let give_up = crate::limits::deadline_after(crate::limits::wall_duration(
-            ZERO_WAIT_DEVICE_S,
-            scale,
-        ));
+        let give_up =
+            crate::limits::deadline_after(crate::limits::wall_duration(ZERO_WAIT_DEVICE_S, scale));
         loop {
             match self.exchange(req)? {
                 Reply::Nack(NackCode::CurrentZeroPending) if Instant::now() < give_up => {

@@ -7,9 +7,9 @@ use std::thread;
 use std::time::Duration;
 
 use protocol::{
-    CAPTURE_CHUNK_SAMPLES, Capabilities, CaptureChunk, CaptureSample, DeviceInfo, DeviceMessage, FaultFlags,
-    FirmwareVersion, Frame, LegacyV1Nack, NackCode, PROTOCOL_VERSION, ParametersStatus, Reply,
-    Request, RequestDeframer, ResetCause, SCHEMA_HASH,
+    CAPTURE_CHUNK_SAMPLES, Capabilities, CaptureChunk, CaptureSample, DeviceInfo, DeviceMessage,
+    FaultFlags, FirmwareVersion, Frame, LegacyV1Nack, NackCode, PROTOCOL_VERSION, ParametersStatus,
+    Reply, Request, RequestDeframer, ResetCause, SCHEMA_HASH,
 };
 
 use super::*;
@@ -436,7 +436,11 @@ fn a_drive_waits_for_the_current_zero_and_then_names_it() {
         other => good_answer(seq, other),
     });
     c.release(true, 10.0).unwrap();
-    assert_eq!(refused.load(Ordering::SeqCst), 4, "asked again until accepted");
+    assert_eq!(
+        refused.load(Ordering::SeqCst),
+        4,
+        "asked again until accepted"
+    );
     assert!(c.keeping_alive());
     c.release(false, 0.0).unwrap();
 
@@ -453,6 +457,9 @@ fn a_drive_waits_for_the_current_zero_and_then_names_it() {
     let e = c.open_loop(3.0).unwrap_err();
     assert_eq!(e.refusal(), Some(NackCode::CurrentZeroPending));
     let text = e.to_string();
-    assert!(text.contains("zero") && text.contains("rig faults"), "{text}");
+    assert!(
+        text.contains("zero") && text.contains("rig faults"),
+        "{text}"
+    );
     assert!(!c.keeping_alive(), "a refused drive keeps nothing alive");
 }

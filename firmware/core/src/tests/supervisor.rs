@@ -43,10 +43,7 @@ fn boots_locked_and_waits_for_the_current_zero() {
     assert!(rig.core.status().zeroing);
     assert_eq!(rig.core.measured_current_zero_adc(), None);
     // A release before the zero exists is refused with the reason, and has no effect.
-    assert_eq!(
-        rig.ack(&release(10.0)),
-        Err(NackCode::CurrentZeroPending)
-    );
+    assert_eq!(rig.ack(&release(10.0)), Err(NackCode::CurrentZeroPending));
     // Zero takes 1000 samples (100 ms): nothing drives meanwhile, and every release asked
     // for meanwhile is refused.
     let mut steps = 1;
@@ -56,17 +53,14 @@ fn boots_locked_and_waits_for_the_current_zero() {
         steps += 1;
         assert!(steps <= 120, "the zero took more than 120 steps");
         if rig.core.measured_current_zero_adc().is_none() {
-            assert_eq!(
-                rig.ack(&release(10.0)),
-                Err(NackCode::CurrentZeroPending)
-            );
+            assert_eq!(rig.ack(&release(10.0)), Err(NackCode::CurrentZeroPending));
         }
     }
-    assert!(steps >= 99, "the zero took {steps} steps, fewer than its 1000 samples");
-    let zero = rig
-        .core
-        .measured_current_zero_adc()
-        .expect("zero measured");
+    assert!(
+        steps >= 99,
+        "the zero took {steps} steps, fewer than its 1000 samples"
+    );
+    let zero = rig.core.measured_current_zero_adc().expect("zero measured");
     // Now the release is accepted: the trip is centred on the measured zero already.
     assert_eq!(rig.ack(&release(10.0)), Ok(()));
     assert!((zero - 2068.0).abs() < 3.0, "{zero}");
