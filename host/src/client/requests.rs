@@ -76,7 +76,7 @@ impl<T: Read + Write> Client<T> {
     ///
     /// A device still measuring its current sensor's zero (the first ~100 ms after boot or a
     /// re-zero) refuses a drive with `CurrentZeroPending`; the client asks again until it is
-    /// accepted, for at most [`ZERO_WAIT_DEVICE_S`] of the device's time.
+    /// accepted, for at most `ZERO_WAIT_DEVICE_S` (1 s) of the device's time.
     pub fn release(&mut self, on: bool, target_hz: f32) -> Result<(), RigError> {
         self.drive(&Request::Release {
             on,
@@ -97,8 +97,8 @@ impl<T: Read + Write> Client<T> {
     }
 
     /// Sends a drive request and requires an `Ack`, asking again while the device refuses
-    /// it with `CurrentZeroPending` (every [`ZERO_RETRY_DEVICE_S`] of device time, for at
-    /// most [`ZERO_WAIT_DEVICE_S`]); then that refusal stands, with its reason.
+    /// it with `CurrentZeroPending` (every `ZERO_RETRY_DEVICE_S` of device time, for at
+    /// most `ZERO_WAIT_DEVICE_S` (1 s)); then that refusal stands, with its reason.
     fn drive(&mut self, req: &Request) -> Result<(), RigError> {
         let scale = self.opts.time_scale;
         let give_up =
