@@ -212,7 +212,7 @@ pub const KEYS: &[KeySpec] = &[
         "calibration",
         "temperature_c",
         "deg C",
-        "any finite number",
+        "from -273.15 (absolute zero) to 1000",
         "25.0",
         None,
         "motor temperature at calibration (the thermal drift's reference)",
@@ -444,7 +444,7 @@ pub fn wire_keys() -> impl Iterator<Item = &'static KeySpec> {
 }
 
 /// One parameter of an effect in `[[model.effects]] params`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EffectParamSpec {
     /// The effect.
     pub effect: Effect,
@@ -452,8 +452,29 @@ pub struct EffectParamSpec {
     pub name: &'static str,
     /// Its unit.
     pub unit: &'static str,
+    /// The range a rig file's value must lie in, [low, high] (the range the fit keeps it
+    /// in; a fixed parameter's value twice).
+    pub bounds: (f64, f64),
     /// What it means and what the reader does with it.
     pub meaning: &'static str,
+}
+
+impl EffectParamSpec {
+    /// [`EffectParamSpec::bounds`] in words, as the range check quotes it.
+    pub fn range(&self) -> String {
+        range_text(self.bounds)
+    }
+}
+
+/// A parameter's range `[lo, hi]` in words: `from lo to hi`, `at least lo`, `exactly v`.
+pub fn range_text((lo, hi): (f64, f64)) -> String {
+    if lo == hi {
+        format!("exactly {lo}")
+    } else if hi.is_finite() {
+        format!("from {lo} to {hi}")
+    } else {
+        format!("at least {lo}")
+    }
 }
 
 /// The parameters each effect takes (names as `rig explain` reports them), read from the
@@ -466,6 +487,10 @@ pub fn effect_params() -> Vec<EffectParamSpec> {
                 effect: info.effect,
                 name: p.key,
                 unit: p.unit,
+                bounds: match p.value {
+                    model::effects::ParamValue::Fixed(v) => (v, v),
+                    _ => p.bounds,
+                },
                 meaning: p.meaning,
             })
         })

@@ -336,7 +336,7 @@ fn check(loaded: &Loaded, name: &str) -> Result<(), RigFileError> {
         let why = too_big.then(|| "too large for the device's 32-bit record".to_string());
         return Err(out_of_range(spec.section, spec.key, why));
     }
-    if !rig.calibration.temperature_c.is_finite() {
+    if !(-273.15..=1000.0).contains(&rig.calibration.temperature_c) {
         return Err(out_of_range("calibration", "temperature_c", None));
     }
     if let Some(m) = &rig.model {
