@@ -601,7 +601,10 @@ mod gap_tests {
         let fitted = replay_of(&[Some(2.5); 3], 25.0, Some(0.004));
         let (rows, _) = gap_rows(&data, &order, &cells, &plan, &base, Some(&fitted));
         let want = 2.5 / (1.0 - 0.004 * (74.975 - 25.0));
-        assert!((rows[1999].model_a.unwrap() - want).abs() < 1e-9, "{rows:?}");
+        assert!(
+            (rows[1999].model_a.unwrap() - want).abs() < 1e-9,
+            "{rows:?}"
+        );
         assert!((rows[0].model_a.unwrap() - 2.5).abs() < 1e-12);
     }
 
@@ -633,7 +636,10 @@ mod gap_tests {
         let (cool, warm) = (&c.rows[0], &c.rows[1998]);
         assert_eq!(cool.tau_rot_nm, warm.tau_rot_nm);
         assert!(warm.model_a.unwrap() > cool.model_a.unwrap());
-        assert!((warm.base_a - cool.base_a).abs() < 1e-12, "no drift in the base model");
+        assert!(
+            (warm.base_a - cool.base_a).abs() < 1e-12,
+            "no drift in the base model"
+        );
     }
 
     /// Absurd loads are refused by the plan's range before anything runs.

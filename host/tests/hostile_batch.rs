@@ -268,9 +268,7 @@ fn signals() {
                 format!(", latched {faults:?}")
             }
         );
-        *codes
-            .entry(format!("{}:{code:?}", verb[0]))
-            .or_default() += 1;
+        *codes.entry(format!("{}:{code:?}", verb[0])).or_default() += 1;
     }
     println!(
         "signals: {runs} runs; exit statuses by verb {codes:?}; {bad} not 0 or 128+N; {latched_runs} left a fault latched"
@@ -358,27 +356,64 @@ fn files() {
     }
     let ok = write("ok.csv", good.as_bytes());
     let verbs: Vec<(&str, Vec<&str>)> = vec![
-        ("explain --measured", vec!["explain", "--json", "--measured"]),
-        ("compare --measured", vec!["compare", "--json", "--measured"]),
-        ("explain --model", vec!["explain", "--measured", "ok.csv", "--model"]),
-        ("compare --rig", vec!["compare", "--measured", "ok.csv", "--rig"]),
+        (
+            "explain --measured",
+            vec!["explain", "--json", "--measured"],
+        ),
+        (
+            "compare --measured",
+            vec!["compare", "--json", "--measured"],
+        ),
+        (
+            "explain --model",
+            vec!["explain", "--measured", "ok.csv", "--model"],
+        ),
+        (
+            "compare --rig",
+            vec!["compare", "--measured", "ok.csv", "--rig"],
+        ),
         ("calibration set", vec!["--sim", "calibration", "set"]),
         (
             "experiment --plan",
-            vec!["--sim", "experiment", "torque-sweep", "--csv", "new.csv", "--plan"],
+            vec![
+                "--sim",
+                "experiment",
+                "torque-sweep",
+                "--csv",
+                "new.csv",
+                "--plan",
+            ],
         ),
-        ("calibrate --from-points", vec!["calibrate", "--out", "o", "--from-points"]),
+        (
+            "calibrate --from-points",
+            vec!["calibrate", "--out", "o", "--from-points"],
+        ),
         (
             "calibrate --gauge-csv",
             vec!["--sim", "calibrate", "--yes", "--out", "o", "--gauge-csv"],
         ),
         (
             "torque-sweep --resume",
-            vec!["--sim", "experiment", "torque-sweep", "--quick", "--resume", "--csv"],
+            vec![
+                "--sim",
+                "experiment",
+                "torque-sweep",
+                "--quick",
+                "--resume",
+                "--csv",
+            ],
         ),
         (
             "monitor --resume",
-            vec!["--sim", "monitor", "--plain", "--seconds", "0.1", "--resume", "--csv"],
+            vec![
+                "--sim",
+                "monitor",
+                "--plain",
+                "--seconds",
+                "0.1",
+                "--resume",
+                "--csv",
+            ],
         ),
         ("--sim --model", vec!["--sim", "--model"]),
     ];
@@ -425,7 +460,13 @@ fn files() {
                     "NOT CLEAN"
                 }
             };
-            let first = err.lines().last().unwrap_or("").chars().take(150).collect::<String>();
+            let first = err
+                .lines()
+                .last()
+                .unwrap_or("")
+                .chars()
+                .take(150)
+                .collect::<String>();
             println!("file: {what} into `{verb}`: {verdict} (exit {code:?}): {first}");
         }
     }
@@ -470,7 +511,12 @@ fn soak() {
         .unwrap();
     let lines = BufReader::new(child.stdout.take().unwrap()).lines().count();
     let mut err = String::new();
-    child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
     let status = child.wait().unwrap();
     let after = rss_kb(pid);
     let faults = latched(&server.port);

@@ -101,11 +101,13 @@ fn sigkill_leaves_whole_rows_and_resume_drops_a_row_cut_short() {
             }
             if let Some(status) = child.try_wait().unwrap() {
                 let mut err = String::new();
-                std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err)
-                    .unwrap();
+                std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
                 panic!("the monitor ended by itself ({status}): {err}");
             }
-            assert!(std::time::Instant::now() < deadline, "no {want} rows logged");
+            assert!(
+                std::time::Instant::now() < deadline,
+                "no {want} rows logged"
+            );
             std::thread::sleep(Duration::from_millis(10));
         }
         child.kill().unwrap(); // SIGKILL
@@ -129,7 +131,10 @@ fn sigkill_leaves_whole_rows_and_resume_drops_a_row_cut_short() {
             let fields: Vec<&str> = row.split(',').collect();
             assert_eq!(fields.len(), 16, "{row}");
             assert!(fields[0].parse::<f64>().is_ok(), "{row}");
-            assert!(!fields[1].is_empty() && fields[1] != "device_time_s", "{row}");
+            assert!(
+                !fields[1].is_empty() && fields[1] != "device_time_s",
+                "{row}"
+            );
         }
     }
     // A row cut short for certain (as a full disk or a kill inside a write leaves it): the
@@ -145,7 +150,17 @@ fn sigkill_leaves_whole_rows_and_resume_drops_a_row_cut_short() {
         .unwrap()
         .env_remove("RIG_PORT")
         .timeout(Duration::from_secs(120))
-        .args(["--sim", "monitor", "--plain", "--rate", "100", "--seconds", "0.2", "--resume", "--csv"])
+        .args([
+            "--sim",
+            "monitor",
+            "--plain",
+            "--rate",
+            "100",
+            "--seconds",
+            "0.2",
+            "--resume",
+            "--csv",
+        ])
         .arg(&csv)
         .output()
         .unwrap();
@@ -162,7 +177,8 @@ fn sigkill_leaves_whole_rows_and_resume_drops_a_row_cut_short() {
     assert!(
         text.lines()
             .skip(1)
-            .all(|l| l.split(',').count() == 16 && l.split(',').next().unwrap().parse::<f64>().is_ok()),
+            .all(|l| l.split(',').count() == 16
+                && l.split(',').next().unwrap().parse::<f64>().is_ok()),
         "a row not whole"
     );
     // Without --resume or --force an existing log is refused and left as it was.
@@ -174,7 +190,10 @@ fn sigkill_leaves_whole_rows_and_resume_drops_a_row_cut_short() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("--resume") && err.contains("--force"), "{err}");
+    assert!(
+        !out.status.success() && err.contains("--resume") && err.contains("--force"),
+        "{err}"
+    );
     assert_eq!(std::fs::read_to_string(&csv).unwrap(), text);
     eprintln!("{said_dropped} kills landed inside a row's write");
 }
@@ -191,7 +210,15 @@ fn force_keeps_the_old_log_until_the_monitor_ends() {
             .unwrap()
             .env_remove("RIG_PORT")
             .timeout(Duration::from_secs(120))
-            .args(["--sim", "monitor", "--plain", "--rate", "50", "--seconds", "0.2"])
+            .args([
+                "--sim",
+                "monitor",
+                "--plain",
+                "--rate",
+                "50",
+                "--seconds",
+                "0.2",
+            ])
             .args(extra)
             .arg("--csv")
             .arg(&csv)
@@ -202,18 +229,34 @@ fn force_keeps_the_old_log_until_the_monitor_ends() {
     std::fs::write(&new, "rows of a killed run\n").unwrap();
     let out = run(&["--force"]);
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("mon.csv.new"), "{err}");
-    assert_eq!(std::fs::read_to_string(&new).unwrap(), "rows of a killed run\n");
+    assert!(
+        !out.status.success() && err.contains("mon.csv.new"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&new).unwrap(),
+        "rows of a killed run\n"
+    );
     std::fs::remove_file(&new).unwrap();
     let out = run(&["--force"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = std::fs::read_to_string(&csv).unwrap();
-    assert!(text.starts_with("device_time_s,") && text.lines().count() >= 10, "{text}");
+    assert!(
+        text.starts_with("device_time_s,") && text.lines().count() >= 10,
+        "{text}"
+    );
     assert!(!new.exists());
     // Not a monitor's log: --resume refuses it and leaves it alone.
     std::fs::write(&csv, "t_s,i_in_a\n1,2\n").unwrap();
     let out = run(&["--resume"]);
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("not a `rig monitor --csv` log"), "{err}");
+    assert!(
+        !out.status.success() && err.contains("not a `rig monitor --csv` log"),
+        "{err}"
+    );
     assert_eq!(std::fs::read_to_string(&csv).unwrap(), "t_s,i_in_a\n1,2\n");
 }

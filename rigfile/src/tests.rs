@@ -417,3 +417,37 @@ fn the_drive_decay_round_trips_and_defaults_to_the_boards_braking_drive() {
         "{e}"
     );
 }
+
+/// Issue 33: the numbers the hostile rig-file property test found: a tooth count past
+/// `u32` (named, with its range), 3.4e38 N mm/A (fits the device's 32-bit record, ran the
+/// simulated motor to NaN), an effect parameter far outside any fit and an extra viscous
+/// loss that leaves the vibrator negative damping.
+#[test]
+fn extreme_numbers_are_refused_naming_the_key_and_its_range() {
+    let refused = |text: &str| RigFile::parse(text, "h.toml").unwrap_err().to_string();
+    let e = refused("[gear]\nz = [4294967296, 51, 50, 50]\n");
+    assert!(e.contains("`z`") && e.contains("4 to 65535"), "{e}");
+    let e = refused("[gear]\nz = [4294967295, 51, 50, 50]\n");
+    assert!(e.contains("z"), "{e}");
+    let e = refused("[calibration]\nc1 = 3.4e38\n");
+    assert!(e.contains("c1") && e.contains("at most 1000"), "{e}");
+    let e = refused("[calibration]\ntemperature_c = -300.0\n");
+    assert!(
+        e.contains("temperature_c") && e.contains("absolute zero"),
+        "{e}"
+    );
+    let e = refused(
+        "[model]\nmu = 0.2\n[[model.effects]]\nname = \"inertia-rectification\"\nparams = { kappa = 1e300 }\n",
+    );
+    assert!(e.contains("kappa") && e.contains("from -1 to 20"), "{e}");
+    let e = refused(
+        "[model]\nmu = 0.2\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = -1.0 }\n",
+    );
+    assert!(e.contains("c_v_n_mm_s_per_rad") && e.contains("-C3"), "{e}");
+    // Inside every range: a usable rig.
+    RigFile::parse(
+        "[calibration]\nc1 = 1000.0\n[model]\nmu = 10.0\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = -0.2 }\n",
+        "ok.toml",
+    )
+    .unwrap();
+}

@@ -172,7 +172,8 @@ fn use_rig(rig: &RigFile) -> Result<(), String> {
     rig.gear_set().map_err(|e| format!("gear_set: {e}"))?;
     rig.drive().map_err(|e| format!("drive: {e}"))?;
     let wire = rig.to_wire().map_err(|e| format!("to_wire: {e}"))?;
-    wire.validate().map_err(|e| format!("the device would refuse it: {e:?}"))?;
+    wire.validate()
+        .map_err(|e| format!("the device would refuse it: {e:?}"))?;
     let _ = rig.calibration();
     let text = rig.to_toml().map_err(|e| format!("to_toml: {e}"))?;
     let again = RigFile::parse(&text, "again.toml").map_err(|e| format!("read back: {e}"))?;
@@ -180,8 +181,10 @@ fn use_rig(rig: &RigFile) -> Result<(), String> {
         return Err("its own file reads back differently".into());
     }
     if rig.model.is_some() {
-        rig.plant_effects().map_err(|e| format!("plant_effects: {e}"))?;
-        rig.current_model().map_err(|e| format!("current_model: {e}"))?;
+        rig.plant_effects()
+            .map_err(|e| format!("plant_effects: {e}"))?;
+        rig.current_model()
+            .map_err(|e| format!("current_model: {e}"))?;
     }
     let mut config = SimConfig::from_rig_file(rig).map_err(|e| format!("virtual rig: {e}"))?;
     sim::preset::apply_model(rig, &mut config.plant).or_else(|e| {

@@ -16,8 +16,8 @@ use serde::Serialize;
 use super::bench::{Bench, Go, Operator, Verdict, interrupted};
 use super::plan::{Plan, Run};
 use crate::RigError;
-use crate::row_log::{self, Appender};
 use crate::provenance::{Header, Provenance};
+use crate::row_log::{self, Appender};
 
 /// Telemetry rate during a point, Hz.
 pub const TELEMETRY_HZ: u16 = 100;
