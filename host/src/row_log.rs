@@ -3,7 +3,7 @@
 //! `write` of its whole text, so a process killed with SIGKILL leaves whole rows (the
 //! kernel keeps what was written when the process dies); a write that fails (a full
 //! disk) is cut back to the last whole row; and a file found ending mid-row when it is
-//! continued (`--resume`) has that row dropped and reported ([`drop_half_row`]).
+//! continued (`--resume`) has that row dropped and reported ([`open_to_continue`]).
 
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::Path;
