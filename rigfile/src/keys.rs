@@ -392,7 +392,7 @@ pub const KEYS: &[KeySpec] = &[
         "model",
         "mu",
         "-",
-        "from 0 to 10",
+        "from 0 to 3 (the fit's bounds)",
         "-",
         None,
         "mu of Eq. (10) fitted to the vibrator current",

@@ -295,6 +295,48 @@ fn value_text(rig: &RigFile, key: &KeySpec) -> String {
     t.get(key.key).map_or("?".into(), |v| v.to_string())
 }
 
+/// The rig file's own ranges, inside the device's (which asks only for a finite 32-bit
+/// number of the right sign), in the file's units: (section, key, low, high), each quoted
+/// by its key's range in [`keys::KEYS`]. Wide enough for any build of this rig, narrow
+/// enough that no model or simulation of it overflows (3.4e38 N mm/A fits the device's
+/// record and ran the simulated motor to NaN).
+pub(crate) const BOUNDED: [(&str, &str, f64, f64); 13] = [
+    ("gear", "module_mm", f64::MIN, 20.0),
+    ("cam", "eccentricity_mm", f64::MIN, 20.0),
+    ("cam", "carrier_mass_kg", f64::MIN, 1000.0),
+    ("calibration", "c1", f64::MIN, 1000.0),
+    ("calibration", "c2", -10_000.0, 10_000.0),
+    ("calibration", "c3", 0.0, 100.0),
+    ("calibration", "c4", -10_000.0, 10_000.0),
+    ("calibration", "c5", 0.0, 1.0),
+    ("calibration", "c6", 0.0, 100.0),
+    ("calibration", "temperature_c", -273.15, 1000.0),
+    ("limits", "max_release_load_nm", f64::MIN, 1000.0),
+    ("limits", "max_current_a", f64::MIN, 100.0),
+    ("limits", "max_freq_hz", f64::MIN, 100.0),
+];
+
+/// The value of `key` (one of [`BOUNDED`]'s) in `rig`, in the file's units.
+fn bounded_value(rig: &RigFile, key: &str) -> f64 {
+    let c = crate::paper_units::to_paper(&rig.calibration.constants);
+    match key {
+        "module_mm" => rig.gear.module_mm,
+        "eccentricity_mm" => rig.cam.eccentricity_mm,
+        "carrier_mass_kg" => rig.cam.carrier_mass_kg,
+        "c1" => c[0],
+        "c2" => c[1],
+        "c3" => c[2],
+        "c4" => c[3],
+        "c5" => c[4],
+        "c6" => c[5],
+        "temperature_c" => rig.calibration.temperature_c,
+        "max_release_load_nm" => rig.limits.max_release_load_nm,
+        "max_current_a" => rig.limits.max_current_a,
+        "max_freq_hz" => rig.limits.max_freq_hz,
+        _ => f64::NAN,
+    }
+}
+
 /// The range checks of `docs/rig-file.md`; the message names the key as the file does and
 /// says whether the file set it.
 fn check(loaded: &Loaded, name: &str) -> Result<(), RigFileError> {
@@ -362,68 +404,14 @@ fn check(loaded: &Loaded, name: &str) -> Result<(), RigFileError> {
         let why = too_big.then(|| "too large for the device's 32-bit record".to_string());
         return Err(out_of_range(spec.section, spec.key, why));
     }
-    // The rig file's own ranges, inside the device's (which asks only for a finite 32-bit
-    // number of the right sign): wide enough for any build of this rig, narrow enough that
-    // no model or simulation of it overflows.
-    let c = crate::paper_units::to_paper(&rig.calibration.constants);
-    let bounded = [
-        ("gear", "module_mm", rig.gear.module_mm, -f64::MAX, 20.0),
-        (
-            "cam",
-            "eccentricity_mm",
-            rig.cam.eccentricity_mm,
-            -f64::MAX,
-            20.0,
-        ),
-        (
-            "cam",
-            "carrier_mass_kg",
-            rig.cam.carrier_mass_kg,
-            -f64::MAX,
-            1000.0,
-        ),
-        ("calibration", "c1", c[0], -f64::MAX, 1000.0),
-        ("calibration", "c2", c[1], -10_000.0, 10_000.0),
-        ("calibration", "c3", c[2], 0.0, 100.0),
-        ("calibration", "c4", c[3], -10_000.0, 10_000.0),
-        ("calibration", "c5", c[4], 0.0, 1.0),
-        ("calibration", "c6", c[5], 0.0, 100.0),
-        (
-            "calibration",
-            "temperature_c",
-            rig.calibration.temperature_c,
-            -273.15,
-            1000.0,
-        ),
-        (
-            "limits",
-            "max_release_load_nm",
-            rig.limits.max_release_load_nm,
-            -f64::MAX,
-            1000.0,
-        ),
-        (
-            "limits",
-            "max_current_a",
-            rig.limits.max_current_a,
-            -f64::MAX,
-            100.0,
-        ),
-        (
-            "limits",
-            "max_freq_hz",
-            rig.limits.max_freq_hz,
-            -f64::MAX,
-            100.0,
-        ),
-    ];
-    for (section, key, v, lo, hi) in bounded {
-        if !(lo..=hi).contains(&v) {
+    for (section, key, lo, hi) in BOUNDED {
+        if !(lo..=hi).contains(&bounded_value(rig, key)) {
             return Err(out_of_range(section, key, None));
         }
     }
     if let Some(m) = &rig.model {
-        if !(0.0..=10.0).contains(&m.mu) {
+        let (lo, hi) = model::effects::MU_BOUNDS;
+        if !(lo..=hi).contains(&m.mu) {
             return Err(out_of_range("model", "mu", None));
         }
         let (list, p) = rig

@@ -446,8 +446,49 @@ fn extreme_numbers_are_refused_naming_the_key_and_its_range() {
     assert!(e.contains("c_v_n_mm_s_per_rad") && e.contains("-C3"), "{e}");
     // Inside every range: a usable rig.
     RigFile::parse(
-        "[calibration]\nc1 = 1000.0\n[model]\nmu = 10.0\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = -0.2 }\n",
+        "[calibration]\nc1 = 1000.0\n[model]\nmu = 3.0\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = -0.2 }\n",
         "ok.toml",
     )
     .unwrap();
+}
+
+/// Each of the rig file's own ranges is the one its key states (docs/rig-file.md).
+#[test]
+fn the_bounded_keys_state_their_ranges() {
+    for (section, key, lo, hi) in crate::parse::BOUNDED {
+        let spec = crate::keys::find(section, key).unwrap();
+        assert!(
+            spec.range.contains(&format!("{hi}")),
+            "{spec}: {}",
+            spec.range
+        );
+        if lo > f64::MIN {
+            assert!(
+                spec.range.contains(&format!("{lo}")),
+                "{spec}: {}",
+                spec.range
+            );
+        }
+        let mut rig = RigFile::paper();
+        assert!(crate::parse::check_all(&rig, "x").is_ok());
+        // Just past the top: refused naming the key.
+        let past = hi * 1.01 + 1.0;
+        match key {
+            "module_mm" => rig.gear.module_mm = past,
+            "eccentricity_mm" => rig.cam.eccentricity_mm = past,
+            "carrier_mass_kg" => rig.cam.carrier_mass_kg = past,
+            "temperature_c" => rig.calibration.temperature_c = past,
+            "max_release_load_nm" => rig.limits.max_release_load_nm = past,
+            "max_current_a" => rig.limits.max_current_a = past,
+            "max_freq_hz" => rig.limits.max_freq_hz = past,
+            _ => {
+                let mut c = crate::paper_units::to_paper(&rig.calibration.constants);
+                let k: usize = key[1..].parse().unwrap();
+                c[k - 1] = past;
+                rig.calibration.constants = crate::paper_units::from_paper(c);
+            }
+        }
+        let e = crate::parse::check_all(&rig, "x").unwrap_err().to_string();
+        assert!(e.contains(key), "{key}: {e}");
+    }
 }
