@@ -301,8 +301,8 @@ fn value_text(rig: &RigFile, key: &KeySpec) -> String {
 /// enough that no model or simulation of it overflows (3.4e38 N mm/A fits the device's
 /// record and ran the simulated motor to NaN).
 pub(crate) const BOUNDED: [(&str, &str, f64, f64); 13] = [
-    ("gear", "module_mm", f64::MIN, 20.0),
-    ("cam", "eccentricity_mm", f64::MIN, 20.0),
+    ("gear", "module_mm", f64::MIN, 100.0),
+    ("cam", "eccentricity_mm", f64::MIN, 100.0),
     ("cam", "carrier_mass_kg", f64::MIN, 1000.0),
     ("calibration", "c1", f64::MIN, 1000.0),
     ("calibration", "c2", -10_000.0, 10_000.0),
