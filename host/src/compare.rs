@@ -5,6 +5,15 @@
 //! equations) and once with a fitted `[model]` (`rig explain --write-model`), through the
 //! same torque-sweep procedure as `rig experiment`, and reports the gap, measured minus
 //! simulated mean current per test point, with a plot of both.
+//!
+//! Cost: each tested cell (load and drive: supply voltage, or frequency) is replayed once,
+//! however many rows repeat it and whatever motor temperatures they logged, so the replay
+//! grows with the cells, not the rows. The temperature enters the model through the torque
+//! constant alone (a fitted `thermal-drift`: k_t (1 - k (T - T_cal))); the mean current
+//! carries the mean torque, so a row logged at T has the cell's replayed current times
+//! k_t(T_replay) / k_t(T). The winding's resistance, which the temperature also changes,
+//! sets the open-loop speed rather than the mean current (to first order) and is the
+//! replay's own. The base model has no thermal drift: its currents do not depend on T.
 
 use std::path::Path;
 
@@ -31,7 +40,8 @@ pub struct GapRow {
     pub v_in_v: Option<f64>,
     /// Vibration frequency (closed loop, from the measured cam speed), Hz.
     pub hz: Option<f64>,
-    /// Logged motor temperature, deg C.
+    /// Logged motor temperature, deg C (the simulated currents are at it: see the module's
+    /// documentation).
     pub temp_c: Option<f64>,
     /// Measured mean current, A.
     pub measured_a: f64,
@@ -79,12 +89,18 @@ pub struct Comparison {
     pub figure: Option<String>,
     /// Per test point.
     pub rows: Vec<GapRow>,
+    /// Test points the virtual rigs ran, both models together: the replay's cost (each
+    /// tested cell once per model, whatever the rows).
+    #[serde(skip)]
+    pub replays: usize,
 }
 
-/// The replayed plan of `data`: each tested cell (load, drive, temperature to 0.5 deg C)
-/// once, in the order first run, so the replay's cost grows with the cells, not the rows
-/// (a 2,000-row file of repeats replays its grid once); then the rows with a current in
-/// the order they were run, and each one's cell (its plan point).
+/// The replayed plan of `data`: each tested cell (load and drive) once, in the order first
+/// run, so the replay's cost grows with the cells, not the rows (a 2,000-row file of
+/// repeats, or of rows each at its own temperature, replays its grid once); then the rows
+/// with a current in the order they were run, and each one's cell (its plan point). The
+/// cells set no temperature: the replay runs at its winding's own and each row's logged
+/// temperature is applied afterwards ([`at_temperature`]).
 #[allow(clippy::type_complexity, reason = "a private helper's three results")]
 fn replay_plan(
     data: &Dataset,
@@ -103,7 +119,6 @@ fn replay_plan(
         });
     }
     let volts = data.v_in();
-    let temps = data.temp_c();
     let mode = if volts.is_some() {
         DriveMode::OpenLoop
     } else {
@@ -117,11 +132,7 @@ fn replay_plan(
             .then(|| data.omega_n()[k] / (2.0 * std::f64::consts::PI)),
         repeats: None,
         duration_s: None,
-        // Half a degree: the motor's temperature, not its sensor's last digit.
-        temp_c: temps
-            .map(|t| t[k])
-            .filter(|t| t.is_finite())
-            .map(|t| (t * 2.0).round() / 2.0),
+        temp_c: None,
     };
     let mut points: Vec<PlanPoint> = Vec::new();
     let mut cell_of = std::collections::HashMap::new();
@@ -133,7 +144,6 @@ fn replay_plan(
                 p.load_nm.to_bits(),
                 p.volts.map(f64::to_bits),
                 p.hz.map(f64::to_bits),
-                p.temp_c.map(f64::to_bits),
             );
             *cell_of.entry(key).or_insert_with(|| {
                 points.push(p);
@@ -176,9 +186,65 @@ fn header_plan(path: &Path) -> HeaderPlan {
 /// the rig's `max_release_load_nm`, a point its protections skipped), as the measuring
 /// sensor reads them (with the plant's `current_offset`).
 pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>, RigError> {
+    Ok(replay(config, plan)?
+        .points
+        .into_iter()
+        .map(|p| p.map(|p| p.current_a))
+        .collect())
+}
+
+/// One plan point as the virtual rig ran it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Replayed {
+    /// Mean current as the measuring sensor reads it, A.
+    pub current_a: f64,
+    /// The replay's winding temperature over the point, deg C.
+    pub temp_c: Option<f64>,
+    /// The sensor offset included in `current_a`, A.
+    sensor_offset_a: f64,
+}
+
+/// What one virtual rig made of a replayed plan.
+#[derive(Debug, Clone)]
+pub struct Replay {
+    /// Per plan point, in plan order (`None`: not measured, as [`simulate`]).
+    pub points: Vec<Option<Replayed>>,
+    /// Test points the virtual rig ran (the plan's runs).
+    pub runs: usize,
+    /// The plant's thermal law: its effects and the calibration temperature.
+    thermal: (model::plant::PlantEffects, f64),
+}
+
+impl Replay {
+    /// The current of `point` at winding temperature `temp_c` ([`at_temperature`]).
+    fn current_at(&self, point: &Replayed, temp_c: Option<f64>) -> f64 {
+        at_temperature(point, temp_c, &self.thermal.0, self.thermal.1)
+    }
+}
+
+/// The replayed current of `point` for a row logged at `temp_c`: the torque constant's
+/// factor at the replay's temperature over the one at the row's (1 for a plant without
+/// thermal drift, or when either temperature is unknown); the sensor offset is not scaled.
+pub fn at_temperature(
+    point: &Replayed,
+    temp_c: Option<f64>,
+    effects: &model::plant::PlantEffects,
+    ambient_c: f64,
+) -> f64 {
+    let (Some(row), Some(ran)) = (temp_c.filter(|t| t.is_finite()), point.temp_c) else {
+        return point.current_a;
+    };
+    let factor = effects.torque_constant_factor(ran, ambient_c)
+        / effects.torque_constant_factor(row, ambient_c);
+    (point.current_a - point.sensor_offset_a) * factor + point.sensor_offset_a
+}
+
+/// [`simulate`], with each point's winding temperature and the count of runs.
+pub fn replay(config: sim::SimConfig, plan: &Plan) -> Result<Replay, RigError> {
     // The replay reads the board's current (telemetry); a fitted `current-sensor-offset` is
     // the measuring sensor's (the plant adds it to the logger only), so it is added here.
     let sensor_offset = config.plant.effects.current_offset;
+    let thermal = (config.plant.effects, config.plant.motor.ambient_c);
     // The board measures its current zero first (ADC samples at ADC_HZ, motor off); the
     // plan starts once it has (a long zero, as `virtual_rig`'s, outlasts the sweep's
     // spin-up limit).
@@ -198,13 +264,21 @@ pub fn simulate(config: sim::SimConfig, plan: &Plan) -> Result<Vec<Option<f64>>,
         command: "rig compare".into(),
     };
     let outcome = sweep::run_to(&mut bench, &mut operator, &setup, None, &mut |_| {})?;
-    let mut currents = vec![None; plan.points.len()];
+    let mut points = vec![None; plan.points.len()];
     for r in &outcome.rows {
-        if let (Some(slot), Some(i)) = (r.point.and_then(|p| currents.get_mut(p)), r.i_in) {
-            *slot = Some(i + sensor_offset);
+        if let (Some(slot), Some(i)) = (r.point.and_then(|p| points.get_mut(p)), r.i_in) {
+            *slot = Some(Replayed {
+                current_a: i + sensor_offset,
+                temp_c: r.temp_c.filter(|t| t.is_finite()),
+                sensor_offset_a: sensor_offset,
+            });
         }
     }
-    Ok(currents)
+    Ok(Replay {
+        points,
+        runs: outcome.planned,
+        thermal,
+    })
 }
 
 /// The virtual rig of `rig` with its fitted `[model]` running in the plant (or none).
@@ -254,12 +328,13 @@ pub fn compare(
 ) -> Result<Comparison, RigError> {
     let data = Dataset::read_csv(measured)?;
     let (plan, order, cells) = replay_plan(&data, &header_plan(measured))?;
-    let base = simulate(virtual_rig(base_rig, false, seed)?, &plan)?;
+    let base = replay(virtual_rig(base_rig, false, seed)?, &plan)?;
     let fitted = match model_rig {
-        Some(m) => Some(simulate(virtual_rig(m, true, seed)?, &plan)?),
+        Some(m) => Some(replay(virtual_rig(m, true, seed)?, &plan)?),
         None => None,
     };
-    let (rows, skipped_rows) = gap_rows(&data, &order, &cells, &plan, &base, fitted.as_deref());
+    let replays = base.runs + fitted.as_ref().map_or(0, |f| f.runs);
+    let (rows, skipped_rows) = gap_rows(&data, &order, &cells, &plan, &base, fitted.as_ref());
     if rows.is_empty() {
         return Err(RigError::BadValue {
             what: format!("--measured {}", measured.display()),
@@ -304,29 +379,39 @@ pub fn compare(
         svg: None,
         figure: None,
         rows,
+        replays,
     })
 }
 
-/// The gap per replayed point (`base`, `fitted`: the simulated currents per plan point,
-/// `None` where the virtual rig did not run it) and the data rows (1-based) left out
-/// because either virtual rig could not run them.
+/// The gap per replayed point (`base`, `fitted`: the replays, `None` points where the
+/// virtual rig did not run them), each simulated current at the row's logged temperature,
+/// and the data rows (1-based) left out because either virtual rig could not run them.
 fn gap_rows(
     data: &Dataset,
     order: &[usize],
     cells: &[usize],
     plan: &Plan,
-    base: &[Option<f64>],
-    fitted: Option<&[Option<f64>]>,
+    base: &Replay,
+    fitted: Option<&Replay>,
 ) -> (Vec<GapRow>, Vec<usize>) {
     let mut skipped_rows = Vec::new();
+    let temps = data.temp_c();
     let rows = order
         .iter()
         .enumerate()
         .filter_map(|(n, &k)| {
             let j = cells[n];
             let measured_a = data.i_in()[k];
-            let base_a = base.get(j).copied().flatten();
-            let model_a = fitted.map(|f| f.get(j).copied().flatten());
+            let temp_c = temps.map(|t| t[k]).filter(|t| t.is_finite());
+            let at = |r: &Replay| {
+                r.points
+                    .get(j)
+                    .copied()
+                    .flatten()
+                    .map(|p| r.current_at(&p, temp_c))
+            };
+            let base_a = at(base);
+            let model_a = fitted.map(at);
             let (Some(base_a), None | Some(Some(_))) = (base_a, model_a) else {
                 skipped_rows.push(k + 1);
                 return None;
@@ -338,7 +423,7 @@ fn gap_rows(
                 tau_rot_nm: data.tau_rot()[k],
                 v_in_v: p.volts,
                 hz: p.hz,
-                temp_c: p.temp_c,
+                temp_c,
                 measured_a,
                 base_a,
                 model_a,
@@ -417,6 +502,31 @@ pub fn gap_figure(path: &Path, c: &Comparison) -> Result<(), RigError> {
 mod gap_tests {
     use super::*;
 
+    /// A replay of these currents (A, per plan point) at `temp_c`, on a plant with thermal
+    /// drift `k` (1/K) calibrated at 25 deg C.
+    fn replay_of(currents: &[Option<f64>], temp_c: f64, k: Option<f64>) -> Replay {
+        Replay {
+            points: currents
+                .iter()
+                .map(|c| {
+                    c.map(|current_a| Replayed {
+                        current_a,
+                        temp_c: Some(temp_c),
+                        sensor_offset_a: 0.0,
+                    })
+                })
+                .collect(),
+            runs: currents.len(),
+            thermal: (
+                model::plant::PlantEffects {
+                    thermal_drift: k,
+                    ..Default::default()
+                },
+                25.0,
+            ),
+        }
+    }
+
     /// A point the virtual rig skipped (a load above its `max_release_load_nm`: the sweep
     /// writes no row for it) is left out of both gaps and listed, where the replay used to
     /// index past the simulated rows and panic.
@@ -438,6 +548,7 @@ mod gap_tests {
         let base: Vec<Option<f64>> = (0..plan.points.len())
             .map(|j| (j != 2).then_some(2.5))
             .collect();
+        let base = replay_of(&base, 25.0, None);
         let (rows, skipped) = gap_rows(&data, &order, &cells, &plan, &base, None);
         assert_eq!(skipped, [3]);
         assert_eq!(rows.len(), 9);
@@ -446,22 +557,26 @@ mod gap_tests {
         let fitted: Vec<Option<f64>> = (0..plan.points.len())
             .map(|j| (j != 5).then_some(2.55))
             .collect();
+        let fitted = replay_of(&fitted, 25.0, None);
         let (rows, skipped) = gap_rows(&data, &order, &cells, &plan, &base, Some(&fitted));
         assert_eq!(skipped, [3, 6]);
         assert_eq!(rows.len(), 8);
         assert!(rows.iter().all(|r| r.gap_model_a.is_some()));
     }
 
-    /// Issue 33: the replay grew faster than the rows (1,000 rows 21 s, 2,000 rows 59 s):
-    /// each tested cell is replayed once, so repeats cost a lookup.
+    /// Issue 33: the replay grew faster than the rows (1,000 rows 21 s, 2,000 rows 59 s),
+    /// and rows each at its own temperature made a cell each (2,000 rows, ~150 cells,
+    /// 148 s): each (load, drive) cell is replayed once, whatever the temperatures, and a
+    /// fitted thermal drift is applied at each row's logged temperature.
     #[test]
-    fn repeats_of_a_cell_are_replayed_once() {
+    fn repeats_of_a_cell_are_replayed_once_at_any_temperature() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("m.csv");
         let mut text = String::from("t_s,v_in_v,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c\n");
         for k in 0..2000 {
             let load = [0.368, 0.736, 1.104][k % 3];
-            let temp = 25.0 + 0.1 * (k % 2) as f64;
+            // Every row its own temperature: 25.00 to 74.975 deg C.
+            let temp = 25.0 + 0.025 * k as f64;
             text.push_str(&format!(
                 "{k},3.6,30.0,{load},{},{temp}\n",
                 2.6 + 1e-4 * k as f64
@@ -470,18 +585,61 @@ mod gap_tests {
         std::fs::write(&path, text).unwrap();
         let data = Dataset::read_csv(&path).unwrap();
         let (plan, order, cells) = replay_plan(&data, &HeaderPlan::default()).unwrap();
-        assert_eq!(
-            plan.points.len(),
-            3,
-            "three cells (25.0 and 25.1 deg C are one)"
-        );
+        assert_eq!(plan.points.len(), 3, "three (load, drive) cells");
+        assert!(plan.points.iter().all(|p| p.temp_c.is_none()));
         assert_eq!((order.len(), cells.len()), (2000, 2000));
         assert!(cells.iter().enumerate().all(|(n, &c)| c == n % 3));
-        let base = vec![Some(2.5); 3];
+        let base = replay_of(&[Some(2.5); 3], 25.0, None);
         let (rows, skipped) = gap_rows(&data, &order, &cells, &plan, &base, None);
         assert!(skipped.is_empty());
         assert_eq!(rows.len(), 2000);
+        // Without thermal drift the current does not depend on the temperature.
         assert!((rows[1999].gap_base_a - (2.6 + 0.1999 - 2.5)).abs() < 1e-9);
+        assert!((rows[1999].temp_c.unwrap() - 74.975).abs() < 1e-9);
+        // With k = 0.004/K, a row 50 K above the replay's 25 deg C needs 1 / (1 - 0.2) of
+        // the current for the same torque.
+        let fitted = replay_of(&[Some(2.5); 3], 25.0, Some(0.004));
+        let (rows, _) = gap_rows(&data, &order, &cells, &plan, &base, Some(&fitted));
+        let want = 2.5 / (1.0 - 0.004 * (74.975 - 25.0));
+        assert!(
+            (rows[1999].model_a.unwrap() - want).abs() < 1e-9,
+            "{rows:?}"
+        );
+        assert!((rows[0].model_a.unwrap() - 2.5).abs() < 1e-12);
+    }
+
+    /// The whole replay on 2,000 rows each at its own temperature: the virtual rigs run
+    /// each (load, drive) cell once per model, counted by the comparison's `replays`.
+    #[test]
+    fn a_compare_of_2000_rows_at_distinct_temperatures_replays_each_cell_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.csv");
+        let mut text = String::from("t_s,omega_n_rad_s,tau_rot_nm,i_in_a,temp_c\n");
+        for k in 0..2000 {
+            let load = [0.368, 0.736][k % 2];
+            let temp = 25.0 + 0.0173 * k as f64;
+            text.push_str(&format!("{k},62.83185307179586,{load},2.6,{temp}\n"));
+        }
+        std::fs::write(&path, text).unwrap();
+        let base = RigFile::paper();
+        let fitted = base.with_model(
+            0.2,
+            vec![rigfile::EffectEntry {
+                name: "thermal-drift".into(),
+                params: [("k_per_c".to_string(), 0.004)].into(),
+            }],
+        );
+        let c = compare(&path, &base, Some(&fitted), 1).unwrap();
+        assert_eq!(c.points, 2000, "{:?}", c.skipped_rows);
+        assert_eq!(c.replays, 4, "two cells, once per model");
+        // The fitted drift at each row's temperature: warmer rows need more current.
+        let (cool, warm) = (&c.rows[0], &c.rows[1998]);
+        assert_eq!(cool.tau_rot_nm, warm.tau_rot_nm);
+        assert!(warm.model_a.unwrap() > cool.model_a.unwrap());
+        assert!(
+            (warm.base_a - cool.base_a).abs() < 1e-12,
+            "no drift in the base model"
+        );
     }
 
     /// Absurd loads are refused by the plan's range before anything runs.

@@ -281,18 +281,30 @@ fn malformed_calibration_files_change_nothing() {
 #[test]
 fn limits_and_constants_beyond_the_board_are_refused() {
     // The firmware's rule (model::BoardLimits and model::Calibration::check), run before
-    // sending: a load cap of 1e30 would switch OVERLOAD off, C1 = 2258 is 36 times Table 2.
+    // sending: a load cap of 100 N m would switch OVERLOAD off, C1 = 900 is 14 times
+    // Table 2. Past the rig file's own ranges (issue 33: 1e30, 2258), the file is refused
+    // as it is read, naming the key and its range.
     let dir = tempfile::tempdir().unwrap();
     let cases: &[(&str, &str, &[&str])] = &[
         (
             "load.toml",
-            "[limits]\nmax_release_load_nm = 1e30\n",
+            "[limits]\nmax_release_load_nm = 100.0\n",
             &["max_release_load_nm", "3.68 N m"],
         ),
         (
             "c1.toml",
-            "[calibration]\nc1 = 2258.0\n",
+            "[calibration]\nc1 = 900.0\n",
             &["c1", "plausible range"],
+        ),
+        (
+            "load-far.toml",
+            "[limits]\nmax_release_load_nm = 1e30\n",
+            &["max_release_load_nm", "at most 1000"],
+        ),
+        (
+            "c1-far.toml",
+            "[calibration]\nc1 = 2258.0\n",
+            &["c1", "at most 1000"],
         ),
     ];
     for (name, text, wants) in cases {

@@ -148,6 +148,18 @@ pub struct GearSet {
 /// modules (1 um at m = 1 mm: below any manufacturing tolerance of a centre distance).
 pub const CENTRE_DISTANCE_TOLERANCE_MODULES: f64 = 1e-3;
 
+/// `v` as a `u32`, `u32::MAX` when larger (for a message's numbers).
+const fn saturate_u32(v: u64) -> u32 {
+    if v > u32::MAX as u64 {
+        u32::MAX
+    } else {
+        #[allow(clippy::cast_possible_truncation, reason = "checked just above")]
+        {
+            v as u32
+        }
+    }
+}
+
 impl GearSet {
     /// Module of the paper's gears, m ([`crate::paper::MODULE`]).
     pub const MODULE_PAPER: f64 = crate::paper::MODULE;
@@ -167,9 +179,13 @@ impl GearSet {
         if z[0] == z[3] {
             return Err(GearError::NoToothDifference);
         }
-        let (sum12, sum34) = (z[0] + z[1], z[2] + z[3]);
+        // In u64: tooth counts near u32::MAX (a hostile file) must not overflow the sum.
+        let (sum12, sum34) = (z[0] as u64 + z[1] as u64, z[2] as u64 + z[3] as u64);
         if sum12 != sum34 {
-            return Err(GearError::UnequalCentreDistance { sum12, sum34 });
+            return Err(GearError::UnequalCentreDistance {
+                sum12: saturate_u32(sum12),
+                sum34: saturate_u32(sum34),
+            });
         }
         if !(module.is_finite() && module > 0.0) {
             return Err(GearError::BadModule);
@@ -238,7 +254,7 @@ impl GearSet {
                 a12,
                 a34,
                 x34_needed: involute::shift_sum_for_centre_distance(
-                    z[2] + z[3],
+                    z[2].saturating_add(z[3]),
                     module,
                     pressure_angle,
                     a12,

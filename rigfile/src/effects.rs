@@ -229,8 +229,9 @@ impl RigFile {
 
 /// Sets the effect's parameters in `p` from reported (rig-file) names, as the model's effect
 /// table ([`model::effects::EFFECTS`]) names them with their units; unknown names are an
-/// error naming the expected ones, a fixed parameter must keep its value. Missing names keep
-/// their value in `p`.
+/// error naming the expected ones, a fixed parameter must keep its value, any other must be
+/// finite and inside its range (the table's `bounds`, named in the error). Missing names
+/// keep their value in `p`.
 pub fn apply_params(
     effect: Effect,
     params: &BTreeMap<String, f64>,
@@ -248,12 +249,21 @@ pub fn apply_params(
         if !v.is_finite() {
             return Err(format!("{} {k} = {v} is not finite", effect.name()));
         }
-        if let ParamValue::Fixed(fixed) = param.value
-            && (v - fixed).abs() > 1e-12
-        {
+        if let ParamValue::Fixed(fixed) = param.value {
+            if (v - fixed).abs() > 1e-12 {
+                return Err(format!(
+                    "{} {k} is fixed at {fixed} {}",
+                    effect.name(),
+                    param.unit
+                ));
+            }
+        } else if !(param.bounds.0..=param.bounds.1).contains(&v) {
+            // The range the fit keeps it in (the physical one where fitted apart): a value
+            // outside it came from no fit, and the laws are not made for it.
             return Err(format!(
-                "{} {k} is fixed at {fixed} {}",
+                "{} {k} = {v} is out of range: it must be {} {}",
                 effect.name(),
+                crate::keys::range_text(param.bounds),
                 param.unit
             ));
         }

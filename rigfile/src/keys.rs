@@ -92,7 +92,7 @@ pub const KEYS: &[KeySpec] = &[
         "gear",
         "module_mm",
         "mm",
-        "positive",
+        "positive, at most 100",
         "1.0",
         Some("module_mm"),
         "gear module",
@@ -121,7 +121,7 @@ pub const KEYS: &[KeySpec] = &[
             "cam",
             "eccentricity_mm",
             "mm",
-            "positive",
+            "positive, at most 100",
             "1.0",
             Some("eccentricity_mm"),
             "cam eccentricity e, the vibration amplitude",
@@ -131,7 +131,7 @@ pub const KEYS: &[KeySpec] = &[
         "cam",
         "carrier_mass_kg",
         "kg",
-        "positive",
+        "positive, at most 1000",
         "3.82",
         Some("carrier_mass_kg"),
         "vibrating mass M_hat = M1 + M23",
@@ -158,7 +158,7 @@ pub const KEYS: &[KeySpec] = &[
         "calibration",
         "c1",
         "N mm/A",
-        "positive",
+        "positive, at most 1000",
         "62.1",
         Some("c1_nmm_per_a"),
         "C1 of Eq. (15): cam torque = C1 i_in + C2",
@@ -167,7 +167,7 @@ pub const KEYS: &[KeySpec] = &[
         "calibration",
         "c2",
         "N mm",
-        "any finite number",
+        "from -10000 to 10000",
         "-138.0",
         Some("c2_nmm"),
         "C2 of Eq. (15)",
@@ -176,7 +176,7 @@ pub const KEYS: &[KeySpec] = &[
         "calibration",
         "c3",
         "N mm s/rad",
-        "zero or positive",
+        "zero or positive, at most 100",
         "0.235",
         Some("c3_nmm_s_per_rad"),
         "C3 of Eq. (16): vibrator loss torque = C3 w_n + C4",
@@ -185,7 +185,7 @@ pub const KEYS: &[KeySpec] = &[
         "calibration",
         "c4",
         "N mm",
-        "any finite number",
+        "from -10000 to 10000",
         "1.69",
         Some("c4_nmm"),
         "C4 of Eq. (16)",
@@ -194,7 +194,7 @@ pub const KEYS: &[KeySpec] = &[
         "calibration",
         "c5",
         "A s/rad",
-        "zero or positive",
+        "zero or positive, at most 1",
         "0.00378",
         Some("c5_a_s_per_rad"),
         "C5 of Eq. (17): no-load current = C5 w_n + C6",
@@ -203,7 +203,7 @@ pub const KEYS: &[KeySpec] = &[
         "calibration",
         "c6",
         "A",
-        "zero or positive",
+        "zero or positive, at most 100",
         "2.25",
         Some("c6_a"),
         "C6 of Eq. (17)",
@@ -212,7 +212,7 @@ pub const KEYS: &[KeySpec] = &[
         "calibration",
         "temperature_c",
         "deg C",
-        "any finite number",
+        "from -273.15 (absolute zero) to 1000",
         "25.0",
         None,
         "motor temperature at calibration (the thermal drift's reference)",
@@ -356,7 +356,7 @@ pub const KEYS: &[KeySpec] = &[
         "limits",
         "max_release_load_nm",
         "N m",
-        "positive",
+        "positive, at most 1000",
         "3.68",
         Some("max_release_load_nm"),
         "largest output load the firmware will release",
@@ -365,7 +365,7 @@ pub const KEYS: &[KeySpec] = &[
         "limits",
         "max_current_a",
         "A",
-        "positive",
+        "positive, at most 100",
         "4.5",
         Some("max_current_a"),
         "motor current limit",
@@ -374,7 +374,7 @@ pub const KEYS: &[KeySpec] = &[
         "limits",
         "max_freq_hz",
         "Hz",
-        "positive",
+        "positive, at most 100",
         "15.0",
         Some("max_freq_hz"),
         "highest vibration frequency the firmware will drive",
@@ -392,7 +392,7 @@ pub const KEYS: &[KeySpec] = &[
         "model",
         "mu",
         "-",
-        "zero or positive",
+        "from 0 to 3 (the fit's bounds)",
         "-",
         None,
         "mu of Eq. (10) fitted to the vibrator current",
@@ -444,7 +444,7 @@ pub fn wire_keys() -> impl Iterator<Item = &'static KeySpec> {
 }
 
 /// One parameter of an effect in `[[model.effects]] params`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EffectParamSpec {
     /// The effect.
     pub effect: Effect,
@@ -452,8 +452,29 @@ pub struct EffectParamSpec {
     pub name: &'static str,
     /// Its unit.
     pub unit: &'static str,
+    /// The range a rig file's value must lie in, [low, high] (the range the fit keeps it
+    /// in; a fixed parameter's value twice).
+    pub bounds: (f64, f64),
     /// What it means and what the reader does with it.
     pub meaning: &'static str,
+}
+
+impl EffectParamSpec {
+    /// [`EffectParamSpec::bounds`] in words, as the range check quotes it.
+    pub fn range(&self) -> String {
+        range_text(self.bounds)
+    }
+}
+
+/// A parameter's range `[lo, hi]` in words: `from lo to hi`, `at least lo`, `exactly v`.
+pub fn range_text((lo, hi): (f64, f64)) -> String {
+    if lo == hi {
+        format!("exactly {lo}")
+    } else if hi.is_finite() {
+        format!("from {lo} to {hi}")
+    } else {
+        format!("at least {lo}")
+    }
 }
 
 /// The parameters each effect takes (names as `rig explain` reports them), read from the
@@ -466,6 +487,10 @@ pub fn effect_params() -> Vec<EffectParamSpec> {
                 effect: info.effect,
                 name: p.key,
                 unit: p.unit,
+                bounds: match p.value {
+                    model::effects::ParamValue::Fixed(v) => (v, v),
+                    _ => p.bounds,
+                },
                 meaning: p.meaning,
             })
         })

@@ -168,15 +168,23 @@ impl RigFile {
             path: path.display().to_string(),
             source,
         };
-        let mut text = String::new();
-        std::io::Read::read_to_string(
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(
             &mut std::io::Read::take(
                 std::fs::File::open(path).map_err(read_err)?,
                 MAX_RIG_FILE_BYTES + 1,
             ),
-            &mut text,
+            &mut bytes,
         )
         .map_err(read_err)?;
+        // Not text (a binary file): said as the bounded reader says it ([`text_input`]).
+        let text = String::from_utf8(bytes).map_err(|e| RigFileError::BadValue {
+            what: format!("rig file {}", path.display()),
+            why: format!(
+                "is not UTF-8 text (byte {}): give a rig file (TOML)",
+                e.utf8_error().valid_up_to()
+            ),
+        })?;
         if text.len() as u64 > MAX_RIG_FILE_BYTES {
             return Err(RigFileError::BadValue {
                 what: format!("rig file {}", path.display()),

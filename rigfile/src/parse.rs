@@ -86,15 +86,41 @@ fn section_at(text: &str, offset: usize) -> Option<String> {
     })
 }
 
-/// A TOML error as one line: where (line, section) and what.
+/// The key whose value is at byte `offset` of `text`: the name before the nearest `=`
+/// on its line before it (`kappa` in `params = { kappa = 1e999 }`).
+fn key_at(text: &str, offset: usize) -> Option<String> {
+    let offset = offset.min(text.len());
+    let start = text[..offset].rfind('\n').map_or(0, |i| i + 1);
+    let before = text.get(start..offset)?;
+    let eq = before.rfind('=')?;
+    let name = before[..eq]
+        .trim_end()
+        .rsplit(|c: char| c == '{' || c == ',' || c.is_whitespace())
+        .next()?
+        .trim_matches('"');
+    (!name.is_empty()).then(|| name.to_string())
+}
+
+/// A TOML error as one line: where (line, section, key) and what, with the key's allowed
+/// range when it is one of the rig file's.
 fn describe(text: &str, e: &toml::de::Error) -> String {
     let what = e.message().trim_end().to_string();
     match e.span() {
         Some(span) => {
             let line = line_of(text, span.start);
-            match section_at(text, span.start) {
-                Some(section) => format!("line {line}, in [{section}]: {what}"),
-                None => format!("line {line}: {what}"),
+            let section = section_at(text, span.start);
+            let key = key_at(text, span.start);
+            let spec = match (&section, &key) {
+                (Some(s), Some(k)) => keys::find(s, k),
+                _ => None,
+            };
+            let range = spec
+                .map(|k| format!("; it must be {}", k.range))
+                .unwrap_or_default();
+            let key = key.map(|k| format!(", `{k}`")).unwrap_or_default();
+            match section {
+                Some(section) => format!("line {line}, in [{section}]{key}: {what}{range}"),
+                None => format!("line {line}{key}: {what}{range}"),
             }
         }
         None => what,
@@ -269,6 +295,48 @@ fn value_text(rig: &RigFile, key: &KeySpec) -> String {
     t.get(key.key).map_or("?".into(), |v| v.to_string())
 }
 
+/// The rig file's own ranges, inside the device's (which asks only for a finite 32-bit
+/// number of the right sign), in the file's units: (section, key, low, high), each quoted
+/// by its key's range in [`keys::KEYS`]. Wide enough for any build of this rig, narrow
+/// enough that no model or simulation of it overflows (3.4e38 N mm/A fits the device's
+/// record and ran the simulated motor to NaN).
+pub(crate) const BOUNDED: [(&str, &str, f64, f64); 13] = [
+    ("gear", "module_mm", f64::MIN, 100.0),
+    ("cam", "eccentricity_mm", f64::MIN, 100.0),
+    ("cam", "carrier_mass_kg", f64::MIN, 1000.0),
+    ("calibration", "c1", f64::MIN, 1000.0),
+    ("calibration", "c2", -10_000.0, 10_000.0),
+    ("calibration", "c3", 0.0, 100.0),
+    ("calibration", "c4", -10_000.0, 10_000.0),
+    ("calibration", "c5", 0.0, 1.0),
+    ("calibration", "c6", 0.0, 100.0),
+    ("calibration", "temperature_c", -273.15, 1000.0),
+    ("limits", "max_release_load_nm", f64::MIN, 1000.0),
+    ("limits", "max_current_a", f64::MIN, 100.0),
+    ("limits", "max_freq_hz", f64::MIN, 100.0),
+];
+
+/// The value of `key` (one of [`BOUNDED`]'s) in `rig`, in the file's units.
+fn bounded_value(rig: &RigFile, key: &str) -> f64 {
+    let c = crate::paper_units::to_paper(&rig.calibration.constants);
+    match key {
+        "module_mm" => rig.gear.module_mm,
+        "eccentricity_mm" => rig.cam.eccentricity_mm,
+        "carrier_mass_kg" => rig.cam.carrier_mass_kg,
+        "c1" => c[0],
+        "c2" => c[1],
+        "c3" => c[2],
+        "c4" => c[3],
+        "c5" => c[4],
+        "c6" => c[5],
+        "temperature_c" => rig.calibration.temperature_c,
+        "max_release_load_nm" => rig.limits.max_release_load_nm,
+        "max_current_a" => rig.limits.max_current_a,
+        "max_freq_hz" => rig.limits.max_freq_hz,
+        _ => f64::NAN,
+    }
+}
+
 /// The range checks of `docs/rig-file.md`; the message names the key as the file does and
 /// says whether the file set it.
 fn check(loaded: &Loaded, name: &str) -> Result<(), RigFileError> {
@@ -336,15 +404,32 @@ fn check(loaded: &Loaded, name: &str) -> Result<(), RigFileError> {
         let why = too_big.then(|| "too large for the device's 32-bit record".to_string());
         return Err(out_of_range(spec.section, spec.key, why));
     }
-    if !rig.calibration.temperature_c.is_finite() {
-        return Err(out_of_range("calibration", "temperature_c", None));
+    for (section, key, lo, hi) in BOUNDED {
+        if !(lo..=hi).contains(&bounded_value(rig, key)) {
+            return Err(out_of_range(section, key, None));
+        }
     }
     if let Some(m) = &rig.model {
-        if !(m.mu.is_finite() && m.mu >= 0.0) {
+        let (lo, hi) = model::effects::MU_BOUNDS;
+        if !(lo..=hi).contains(&m.mu) {
             return Err(out_of_range("model", "mu", None));
         }
-        rig.effects()
+        let (list, p) = rig
+            .effects()
             .map_err(|why| bad(name, format!("[model] effects: {why}")))?;
+        // An extra viscous loss below -C3 leaves the vibrator negative damping: it would
+        // speed itself up (the plant runs away), which no motor does.
+        let net = rig.calibration.constants.c3 + p.viscous_loss;
+        if list.contains(&model::effects::Effect::VibratorViscousLoss) && net < 0.0 {
+            return Err(bad(
+                name,
+                format!(
+                    "[model] effects: vibrator-viscous-loss c_v_n_mm_s_per_rad = {} is out of range: it must be at least -C3 = {} N mm s/rad (C3 + c_v is the vibrator's whole viscous loss, never negative)",
+                    p.viscous_loss * 1e3,
+                    -rig.calibration.constants.c3 * 1e3
+                ),
+            ));
+        }
     }
     rig.check_user_effects().map_err(|why| bad(name, why))?;
     Ok(())

@@ -417,3 +417,79 @@ fn the_drive_decay_round_trips_and_defaults_to_the_boards_braking_drive() {
         "{e}"
     );
 }
+
+/// Issue 33: the numbers the hostile rig-file property test found: a tooth count past
+/// `u32` (named, with its range), 3.4e38 N mm/A (fits the device's 32-bit record, ran the
+/// simulated motor to NaN), an effect parameter far outside any fit and an extra viscous
+/// loss that leaves the vibrator negative damping.
+#[test]
+fn extreme_numbers_are_refused_naming_the_key_and_its_range() {
+    let refused = |text: &str| RigFile::parse(text, "h.toml").unwrap_err().to_string();
+    let e = refused("[gear]\nz = [4294967296, 51, 50, 50]\n");
+    assert!(e.contains("`z`") && e.contains("4 to 65535"), "{e}");
+    let e = refused("[gear]\nz = [4294967295, 51, 50, 50]\n");
+    assert!(e.contains("z"), "{e}");
+    let e = refused("[calibration]\nc1 = 3.4e38\n");
+    assert!(e.contains("c1") && e.contains("at most 1000"), "{e}");
+    let e = refused("[calibration]\ntemperature_c = -300.0\n");
+    assert!(
+        e.contains("temperature_c") && e.contains("absolute zero"),
+        "{e}"
+    );
+    let e = refused(
+        "[model]\nmu = 0.2\n[[model.effects]]\nname = \"inertia-rectification\"\nparams = { kappa = 1e300 }\n",
+    );
+    assert!(e.contains("kappa") && e.contains("from -1 to 20"), "{e}");
+    let e = refused(
+        "[model]\nmu = 0.2\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = -1.0 }\n",
+    );
+    assert!(e.contains("c_v_n_mm_s_per_rad") && e.contains("-C3"), "{e}");
+    // Inside every range: a usable rig.
+    RigFile::parse(
+        "[calibration]\nc1 = 1000.0\n[model]\nmu = 3.0\n[[model.effects]]\nname = \"vibrator-viscous-loss\"\nparams = { c_v_n_mm_s_per_rad = -0.2 }\n",
+        "ok.toml",
+    )
+    .unwrap();
+}
+
+/// Each of the rig file's own ranges is the one its key states (docs/rig-file.md).
+#[test]
+fn the_bounded_keys_state_their_ranges() {
+    for (section, key, lo, hi) in crate::parse::BOUNDED {
+        let spec = crate::keys::find(section, key).unwrap();
+        assert!(
+            spec.range.contains(&format!("{hi}")),
+            "{spec}: {}",
+            spec.range
+        );
+        // Zero as a lower end reads "zero or positive".
+        if lo > f64::MIN && lo != 0.0 {
+            assert!(
+                spec.range.contains(&format!("{lo}")),
+                "{spec}: {}",
+                spec.range
+            );
+        }
+        let mut rig = RigFile::paper();
+        assert!(crate::parse::check_all(&rig, "x").is_ok());
+        // Just past the top: refused naming the key.
+        let past = hi * 1.01 + 1.0;
+        match key {
+            "module_mm" => rig.gear.module_mm = past,
+            "eccentricity_mm" => rig.cam.eccentricity_mm = past,
+            "carrier_mass_kg" => rig.cam.carrier_mass_kg = past,
+            "temperature_c" => rig.calibration.temperature_c = past,
+            "max_release_load_nm" => rig.limits.max_release_load_nm = past,
+            "max_current_a" => rig.limits.max_current_a = past,
+            "max_freq_hz" => rig.limits.max_freq_hz = past,
+            _ => {
+                let mut c = crate::paper_units::to_paper(&rig.calibration.constants);
+                let k: usize = key[1..].parse().unwrap();
+                c[k - 1] = past;
+                rig.calibration.constants = crate::paper_units::from_paper(c);
+            }
+        }
+        let e = crate::parse::check_all(&rig, "x").unwrap_err().to_string();
+        assert!(e.contains(key), "{key}: {e}");
+    }
+}

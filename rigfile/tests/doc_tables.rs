@@ -106,26 +106,28 @@ fn the_document_lists_every_key_with_its_unit_range_and_default() {
 #[test]
 fn the_document_lists_every_effect_parameter() {
     let doc = read_doc();
-    let documented: Vec<(String, String, String, String)> = doc
+    let documented: Vec<(String, String, String, String, String)> = doc
         .effects
         .iter()
         .map(|r| {
-            assert_eq!(r.len(), 4, "{r:?}");
+            assert_eq!(r.len(), 5, "{r:?}");
             (
                 ticked(&r[0])[0].clone(),
                 ticked(&r[1])[0].clone(),
                 r[2].clone(),
                 r[3].clone(),
+                r[4].clone(),
             )
         })
         .collect();
-    let code: Vec<(String, String, String, String)> = keys::effect_params()
+    let code: Vec<(String, String, String, String, String)> = keys::effect_params()
         .iter()
         .map(|p| {
             (
                 p.effect.name().to_string(),
                 p.name.to_string(),
                 p.unit.to_string(),
+                p.range(),
                 p.meaning.to_string(),
             )
         })

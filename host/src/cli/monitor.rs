@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 use std::fs::File;
-use std::io::{IsTerminal, Write};
+use std::io::{IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;
@@ -27,7 +27,7 @@ use super::connect::{DeviceOpts, interrupt_flag};
 use crate::client::LinkStats;
 use crate::monitor::HealthValues;
 pub use crate::monitor::{CSV_HEADER, Freshness, MonitorRow, STALE_RULE, status_meaning};
-use crate::{RigError, args, limits};
+use crate::{RigError, args, limits, row_log};
 
 /// Arguments of `rig monitor`.
 #[derive(Debug, Args)]
@@ -35,9 +35,20 @@ pub struct MonitorArgs {
     /// One line per sample instead of the full-screen view (the default without a terminal).
     #[arg(long)]
     plain: bool,
-    /// Also log every sample to this CSV file.
+    /// Also log every sample to this CSV file, a new one (an existing one only with
+    /// --resume or --force): each row is appended whole as it arrives, so a monitor killed
+    /// in any way leaves its header and whole rows.
     #[arg(long, value_name = "FILE")]
     csv: Option<PathBuf>,
+    /// Continue an existing --csv log (a monitor's, same columns): rows are appended after
+    /// its last whole row; a row cut short (a SIGKILL mid-write, a full disk) is dropped
+    /// and said so.
+    #[arg(long, requires = "csv", conflicts_with = "force")]
+    resume: bool,
+    /// Replace an existing --csv file once the monitor ends (q, Ctrl-C, --seconds): until
+    /// then it logs to FILE.new and the old file stays whole.
+    #[arg(long, requires = "csv")]
+    force: bool,
     /// Stop after this many (device) seconds; default: until q or Ctrl-C.
     #[arg(long, value_name = "S", value_parser = args::positive, allow_hyphen_values = true)]
     seconds: Option<f64>,
@@ -381,49 +392,15 @@ pub fn run(a: MonitorArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     // The firmware would send at its control rate divided by a whole number.
     limits::check_telemetry_rate("--rate", a.rate)?;
     match &a.csv {
-        // Logged to a temporary file beside the target, renamed over it when the monitor
-        // ends normally (q, Ctrl-C, --seconds): a failed run leaves an existing file as it
-        // was, and keeps what it logged in FILE.partial.
-        Some(path) => reporting::write_atomic_with(path, |tmp| -> Result<(), RigError> {
-            let file = File::create(tmp).map_err(|source| RigError::File {
-                action: "create",
-                path: path.display().to_string(),
-                source,
-            })?;
-            let mut w = csv::Writer::from_writer(file);
-            w.write_record(CSV_HEADER).map_err(csv_error(path))?;
-            let mut logged = 0;
-            let watched = watch(&a, dev, Some((&mut w, path)), &mut logged);
-            let flushed = w.flush().map_err(RigError::Output);
-            drop(w);
-            if let Err(e) = watched.and(flushed) {
-                let mut partial = path.as_os_str().to_owned();
-                partial.push(".partial");
-                if logged > 0 && std::fs::rename(tmp, &partial).is_ok() {
-                    eprintln!(
-                        "note: what was logged before the error is in {}; {} was left as it was",
-                        std::path::Path::new(&partial).display(),
-                        path.display()
-                    );
-                }
-                return Err(e);
-            }
-            Ok(())
-        })?,
-        None => watch(&a, dev, None, &mut 0)?,
+        Some(path) => log_to(path, &a, dev)?,
+        None => watch(&a, dev, None)?,
     }
     // Ended by SIGTERM, SIGHUP or Ctrl-C (not `q`): 128 + the signal's number.
     Ok(crate::signals::exit_code())
 }
 
-/// The monitor itself: connects, streams telemetry until done, logs every sample to `csv`
-/// (counting them in `logged`).
-fn watch(
-    a: &MonitorArgs,
-    dev: &DeviceOpts,
-    mut csv: Option<(&mut csv::Writer<File>, &Path)>,
-    logged: &mut u64,
-) -> Result<(), RigError> {
+/// The monitor itself: connects, streams telemetry until done, logs every sample to `log`.
+fn watch(a: &MonitorArgs, dev: &DeviceOpts, mut log: Option<&mut Log>) -> Result<(), RigError> {
     let stop = interrupt_flag();
     let mut s = dev.connect()?;
     let calibration = s.client.calibration()?;
@@ -487,10 +464,8 @@ fn watch(
                 count += 1;
                 let start = *first.get_or_insert(t.device_time_us);
                 let fresh = view.push(t);
-                if let Some((w, path)) = csv.as_mut() {
-                    w.write_record(MonitorRow::new(&t, fresh, view.health()).csv_record())
-                        .map_err(csv_error(path))?;
-                    *logged += 1;
+                if let Some(log) = log.as_deref_mut() {
+                    log.row(&MonitorRow::new(&t, fresh, view.health()))?;
                 }
                 if a.json {
                     super::print_json_line(&mut out, &MonitorRow::new(&t, fresh, view.health()))?;
@@ -539,11 +514,145 @@ fn watch(
     Ok(())
 }
 
-fn csv_error(path: &Path) -> impl Fn(csv::Error) -> RigError + '_ {
-    move |e| RigError::MeasuredFile {
-        file: path.display().to_string(),
-        why: format!("cannot write the log: {e}"),
+/// The `--csv` log being written: its rows appended whole ([`row_log::Appender`]).
+#[derive(Debug)]
+struct Log {
+    out: row_log::Appender,
+    /// Rows this run logged.
+    rows: u64,
+}
+
+impl Log {
+    fn row(&mut self, row: &MonitorRow) -> Result<(), RigError> {
+        self.out.write(&csv_line(&row.csv_record()))?;
+        self.rows += 1;
+        Ok(())
     }
+}
+
+/// `fields` as one CSV line (quoted as the csv crate quotes), newline included.
+fn csv_line(fields: &[String]) -> String {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    // Writing to memory cannot fail.
+    let _ = w.write_record(fields);
+    String::from_utf8_lossy(&w.into_inner().unwrap_or_default()).into_owned()
+}
+
+/// How often the log is synced to disk (rows reach the file at every write).
+const LOG_SYNC: row_log::Sync = row_log::Sync::Every(Duration::from_secs(1));
+
+/// Runs the monitor logging to `path`: a new file is written directly, row by row; an
+/// existing one only with `--resume` (appended to, after dropping a row cut short) or
+/// `--force` (FILE.new, renamed over it when the monitor ends normally).
+fn log_to(path: &Path, a: &MonitorArgs, dev: &DeviceOpts) -> Result<(), RigError> {
+    let name = path.display().to_string();
+    // A folder, FIFO or device is no log: writing or reading one would fail or block.
+    if let Some(why) = rigfile::text_input::not_a_regular_file(path) {
+        return Err(RigError::BadValue {
+            what: format!("--csv {name}"),
+            why: why.replace("save it to a file first", "give a file name"),
+        });
+    }
+    let exists = path.exists();
+    let header = csv_line(&CSV_HEADER.map(String::from));
+    if exists && !a.resume && !a.force {
+        let half = row_log::tail_half_row(path).unwrap_or(0);
+        let cut = if half > 0 {
+            format!(" (it ends in a row cut short, {half} bytes, which --resume drops)")
+        } else {
+            String::new()
+        };
+        return Err(RigError::BadValue {
+            what: format!("--csv {name}"),
+            why: format!(
+                "already exists{cut}: it was left unchanged; pass --resume to continue it, --force to replace it, or give a new file name"
+            ),
+        });
+    }
+    let replaces = (exists && a.force).then(|| crate::experiment::sweep::forced_path(path));
+    let mut log = if exists && a.resume {
+        check_monitor_log(path, &header)?;
+        let file = row_log::open_to_continue(path, &mut |l| eprintln!("{l}"))?;
+        let mut out = row_log::Appender::new(file, name.clone(), LOG_SYNC)?;
+        if out.is_empty() {
+            out.write(&header)?;
+        }
+        Log { out, rows: 0 }
+    } else {
+        let target = replaces.as_deref().unwrap_or(path);
+        if let Some(new) = &replaces
+            && new.exists()
+        {
+            return Err(RigError::BadValue {
+                what: format!("--csv {name} --force"),
+                why: format!(
+                    "{} is there already: the rows of an interrupted --force monitor (or one still running); move it away, or rename it over {name} and continue it with --resume (nothing was written)",
+                    new.display()
+                ),
+            });
+        }
+        let file = crate::experiment::sweep::create_new(target, false)?;
+        let mut out = row_log::Appender::new(file, target.display().to_string(), LOG_SYNC)?;
+        if let Err(e) = out.write(&header) {
+            let _ = std::fs::remove_file(target);
+            return Err(e);
+        }
+        Log { out, rows: 0 }
+    };
+    let created = !(exists && a.resume);
+    let written = replaces.as_deref().unwrap_or(path);
+    let watched = watch(a, dev, Some(&mut log));
+    let result = watched.and_then(|()| log.out.sync());
+    if let Err(e) = result {
+        if created && log.rows == 0 {
+            // Nothing measured: no file of a header alone is left behind.
+            let _ = std::fs::remove_file(written);
+        } else {
+            let old = if replaces.is_some() {
+                format!("; {name} was left as it was")
+            } else {
+                String::new()
+            };
+            eprintln!(
+                "note: the {} rows logged before the error are in {}, each whole{old}",
+                log.rows,
+                written.display()
+            );
+        }
+        return Err(e);
+    }
+    drop(log);
+    if let Some(new) = replaces {
+        std::fs::rename(&new, path).map_err(|source| RigError::File {
+            action: "replace",
+            path: name,
+            source,
+        })?;
+    }
+    Ok(())
+}
+
+/// Refuses to `--resume` a file that is not a monitor log: its first line must be the
+/// monitor's header (or the file empty, or the header itself cut short).
+fn check_monitor_log(path: &Path, header: &str) -> Result<(), RigError> {
+    let mut first = Vec::new();
+    let read = File::open(path)
+        .and_then(|f| f.take(header.len() as u64).read_to_end(&mut first))
+        .map_err(|source| RigError::File {
+            action: "read",
+            path: path.display().to_string(),
+            source,
+        })?;
+    if header.as_bytes().starts_with(&first[..read]) {
+        return Ok(());
+    }
+    Err(RigError::BadValue {
+        what: format!("--resume --csv {}", path.display()),
+        why: format!(
+            "is not a `rig monitor --csv` log (its first line is not the monitor's header `{}`): it was left unchanged; give a monitor log or a new file name",
+            header.trim_end()
+        ),
+    })
 }
 
 /// The key pressed, if any: q, Esc or Ctrl-C quit (the terminal is in raw mode, so Ctrl-C

@@ -7,7 +7,6 @@
 //! explain`'s columns) as it completes, and synced, so an interruption keeps every
 //! completed row and `--resume` continues the plan.
 
-use std::io::Write;
 use std::path::Path;
 
 use protocol::{SupervisorState, TelemetrySample};
@@ -18,6 +17,7 @@ use super::bench::{Bench, Go, Operator, Verdict, interrupted};
 use super::plan::{Plan, Run};
 use crate::RigError;
 use crate::provenance::{Header, Provenance};
+use crate::row_log::{self, Appender};
 
 /// Telemetry rate during a point, Hz.
 pub const TELEMETRY_HZ: u16 = 100;
@@ -258,49 +258,6 @@ pub fn forced_path(csv: &Path) -> std::path::PathBuf {
     let mut name = csv.as_os_str().to_owned();
     name.push(".new");
     name.into()
-}
-
-/// An append-only CSV whose every write is synced to disk, and whose rows are whole or
-/// absent: a write that fails (a full disk) is cut back to the last whole row.
-struct Appender {
-    file: std::fs::File,
-    path: String,
-    /// Bytes of whole rows in the file.
-    len: u64,
-}
-
-impl Appender {
-    fn new(file: std::fs::File, path: String) -> Result<Self, RigError> {
-        let len = file
-            .metadata()
-            .map_err(|source| RigError::File {
-                action: "read",
-                path: path.clone(),
-                source,
-            })?
-            .len();
-        Ok(Self { file, path, len })
-    }
-
-    fn write(&mut self, text: &str) -> Result<(), RigError> {
-        let fail = |source| RigError::File {
-            action: "write",
-            path: self.path.clone(),
-            source,
-        };
-        let written = self
-            .file
-            .write_all(text.as_bytes())
-            .and_then(|()| self.file.sync_data());
-        if let Err(e) = written {
-            // No half row stays behind for `--resume` to keep or `explain` to refuse.
-            let _ = self.file.set_len(self.len);
-            let _ = self.file.sync_data();
-            return Err(fail(e));
-        }
-        self.len += text.len() as u64;
-        Ok(())
-    }
 }
 
 /// Runs the sweep on `bench`, writing rows to `csv`; `progress` gets a line per point.
@@ -565,30 +522,8 @@ fn open_csv<B: Bench + ?Sized>(
         }
         // A row cut short (a crash or a full disk mid-write) is dropped, and said so, so
         // appended rows start on their own line and the file stays readable.
-        let text = std::fs::read(csv).unwrap_or_default();
-        let whole = text.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
-        let file = std::fs::OpenOptions::new()
-            .append(true)
-            .open(csv)
-            .map_err(|source| RigError::File {
-                action: "write",
-                path: path.clone(),
-                source,
-            })?;
-        if whole < text.len() {
-            file.set_len(whole as u64)
-                .and_then(|()| file.sync_data())
-                .map_err(|source| RigError::File {
-                    action: "write",
-                    path: path.clone(),
-                    source,
-                })?;
-            progress(&format!(
-                "dropped an incomplete last row ({} bytes, cut short by a crash or a full disk) from {path}",
-                text.len() - whole
-            ));
-        }
-        let out = Appender::new(file, path)?;
+        let file = row_log::open_to_continue(csv, progress)?;
+        let out = Appender::new(file, path, row_log::Sync::EveryRow)?;
         return Ok((rows, out, None));
     }
     check_output(csv, false, setup.force)?;
@@ -599,6 +534,7 @@ fn open_csv<B: Bench + ?Sized>(
     let mut out = Appender::new(
         create_new(target, setup.force)?,
         target.display().to_string(),
+        row_log::Sync::EveryRow,
     )?;
     out.write(&head)?;
     Ok((Vec::new(), out, replaces))
