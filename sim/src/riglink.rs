@@ -119,10 +119,10 @@ impl RigLink for SimLink {
     }
 }
 
-/// How long a release waits for the rig's current-sensor zero, rig seconds (ten times the
-/// firmware's 100 ms measurement).
+/// How long a drive request waits for the rig's current-sensor zero, rig seconds (ten times
+/// the firmware's 100 ms measurement); the host's client waits as long.
 pub const ZERO_WAIT_S: f64 = 1.0;
-/// How often a release refused with `CurrentZeroPending` is asked again, rig seconds.
+/// How often a drive request refused with `CurrentZeroPending` is asked again, rig seconds.
 pub const ZERO_RETRY_S: f64 = 0.01;
 
 /// Requests a release at `hz` and keeps it alive with heartbeats (waiting for the current

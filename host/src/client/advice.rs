@@ -31,9 +31,10 @@ pub fn nack_advice(code: NackCode) -> String {
         NackCode::SimulationOnly => {
             "simulation commands act only on the virtual rig (--sim); on a real rig do this by hand".into()
         }
-        NackCode::CurrentZeroPending => {
-            "the device is still measuring its current sensor's zero with the motor off (100 ms after boot or a re-zero), and it did not finish within 1 s of the device's time: check `rig faults` and the sensor's supply, then try again".into()
-        }
+        NackCode::CurrentZeroPending => format!(
+            "the device is still measuring its current sensor's zero with the motor off (100 ms after boot or a re-zero), and it did not finish within {} s of the device's time: check `rig faults` and the sensor's supply, then try again",
+            sim::riglink::ZERO_WAIT_S
+        ),
         _ => "the firmware refused it for a reason this tool does not know: update the rig tool".into(),
     }
 }

@@ -140,22 +140,18 @@ impl<T: Read + Write> Client<T> {
     pub fn request(&mut self, req: &Request) -> Result<Reply, RigError> {
         match self.exchange(req)? {
             Reply::Nack(code @ protocol::NackCode::InFaultHold) => {
-                Err(self.fault_hold_error(req, code))
+                // Name the faults that hold the motor off (one more exchange; without an
+                // answer the general advice stands).
+                let latched = match self.exchange(&Request::GetFaults) {
+                    Ok(Reply::Faults { latched, .. }) => Some(latched),
+                    _ => None,
+                };
+                Err(advice::refused_in_fault_hold(req, code, latched))
             }
             Reply::Nack(code) => Err(advice::refused(req, code)),
             reply if req.is_answered_by(&reply) => Ok(reply),
             other => Err(advice::unexpected(req, &other, &self.opts.port_name)),
         }
-    }
-
-    /// The error for `req` refused with `code` (`InFaultHold`): names the faults that hold
-    /// the motor off (one more exchange; without an answer the general advice stands).
-    fn fault_hold_error(&mut self, req: &Request, code: protocol::NackCode) -> RigError {
-        let latched = match self.exchange(&Request::GetFaults) {
-            Ok(Reply::Faults { latched, .. }) => Some(latched),
-            _ => None,
-        };
-        advice::refused_in_fault_hold(req, code, latched)
     }
 
     /// Serves the link for `wall` (heartbeats, retries, arriving messages) without a

@@ -12,13 +12,6 @@ use protocol::{
 use super::{Client, FaultStatus, advice};
 use crate::RigError;
 
-/// How long a drive request waits for the device's current-sensor zero, device seconds:
-/// ten times the firmware's 100 ms measurement.
-pub const ZERO_WAIT_DEVICE_S: f64 = 1.0;
-/// How often a drive request refused with `CurrentZeroPending` is asked again, device
-/// seconds.
-pub const ZERO_RETRY_DEVICE_S: f64 = 0.01;
-
 impl<T: Read + Write> Client<T> {
     /// Says `Hello` and checks the versions (the device's `time_scale` then sets
     /// [`ClientOptions::time_scale`](super::ClientOptions::time_scale), so heartbeats keep
@@ -76,7 +69,7 @@ impl<T: Read + Write> Client<T> {
     ///
     /// A device still measuring its current sensor's zero (the first ~100 ms after boot or a
     /// re-zero) refuses a drive with `CurrentZeroPending`; the client asks again until it is
-    /// accepted, for at most `ZERO_WAIT_DEVICE_S` (1 s) of the device's time.
+    /// accepted, for at most [`sim::riglink::ZERO_WAIT_S`] of the device's time.
     pub fn release(&mut self, on: bool, target_hz: f32) -> Result<(), RigError> {
         self.drive(&Request::Release {
             on,
@@ -97,25 +90,23 @@ impl<T: Read + Write> Client<T> {
     }
 
     /// Sends a drive request and requires an `Ack`, asking again while the device refuses
-    /// it with `CurrentZeroPending` (every `ZERO_RETRY_DEVICE_S` of device time, for at
-    /// most `ZERO_WAIT_DEVICE_S` (1 s)); then that refusal stands, with its reason.
+    /// it with `CurrentZeroPending`, as the scenarios' [`sim::riglink::drive`] does (every
+    /// [`sim::riglink::ZERO_RETRY_S`] of device time, for at most
+    /// [`sim::riglink::ZERO_WAIT_S`]); then that refusal stands, with its reason.
     fn drive(&mut self, req: &Request) -> Result<(), RigError> {
+        use sim::riglink::{ZERO_RETRY_S, ZERO_WAIT_S};
         let scale = self.opts.time_scale;
         let give_up =
-            crate::limits::deadline_after(crate::limits::wall_duration(ZERO_WAIT_DEVICE_S, scale));
+            crate::limits::deadline_after(crate::limits::wall_duration(ZERO_WAIT_S, scale));
         loop {
-            match self.exchange(req)? {
-                Reply::Nack(NackCode::CurrentZeroPending) if Instant::now() < give_up => {
-                    self.pause(crate::limits::wall_duration(ZERO_RETRY_DEVICE_S, scale))?;
+            match self.ack(req) {
+                Err(e)
+                    if e.refusal() == Some(NackCode::CurrentZeroPending)
+                        && Instant::now() < give_up =>
+                {
+                    self.pause(crate::limits::wall_duration(ZERO_RETRY_S, scale))?;
                 }
-                Reply::Nack(code) => {
-                    return Err(match code {
-                        NackCode::InFaultHold => self.fault_hold_error(req, code),
-                        _ => advice::refused(req, code),
-                    });
-                }
-                Reply::Ack => return Ok(()),
-                other => return Err(advice::unexpected(req, &other, &self.opts.port_name)),
+                done => return done,
             }
         }
     }
