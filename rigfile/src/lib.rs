@@ -86,7 +86,7 @@ mod sections;
 pub mod text_input;
 pub mod wire;
 
-pub use effects::{PlantSetup, apply_params};
+pub use effects::{MAX_USER_EFFECTS, PlantSetup, apply_params};
 pub use error::RigFileError;
 pub use keys::KeySpec;
 pub use parse::{FileFormat, Loaded};
