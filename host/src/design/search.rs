@@ -394,6 +394,7 @@ pub fn plot(path: &std::path::Path, r: &SearchResult) -> Result<(), crate::RigEr
     ];
     columns_figure(
         path,
+        reporting::figure::FigureSize::default(),
         (520, 400),
         Some("rig design search: Pareto front"),
         &panels,
