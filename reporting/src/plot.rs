@@ -767,22 +767,6 @@ mod tests {
             )
             .unwrap();
             let svg = std::fs::read_to_string(&path).unwrap();
-            if let Ok(dir) = std::env::var("FIGURE_DUMP") {
-                std::fs::write(format!("{dir}/{size}.svg"), &svg).unwrap();
-                #[cfg(feature = "png")]
-                std::fs::write(
-                    format!("{dir}/{size}.png"),
-                    crate::figure::convert(
-                        &svg,
-                        &crate::figure::FigureOptions {
-                            format: crate::figure::Format::Png,
-                            size,
-                        },
-                    )
-                    .unwrap(),
-                )
-                .unwrap();
-            }
             let problems = crate::check::check_svg(&svg, size.width_in());
             assert!(problems.is_empty(), "{size}: {problems:?}");
             assert!(
