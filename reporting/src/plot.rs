@@ -200,6 +200,11 @@ pub struct Style {
     pub text_px: f64,
     /// Font size of the title, px of the drawing.
     pub title_px: f64,
+    /// Height kept for every panel's caption, px (at least its own; the panels of a row
+    /// then have their plots level).
+    pub caption_px: u32,
+    /// Height kept below every panel for its legend, px (at least its own).
+    pub legend_px: u32,
 }
 
 impl Style {
@@ -209,6 +214,8 @@ impl Style {
             size,
             text_px: size.font_px(TEXT_PT),
             title_px: size.font_px(TITLE_PT),
+            caption_px: 0,
+            legend_px: 0,
         }
     }
 
@@ -369,7 +376,7 @@ pub fn draw_panel(area: &Area<'_>, panel: &XyPanel, style: &Style) -> Result<(),
     let area = match caption {
         Some(c) => {
             let (w, _) = area.dim_in_pixel();
-            let used = Style::wrapped_height(&c, style.text_px, w);
+            let used = Style::wrapped_height(&c, style.text_px, w).max(style.caption_px);
             let (top, rest) = area.split_vertically(used);
             draw_wrapped(&top, &c, style, style.text_px)?;
             rest
@@ -377,7 +384,8 @@ pub fn draw_panel(area: &Area<'_>, panel: &XyPanel, style: &Style) -> Result<(),
         None => area.clone(),
     };
     let (_, height) = area.dim_in_pixel();
-    let legend_h = style.legend_height(panel);
+    let own = style.legend_height(panel);
+    let legend_h = own.max(style.legend_px);
     let (plot_area, legend_area) = if legend_h > 0 && height > legend_h + style.em(8.0) {
         let (a, b) = area.split_vertically(height - legend_h);
         (a, Some(b))
@@ -586,38 +594,42 @@ pub fn columns_figure(
     let rows = n.div_ceil(cols) as u32;
     let panel_w = width / cols as u32;
     let title_h = title.map_or(0, |t| title_height(t, &style));
-    let above = panels
+    // Every panel keeps room for the tallest caption and legend: the plots stay level.
+    let mut style = style;
+    style.caption_px = panels
         .iter()
-        .map(|p| {
-            let caption = p.caption.as_deref().map_or(0, |c| {
-                Style::wrapped_height(&format!("(a) {c}"), style.text_px, panel_w)
-            });
-            caption + style.legend_height(p)
+        .filter_map(|p| {
+            let c = p.caption.as_deref()?;
+            Some(Style::wrapped_height(
+                &format!("(a) {c}"),
+                style.text_px,
+                panel_w,
+            ))
         })
         .max()
         .unwrap_or(0);
+    style.legend_px = panels
+        .iter()
+        .map(|p| style.legend_height(p))
+        .max()
+        .unwrap_or(0);
+    let above = style.caption_px + style.legend_px;
     let plot_h = (u64::from(panel_w) * u64::from(aspect.1) / u64::from(aspect.0.max(1))) as u32;
     let room = (MAX_HEIGHT_PX.saturating_sub(title_h) / rows).saturating_sub(above);
     let panel_h = plot_h.min(room.max(style.em(14.0))) + above;
-    svg_figure(
-        path,
-        size,
-        title_h + rows * panel_h,
-        title,
-        |root, style| {
-            let areas = root.split_evenly((rows as usize, cols));
-            for (k, (area, p)) in areas.iter().zip(panels).enumerate() {
-                if n > 1 && p.letter.is_none() {
-                    let mut lettered = p.clone();
-                    lettered.letter = Some(panel_letter(k));
-                    draw_panel(area, &lettered, style)?;
-                } else {
-                    draw_panel(area, p, style)?;
-                }
+    svg_figure(path, size, title_h + rows * panel_h, title, |root, _| {
+        let areas = root.split_evenly((rows as usize, cols));
+        for (k, (area, p)) in areas.iter().zip(panels).enumerate() {
+            if n > 1 && p.letter.is_none() {
+                let mut lettered = p.clone();
+                lettered.letter = Some(panel_letter(k));
+                draw_panel(area, &lettered, &style)?;
+            } else {
+                draw_panel(area, p, &style)?;
             }
-            Ok(())
-        },
-    )
+        }
+        Ok(())
+    })
 }
 
 /// The letter of the `k`-th panel (0-based): a, b, c, ...
@@ -776,6 +788,29 @@ mod tests {
             // The legend below the plot, one entry per line; the band names above it.
             assert!(svg.contains("paper: held 14.5 s") && svg.contains("release"));
         }
+        // A label put on the plotted data of the drawn figure is found: on the middle
+        // point of the first panel's line.
+        let svg = std::fs::read_to_string(&path).unwrap();
+        let line = svg
+            .lines()
+            .find(|l| l.starts_with("<polyline") && l.contains("stroke=\"#0072B2\""))
+            .unwrap();
+        let points: Vec<&str> = line
+            .split("points=\"")
+            .nth(1)
+            .unwrap()
+            .split_whitespace()
+            .collect();
+        let (x, y) = points[points.len() / 2].split_once(',').unwrap();
+        let label = format!(
+            "<text x=\"{x}\" y=\"{y}\" dy=\"0.5ex\" text-anchor=\"middle\" font-family=\"sans-serif\" font-size=\"12\">release here</text>\n</svg>"
+        );
+        let covered = svg.replace("</svg>", &label);
+        let problems = crate::check::check_svg(&covered, 1600.0 / 96.0);
+        assert!(
+            matches!(problems.as_slice(), [crate::check::Problem::OnData { text, .. }] if text == "release here"),
+            "{problems:?}"
+        );
         // The same figure printed narrower than drawn: its text is too small.
         let svg = std::fs::read_to_string(&path).unwrap();
         assert!(
