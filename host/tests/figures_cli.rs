@@ -1,6 +1,6 @@
 //! Figures as journals print them, through the real binary on the virtual rig: every verb
 //! that draws (`rig demo`, `rig calibrate`, `rig compare`, `rig experiment torque-sweep` and
-//! `hold-release`, `rig design search`) at `--size single` (3.5 in) and `--size double` (7.2 in) writes SVGs
+//! `hold-release`, `rig design search`, `rig explain`'s report) at `--size single` (3.5 in) and `--size double` (7.2 in) writes SVGs
 //! whose text is at least 7 pt at that width and clear of the plotted data
 //! (`reporting::check::check_svg`), and PDFs of that printed width.
 
@@ -103,7 +103,7 @@ fn demo_figures_print_at_a_journal_width() {
 }
 
 #[test]
-fn calibrate_compare_experiment_and_design_figures_print_at_a_journal_width() {
+fn the_other_verbs_figures_print_at_a_journal_width() {
     let dir = tempfile::tempdir().unwrap();
     // A quick measured sweep, the input of `rig compare`.
     let measured = dir.path().join("measured.csv");
@@ -198,6 +198,19 @@ fn calibrate_compare_experiment_and_design_figures_print_at_a_journal_width() {
             (w - size.width_in() * 72.0).abs() < 0.01,
             "hold-release: {w} pt"
         );
+        // rig explain's report: the residuals before and after.
+        let report = at.join("explain");
+        rig()
+            .args(["explain", "--json", "--replicates", "50", "--measured"])
+            .arg(&measured)
+            .arg("--report")
+            .arg(&report)
+            .args(["--size", name])
+            .assert()
+            .success();
+        for plot in ["residuals_before.svg", "residuals_after.svg"] {
+            assert_prints_well(&report.join(plot), size);
+        }
         // rig design search --svg: the front.
         let front = at.join("front.svg");
         rig()

@@ -648,10 +648,11 @@ pub struct Panel {
     pub residual_ma: Vec<f64>,
 }
 
-/// Draws `panels` side by side under `title` into the SVG file `path`, all with the same
-/// residual axis of +-`y_max_ma` (points beyond it drawn at its edge).
+/// Draws `panels` side by side under `title` into the SVG file `path` printed at `size`,
+/// all with the same residual axis of +-`y_max_ma` (points beyond it drawn at its edge).
 pub fn residual_figure(
     path: &Path,
+    size: FigureSize,
     title: &str,
     panels: &[Panel],
     y_max_ma: f64,
@@ -684,13 +685,7 @@ pub fn residual_figure(
             }
         })
         .collect();
-    columns_figure(
-        path,
-        FigureSize::default(),
-        (380, 360),
-        Some(title),
-        &panels,
-    )
+    columns_figure(path, size, (380, 360), Some(title), &panels)
 }
 
 #[cfg(test)]
@@ -865,7 +860,7 @@ mod tests {
             x: vec![1.0, 2.0, 3.0],
             residual_ma: vec![5.0, -50.0, 1.0],
         };
-        residual_figure(&path, "residuals", &[residuals], 10.0).unwrap();
+        residual_figure(&path, FigureSize::Single, "residuals", &[residuals], 10.0).unwrap();
         assert!(
             std::fs::read_to_string(&path)
                 .unwrap()

@@ -1,5 +1,6 @@
 //! The figure options of every verb that draws (`rig demo`, `rig calibrate`, `rig compare`,
-//! `rig experiment`): `--format` and `--size`, defined once. Figures are drawn at the
+//! `rig experiment`, `rig design search`, `rig explain` and `rig discover`): `--format`
+//! and `--size`, defined once. Figures are drawn at the
 //! width they print ([`reporting::figure::FigureSize`]) with every text 8 pt there
 //! ([`reporting::plot::TEXT_PT`]); `reporting::check::check_svg` measures them.
 
@@ -33,6 +34,21 @@ impl FigureArgs {
     /// The printed size asked for.
     pub fn size(&self) -> FigureSize {
         self.size.unwrap_or_default()
+    }
+
+    /// Writes the SVG figures `svgs` also in the asked format (beside them); returns the
+    /// files written (none for SVG).
+    pub fn export_all(
+        &self,
+        svgs: &[std::path::PathBuf],
+    ) -> Result<Vec<std::path::PathBuf>, crate::RigError> {
+        let options = self.options();
+        if options.format == Format::Svg {
+            return Ok(Vec::new());
+        }
+        svgs.iter()
+            .map(|svg| Ok(reporting::figure::export(svg, &options)?))
+            .collect()
     }
 
     /// The option given on the command line, if either was (`--size` first).
