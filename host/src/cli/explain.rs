@@ -298,7 +298,7 @@ fn write_report(
             .and_then(|()| args.figures.export_all(&report_files::figures(d)));
         if let Err(e) = written {
             if args.report.is_some() {
-                return Err(e.into());
+                return Err(e);
             }
             // The default folder is a convenience: the analysis still prints.
             eprintln!("warning: no report written ({e}); choose a folder with --report DIR");
