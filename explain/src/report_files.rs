@@ -732,9 +732,22 @@ fn write(path: &Path, text: &str) -> Result<(), ExplainError> {
     Ok(())
 }
 
+/// The figures [`write_report`] writes into `dir`.
+pub fn figures(dir: &Path) -> Vec<std::path::PathBuf> {
+    ["residuals_before.svg", "residuals_after.svg"]
+        .iter()
+        .map(|f| dir.join(f))
+        .collect()
+}
+
 /// Writes the report folder `dir`: `report.md`, `candidates.csv`, `explanation.json`,
-/// `residuals_before.svg` and `residuals_after.svg`.
-pub fn write_report(dir: &Path, outcome: &Outcome, source: &str) -> Result<(), ExplainError> {
+/// `residuals_before.svg` and `residuals_after.svg` (printed at `size`).
+pub fn write_report(
+    dir: &Path,
+    outcome: &Outcome,
+    source: &str,
+    size: reporting::figure::FigureSize,
+) -> Result<(), ExplainError> {
     std::fs::create_dir_all(dir).map_err(|source| ExplainError::File {
         action: "create folder",
         path: dir.display().to_string(),
@@ -786,6 +799,7 @@ pub fn write_report(dir: &Path, outcome: &Outcome, source: &str) -> Result<(), E
         * 1.1e3;
     plot::residual_figure(
         &dir.join("residuals_before.svg"),
+        size,
         &format!("before: RMSE {}", ma(e.rmse_before_a)),
         &axes(&outcome.before.residuals),
         y_max,
@@ -805,6 +819,7 @@ pub fn write_report(dir: &Path, outcome: &Outcome, source: &str) -> Result<(), E
     };
     plot::residual_figure(
         &dir.join("residuals_after.svg"),
+        size,
         &title,
         &axes(&outcome.after.residuals),
         y_max,

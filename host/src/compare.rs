@@ -435,8 +435,12 @@ fn gap_rows(
     (rows, skipped_rows)
 }
 
-/// Plots both gaps per test point (in run order) to `path`.
-pub fn gap_figure(path: &Path, c: &Comparison) -> Result<(), RigError> {
+/// Plots both gaps per test point (in run order) to `path`, printed at `size`.
+pub fn gap_figure(
+    path: &Path,
+    c: &Comparison,
+    size: reporting::figure::FigureSize,
+) -> Result<(), RigError> {
     use reporting::plot::{Legend, PALETTE, Series, XyPanel, columns_figure};
     let mut series = vec![
         Series::points(
@@ -484,13 +488,14 @@ pub fn gap_figure(path: &Path, c: &Comparison) -> Result<(), RigError> {
         y_label: "gap, mA".into(),
         series,
         include_zero_y: true,
-        // Beside the plot: inside it covered points.
-        legend: Some(Legend::Outside),
+        // Below the plot: inside it covered points.
+        legend: Some(Legend::Below),
         whole_x: true,
         ..XyPanel::default()
     };
     columns_figure(
         path,
+        size,
         (900, 480),
         Some("Simulation versus measurement, before and after the fitted effect"),
         &[panel],

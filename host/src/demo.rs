@@ -54,7 +54,7 @@ pub struct DemoOptions {
     pub quick: bool,
     /// Seed of the noise and the test order.
     pub seed: u64,
-    /// The figures' format and width (every figure is also kept as SVG).
+    /// The figures' format and printed size (every figure is also kept as SVG).
     pub figures: reporting::figure::FigureOptions,
 }
 
@@ -184,7 +184,7 @@ pub fn run_simulated(
     crate::experiment::hold_release::write_csv(&history, &fig5_csv)?;
     files.push(fig5_csv.display().to_string());
     let fig5_svg = opts.out.join("fig5.svg");
-    crate::experiment::hold_release::write_svg(&history, &fig5_svg)?;
+    crate::experiment::hold_release::write_svg(&history, &fig5_svg, opts.figures.size)?;
     let fig5_figure = figure(&fig5_svg, &opts.figures, &mut files)?;
 
     progress("table1: six gear sets at 3.68 N m");
@@ -221,7 +221,7 @@ pub fn run_simulated(
     crate::sweep_report::write_csv(&points, &csv_path, &header)?;
     files.push(csv_path.display().to_string());
     let svg_path = opts.out.join("torque_sweep.svg");
-    crate::sweep_report::sweep_figure(&svg_path, &points)?;
+    crate::sweep_report::sweep_figure(&svg_path, &points, opts.figures.size)?;
     let sweep_figure = figure(&svg_path, &opts.figures, &mut files)?;
     let torque_sweep = sweep::summarise(&points, &sweep_opts);
     write_json(&opts.out, "torque_sweep.json", &torque_sweep, &mut files)?;

@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use reporting::figure::FigureSize;
 use reporting::plot::{self, Legend, PALETTE, Series, XyPanel};
 
 use crate::RigError;
@@ -65,7 +66,7 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
         y_label: "i_in, A".into(),
         series: per_voltage(&|p| p.i_in, true),
         x_range: Some(x),
-        legend: Some(Legend::Outside),
+        legend: Some(Legend::Below),
         fine_grid: true,
         ..XyPanel::default()
     };
@@ -114,7 +115,7 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
         y_label: "τ_cam, N mm".into(),
         series: torque,
         x_range: Some(x),
-        legend: Some(Legend::Outside),
+        legend: Some(Legend::Below),
         fine_grid: true,
         ..XyPanel::default()
     };
@@ -123,9 +124,10 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
 
 /// Draws Fig. 8 (current and cam speed) and Fig. 9 of the sweep side by side into the SVG
 /// `path`, atomically.
-pub fn sweep_figure(path: &Path, points: &[Row]) -> Result<(), RigError> {
+pub fn sweep_figure(path: &Path, points: &[Row], size: FigureSize) -> Result<(), RigError> {
     Ok(plot::columns_figure(
         path,
+        size,
         (460, 400),
         None,
         &sweep_panels(points),
@@ -168,7 +170,7 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
             y_label: y.into(),
             series,
             x_range: Some(x),
-            legend: Some(Legend::Outside),
+            legend: Some(Legend::Below),
             fine_grid: true,
             ..XyPanel::default()
         }
@@ -184,9 +186,10 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
 }
 
 /// Draws [`experiment_panels`] side by side into the SVG `path`, atomically.
-pub fn experiment_figure(path: &Path, rows: &[Row]) -> Result<(), RigError> {
+pub fn experiment_figure(path: &Path, rows: &[Row], size: FigureSize) -> Result<(), RigError> {
     Ok(plot::columns_figure(
         path,
+        size,
         (480, 400),
         None,
         &experiment_panels(rows),
@@ -277,7 +280,7 @@ mod tests {
         assert_eq!(torque.series.len(), 6);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("sweep.svg");
-        sweep_figure(&path, &points).unwrap();
+        sweep_figure(&path, &points, FigureSize::Single).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         for want in [
             "Fig. 8",

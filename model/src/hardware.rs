@@ -336,10 +336,17 @@ pub mod bench {
     /// Height a load hung on the output pulley falls before it rests on the floor, m (a
     /// rig on a frame above the floor; long enough that a sweep's point, re-hung before
     /// each run, ends or trips OUTPUT_OVERSPEED at 20 rad/s before its load lands).
+    /// The default of a rig file's `[load] drop_m`.
     pub const LOAD_DROP_M: f64 = 2.0;
     /// The output's travel from where the load was hung to where it rests, rad: the drop
     /// unwound from the pulley of radius [`paper::R_OUT`] (26.7 rad).
-    pub const OUTPUT_TRAVEL_RAD: f64 = LOAD_DROP_M / paper::R_OUT;
+    pub const OUTPUT_TRAVEL_RAD: f64 = output_travel_rad(LOAD_DROP_M);
+
+    /// The output's travel, rad, before a load hung `drop_m` metres above the floor rests
+    /// on it: the drop unwound from the pulley of radius [`paper::R_OUT`].
+    pub const fn output_travel_rad(drop_m: f64) -> f64 {
+        drop_m / paper::R_OUT
+    }
 }
 
 #[cfg(test)]

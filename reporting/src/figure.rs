@@ -76,32 +76,122 @@ impl std::fmt::Display for Format {
     }
 }
 
-/// How the figures are written: format and width.
+/// Pixels per inch of the figures' drawings: CSS pixels, as SVG, resvg and svg2pdf measure
+/// them (a figure drawn `w` px wide prints `w / 96` in wide, `0.75 w` pt).
+pub const PX_PER_IN: f64 = 96.0;
+/// A journal's single column, in (3.5 in: Elsevier 90 mm, IEEE 3.5 in, Springer 84 mm).
+pub const SINGLE_COLUMN_IN: f64 = 3.5;
+/// A journal's full page width, two columns, in (7.2 in: Elsevier 190 mm, IEEE 7.16 in).
+pub const DOUBLE_COLUMN_IN: f64 = 7.2;
+/// The smallest text a journal prints, pt (1/72 in).
+pub const MIN_TEXT_PT: f64 = 7.0;
+/// Resolution of a PNG of a journal width, dots per inch (the journals' line-art minimum).
+pub const PNG_DPI: f64 = 300.0;
+
+/// How wide a figure prints: the figures are drawn at this width ([`FigureSize::width_px`])
+/// with their text sized for it, so the text keeps its size in points when printed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FigureSize {
+    /// A journal's single column ([`SINGLE_COLUMN_IN`]).
+    Single,
+    /// A journal's full page width ([`DOUBLE_COLUMN_IN`]), the default.
+    #[default]
+    Double,
+    /// This many pixels, printed at [`PX_PER_IN`] (a PNG of exactly these pixels).
+    Pixels(u32),
+}
+
+impl FigureSize {
+    /// The printed width, in.
+    pub fn width_in(self) -> f64 {
+        match self {
+            Self::Single => SINGLE_COLUMN_IN,
+            Self::Double => DOUBLE_COLUMN_IN,
+            Self::Pixels(px) => f64::from(px) / PX_PER_IN,
+        }
+    }
+
+    /// The drawing's width, px: the printed width at [`PX_PER_IN`].
+    pub fn width_px(self) -> u32 {
+        match self {
+            Self::Pixels(px) => px,
+            _ => (self.width_in() * PX_PER_IN).round() as u32,
+        }
+    }
+
+    /// Font size, px of a drawing [`FigureSize::width_px`] wide, of text that prints `pt`
+    /// points (1/72 in) high at [`FigureSize::width_in`]; rounded up to 0.01 px.
+    pub fn font_px(self, pt: f64) -> f64 {
+        let px = pt / 72.0 * f64::from(self.width_px()) / self.width_in();
+        (px * 100.0).ceil() / 100.0
+    }
+
+    /// Width of a PNG of this size, px: [`PNG_DPI`] across a journal width, the pixels
+    /// asked for otherwise.
+    pub fn png_width_px(self) -> u32 {
+        match self {
+            Self::Pixels(px) => px,
+            _ => (self.width_in() * PNG_DPI).round() as u32,
+        }
+    }
+}
+
+impl FromStr for FigureSize {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        parse_size(s)
+    }
+}
+
+impl std::fmt::Display for FigureSize {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Single => f.write_str("single"),
+            Self::Double => f.write_str("double"),
+            Self::Pixels(px) => write!(f, "{px}"),
+        }
+    }
+}
+
+/// How the figures are written: format and size.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct FigureOptions {
     /// The file format.
     pub format: Format,
-    /// Width of a PNG in pixels, or of a PDF page in points (1/72 in); `None`: the
-    /// figure's own size (its SVG pixels; a PDF then measures 0.75 pt per pixel).
-    pub width: Option<u32>,
+    /// The printed width (the drawing's, a PNG's pixels, a PDF page's points).
+    pub size: FigureSize,
 }
 
 /// Widest figure `--size` accepts, px (a 600 dpi page width is about 5000).
 pub const MAX_WIDTH: u32 = 10_000;
 
-/// Parses a figure width, px: a whole number from 100 to [`MAX_WIDTH`].
+/// Narrowest figure `--size` accepts, px: room for one panel with its 7 pt text.
+pub const MIN_WIDTH: u32 = 100;
+
+/// Parses a figure width, px: a whole number from [`MIN_WIDTH`] to [`MAX_WIDTH`].
 pub fn parse_width(s: &str) -> Result<u32, String> {
     match s.trim().parse::<u32>() {
-        Ok(w) if (100..=MAX_WIDTH).contains(&w) => Ok(w),
+        Ok(w) if (MIN_WIDTH..=MAX_WIDTH).contains(&w) => Ok(w),
         _ => Err(format!(
-            "'{s}' is not a figure width: give whole pixels from 100 to {MAX_WIDTH}"
+            "'{s}' is not a figure width: give `single` (3.5 in), `double` (7.2 in) or whole pixels from {MIN_WIDTH} to {MAX_WIDTH} (at 96 px/in)"
         )),
     }
 }
 
+/// Parses `--size`: `single` (a journal column, 3.5 in), `double` (a page width, 7.2 in)
+/// or whole pixels ([`parse_width`], printed at 96 px/in).
+pub fn parse_size(s: &str) -> Result<FigureSize, String> {
+    match s.trim().to_ascii_lowercase().as_str() {
+        "single" => Ok(FigureSize::Single),
+        "double" => Ok(FigureSize::Double),
+        _ => parse_width(s).map(FigureSize::Pixels),
+    }
+}
+
 /// Writes the SVG figure `svg_path` in `options.format` beside it (same name, the format's
-/// extension; atomically) and returns the path written; for SVG at its own size, the SVG
-/// itself.
+/// extension; atomically) and returns the path written; for SVG, the SVG itself (drawn at
+/// its size already).
 pub fn export(svg_path: &Path, options: &FigureOptions) -> Result<PathBuf, ReportError> {
     if options.format == Format::Svg {
         return Ok(svg_path.to_path_buf());
@@ -126,8 +216,8 @@ pub fn export(svg_path: &Path, options: &FigureOptions) -> Result<PathBuf, Repor
 pub fn convert(svg: &str, options: &FigureOptions) -> Result<Vec<u8>, String> {
     match options.format {
         Format::Svg => Ok(svg.as_bytes().to_vec()),
-        Format::Png => png(svg, options.width),
-        Format::Pdf => pdf(svg, options.width),
+        Format::Png => png(svg, options.size.png_width_px()),
+        Format::Pdf => pdf(svg, options.size.width_in()),
     }
 }
 
@@ -168,13 +258,13 @@ use resvg::usvg::fontdb as usvg_fonts;
 use svg2pdf::usvg::fontdb as usvg_fonts;
 
 #[cfg(feature = "png")]
-fn png(svg: &str, width: Option<u32>) -> Result<Vec<u8>, String> {
+fn png(svg: &str, width: u32) -> Result<Vec<u8>, String> {
     use resvg::{tiny_skia, usvg};
     let mut opt = usvg::Options::default();
     load_fonts(opt.fontdb_mut());
     let tree = usvg::Tree::from_str(svg, &opt).map_err(|e| e.to_string())?;
     let size = tree.size();
-    let scale = width.map_or(1.0, |w| w as f32 / size.width());
+    let scale = width as f32 / size.width();
     let (w, h) = (
         (size.width() * scale).ceil() as u32,
         (size.height() * scale).ceil() as u32,
@@ -191,37 +281,39 @@ fn png(svg: &str, width: Option<u32>) -> Result<Vec<u8>, String> {
 }
 
 #[cfg(not(feature = "png"))]
-fn png(_svg: &str, _width: Option<u32>) -> Result<Vec<u8>, String> {
+fn png(_svg: &str, _width: u32) -> Result<Vec<u8>, String> {
     Format::Png.check_available().map(|()| Vec::new())
 }
 
+/// A PDF page `width_in` wide: the drawing's width set to `width_in` * 96 px, converted at
+/// 96 px/in (0.75 pt per SVG pixel).
 #[cfg(feature = "pdf")]
-fn pdf(svg: &str, width: Option<u32>) -> Result<Vec<u8>, String> {
+fn pdf(svg: &str, width_in: f64) -> Result<Vec<u8>, String> {
     use svg2pdf::usvg;
     let mut opt = usvg::Options::default();
     load_fonts(opt.fontdb_mut());
-    let mut svg = svg.to_string();
-    if let Some(w) = width {
-        svg = with_width(&svg, w);
-    }
+    let svg = with_width(svg, width_in * PX_PER_IN);
     let tree = usvg::Tree::from_str(&svg, &opt).map_err(|e| e.to_string())?;
     svg2pdf::to_pdf(
         &tree,
         svg2pdf::ConversionOptions::default(),
-        svg2pdf::PageOptions::default(),
+        // SVG pixels are CSS pixels: 96 to the inch (svg2pdf's default is 72).
+        svg2pdf::PageOptions {
+            dpi: PX_PER_IN as f32,
+        },
     )
     .map_err(|e| e.to_string())
 }
 
 #[cfg(not(feature = "pdf"))]
-fn pdf(_svg: &str, _width: Option<u32>) -> Result<Vec<u8>, String> {
+fn pdf(_svg: &str, _width_in: f64) -> Result<Vec<u8>, String> {
     Format::Pdf.check_available().map(|()| Vec::new())
 }
 
 /// The SVG document scaled to `width` (its viewBox kept, so the drawing scales): the
 /// root's `width` and `height` attributes replaced.
 #[cfg_attr(not(feature = "pdf"), allow(dead_code))]
-fn with_width(svg: &str, width: u32) -> String {
+fn with_width(svg: &str, width: f64) -> String {
     let Some(start) = svg.find("<svg") else {
         return svg.to_string();
     };
@@ -238,10 +330,9 @@ fn with_width(svg: &str, width: u32) -> String {
     let (Some(w), Some(h)) = (attr("width"), attr("height")) else {
         return svg.to_string();
     };
-    let height = (h * f64::from(width) / w).round();
+    let height = h * width / w;
     let mut new_tag = tag.to_string();
-    for (name, old, new) in [("width", w, f64::from(width)), ("height", h, height)] {
-        let _ = old;
+    for (name, new) in [("width", width), ("height", height)] {
         let key = format!(" {name}=\"");
         if let Some(at) = new_tag.find(&key) {
             let from = at + key.len();
@@ -274,11 +365,41 @@ mod tests {
         assert_eq!(parse_width("1200"), Ok(1200));
         assert!(parse_width("0").unwrap_err().contains("100 to"));
         assert!(parse_width("wide").is_err());
+        assert_eq!(parse_size("single"), Ok(FigureSize::Single));
+        assert_eq!(parse_size("Double"), Ok(FigureSize::Double));
+        assert_eq!(parse_size("800"), Ok(FigureSize::Pixels(800)));
+        assert!(
+            parse_size("wide")
+                .unwrap_err()
+                .contains("`single` (3.5 in)")
+        );
+        assert_eq!(FigureSize::default(), FigureSize::Double);
+    }
+
+    #[test]
+    fn sizes_print_their_text_at_its_points() {
+        // A single column is 336 px at 96 px/in, a page width 691 px (7.2 in: 691.2).
+        assert_eq!(FigureSize::Single.width_px(), 336);
+        assert_eq!(FigureSize::Double.width_px(), 691);
+        assert_eq!(FigureSize::Pixels(500).width_in(), 500.0 / 96.0);
+        for size in [
+            FigureSize::Single,
+            FigureSize::Double,
+            FigureSize::Pixels(500),
+        ] {
+            // 7 pt = 7/72 in: at the printed width, font px * (in per px) * 72 >= 7.
+            let px = size.font_px(MIN_TEXT_PT);
+            let printed_pt = px * size.width_in() / f64::from(size.width_px()) * 72.0;
+            assert!((7.0..7.01).contains(&printed_pt), "{size}: {printed_pt} pt");
+        }
+        // 96 px/in: 7 pt is 9.33 px on a drawing of pixels.
+        assert_eq!(FigureSize::Pixels(500).font_px(7.0), 9.34);
+        assert_eq!(FigureSize::Single.png_width_px(), 1050);
     }
 
     #[test]
     fn the_width_is_set_and_the_drawing_scales() {
-        let scaled = with_width(SVG, 400);
+        let scaled = with_width(SVG, 400.0);
         assert!(scaled.contains("width=\"400\" height=\"200\""), "{scaled}");
         assert!(scaled.contains("viewBox=\"0 0 200 100\""), "{scaled}");
     }
@@ -290,7 +411,7 @@ mod tests {
             SVG,
             &FigureOptions {
                 format: Format::Png,
-                width: Some(400),
+                size: FigureSize::Pixels(400),
             },
         )
         .unwrap();
@@ -308,11 +429,25 @@ mod tests {
             SVG,
             &FigureOptions {
                 format: Format::Pdf,
-                width: None,
+                size: FigureSize::Single,
             },
         )
         .unwrap();
         assert!(bytes.starts_with(b"%PDF-"));
+        // A page of the printed width: 3.5 in = 252 pt (the 200 x 100 px drawing scaled).
+        let text = String::from_utf8_lossy(&bytes);
+        let at = text.find("/MediaBox").unwrap();
+        let page: Vec<f64> = text[at + 9..]
+            .trim_start()
+            .trim_start_matches('[')
+            .split_whitespace()
+            .take(4)
+            .map(|n| n.trim_end_matches(']').parse().unwrap())
+            .collect();
+        assert!(
+            (page[2] - 252.0).abs() < 0.01 && (page[3] - 126.0).abs() < 0.01,
+            "{page:?}"
+        );
     }
 
     #[test]
@@ -325,7 +460,7 @@ mod tests {
         for format in [Format::Png, Format::Pdf] {
             let o = FigureOptions {
                 format,
-                width: None,
+                size: FigureSize::Single,
             };
             match export(&svg, &o) {
                 Ok(p) => {

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
+pub mod check;
 pub mod figure;
 pub mod plot;
 

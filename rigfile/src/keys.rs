@@ -43,13 +43,14 @@ impl fmt::Display for KeySpec {
 }
 
 /// The sections a rig file may have; any other section is kept as it is but not read.
-pub const SECTIONS: [&str; 8] = [
+pub const SECTIONS: [&str; 9] = [
     "gear",
     "cam",
     "friction",
     "calibration",
     "limits",
     "drive",
+    "load",
     "model",
     "user_effects",
 ];
@@ -387,6 +388,15 @@ pub const KEYS: &[KeySpec] = &[
         "\"brake\"",
         None,
         "what the H-bridge does in the PWM's off-time: `brake` (slow decay, the Pololu G2: the carrier's power returns through the gearhead, kappa -0.82) or `coast` (nothing returns, kappa -1/2); the virtual rig, the estimator and `rig explain`'s base model follow it",
+    ),
+    key(
+        "load",
+        "drop_m",
+        "m",
+        "from 0.05 to 20",
+        "2.0",
+        None,
+        "how far a load hung on the output pulley falls before it rests on the floor (the virtual rig's output then stands still, its rope slack); the drop unwound from the 75 mm pulley is the output's travel (2 m: 26.7 rad)",
     ),
     key(
         "model",

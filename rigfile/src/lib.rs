@@ -92,8 +92,8 @@ pub use keys::KeySpec;
 pub use parse::{FileFormat, Loaded};
 pub use sections::{
     CALIBRATION_TEMPERATURE_C, CalibrationSection, CamSection, DecayMode, DriveSection,
-    EffectEntry, FitSection, FrictionSection, GearSection, LimitsSection, ModelSection, TermEntry,
-    UserEffectDef, UserParamDef,
+    EffectEntry, FitSection, FrictionSection, GearSection, LimitsSection, LoadSection,
+    ModelSection, TermEntry, UserEffectDef, UserParamDef,
 };
 
 /// The first line of every rig file the tools write.
@@ -116,6 +116,10 @@ pub struct RigFile {
     pub limits: LimitsSection,
     /// The drive: the bridge's decay mode (braking by default, the README's board).
     pub drive: DriveSection,
+    /// The bench around the output: how far a hung load falls before it rests on the
+    /// floor (left out of written files while it is the default).
+    #[serde(skip_serializing_if = "LoadSection::is_default")]
+    pub load: LoadSection,
     /// The fitted model, when `rig explain` wrote one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelSection>,

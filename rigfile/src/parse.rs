@@ -300,7 +300,7 @@ fn value_text(rig: &RigFile, key: &KeySpec) -> String {
 /// by its key's range in [`keys::KEYS`]. Wide enough for any build of this rig, narrow
 /// enough that no model or simulation of it overflows (3.4e38 N mm/A fits the device's
 /// record and ran the simulated motor to NaN).
-pub(crate) const BOUNDED: [(&str, &str, f64, f64); 13] = [
+pub(crate) const BOUNDED: [(&str, &str, f64, f64); 14] = [
     ("gear", "module_mm", f64::MIN, 100.0),
     ("cam", "eccentricity_mm", f64::MIN, 100.0),
     ("cam", "carrier_mass_kg", f64::MIN, 1000.0),
@@ -314,6 +314,7 @@ pub(crate) const BOUNDED: [(&str, &str, f64, f64); 13] = [
     ("limits", "max_release_load_nm", f64::MIN, 1000.0),
     ("limits", "max_current_a", f64::MIN, 100.0),
     ("limits", "max_freq_hz", f64::MIN, 100.0),
+    ("load", "drop_m", 0.05, 20.0),
 ];
 
 /// The value of `key` (one of [`BOUNDED`]'s) in `rig`, in the file's units.
@@ -333,6 +334,7 @@ fn bounded_value(rig: &RigFile, key: &str) -> f64 {
         "max_release_load_nm" => rig.limits.max_release_load_nm,
         "max_current_a" => rig.limits.max_current_a,
         "max_freq_hz" => rig.limits.max_freq_hz,
+        "drop_m" => rig.load.drop_m,
         _ => f64::NAN,
     }
 }

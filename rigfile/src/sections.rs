@@ -364,6 +364,36 @@ impl Default for LimitsSection {
     }
 }
 
+/// `[load]`: the bench around the rig's output, as far as the virtual rig's plant needs it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoadSection {
+    /// How far a load hung on the output pulley falls before it rests on the floor, m
+    /// (the virtual rig's output then stands still, the rope slack).
+    pub drop_m: f64,
+}
+
+impl Default for LoadSection {
+    fn default() -> Self {
+        Self {
+            drop_m: model::hardware::bench::LOAD_DROP_M,
+        }
+    }
+}
+
+impl LoadSection {
+    /// The output's travel from where a load is hung to where it rests, rad
+    /// ([`model::hardware::bench::output_travel_rad`]).
+    pub fn output_travel_rad(&self) -> f64 {
+        model::hardware::bench::output_travel_rad(self.drop_m)
+    }
+
+    /// Whether this is the default bench (the section is then left out of written files).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
 /// `[drive]`: which drive the rig's H-bridge is, the one setting the virtual rig's plant,
 /// the firmware's estimator and `rig explain`'s base model read for a rig
 /// (`model::hardware::board::DECAY` is the board's default).

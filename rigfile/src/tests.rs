@@ -470,26 +470,66 @@ fn the_bounded_keys_state_their_ranges() {
                 spec.range
             );
         }
-        let mut rig = RigFile::paper();
-        assert!(crate::parse::check_all(&rig, "x").is_ok());
-        // Just past the top: refused naming the key.
-        let past = hi * 1.01 + 1.0;
-        match key {
-            "module_mm" => rig.gear.module_mm = past,
-            "eccentricity_mm" => rig.cam.eccentricity_mm = past,
-            "carrier_mass_kg" => rig.cam.carrier_mass_kg = past,
-            "temperature_c" => rig.calibration.temperature_c = past,
-            "max_release_load_nm" => rig.limits.max_release_load_nm = past,
-            "max_current_a" => rig.limits.max_current_a = past,
-            "max_freq_hz" => rig.limits.max_freq_hz = past,
-            _ => {
-                let mut c = crate::paper_units::to_paper(&rig.calibration.constants);
-                let k: usize = key[1..].parse().unwrap();
-                c[k - 1] = past;
-                rig.calibration.constants = crate::paper_units::from_paper(c);
+        assert!(crate::parse::check_all(&RigFile::paper(), "x").is_ok());
+        // Just past each end (a bottom of f64::MIN is the sign the device checks): refused
+        // naming the key; at each end: accepted.
+        let step = |end: f64| (end.abs() * 0.01).max(1e-3);
+        let mut ends = vec![(hi + step(hi), false), (hi, true)];
+        if lo > f64::MIN {
+            ends.extend([(lo - step(lo), false), (lo, true)]);
+        }
+        for (value, ok) in ends {
+            let rig = with_bounded(key, value);
+            match crate::parse::check_all(&rig, "x") {
+                Ok(()) => assert!(ok, "{key} = {value} accepted"),
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(!ok, "{key} = {value} refused: {e}");
+                    assert!(e.contains(key), "{key} = {value}: {e}");
+                }
             }
         }
-        let e = crate::parse::check_all(&rig, "x").unwrap_err().to_string();
-        assert!(e.contains(key), "{key}: {e}");
+    }
+}
+
+/// The paper's rig with `key` (one of [`crate::parse::BOUNDED`]'s) set to `value`.
+fn with_bounded(key: &str, value: f64) -> RigFile {
+    let mut rig = RigFile::paper();
+    match key {
+        "module_mm" => rig.gear.module_mm = value,
+        "eccentricity_mm" => rig.cam.eccentricity_mm = value,
+        "carrier_mass_kg" => rig.cam.carrier_mass_kg = value,
+        "temperature_c" => rig.calibration.temperature_c = value,
+        "max_release_load_nm" => rig.limits.max_release_load_nm = value,
+        "max_current_a" => rig.limits.max_current_a = value,
+        "max_freq_hz" => rig.limits.max_freq_hz = value,
+        "drop_m" => rig.load.drop_m = value,
+        _ => {
+            let mut c = crate::paper_units::to_paper(&rig.calibration.constants);
+            let k: usize = key[1..].parse().unwrap();
+            c[k - 1] = value;
+            rig.calibration.constants = crate::paper_units::from_paper(c);
+        }
+    }
+    rig
+}
+
+/// `[load] drop_m`: read from the file, its travel on the pulley, left out when written
+/// at its default, and refused just outside 0.05..=20 m naming the key.
+#[test]
+fn the_load_drop_is_read_and_bounded() {
+    let rig = RigFile::parse("[load]\ndrop_m = 0.5\n", "rig.toml").unwrap();
+    assert_eq!(rig.load.drop_m, 0.5);
+    assert!((rig.load.output_travel_rad() - 0.5 / 0.075).abs() < 1e-12);
+    assert!(rig.to_toml().unwrap().contains("drop_m = 0.5"));
+    let paper = RigFile::paper();
+    assert_eq!(paper.load.drop_m, 2.0);
+    assert!(!paper.to_toml().unwrap().contains("[load]"));
+    for text in ["[load]\ndrop_m = 0.049\n", "[load]\ndrop_m = 20.5\n"] {
+        let e = RigFile::parse(text, "rig.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("[load] `drop_m`") && e.contains("from 0.05 to 20"),
+            "{e}"
+        );
     }
 }

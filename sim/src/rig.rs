@@ -122,6 +122,15 @@ impl SimConfig {
         })
     }
 
+    /// This configuration with a floor `drop_m` metres below where a load is hung (a rig
+    /// file's `[load] drop_m`, [`model::hardware::bench::LOAD_DROP_M`] by default): a load
+    /// that falls that far unwinds [`model::hardware::bench::output_travel_rad`] from the
+    /// pulley and rests there, its rope slack, as on a bench (the virtual rigs of `rig`).
+    pub fn with_floor(mut self, drop_m: f64) -> Self {
+        self.plant.output_travel = Some(model::hardware::bench::output_travel_rad(drop_m));
+        self
+    }
+
     /// This configuration reporting itself as board [`VIRTUAL_BOARD`], as the host's
     /// virtual rigs do (the firmware core's default names the Nucleo board).
     pub fn virtual_board(mut self) -> Self {

@@ -68,13 +68,9 @@ pub struct CalibrateArgs {
     /// the others measured (the set-up prompts start at the first missing step).
     #[arg(long, requires = "out", conflicts_with_all = ["from_points", "dry_run"])]
     resume: bool,
-    /// Figure format of the two fit plots: svg, png (resvg) or pdf (svg2pdf); the SVG is
-    /// always kept too.
-    #[arg(long, default_value = "svg", value_parser = super::demo::parse_format)]
-    format: reporting::figure::Format,
-    /// Figure width: pixels of a PNG, points of a PDF [default: the figure's own size].
-    #[arg(long, value_name = "WIDTH", value_parser = reporting::figure::parse_width)]
-    size: Option<u32>,
+    /// The two fit plots' format and printed size.
+    #[command(flatten)]
+    figures: super::figures::FigureArgs,
 }
 
 /// `rig calibrate --gauge`.
@@ -186,12 +182,9 @@ pub fn run(a: CalibrateArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     let files = if a.dry_run {
         None
     } else {
-        let mut files = write_files(&out, &result, &measurements, &base, &port)?;
-        let options = reporting::figure::FigureOptions {
-            format: a.format,
-            width: a.size,
-        };
-        if a.format != reporting::figure::Format::Svg {
+        let options = a.figures.options();
+        let mut files = write_files(&out, &result, &measurements, &base, &port, options.size)?;
+        if options.format != reporting::figure::Format::Svg {
             for plot in [&files.torque_plot, &files.no_load_plot] {
                 let written = reporting::figure::export(Path::new(plot), &options)?;
                 files.figures.push(written.display().to_string());
@@ -394,6 +387,7 @@ pub fn write_files(
     m: &Measurements,
     base: &protocol::RigParameters,
     port: &str,
+    size: reporting::figure::FigureSize,
 ) -> Result<CalibrationFiles, RigError> {
     let toml_path = dir.join("calibration.toml");
     let mut rig = RigFile::from_wire(&r.apply_to(base));
@@ -423,6 +417,7 @@ pub fn write_files(
             fit: &r.torque_fit,
             reference: Some((table2[0], table2[1])),
         },
+        size,
     )?;
     let no_load_plot = dir.join("no_load.svg");
     let no_load_points: Vec<(f64, f64)> = m
@@ -441,6 +436,7 @@ pub fn write_files(
             fit: &r.no_load_fit,
             reference: Some((table2[4], table2[5])),
         },
+        size,
     )?;
     let s = |p: &Path| p.display().to_string();
     Ok(CalibrationFiles {

@@ -34,13 +34,9 @@ pub struct CompareArgs {
     /// Plot both gaps per test point to this SVG.
     #[arg(long, value_name = "FILE.svg")]
     pub svg: Option<PathBuf>,
-    /// Also write the --svg plot as png (resvg) or pdf (svg2pdf) beside it (svg: only the
-    /// SVG).
-    #[arg(long, default_value = "svg", value_parser = super::demo::parse_format, requires = "svg")]
-    pub format: reporting::figure::Format,
-    /// Figure width: pixels of a PNG, points of a PDF [default: the figure's own size].
-    #[arg(long, value_name = "WIDTH", value_parser = reporting::figure::parse_width, requires = "svg")]
-    pub size: Option<u32>,
+    /// The --svg plot's printed size, and a png or pdf of it beside it (with --svg).
+    #[command(flatten)]
+    pub figures: super::figures::FigureArgs,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -48,6 +44,14 @@ pub struct CompareArgs {
 
 /// Runs `rig compare`.
 pub fn run(a: CompareArgs) -> Result<ExitCode, RigError> {
+    if a.svg.is_none()
+        && let Some(option) = a.figures.given()
+    {
+        return Err(RigError::BadValue {
+            what: option.into(),
+            why: "it sets the --svg plot's figure: add --svg FILE.svg".into(),
+        });
+    }
     crate::output_paths::refuse_outputs_over_inputs(
         &[
             ("--measured", Some(a.measured.as_path())),
@@ -77,13 +81,10 @@ pub fn run(a: CompareArgs) -> Result<ExitCode, RigError> {
     let mut c = compare(&a.measured, &base_rig, model_rig.as_ref(), a.seed)?;
     c.model = a.model.as_ref().map(|p| p.display().to_string());
     if let Some(svg) = &a.svg {
-        gap_figure(svg, &c)?;
+        let options = a.figures.options();
+        gap_figure(svg, &c, options.size)?;
         c.svg = Some(svg.display().to_string());
-        if a.format != reporting::figure::Format::Svg {
-            let options = reporting::figure::FigureOptions {
-                format: a.format,
-                width: a.size,
-            };
+        if options.format != reporting::figure::Format::Svg {
             c.figure = Some(
                 reporting::figure::export(svg, &options)?
                     .display()

@@ -24,20 +24,9 @@ pub struct DemoArgs {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Figure format: svg, png (resvg) or pdf (svg2pdf); the SVG is always kept too, and
-    /// report.md shows the figures in this format.
-    #[arg(long, default_value = "svg", value_parser = parse_format)]
-    pub format: reporting::figure::Format,
-    /// Figure width: pixels of a PNG, points of a PDF [default: the figure's own size].
-    #[arg(long, value_name = "WIDTH", value_parser = reporting::figure::parse_width)]
-    pub size: Option<u32>,
-}
-
-/// A `--format` value this build can write (shared by every verb that draws).
-pub(super) fn parse_format(s: &str) -> Result<reporting::figure::Format, String> {
-    let f: reporting::figure::Format = s.parse()?;
-    f.check_available()?;
-    Ok(f)
+    /// The figures' format and printed size; report.md shows them in this format.
+    #[command(flatten)]
+    pub figures: super::figures::FigureArgs,
 }
 
 /// Runs `rig demo`: the simulated rig by default; with `--port` the parts that cannot move
@@ -59,9 +48,9 @@ pub fn run(a: DemoArgs, dev: &DeviceOpts, given: &[&str]) -> Result<ExitCode, Ri
                 .into(),
         });
     }
-    if real && (a.format != reporting::figure::Format::Svg || a.size.is_some()) {
+    if real && let Some(option) = a.figures.given() {
         return Err(RigError::BadValue {
-            what: if a.size.is_some() { "--size" } else { "--format" }.into(),
+            what: option.into(),
             why: "`rig demo --port` draws no figures (it runs only what cannot move a load): leave it out".into(),
         });
     }
@@ -73,12 +62,17 @@ pub fn run(a: DemoArgs, dev: &DeviceOpts, given: &[&str]) -> Result<ExitCode, Ri
             out: a.out.clone(),
             quick: a.quick,
             seed: a.seed,
-            figures: reporting::figure::FigureOptions {
-                format: a.format,
-                width: a.size,
-            },
+            figures: a.figures.options(),
         };
-        demo::run_simulated(&opts, &write_calibration, &mut |step| {
+        let size = a.figures.size();
+        let writer = |dir: &std::path::Path,
+                      result: &crate::calibrate::CalibrationResult,
+                      measurements: &crate::calibrate::Measurements,
+                      base: &protocol::RigParameters,
+                      port: &str| {
+            write_calibration(dir, result, measurements, base, port, size)
+        };
+        demo::run_simulated(&opts, &writer, &mut |step| {
             if chatty {
                 eprintln!("... {step}");
             }
@@ -104,7 +98,8 @@ fn write_calibration(
     measurements: &crate::calibrate::Measurements,
     base: &protocol::RigParameters,
     port: &str,
+    size: reporting::figure::FigureSize,
 ) -> Result<Vec<String>, RigError> {
-    let w = super::calibrate::write_files(dir, result, measurements, base, port)?;
+    let w = super::calibrate::write_files(dir, result, measurements, base, port, size)?;
     Ok(vec![w.calibration, w.torque_plot, w.no_load_plot, w.points])
 }

@@ -147,6 +147,9 @@ struct SearchArgs {
     /// Draw the front into this SVG file.
     #[arg(long)]
     svg: Option<PathBuf>,
+    /// The --svg plot's printed size, and a png or pdf of it beside it (with --svg).
+    #[command(flatten)]
+    figures: super::figures::FigureArgs,
     /// Write a rig file per shown design into this folder (design-01.toml, ...).
     #[arg(long)]
     write: Option<PathBuf>,
@@ -268,6 +271,14 @@ pub fn run(a: DesignArgs) -> Result<ExitCode, RigError> {
 }
 
 fn run_search(a: SearchArgs) -> Result<ExitCode, RigError> {
+    if a.svg.is_none()
+        && let Some(option) = a.figures.given()
+    {
+        return Err(RigError::BadValue {
+            what: option.into(),
+            why: "it sets the --svg plot's figure: add --svg FILE.svg".into(),
+        });
+    }
     let params = a.rig.params(None)?;
     if a.shift.0 < -1.0 || a.shift.1 > 2.0 {
         return Err(RigError::BadValue {
@@ -303,7 +314,9 @@ fn run_search(a: SearchArgs) -> Result<ExitCode, RigError> {
     let mut result = search::search(&space, &params, threads);
     result.designs.truncate(a.limit);
     if let Some(path) = &a.svg {
-        search::plot(path, &result)?;
+        let options = a.figures.options();
+        search::plot(path, &result, options.size)?;
+        reporting::figure::export(path, &options)?;
     }
     let written = match &a.write {
         Some(dir) => write_rig_files(dir, &result.designs, &params)?,

@@ -65,6 +65,9 @@ pub struct DiscoverArgs {
     /// Write no report folder.
     #[arg(long, conflicts_with = "report")]
     pub no_report: bool,
+    /// The report's residual plots: printed size, and png or pdf beside the SVGs.
+    #[command(flatten)]
+    pub figures: super::figures::FigureArgs,
     /// Write the final augmented model (rig file with its fitted [model]) to FILE.
     #[arg(long, value_name = "FILE")]
     pub write_model: Option<PathBuf>,
@@ -189,7 +192,8 @@ fn write_outputs(
     };
     if let Some(d) = &dir {
         outcome.explanation.report_dir = Some(d.display().to_string());
-        report_files::write_report(d, outcome, source)?;
+        report_files::write_report(d, outcome, source, a.figures.size())?;
+        a.figures.export_all(&report_files::figures(d))?;
     }
     if let Some((p, r)) = &model_file {
         r.save_with_comment(

@@ -67,6 +67,9 @@ pub struct SweepArgs {
     /// Also draw Figs. 8-9 (means and spread over repeats, cam speed) to this SVG.
     #[arg(long)]
     pub svg: Option<PathBuf>,
+    /// The --svg plot's printed size, and a png or pdf of it beside it (with --svg).
+    #[command(flatten)]
+    pub figures: super::figures::FigureArgs,
     /// Print a JSON summary.
     #[arg(long)]
     pub json: bool,
@@ -81,6 +84,9 @@ pub struct HoldArgs {
     /// The SVG plot to write (default: the CSV's name with .svg).
     #[arg(long)]
     pub svg: Option<PathBuf>,
+    /// The plot's printed size, and a png or pdf of it beside the SVG.
+    #[command(flatten)]
+    pub figures: super::figures::FigureArgs,
     /// Load, N m (Fig. 5: 1.0 kg on 75 mm).
     #[arg(long, default_value_t = model::paper::FIG5_LOAD.torque(), value_parser = hold_load)]
     pub load: f64,
@@ -175,6 +181,14 @@ pub fn run(a: ExperimentArgs, dev: &DeviceOpts) -> Result<ExitCode, RigError> {
     // Check the arguments before the rig moves.
     let plan = match &a.procedure {
         Procedure::TorqueSweep(s) => {
+            if s.svg.is_none()
+                && let Some(option) = s.figures.given()
+            {
+                return Err(RigError::BadValue {
+                    what: option.into(),
+                    why: "it sets the --svg plot's figure: add --svg FILE.svg".into(),
+                });
+            }
             sweep::check_output(&s.csv, s.resume, s.force)?;
             Some(plan_of(s)?)
         }
@@ -227,7 +241,9 @@ fn torque_sweep(
         Ok(o) => {
             if let Some(svg) = &s.svg {
                 let (rows, _) = sweep::read_rows(&s.csv)?;
-                crate::sweep_report::experiment_figure(svg, &rows)?;
+                let options = s.figures.options();
+                crate::sweep_report::experiment_figure(svg, &rows, options.size)?;
+                reporting::figure::export(svg, &options)?;
             }
             if s.json {
                 super::print_json(out, &o)?;
@@ -289,7 +305,9 @@ fn hold_release_run(
     hold_release::write_csv(&samples, &h.csv)?;
     let svg = h.svg.unwrap_or_else(|| h.csv.with_extension("svg"));
     if !samples.is_empty() {
-        hold_release::write_svg(&samples, &svg)?;
+        let options = h.figures.options();
+        hold_release::write_svg(&samples, &svg, options.size)?;
+        reporting::figure::export(&svg, &options)?;
     }
     writeln!(
         out,

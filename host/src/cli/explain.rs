@@ -87,6 +87,9 @@ pub struct ExplainArgs {
     /// Write no report folder.
     #[arg(long, conflicts_with = "report")]
     pub no_report: bool,
+    /// The report's residual plots: printed size, and png or pdf beside the SVGs.
+    #[command(flatten)]
+    pub figures: super::figures::FigureArgs,
     /// Write the augmented model (the rig file with its fitted [model]) to FILE, atomically and only when the whole run succeeded.
     #[arg(long, value_name = "FILE")]
     pub write_model: Option<PathBuf>,
@@ -290,9 +293,12 @@ fn write_report(
     };
     if let Some(d) = &dir {
         outcome.explanation.report_dir = Some(d.display().to_string());
-        if let Err(e) = report_files::write_report(d, outcome, &input.source) {
+        let written = report_files::write_report(d, outcome, &input.source, args.figures.size())
+            .map_err(RigError::from)
+            .and_then(|()| args.figures.export_all(&report_files::figures(d)));
+        if let Err(e) = written {
             if args.report.is_some() {
-                return Err(e.into());
+                return Err(e);
             }
             // The default folder is a convenience: the analysis still prints.
             eprintln!("warning: no report written ({e}); choose a folder with --report DIR");

@@ -23,6 +23,7 @@ pub mod discover;
 pub mod experiment;
 pub mod explain;
 pub mod faults;
+pub mod figures;
 pub mod flash;
 pub mod info;
 pub mod log;

@@ -362,9 +362,13 @@ pub fn render_table(r: &SearchResult) -> String {
     s
 }
 
-/// Draws the front into the SVG file `path`: required cam torque against |rho|, and
-/// mu_d Lambda against the strength margin.
-pub fn plot(path: &std::path::Path, r: &SearchResult) -> Result<(), crate::RigError> {
+/// Draws the front into the SVG file `path` printed at `size`: required cam torque against
+/// |rho|, and mu_d Lambda against the strength margin.
+pub fn plot(
+    path: &std::path::Path,
+    r: &SearchResult,
+    size: reporting::figure::FigureSize,
+) -> Result<(), crate::RigError> {
     use reporting::plot::{PALETTE, Series, XyPanel, columns_figure};
     let cam: Vec<(f64, f64)> = r
         .designs
@@ -394,6 +398,7 @@ pub fn plot(path: &std::path::Path, r: &SearchResult) -> Result<(), crate::RigEr
     ];
     columns_figure(
         path,
+        size,
         (520, 400),
         Some("rig design search: Pareto front"),
         &panels,

@@ -287,8 +287,12 @@ pub fn write_csv(samples: &[Sample], path: &Path) -> Result<(), RigError> {
 }
 
 /// Draws the time history (output angle, cam speed, current against time) into the SVG
-/// file `path`, atomically.
-pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
+/// file `path` printed at `size`, atomically.
+pub fn write_svg(
+    samples: &[Sample],
+    path: &Path,
+    size: reporting::figure::FigureSize,
+) -> Result<(), RigError> {
     // The phases shaded, so the hold, the release and what follows read at a glance.
     let bands: Vec<Band> = ["hold", "release", "after"]
         .iter()
@@ -342,7 +346,7 @@ pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
             .labelled(format!("paper: held {} s", reporting::human(paper_hold))),
         );
         angle.series[0].label = Some("output angle".into());
-        angle.legend = Some(Legend::Outside);
+        angle.legend = Some(Legend::Below);
     }
     let panels = [
         angle,
@@ -351,6 +355,7 @@ pub fn write_svg(samples: &[Sample], path: &Path) -> Result<(), RigError> {
     ];
     Ok(plot::columns_figure(
         path,
+        size,
         (470, 360),
         Some("Fig. 5: hold, release, after"),
         &panels,

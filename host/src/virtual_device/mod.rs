@@ -187,15 +187,16 @@ impl VirtualDevice {
     /// load rests on the floor after [`model::hardware::bench::OUTPUT_TRAVEL_RAD`] (a hung
     /// load that keeps falling, mu_d Lambda < 1, lands as on a bench and stops).
     pub fn paper_config(preset: &sim::Preset) -> SimConfig {
-        let mut config = SimConfig::paper().virtual_board();
+        let mut config = SimConfig::paper()
+            .virtual_board()
+            .with_floor(model::hardware::bench::LOAD_DROP_M);
         config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
-        config.plant.output_travel = Some(model::hardware::bench::OUTPUT_TRAVEL_RAD);
         preset.apply(&mut config.plant);
         config
     }
 
     /// The virtual rig a rig file describes (gear, friction, the calibration stored in its
-    /// flash), reporting itself as board `virtual` with an output encoder fitted (as
+    /// flash, the floor `[load] drop_m` below the pulley), reporting itself as board `virtual` with an output encoder fitted (as
     /// [`VirtualDevice::paper_config`]): its plant runs the file's fitted
     /// `[model]` (every effect, or an error naming the one it cannot run), or `preset` when
     /// the file has none. `rig sim serve --model` and the device option `--sim --model`
@@ -204,9 +205,10 @@ impl VirtualDevice {
         rig: &rigfile::RigFile,
         preset: &sim::Preset,
     ) -> Result<SimConfig, RigError> {
-        let mut config = SimConfig::from_rig_file(rig)?.virtual_board();
+        let mut config = SimConfig::from_rig_file(rig)?
+            .virtual_board()
+            .with_floor(rig.load.drop_m);
         config.core.output_encoder = Some(firmware_core::OutputEncoderConfig::default());
-        config.plant.output_travel = Some(model::hardware::bench::OUTPUT_TRAVEL_RAD);
         if rig.model.is_none() {
             preset.apply(&mut config.plant);
         } else {
