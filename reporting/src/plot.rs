@@ -70,6 +70,17 @@ pub fn span(values: impl IntoIterator<Item = f64>, pad: f64, include_zero: bool)
     (lo - pad, hi + pad)
 }
 
+/// An axis label in the figures' one unit style, `quantity, unit` as printed: symbols in
+/// Unicode (τ_rot, ω_n, μ_d Λ, ±), subscripts after `_`, and a unitless quantity (a ratio, a
+/// count) alone. [`crate::check::ascii_stand_in`] finds the ASCII names this replaces.
+pub fn axis_label(quantity: &str, unit: &str) -> String {
+    if unit.is_empty() {
+        quantity.to_string()
+    } else {
+        format!("{quantity}, {unit}")
+    }
+}
+
 /// How a series is drawn.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Mark {
@@ -649,7 +660,7 @@ pub struct Panel {
 }
 
 /// Draws `panels` side by side under `title` into the SVG file `path` printed at `size`,
-/// all with the same residual axis of +-`y_max_ma` (points beyond it drawn at its edge).
+/// all with the same residual axis of ±`y_max_ma` (points beyond it drawn at its edge).
 pub fn residual_figure(
     path: &Path,
     size: FigureSize,
@@ -671,7 +682,7 @@ pub fn residual_figure(
                     .collect();
             XyPanel {
                 x_label: p.x_label.clone(),
-                y_label: "measured - model [mA]".into(),
+                y_label: axis_label("measured − model", "mA"),
                 series: vec![
                     Series::line(BLACK, 1, vec![(x0, 0.0), (x1, 0.0)]),
                     Series {
@@ -732,8 +743,8 @@ mod tests {
             .collect::<Vec<_>>();
         let panel = |caption: &str, f: &dyn Fn(f64) -> f64| XyPanel {
             caption: Some(caption.into()),
-            x_label: "t, s".into(),
-            y_label: "i_in, A".into(),
+            x_label: axis_label("t", "s"),
+            y_label: axis_label("i_in", "A"),
             series: vec![
                 Series::line(PALETTE[0], 2, t.iter().map(|&x| (x, f(x))).collect())
                     .labelled("measured current"),
@@ -821,7 +832,7 @@ mod tests {
         let path = dir.path().join("fig.svg");
         let panel = XyPanel {
             caption: Some("current".into()),
-            x_label: "tau_rot, N m".into(),
+            x_label: axis_label("τ_rot", "N m"),
             y_label: "i_in, A".into(),
             series: vec![
                 Series::points(PALETTE[0], 3, vec![(0.368, 2.3), (3.68, 2.9)]).labelled("3.6 V"),
@@ -864,7 +875,7 @@ mod tests {
         assert!(
             std::fs::read_to_string(&path)
                 .unwrap()
-                .contains("measured - model [mA]")
+                .contains("measured − model, mA")
         );
     }
 }
