@@ -62,8 +62,8 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     };
     let current = XyPanel {
         caption: Some(current_caption(points.iter().map(|p| (p.v_in, p.tau_rot)))),
-        x_label: "τ_rot, N m".into(),
-        y_label: "i_in, A".into(),
+        x_label: plot::axis_label("τ_rot", "N m"),
+        y_label: plot::axis_label("i_in", "A"),
         series: per_voltage(&|p| p.i_in, true),
         x_range: Some(x),
         legend: Some(Legend::Below),
@@ -72,8 +72,8 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     };
     let speed = XyPanel {
         caption: Some("cam speed (Fig. 8)".into()),
-        x_label: "τ_rot, N m".into(),
-        y_label: "ω_n, rad/s".into(),
+        x_label: plot::axis_label("τ_rot", "N m"),
+        y_label: plot::axis_label("ω_n", "rad/s"),
         series: per_voltage(&|p| Some(p.omega_n), false),
         x_range: Some(x),
         fine_grid: true,
@@ -88,12 +88,9 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
         let mean = plot::mean_with_spread(color(k), 0, "", &eq10)
             .pop()
             .map_or_else(Vec::new, |s| s.points);
-        let line = Series::line(color(k), 2, mean);
-        torque.push(if k == 0 {
-            line.labelled("Eq. (10)")
-        } else {
-            line
-        });
+        // In its voltage's colour, out of the legend (one entry would stand for every
+        // line): the caption says the lines are Eq. (10).
+        torque.push(Series::line(color(k), 2, mean));
     }
     // The runs whose output did not move (the paper's non-backdriven points, marked as
     // in its Figs. 8-9).
@@ -111,8 +108,8 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     }
     let torque = XyPanel {
         caption: Some("cam torque (Fig. 9): points measured, lines Eq. (10)".into()),
-        x_label: "τ_rot, N m".into(),
-        y_label: "τ_cam, N mm".into(),
+        x_label: plot::axis_label("τ_rot", "N m"),
+        y_label: plot::axis_label("τ_cam", "N mm"),
         series: torque,
         x_range: Some(x),
         legend: Some(Legend::Below),
@@ -136,7 +133,7 @@ pub fn sweep_figure(path: &Path, points: &[Row], size: FigureSize) -> Result<(),
 
 /// Panels of a `rig experiment torque-sweep` CSV: the current (Fig. 8) and the cam speed
 /// (Fig. 8's speed panel) against the load, per supply voltage (or frequency): the mean
-/// over repeats as points, the spread (mean +- one standard deviation) as bars.
+/// over repeats as points, the spread (mean ± one standard deviation) as bars.
 pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
     let drive = |r: &Row| r.v_in.or(r.target_hz).unwrap_or(0.0);
     let unit = if rows.iter().any(|r| r.v_in.is_some()) {
@@ -166,7 +163,7 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
         }
         XyPanel {
             caption: Some(caption.into()),
-            x_label: "τ_rot, N m".into(),
+            x_label: plot::axis_label("τ_rot", "N m"),
             y_label: y.into(),
             series,
             x_range: Some(x),
@@ -178,10 +175,14 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
     [
         panel(
             &current_caption(rows.iter().map(|r| (Some(drive(r)), r.tau_rot))),
-            "i_in, A",
+            &plot::axis_label("i_in", "A"),
             &|r| r.i_in,
         ),
-        panel("cam speed (Fig. 8)", "ω_n, rad/s", &|r| Some(r.omega_n)),
+        panel(
+            "cam speed (Fig. 8)",
+            &plot::axis_label("ω_n", "rad/s"),
+            &|r| Some(r.omega_n),
+        ),
     ]
 }
 
@@ -290,7 +291,6 @@ mod tests {
             "τ_cam, N mm",
             "i_in, A",
             "cam speed",
-            "Eq. (10)",
             "(a)",
             "(c)",
         ] {
@@ -301,5 +301,15 @@ mod tests {
         for ascii in ["tau_", "w_n", "+-", "["] {
             assert!(!svg.contains(ascii), "{ascii} in the figure");
         }
+        assert_eq!(reporting::check::check_svg(&svg, 3.5), vec![]);
+        // The lines of Eq. (10), one per voltage in its colour, are named by the caption,
+        // not by one legend entry standing for all three.
+        assert!(torque.caption.unwrap().contains("lines Eq. (10)"));
+        assert!(
+            torque
+                .series
+                .iter()
+                .all(|s| s.mark == plot::Mark::Points(3) || s.label.is_none())
+        );
     }
 }

@@ -91,7 +91,10 @@ pub fn ascii_stand_in(text: &str) -> Option<String> {
     // Words: runs of ASCII letters (so `tau_rot` has the word `tau`, `C1` the word `C`).
     let mut words = Vec::new();
     let mut start = None;
-    for (k, c) in text.char_indices().chain(std::iter::once((text.len(), ' '))) {
+    for (k, c) in text
+        .char_indices()
+        .chain(std::iter::once((text.len(), ' ')))
+    {
         match (c.is_ascii_alphabetic(), start) {
             (true, None) => start = Some(k),
             (false, Some(s)) => {
