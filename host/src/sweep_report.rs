@@ -283,6 +283,8 @@ mod tests {
         let path = dir.path().join("sweep.svg");
         sweep_figure(&path, &points, FigureSize::Single).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
+        // The texts as written (subscripts after `_`; the SVG sets them lowered).
+        let texts = reporting::check::figure_texts(&svg).join("\n");
         for want in [
             "Fig. 8",
             "Fig. 9",
@@ -294,12 +296,12 @@ mod tests {
             "(a)",
             "(c)",
         ] {
-            assert!(svg.contains(want), "missing {want}");
+            assert!(texts.contains(want), "missing {want}");
         }
         // One run per point: no bars, and the caption promises none; symbols as printed.
         assert!(svg.contains("one run per point") && !svg.contains("bars"));
         for ascii in ["tau_", "w_n", "+-", "["] {
-            assert!(!svg.contains(ascii), "{ascii} in the figure");
+            assert!(!texts.contains(ascii), "{ascii} in the figure");
         }
         assert_eq!(reporting::check::check_svg(&svg, 3.5), vec![]);
         // The lines of Eq. (10), one per voltage in its colour, are named by the caption,

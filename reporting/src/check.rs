@@ -139,6 +139,8 @@ struct Element {
     name: String,
     attrs: Vec<(String, String)>,
     text: String,
+    /// The smallest `font-size` of its `tspan`s relative to its own (1 without).
+    smallest: f64,
 }
 
 impl Element {
@@ -182,15 +184,63 @@ fn elements(svg: &str) -> Vec<Element> {
             a = &a[value_from + close + 1..];
         }
         let mut text = String::new();
+        let mut smallest = 1.0f64;
         if name == "text"
             && let Some(close) = rest.find("</text>")
         {
-            text = unescape(rest[..close].trim());
+            text = plain_text(rest[..close].trim());
+            for span in rest[..close].split("<tspan").skip(1) {
+                if let Some(pct) = span
+                    .split("font-size=\"")
+                    .nth(1)
+                    .and_then(|v| v.split('"').next())
+                    .and_then(|v| v.strip_suffix('%'))
+                    .and_then(|v| v.parse::<f64>().ok())
+                {
+                    smallest = smallest.min(pct / 100.0);
+                }
+            }
             rest = &rest[close..];
         }
-        out.push(Element { name, attrs, text });
+        out.push(Element {
+            name,
+            attrs,
+            text,
+            smallest,
+        });
     }
     out
+}
+
+/// The text of a `text` element's content `s` as the code wrote it: subscripts
+/// ([`crate::plot::subscripts`]) back after `_`, escapes undone.
+fn plain_text(s: &str) -> String {
+    let mut plain = String::new();
+    let mut tag: Option<String> = None;
+    for c in s.chars() {
+        match (&mut tag, c) {
+            (None, '<') => tag = Some(String::new()),
+            (Some(t), '>') => {
+                if t.starts_with("tspan") && t.contains("baseline-shift=\"sub\"") {
+                    plain.push('_');
+                }
+                tag = None;
+            }
+            (Some(t), c) => t.push(c),
+            (None, c) => plain.push(c),
+        }
+    }
+    unescape(&plain)
+}
+
+/// Every text of the SVG figure `svg`, in order, as the code wrote it (a subscript after
+/// `_`): what a test asserts a figure says.
+pub fn figure_texts(svg: &str) -> Vec<String> {
+    elements(svg)
+        .into_iter()
+        .filter(|e| e.name == "text" && !e.text.is_empty())
+        .map(|e| e.text)
+        .collect()
 }
 
 fn unescape(s: &str) -> String {
@@ -353,7 +403,8 @@ pub fn check_svg(svg: &str, printed_width_in: f64) -> Vec<Problem> {
         let Some(px) = e.num("font-size") else {
             continue;
         };
-        let pt = px * pt_per_px;
+        // Its smallest part: a subscript is smaller than its text.
+        let pt = px * e.smallest * pt_per_px;
         if pt < MIN_TEXT_PT - 1e-9 {
             problems.push(Problem::SmallText {
                 text: e.text.clone(),
@@ -490,6 +541,33 @@ mod tests {
     }
 
     #[test]
+    fn subscripts_are_read_back_and_checked() {
+        let svg = crate::plot::subscripts(&figure(&[
+            (190.0, 170.0, 10.67, "middle", "τ_rot, N m"),
+            (62.0, 2.0, 10.67, "start", "w_n [rad/s]"),
+        ]));
+        assert!(svg.contains("τ<tspan baseline-shift=\"sub\" font-size=\"88%\">rot</tspan>, N m"));
+        assert_eq!(figure_texts(&svg), ["τ_rot, N m", "w_n [rad/s]"]);
+        // Measured at the subscript's size: 8 pt text keeps 7 pt subscripts, 7 pt does not.
+        let at = |pt: f64| {
+            let px = pt / 72.0 * 96.0;
+            crate::plot::subscripts(&figure(&[(190.0, 170.0, px, "middle", "τ_rot, N m")]))
+        };
+        assert_eq!(check_svg(&at(8.0), 3.5), vec![]);
+        assert!(matches!(
+            check_svg(&at(7.0), 3.5).as_slice(),
+            [Problem::SmallText { pt, .. }] if (pt - 7.0 * 0.88).abs() < 0.01
+        ));
+        assert_eq!(
+            check_svg(&svg, 3.5),
+            vec![Problem::AsciiSymbol {
+                text: "w_n [rad/s]".into(),
+                stand_in: "`w_` for ω".into(),
+            }]
+        );
+    }
+
+    #[test]
     fn an_svg_without_a_plot_area_is_not_a_figure() {
         let svg = "<svg width=\"100\" height=\"100\"></svg>";
         assert!(matches!(
@@ -510,6 +588,7 @@ mod tests {
                 ("transform".into(), "rotate(270, 10, 100)".into()),
             ],
             text: "abcdefghij".into(),
+            smallest: 1.0,
         };
         let b = text_box(&e, 10.0).unwrap();
         // 60 px of text turned upright: 60 px high, 10 px wide, to the anchor's right.

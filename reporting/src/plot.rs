@@ -71,8 +71,8 @@ pub fn span(values: impl IntoIterator<Item = f64>, pad: f64, include_zero: bool)
 }
 
 /// An axis label in the figures' one unit style, `quantity, unit` as printed: symbols in
-/// Unicode (τ_rot, ω_n, μ_d Λ, ±), subscripts after `_`, and a unitless quantity (a ratio, a
-/// count) alone. [`crate::check::ascii_stand_in`] finds the ASCII names this replaces.
+/// Unicode (τ_rot, ω_n, μ_d Λ, ±), subscripts after `_` (set lowered and smaller in the
+/// written figure, [`subscripts`]), and a unitless quantity (a ratio, a count) alone. [`crate::check::ascii_stand_in`] finds the ASCII names this replaces.
 pub fn axis_label(quantity: &str, unit: &str) -> String {
     if unit.is_empty() {
         quantity.to_string()
@@ -579,7 +579,55 @@ pub fn svg_figure(
         draw(&area, &style).map_err(err)?;
         root.present().map_err(|e| err(e.to_string()))?;
     }
-    crate::write_atomic(path, svg.as_bytes())
+    crate::write_atomic(path, subscripts(&svg).as_bytes())
+}
+
+/// Subscript size, relative to its text: [`TEXT_PT`] text keeps its subscripts at
+/// [`MIN_TEXT_PT`] or more ([`crate::check::check_svg`] measures them).
+const SUBSCRIPT_SIZE: &str = "88%";
+const _: () = assert!(TEXT_PT * 0.88 >= MIN_TEXT_PT);
+
+/// The figure `svg` with every subscript of its texts set as printed: `τ_cam` (a letter,
+/// `_`, letters or digits) becomes `τ` and a lowered, smaller `cam` (an SVG `tspan`, which
+/// resvg and svg2pdf draw as well), so labels are written `τ_cam` everywhere in the code
+/// and print τ with cam below.
+pub fn subscripts(svg: &str) -> String {
+    let mut out = String::with_capacity(svg.len());
+    let mut rest = svg;
+    while let Some(open) = rest.find("<text") {
+        let Some(body) = rest[open..].find('>').map(|k| open + k + 1) else {
+            break;
+        };
+        let Some(close) = rest[body..].find("</text>").map(|k| body + k) else {
+            break;
+        };
+        out.push_str(&rest[..body]);
+        let text = &rest[body..close];
+        let mut prev: Option<char> = None;
+        let mut chars = text.chars().peekable();
+        while let Some(c) = chars.next() {
+            let starts = c == '_'
+                && prev.is_some_and(char::is_alphabetic)
+                && chars.peek().is_some_and(|n| n.is_alphanumeric());
+            if starts {
+                out.push_str(&format!(
+                    "<tspan baseline-shift=\"sub\" font-size=\"{SUBSCRIPT_SIZE}\">"
+                ));
+                while let Some(&n) = chars.peek().filter(|n| n.is_alphanumeric()) {
+                    out.push(n);
+                    chars.next();
+                }
+                out.push_str("</tspan>");
+                prev = None;
+            } else {
+                out.push(c);
+                prev = Some(c);
+            }
+        }
+        rest = &rest[close..];
+    }
+    out.push_str(rest);
+    out
 }
 
 /// Height of `title` over a figure in `style`, px.
@@ -715,6 +763,23 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn subscripts_are_set_lowered_and_smaller() {
+        let sub = |s: &str| format!("<tspan baseline-shift=\"sub\" font-size=\"88%\">{s}</tspan>");
+        let svg = "<svg><text x=\"1\">\n|τ_cam| = C1 i_in + C2, ω_n2 x_ _y a_b_c\n</text><rect id=\"a_b\"/></svg>";
+        assert_eq!(
+            subscripts(svg),
+            format!(
+                "<svg><text x=\"1\">\n|τ{}| = C1 i{} + C2, ω{} x_ _y a{}{}\n</text><rect id=\"a_b\"/></svg>",
+                sub("cam"),
+                sub("in"),
+                sub("n2"),
+                sub("b"),
+                "_c"
+            )
+        );
+    }
 
     #[test]
     fn span_pads_and_includes_zero() {
