@@ -9,8 +9,9 @@
 //! - [`residual_figure`], the residual plots of `rig explain`.
 //!
 //! The style for a paper: figures drawn at the width they print ([`FigureSize`]: a
-//! journal's single or double column) with every text [`TEXT_PT`] there, axis labels with
-//! their units, a panel letter on every panel of a multi-panel figure ((a), (b), ...),
+//! journal's single or double column) with every text [`TEXT_PT`] there, axis labels in one
+//! unit style with symbols as printed ([`axis_label`]: `τ_rot, N m`, subscripts set by
+//! [`subscripts`]), a panel letter on every panel of a multi-panel figure ((a), (b), ...),
 //! legends below the plot area ([`Legend::Below`]) and band names above it, never over the
 //! data, shaded phases ([`Band`]), reference values from the paper drawn as their own
 //! labelled series. [`crate::check`] measures a written SVG against these rules.
