@@ -21,19 +21,36 @@ fn voltages(points: &[Row]) -> Vec<f64> {
     v
 }
 
-/// The current panel's caption: it promises bars of ±1 SD only when some point (a drive
-/// and a load) was measured more than once, so has them.
-fn current_caption(points: impl Iterator<Item = (Option<f64>, f64)>) -> String {
-    let mut seen: Vec<(Option<f64>, f64)> = Vec::new();
-    let mut repeated = false;
-    for p in points {
-        repeated |= seen.contains(&p);
-        seen.push(p);
+/// The current panel's caption from its points ((drive, load), current in A): it promises
+/// bars of ±1 SD only when some point was measured more than once, so has them, and states
+/// the largest (a bar shorter than its point's mark is hidden under it).
+fn current_caption(points: impl Iterator<Item = ((Option<f64>, f64), Option<f64>)>) -> String {
+    let mut groups: Vec<((Option<f64>, f64), Vec<f64>)> = Vec::new();
+    for (key, i) in points {
+        let values = match groups.iter_mut().find(|g| g.0 == key) {
+            Some(g) => &mut g.1,
+            None => {
+                groups.push((key, Vec::new()));
+                &mut groups.last_mut().expect("just pushed").1
+            }
+        };
+        values.extend(i.filter(|i| i.is_finite()));
     }
-    if repeated {
-        "current (Fig. 8): mean, bars ±1 SD over repeats".into()
-    } else {
-        "current (Fig. 8): one run per point".into()
+    let largest_sd = groups
+        .iter()
+        .filter(|g| g.1.len() > 1)
+        .map(|(_, ys)| {
+            let n = ys.len() as f64;
+            let mean = ys.iter().sum::<f64>() / n;
+            (ys.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+        })
+        .reduce(f64::max);
+    match largest_sd {
+        Some(sd) => format!(
+            "current (Fig. 8): mean, bars ±1 SD over repeats (largest {} mA)",
+            reporting::human(reporting::significant(sd * 1e3, 2))
+        ),
+        None => "current (Fig. 8): one run per point".into(),
     }
 }
 
@@ -61,7 +78,9 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
             .collect()
     };
     let current = XyPanel {
-        caption: Some(current_caption(points.iter().map(|p| (p.v_in, p.tau_rot)))),
+        caption: Some(current_caption(
+            points.iter().map(|p| ((p.v_in, p.tau_rot), p.i_in)),
+        )),
         x_label: plot::axis_label("τ_rot", "N m"),
         y_label: plot::axis_label("i_in", "A"),
         series: per_voltage(&|p| p.i_in, true),
@@ -174,7 +193,7 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
     };
     [
         panel(
-            &current_caption(rows.iter().map(|r| (Some(drive(r)), r.tau_rot))),
+            &current_caption(rows.iter().map(|r| ((Some(drive(r)), r.tau_rot), r.i_in))),
             &plot::axis_label("i_in", "A"),
             &|r| r.i_in,
         ),
@@ -247,7 +266,11 @@ mod tests {
             points.push(p);
         }
         let [current, ..] = sweep_panels(&points);
-        assert!(current.caption.as_deref().unwrap().contains("bars ±1 SD"));
+        // Currents 2.2, 2.3, 2.4 A: SD 0.1 A, stated in the caption.
+        assert_eq!(
+            current.caption.as_deref(),
+            Some("current (Fig. 8): mean, bars ±1 SD over repeats (largest 100 mA)")
+        );
         // A bar and the mean point.
         assert_eq!(current.series.len(), 2);
         let mean = &current.series[1].points;
