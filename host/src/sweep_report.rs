@@ -21,11 +21,14 @@ fn voltages(points: &[Row]) -> Vec<f64> {
     v
 }
 
+/// A point of a sweep: its drive (supply voltage or frequency) and load.
+type PointKey = (Option<f64>, f64);
+
 /// The current panel's caption from its points ((drive, load), current in A): it promises
 /// bars of ±1 SD only when some point was measured more than once, so has them, and states
 /// the largest (a bar shorter than its point's mark is hidden under it).
-fn current_caption(points: impl Iterator<Item = ((Option<f64>, f64), Option<f64>)>) -> String {
-    let mut groups: Vec<((Option<f64>, f64), Vec<f64>)> = Vec::new();
+fn current_caption(points: impl Iterator<Item = (PointKey, Option<f64>)>) -> String {
+    let mut groups: Vec<(PointKey, Vec<f64>)> = Vec::new();
     for (key, i) in points {
         let values = match groups.iter_mut().find(|g| g.0 == key) {
             Some(g) => &mut g.1,
