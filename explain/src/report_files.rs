@@ -765,24 +765,24 @@ pub fn write_report(
         let r: Vec<f64> = res.iter().map(|v| v * 1e3).collect();
         let mut panels = vec![
             Panel {
-                x_label: "cam speed w_n, rad/s".into(),
+                x_label: plot::axis_label("cam speed ω_n", "rad/s"),
                 x: pts.ops.iter().map(|o| o.omega_n).collect(),
                 residual_ma: r.clone(),
             },
             Panel {
-                x_label: "load tau_rot, N m".into(),
+                x_label: plot::axis_label("load τ_rot", "N m"),
                 x: pts.ops.iter().map(|o| o.tau_rot).collect(),
                 residual_ma: r.clone(),
             },
         ];
         match pts.thermal {
             super::library::ThermalDriver::Temperature { reference_c } => panels.push(Panel {
-                x_label: "motor temperature, C".into(),
+                x_label: plot::axis_label("motor temperature", "°C"),
                 x: pts.ops.iter().map(|o| o.thermal + reference_c).collect(),
                 residual_ma: r,
             }),
             super::library::ThermalDriver::Time => panels.push(Panel {
-                x_label: "time, s".into(),
+                x_label: plot::axis_label("time", "s"),
                 x: pts.ops.iter().map(|o| o.thermal).collect(),
                 residual_ma: r,
             }),

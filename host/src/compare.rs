@@ -441,7 +441,7 @@ pub fn gap_figure(
     c: &Comparison,
     size: reporting::figure::FigureSize,
 ) -> Result<(), RigError> {
-    use reporting::plot::{Legend, PALETTE, Series, XyPanel, columns_figure};
+    use reporting::plot::{Legend, PALETTE, Series, XyPanel, axis_label, columns_figure};
     let mut series = vec![
         Series::points(
             PALETTE[0],
@@ -484,8 +484,8 @@ pub fn gap_figure(
     }
     let panel = XyPanel {
         caption: Some(caption),
-        x_label: "test point (run order)".into(),
-        y_label: "gap, mA".into(),
+        x_label: axis_label("test point (run order)", ""),
+        y_label: axis_label("measured − simulated", "mA"),
         series,
         include_zero_y: true,
         // Below the plot: inside it covered points.
@@ -493,13 +493,13 @@ pub fn gap_figure(
         whole_x: true,
         ..XyPanel::default()
     };
-    columns_figure(
-        path,
-        size,
-        (900, 480),
-        Some("Simulation versus measurement, before and after the fitted effect"),
-        &[panel],
-    )?;
+    // The title promises the fitted model's gaps only when they are drawn.
+    let title = if c.gap_rmse_model_a.is_some() {
+        "Simulation versus measurement, before and after the fitted effect"
+    } else {
+        "Simulation versus measurement: the base model"
+    };
+    columns_figure(path, size, (900, 480), Some(title), &[panel])?;
     Ok(())
 }
 

@@ -21,19 +21,39 @@ fn voltages(points: &[Row]) -> Vec<f64> {
     v
 }
 
-/// The current panel's caption: it promises bars of ±1 SD only when some point (a drive
-/// and a load) was measured more than once, so has them.
-fn current_caption(points: impl Iterator<Item = (Option<f64>, f64)>) -> String {
-    let mut seen: Vec<(Option<f64>, f64)> = Vec::new();
-    let mut repeated = false;
-    for p in points {
-        repeated |= seen.contains(&p);
-        seen.push(p);
+/// A point of a sweep: its drive (supply voltage or frequency) and load.
+type PointKey = (Option<f64>, f64);
+
+/// The current panel's caption from its points ((drive, load), current in A): it promises
+/// bars of ±1 SD only when some point was measured more than once, so has them, and states
+/// the largest (a bar shorter than its point's mark is hidden under it).
+fn current_caption(points: impl Iterator<Item = (PointKey, Option<f64>)>) -> String {
+    let mut groups: Vec<(PointKey, Vec<f64>)> = Vec::new();
+    for (key, i) in points {
+        let values = match groups.iter_mut().find(|g| g.0 == key) {
+            Some(g) => &mut g.1,
+            None => {
+                groups.push((key, Vec::new()));
+                &mut groups.last_mut().expect("just pushed").1
+            }
+        };
+        values.extend(i.filter(|i| i.is_finite()));
     }
-    if repeated {
-        "current (Fig. 8): mean, bars ±1 SD over repeats".into()
-    } else {
-        "current (Fig. 8): one run per point".into()
+    let largest_sd = groups
+        .iter()
+        .filter(|g| g.1.len() > 1)
+        .map(|(_, ys)| {
+            let n = ys.len() as f64;
+            let mean = ys.iter().sum::<f64>() / n;
+            (ys.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+        })
+        .reduce(f64::max);
+    match largest_sd {
+        Some(sd) => format!(
+            "current (Fig. 8): mean, bars ±1 SD over repeats (largest {} mA)",
+            reporting::human(reporting::significant(sd * 1e3, 2))
+        ),
+        None => "current (Fig. 8): one run per point".into(),
     }
 }
 
@@ -61,9 +81,11 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
             .collect()
     };
     let current = XyPanel {
-        caption: Some(current_caption(points.iter().map(|p| (p.v_in, p.tau_rot)))),
-        x_label: "τ_rot, N m".into(),
-        y_label: "i_in, A".into(),
+        caption: Some(current_caption(
+            points.iter().map(|p| ((p.v_in, p.tau_rot), p.i_in)),
+        )),
+        x_label: plot::axis_label("τ_rot", "N m"),
+        y_label: plot::axis_label("i_in", "A"),
         series: per_voltage(&|p| p.i_in, true),
         x_range: Some(x),
         legend: Some(Legend::Below),
@@ -72,8 +94,8 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     };
     let speed = XyPanel {
         caption: Some("cam speed (Fig. 8)".into()),
-        x_label: "τ_rot, N m".into(),
-        y_label: "ω_n, rad/s".into(),
+        x_label: plot::axis_label("τ_rot", "N m"),
+        y_label: plot::axis_label("ω_n", "rad/s"),
         series: per_voltage(&|p| Some(p.omega_n), false),
         x_range: Some(x),
         fine_grid: true,
@@ -88,12 +110,9 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
         let mean = plot::mean_with_spread(color(k), 0, "", &eq10)
             .pop()
             .map_or_else(Vec::new, |s| s.points);
-        let line = Series::line(color(k), 2, mean);
-        torque.push(if k == 0 {
-            line.labelled("Eq. (10)")
-        } else {
-            line
-        });
+        // In its voltage's colour, out of the legend (one entry would stand for every
+        // line): the caption says the lines are Eq. (10).
+        torque.push(Series::line(color(k), 2, mean));
     }
     // The runs whose output did not move (the paper's non-backdriven points, marked as
     // in its Figs. 8-9).
@@ -111,8 +130,8 @@ pub fn sweep_panels(points: &[Row]) -> [XyPanel; 3] {
     }
     let torque = XyPanel {
         caption: Some("cam torque (Fig. 9): points measured, lines Eq. (10)".into()),
-        x_label: "τ_rot, N m".into(),
-        y_label: "τ_cam, N mm".into(),
+        x_label: plot::axis_label("τ_rot", "N m"),
+        y_label: plot::axis_label("τ_cam", "N mm"),
         series: torque,
         x_range: Some(x),
         legend: Some(Legend::Below),
@@ -136,7 +155,7 @@ pub fn sweep_figure(path: &Path, points: &[Row], size: FigureSize) -> Result<(),
 
 /// Panels of a `rig experiment torque-sweep` CSV: the current (Fig. 8) and the cam speed
 /// (Fig. 8's speed panel) against the load, per supply voltage (or frequency): the mean
-/// over repeats as points, the spread (mean +- one standard deviation) as bars.
+/// over repeats as points, the spread (mean ± one standard deviation) as bars.
 pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
     let drive = |r: &Row| r.v_in.or(r.target_hz).unwrap_or(0.0);
     let unit = if rows.iter().any(|r| r.v_in.is_some()) {
@@ -166,7 +185,7 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
         }
         XyPanel {
             caption: Some(caption.into()),
-            x_label: "τ_rot, N m".into(),
+            x_label: plot::axis_label("τ_rot", "N m"),
             y_label: y.into(),
             series,
             x_range: Some(x),
@@ -177,11 +196,15 @@ pub fn experiment_panels(rows: &[Row]) -> [XyPanel; 2] {
     };
     [
         panel(
-            &current_caption(rows.iter().map(|r| (Some(drive(r)), r.tau_rot))),
-            "i_in, A",
+            &current_caption(rows.iter().map(|r| ((Some(drive(r)), r.tau_rot), r.i_in))),
+            &plot::axis_label("i_in", "A"),
             &|r| r.i_in,
         ),
-        panel("cam speed (Fig. 8)", "ω_n, rad/s", &|r| Some(r.omega_n)),
+        panel(
+            "cam speed (Fig. 8)",
+            &plot::axis_label("ω_n", "rad/s"),
+            &|r| Some(r.omega_n),
+        ),
     ]
 }
 
@@ -246,7 +269,11 @@ mod tests {
             points.push(p);
         }
         let [current, ..] = sweep_panels(&points);
-        assert!(current.caption.as_deref().unwrap().contains("bars ±1 SD"));
+        // Currents 2.2, 2.3, 2.4 A: SD 0.1 A, stated in the caption.
+        assert_eq!(
+            current.caption.as_deref(),
+            Some("current (Fig. 8): mean, bars ±1 SD over repeats (largest 100 mA)")
+        );
         // A bar and the mean point.
         assert_eq!(current.series.len(), 2);
         let mean = &current.series[1].points;
@@ -282,6 +309,8 @@ mod tests {
         let path = dir.path().join("sweep.svg");
         sweep_figure(&path, &points, FigureSize::Single).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
+        // The texts as written (subscripts after `_`; the SVG sets them lowered).
+        let texts = reporting::check::figure_texts(&svg).join("\n");
         for want in [
             "Fig. 8",
             "Fig. 9",
@@ -290,16 +319,25 @@ mod tests {
             "τ_cam, N mm",
             "i_in, A",
             "cam speed",
-            "Eq. (10)",
             "(a)",
             "(c)",
         ] {
-            assert!(svg.contains(want), "missing {want}");
+            assert!(texts.contains(want), "missing {want}");
         }
         // One run per point: no bars, and the caption promises none; symbols as printed.
         assert!(svg.contains("one run per point") && !svg.contains("bars"));
         for ascii in ["tau_", "w_n", "+-", "["] {
-            assert!(!svg.contains(ascii), "{ascii} in the figure");
+            assert!(!texts.contains(ascii), "{ascii} in the figure");
         }
+        assert_eq!(reporting::check::check_svg(&svg, 3.5), vec![]);
+        // The lines of Eq. (10), one per voltage in its colour, are named by the caption,
+        // not by one legend entry standing for all three.
+        assert!(torque.caption.unwrap().contains("lines Eq. (10)"));
+        assert!(
+            torque
+                .series
+                .iter()
+                .all(|s| s.mark == plot::Mark::Points(3) || s.label.is_none())
+        );
     }
 }

@@ -125,13 +125,20 @@ fn compare_shows_the_gap_shrink_with_the_written_model() {
     assert!(plot.contains("<svg") && plot.contains("base model"));
     // Short legend entries (beside the plot, clear of the points), the numbers in the caption.
     assert!(plot.contains("\nfitted model\n") && plot.contains("mA with the base model"));
-    // Without a model: the base gap only.
+    assert!(plot.contains("before and after the fitted effect"));
+    // Without a model: the base gap only, and the title promises no more.
+    let base_svg = dir.path().join("base.svg");
     let b = json(
         rig()
             .args(["compare", "--json", "--measured"])
-            .arg(&measured),
+            .arg(&measured)
+            .arg("--svg")
+            .arg(&base_svg),
     );
     assert!(b["gap_rmse_model_a"].is_null());
+    let plot = std::fs::read_to_string(&base_svg).unwrap();
+    assert!(plot.contains("Simulation versus measurement: the base model"));
+    assert!(!plot.contains("before and after") && !plot.contains("fitted model"));
 }
 
 #[test]

@@ -216,7 +216,10 @@ fn a_designed_gear_stops_on_the_virtual_rig_and_the_paper_s_keeps_falling() {
         .success();
     let drawn = std::fs::read_to_string(&svg).unwrap();
     assert!(
-        drawn.starts_with("<svg") && drawn.contains("mu_d Lambda"),
+        drawn.starts_with("<svg")
+            && reporting::check::figure_texts(&drawn)
+                .iter()
+                .any(|t| t == "μ_d Λ"),
         "{drawn:.200}"
     );
     let file = out.join("design-01.toml");

@@ -1,7 +1,10 @@
 //! Measures a figure as a journal prints it: [`check_svg`] reads an SVG the figures of
 //! [`crate::plot`] write (its texts' font sizes and positions, the framed plot areas and the
 //! lines and points drawn in them) and reports every text smaller than
-//! [`MIN_TEXT_PT`] at the printed width and every text whose box lies on the plotted data.
+//! [`MIN_TEXT_PT`] at the printed width, every text whose box lies on the plotted data and
+//! every text that writes a symbol or unit in an ASCII stand-in ([`ascii_stand_in`]: `tau_`
+//! for τ, `w_n` for ω_n, `+-` for ±, a unit in brackets where the figures write
+//! `quantity, unit`, [`crate::plot::axis_label`]).
 //!
 //! Text boxes are estimated, not shaped: [`text_width_px`] is wider than a sans-serif face
 //! sets (0.6 em a character), so a text it passes fits.
@@ -31,6 +34,14 @@ pub enum Problem {
         /// Its box, px of the drawing: (left, top, right, bottom).
         text_box: (f64, f64, f64, f64),
     },
+    /// A text writes a symbol or unit as ASCII where a journal prints it
+    /// ([`ascii_stand_in`]).
+    AsciiSymbol {
+        /// The text.
+        text: String,
+        /// The stand-in found, and what the figures write instead.
+        stand_in: String,
+    },
     /// The SVG has no `width` or no framed plot area (not a figure of [`crate::plot`]).
     NotAFigure(String),
 }
@@ -47,9 +58,80 @@ impl std::fmt::Display for Problem {
                 "'{text}' (box {:.0},{:.0} to {:.0},{:.0} px) lies on the plotted data",
                 text_box.0, text_box.1, text_box.2, text_box.3
             ),
+            Self::AsciiSymbol { text, stand_in } => write!(
+                f,
+                "'{text}' writes {stand_in} (symbols as printed, units as `quantity, unit`)"
+            ),
             Self::NotAFigure(why) => write!(f, "not a figure: {why}"),
         }
     }
+}
+
+/// Greek letters spelled out in ASCII, as the figures must not write them, and the letter.
+const GREEK: [(&str, &str); 12] = [
+    ("tau", "τ"),
+    ("omega", "ω"),
+    ("mu", "μ"),
+    ("Lambda", "Λ"),
+    ("lambda", "λ"),
+    ("rho", "ρ"),
+    ("sigma", "σ"),
+    ("theta", "θ"),
+    ("alpha", "α"),
+    ("kappa", "κ"),
+    ("eta", "η"),
+    ("phi", "φ"),
+];
+
+/// The first ASCII stand-in in the figure text `text`, described with what replaces it
+/// (none: `text` writes its symbols and units as printed): a Greek letter spelled out as a
+/// word (`tau_rot`, `mu_d Lambda`), `w_n` or `w_` for ω, `+-` for ±, and a unit in
+/// brackets (`[A]`, `[rad/s]`; the figures write `quantity, unit`).
+pub fn ascii_stand_in(text: &str) -> Option<String> {
+    // Words: runs of ASCII letters (so `tau_rot` has the word `tau`, `C1` the word `C`).
+    let mut words = Vec::new();
+    let mut start = None;
+    for (k, c) in text
+        .char_indices()
+        .chain(std::iter::once((text.len(), ' ')))
+    {
+        match (c.is_ascii_alphabetic(), start) {
+            (true, None) => start = Some(k),
+            (false, Some(s)) => {
+                words.push((s, &text[s..k]));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    for &(at, w) in &words {
+        if let Some((_, greek)) = GREEK.iter().find(|(name, _)| *name == w) {
+            return Some(format!("`{w}` for {greek}"));
+        }
+        if w == "w" && text[at + 1..].starts_with('_') {
+            return Some("`w_` for ω".into());
+        }
+    }
+    if text.contains("+-") || text.contains("-+") {
+        return Some("`+-` for ±".into());
+    }
+    let mut rest = text;
+    while let Some(open) = rest.find('[') {
+        let after = &rest[open + 1..];
+        let Some(close) = after.find(']') else { break };
+        let inside = &after[..close];
+        let unit_like = !inside.is_empty()
+            && inside.chars().count() <= 8
+            && inside.chars().any(char::is_alphabetic)
+            && inside
+                .chars()
+                .all(|c| c.is_alphabetic() || " /%°·^".contains(c));
+        if unit_like {
+            return Some(format!("`[{inside}]` for `, {inside}`"));
+        }
+        rest = &after[close + 1..];
+    }
+    None
 }
 
 /// One element of the SVG: its name, attributes and (for text) its content.
@@ -57,6 +139,8 @@ struct Element {
     name: String,
     attrs: Vec<(String, String)>,
     text: String,
+    /// The smallest `font-size` of its `tspan`s relative to its own (1 without).
+    smallest: f64,
 }
 
 impl Element {
@@ -100,15 +184,63 @@ fn elements(svg: &str) -> Vec<Element> {
             a = &a[value_from + close + 1..];
         }
         let mut text = String::new();
+        let mut smallest = 1.0f64;
         if name == "text"
             && let Some(close) = rest.find("</text>")
         {
-            text = unescape(rest[..close].trim());
+            text = plain_text(rest[..close].trim());
+            for span in rest[..close].split("<tspan").skip(1) {
+                if let Some(pct) = span
+                    .split("font-size=\"")
+                    .nth(1)
+                    .and_then(|v| v.split('"').next())
+                    .and_then(|v| v.strip_suffix('%'))
+                    .and_then(|v| v.parse::<f64>().ok())
+                {
+                    smallest = smallest.min(pct / 100.0);
+                }
+            }
             rest = &rest[close..];
         }
-        out.push(Element { name, attrs, text });
+        out.push(Element {
+            name,
+            attrs,
+            text,
+            smallest,
+        });
     }
     out
+}
+
+/// The text of a `text` element's content `s` as the code wrote it: subscripts
+/// ([`crate::plot::subscripts`]) back after `_`, escapes undone.
+fn plain_text(s: &str) -> String {
+    let mut plain = String::new();
+    let mut tag: Option<String> = None;
+    for c in s.chars() {
+        match (&mut tag, c) {
+            (None, '<') => tag = Some(String::new()),
+            (Some(t), '>') => {
+                if t.starts_with("tspan") && t.contains("baseline-shift=\"sub\"") {
+                    plain.push('_');
+                }
+                tag = None;
+            }
+            (Some(t), c) => t.push(c),
+            (None, c) => plain.push(c),
+        }
+    }
+    unescape(&plain)
+}
+
+/// Every text of the SVG figure `svg`, in order, as the code wrote it (a subscript after
+/// `_`): what a test asserts a figure says.
+pub fn figure_texts(svg: &str) -> Vec<String> {
+    elements(svg)
+        .into_iter()
+        .filter(|e| e.name == "text" && !e.text.is_empty())
+        .map(|e| e.text)
+        .collect()
 }
 
 fn unescape(s: &str) -> String {
@@ -212,9 +344,10 @@ fn points(e: &Element) -> Vec<(f64, f64)> {
 }
 
 /// The problems of the SVG figure `svg` printed `printed_width_in` inches wide: every text
-/// under [`MIN_TEXT_PT`] there, and every text whose box lies on a line or point plotted in
-/// a framed plot area (the unfilled rectangles [`crate::plot`] draws around its plots). An
-/// SVG without a width or plot area is [`Problem::NotAFigure`].
+/// under [`MIN_TEXT_PT`] there, every text whose box lies on a line or point plotted in a
+/// framed plot area (the unfilled rectangles [`crate::plot`] draws around its plots), and
+/// every text with an ASCII stand-in for a symbol or unit ([`ascii_stand_in`]). An SVG
+/// without a width or plot area is [`Problem::NotAFigure`].
 pub fn check_svg(svg: &str, printed_width_in: f64) -> Vec<Problem> {
     let all = elements(svg);
     let Some(width_px) = all
@@ -270,11 +403,18 @@ pub fn check_svg(svg: &str, printed_width_in: f64) -> Vec<Problem> {
         let Some(px) = e.num("font-size") else {
             continue;
         };
-        let pt = px * pt_per_px;
+        // Its smallest part: a subscript is smaller than its text.
+        let pt = px * e.smallest * pt_per_px;
         if pt < MIN_TEXT_PT - 1e-9 {
             problems.push(Problem::SmallText {
                 text: e.text.clone(),
                 pt,
+            });
+        }
+        if let Some(stand_in) = ascii_stand_in(&e.text) {
+            problems.push(Problem::AsciiSymbol {
+                text: e.text.clone(),
+                stand_in,
             });
         }
         let Some(b) = text_box(e, px) else { continue };
@@ -354,6 +494,80 @@ mod tests {
     }
 
     #[test]
+    fn ascii_stand_ins_for_symbols_and_units_are_reported() {
+        for (text, found) in [
+            ("tau_rot [N m]", "`tau` for τ"),
+            ("w_n [rad/s]", "`w_` for ω"),
+            ("cam speed w_n, rad/s", "`w_` for ω"),
+            ("mu_d Lambda", "`mu` for μ"),
+            ("|rho|", "`rho` for ρ"),
+            ("mean, bars +-1 sd", "`+-` for ±"),
+            ("i_in [A]", "`[A]` for `, A`"),
+            ("t [s]", "`[s]` for `, s`"),
+            ("measured - model [mA]", "`[mA]` for `, mA`"),
+        ] {
+            assert_eq!(ascii_stand_in(text).as_deref(), Some(found), "{text}");
+        }
+        // As printed: Unicode symbols, `quantity, unit`, and words that merely contain a
+        // letter's name or brackets that hold no unit.
+        for text in [
+            "τ_rot, N m",
+            "ω_n, rad/s",
+            "μ_d Λ",
+            "|ρ|",
+            "current (Fig. 8): mean, bars ±1 SD over repeats",
+            "Torque-current: |τ_cam| = C1 i_in + C2 (Eq. 15)",
+            "stop after vibration vs tooth strength",
+            "test point (run order)",
+            "range [0, 1]",
+            "paper: held 14.5 s",
+            "fit: 0.1234 x +5, R² 0.99",
+            "motor temperature, °C",
+            "measured − model, mA",
+        ] {
+            assert_eq!(ascii_stand_in(text), None, "{text}");
+        }
+        // In a figure: reported with the stand-in, beside nothing else.
+        let svg = figure(&[(190.0, 170.0, 9.34, "middle", "tau_rot [N m]")]);
+        assert_eq!(
+            check_svg(&svg, 3.5),
+            vec![Problem::AsciiSymbol {
+                text: "tau_rot [N m]".into(),
+                stand_in: "`tau` for τ".into(),
+            }]
+        );
+        let fixed = figure(&[(190.0, 170.0, 9.34, "middle", "τ_rot, N m")]);
+        assert_eq!(check_svg(&fixed, 3.5), vec![]);
+    }
+
+    #[test]
+    fn subscripts_are_read_back_and_checked() {
+        let svg = crate::plot::subscripts(&figure(&[
+            (190.0, 170.0, 10.67, "middle", "τ_rot, N m"),
+            (62.0, 2.0, 10.67, "start", "w_n [rad/s]"),
+        ]));
+        assert!(svg.contains("τ<tspan baseline-shift=\"sub\" font-size=\"88%\">rot</tspan>, N m"));
+        assert_eq!(figure_texts(&svg), ["τ_rot, N m", "w_n [rad/s]"]);
+        // Measured at the subscript's size: 8 pt text keeps 7 pt subscripts, 7 pt does not.
+        let at = |pt: f64| {
+            let px = pt / 72.0 * 96.0;
+            crate::plot::subscripts(&figure(&[(190.0, 170.0, px, "middle", "τ_rot, N m")]))
+        };
+        assert_eq!(check_svg(&at(8.0), 3.5), vec![]);
+        assert!(matches!(
+            check_svg(&at(7.0), 3.5).as_slice(),
+            [Problem::SmallText { pt, .. }] if (pt - 7.0 * 0.88).abs() < 0.01
+        ));
+        assert_eq!(
+            check_svg(&svg, 3.5),
+            vec![Problem::AsciiSymbol {
+                text: "w_n [rad/s]".into(),
+                stand_in: "`w_` for ω".into(),
+            }]
+        );
+    }
+
+    #[test]
     fn an_svg_without_a_plot_area_is_not_a_figure() {
         let svg = "<svg width=\"100\" height=\"100\"></svg>";
         assert!(matches!(
@@ -374,6 +588,7 @@ mod tests {
                 ("transform".into(), "rotate(270, 10, 100)".into()),
             ],
             text: "abcdefghij".into(),
+            smallest: 1.0,
         };
         let b = text_box(&e, 10.0).unwrap();
         // 60 px of text turned upright: 60 px high, 10 px wide, to the anchor's right.

@@ -351,7 +351,7 @@ fn with_width(svg: &str, width: f64) -> String {
 mod tests {
     use super::*;
 
-    const SVG: &str = "<svg width=\"200\" height=\"100\" xmlns=\"http://www.w3.org/2000/svg\"><rect x=\"10\" y=\"10\" width=\"50\" height=\"50\" fill=\"#0072b2\"/><text x=\"80\" y=\"50\" font-family=\"sans-serif\" font-size=\"12\">[N m]</text></svg>";
+    const SVG: &str = "<svg width=\"200\" height=\"100\" xmlns=\"http://www.w3.org/2000/svg\"><rect x=\"10\" y=\"10\" width=\"50\" height=\"50\" fill=\"#0072b2\"/><text x=\"80\" y=\"50\" font-family=\"sans-serif\" font-size=\"12\">τ_rot, N m ± μ_d Λ ω_n</text></svg>";
 
     #[test]
     fn formats_and_widths_are_parsed_with_the_fix_in_the_message() {

@@ -9,8 +9,9 @@
 //! - [`residual_figure`], the residual plots of `rig explain`.
 //!
 //! The style for a paper: figures drawn at the width they print ([`FigureSize`]: a
-//! journal's single or double column) with every text [`TEXT_PT`] there, axis labels with
-//! their units, a panel letter on every panel of a multi-panel figure ((a), (b), ...),
+//! journal's single or double column) with every text [`TEXT_PT`] there, axis labels in one
+//! unit style with symbols as printed ([`axis_label`]: `τ_rot, N m`, subscripts set by
+//! [`subscripts`]), a panel letter on every panel of a multi-panel figure ((a), (b), ...),
 //! legends below the plot area ([`Legend::Below`]) and band names above it, never over the
 //! data, shaded phases ([`Band`]), reference values from the paper drawn as their own
 //! labelled series. [`crate::check`] measures a written SVG against these rules.
@@ -68,6 +69,17 @@ pub fn span(values: impl IntoIterator<Item = f64>, pad: f64, include_zero: bool)
     }
     let pad = ((hi - lo) * pad).max(1e-9 * hi.abs().max(lo.abs()).max(1.0));
     (lo - pad, hi + pad)
+}
+
+/// An axis label in the figures' one unit style, `quantity, unit` as printed: symbols in
+/// Unicode (τ_rot, ω_n, μ_d Λ, ±), subscripts after `_` (set lowered and smaller in the
+/// written figure, [`subscripts`]), and a unitless quantity (a ratio, a count) alone. [`crate::check::ascii_stand_in`] finds the ASCII names this replaces.
+pub fn axis_label(quantity: &str, unit: &str) -> String {
+    if unit.is_empty() {
+        quantity.to_string()
+    } else {
+        format!("{quantity}, {unit}")
+    }
 }
 
 /// How a series is drawn.
@@ -568,7 +580,55 @@ pub fn svg_figure(
         draw(&area, &style).map_err(err)?;
         root.present().map_err(|e| err(e.to_string()))?;
     }
-    crate::write_atomic(path, svg.as_bytes())
+    crate::write_atomic(path, subscripts(&svg).as_bytes())
+}
+
+/// Subscript size, relative to its text: [`TEXT_PT`] text keeps its subscripts at
+/// [`MIN_TEXT_PT`] or more ([`crate::check::check_svg`] measures them).
+const SUBSCRIPT_SIZE: &str = "88%";
+const _: () = assert!(TEXT_PT * 0.88 >= MIN_TEXT_PT);
+
+/// The figure `svg` with every subscript of its texts set as printed: `τ_cam` (a letter,
+/// `_`, letters or digits) becomes `τ` and a lowered, smaller `cam` (an SVG `tspan`, which
+/// resvg and svg2pdf draw as well), so labels are written `τ_cam` everywhere in the code
+/// and print τ with cam below.
+pub fn subscripts(svg: &str) -> String {
+    let mut out = String::with_capacity(svg.len());
+    let mut rest = svg;
+    while let Some(open) = rest.find("<text") {
+        let Some(body) = rest[open..].find('>').map(|k| open + k + 1) else {
+            break;
+        };
+        let Some(close) = rest[body..].find("</text>").map(|k| body + k) else {
+            break;
+        };
+        out.push_str(&rest[..body]);
+        let text = &rest[body..close];
+        let mut prev: Option<char> = None;
+        let mut chars = text.chars().peekable();
+        while let Some(c) = chars.next() {
+            let starts = c == '_'
+                && prev.is_some_and(char::is_alphabetic)
+                && chars.peek().is_some_and(|n| n.is_alphanumeric());
+            if starts {
+                out.push_str(&format!(
+                    "<tspan baseline-shift=\"sub\" font-size=\"{SUBSCRIPT_SIZE}\">"
+                ));
+                while let Some(&n) = chars.peek().filter(|n| n.is_alphanumeric()) {
+                    out.push(n);
+                    chars.next();
+                }
+                out.push_str("</tspan>");
+                prev = None;
+            } else {
+                out.push(c);
+                prev = Some(c);
+            }
+        }
+        rest = &rest[close..];
+    }
+    out.push_str(rest);
+    out
 }
 
 /// Height of `title` over a figure in `style`, px.
@@ -649,7 +709,7 @@ pub struct Panel {
 }
 
 /// Draws `panels` side by side under `title` into the SVG file `path` printed at `size`,
-/// all with the same residual axis of +-`y_max_ma` (points beyond it drawn at its edge).
+/// all with the same residual axis of ±`y_max_ma` (points beyond it drawn at its edge).
 pub fn residual_figure(
     path: &Path,
     size: FigureSize,
@@ -671,7 +731,7 @@ pub fn residual_figure(
                     .collect();
             XyPanel {
                 x_label: p.x_label.clone(),
-                y_label: "measured - model [mA]".into(),
+                y_label: axis_label("measured − model", "mA"),
                 series: vec![
                     Series::line(BLACK, 1, vec![(x0, 0.0), (x1, 0.0)]),
                     Series {
@@ -706,6 +766,23 @@ mod tests {
     use super::*;
 
     #[test]
+    fn subscripts_are_set_lowered_and_smaller() {
+        let sub = |s: &str| format!("<tspan baseline-shift=\"sub\" font-size=\"88%\">{s}</tspan>");
+        let svg = "<svg><text x=\"1\">\n|τ_cam| = C1 i_in + C2, ω_n2 x_ _y a_b_c\n</text><rect id=\"a_b\"/></svg>";
+        assert_eq!(
+            subscripts(svg),
+            format!(
+                "<svg><text x=\"1\">\n|τ{}| = C1 i{} + C2, ω{} x_ _y a{}{}\n</text><rect id=\"a_b\"/></svg>",
+                sub("cam"),
+                sub("in"),
+                sub("n2"),
+                sub("b"),
+                "_c"
+            )
+        );
+    }
+
+    #[test]
     fn span_pads_and_includes_zero() {
         assert_eq!(span([], 0.1, false), (0.0, 1.0));
         let (lo, hi) = span([1.0, 3.0, f64::NAN], 0.1, false);
@@ -732,8 +809,8 @@ mod tests {
             .collect::<Vec<_>>();
         let panel = |caption: &str, f: &dyn Fn(f64) -> f64| XyPanel {
             caption: Some(caption.into()),
-            x_label: "t, s".into(),
-            y_label: "i_in, A".into(),
+            x_label: axis_label("t", "s"),
+            y_label: axis_label("i_in", "A"),
             series: vec![
                 Series::line(PALETTE[0], 2, t.iter().map(|&x| (x, f(x))).collect())
                     .labelled("measured current"),
@@ -821,7 +898,7 @@ mod tests {
         let path = dir.path().join("fig.svg");
         let panel = XyPanel {
             caption: Some("current".into()),
-            x_label: "tau_rot, N m".into(),
+            x_label: axis_label("τ_rot", "N m"),
             y_label: "i_in, A".into(),
             series: vec![
                 Series::points(PALETTE[0], 3, vec![(0.368, 2.3), (3.68, 2.9)]).labelled("3.6 V"),
@@ -864,7 +941,7 @@ mod tests {
         assert!(
             std::fs::read_to_string(&path)
                 .unwrap()
-                .contains("measured - model [mA]")
+                .contains("measured − model, mA")
         );
     }
 }

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use reporting::figure::FigureSize;
 use reporting::plot::{
-    Legend, PALETTE, Series, Style, XyPanel, draw_panel, span, svg_figure, title_height,
+    Legend, PALETTE, Series, Style, XyPanel, axis_label, draw_panel, span, svg_figure, title_height,
 };
 
 use super::fit::LineFit;
@@ -15,9 +15,9 @@ use crate::RigError;
 pub struct FitPlot<'a> {
     /// Title above the plot.
     pub title: &'a str,
-    /// x axis label.
+    /// x axis label ([`axis_label`]: `quantity, unit`).
     pub x_label: &'a str,
-    /// y axis label.
+    /// y axis label ([`axis_label`]); the residuals are labelled in its unit.
     pub y_label: &'a str,
     /// Measured points.
     pub points: &'a [(f64, f64)],
@@ -85,7 +85,10 @@ pub fn draw(path: &Path, plot: &FitPlot<'_>, size: FigureSize) -> Result<(), Rig
     let residuals: Vec<(f64, f64)> = plot.points.iter().map(|&(x, y)| (x, y - f.at(x))).collect();
     let residual_panel = XyPanel {
         x_label: plot.x_label.into(),
-        y_label: "residual".into(),
+        y_label: axis_label(
+            "residual",
+            plot.y_label.rsplit_once(", ").map_or("", |(_, unit)| unit),
+        ),
         series: vec![
             Series::line(PALETTE[5], 1, vec![(x0, 0.0), (x1, 0.0)]),
             Series::points(PALETTE[1], 3, residuals),

@@ -363,13 +363,13 @@ pub fn render_table(r: &SearchResult) -> String {
 }
 
 /// Draws the front into the SVG file `path` printed at `size`: required cam torque against
-/// |rho|, and mu_d Lambda against the strength margin.
+/// |ρ|, and μ_d Λ against the strength margin.
 pub fn plot(
     path: &std::path::Path,
     r: &SearchResult,
     size: reporting::figure::FigureSize,
 ) -> Result<(), crate::RigError> {
-    use reporting::plot::{PALETTE, Series, XyPanel, columns_figure};
+    use reporting::plot::{PALETTE, Series, XyPanel, axis_label, columns_figure};
     let cam: Vec<(f64, f64)> = r
         .designs
         .iter()
@@ -383,15 +383,15 @@ pub fn plot(
     let panels = [
         XyPanel {
             caption: Some("required cam torque (Eq. 10)".into()),
-            x_label: "|rho|".into(),
-            y_label: "τ_cam, N mm".into(),
+            x_label: axis_label("|ρ|", ""),
+            y_label: axis_label("τ_cam", "N mm"),
             series: vec![Series::points(PALETTE[0], 4, cam)],
             ..XyPanel::default()
         },
         XyPanel {
             caption: Some("stop after vibration vs tooth strength".into()),
-            x_label: "strength margin".into(),
-            y_label: "mu_d Lambda".into(),
+            x_label: axis_label("strength margin", ""),
+            y_label: axis_label("μ_d Λ", ""),
             series: vec![Series::points(PALETTE[1], 4, stop)],
             ..XyPanel::default()
         },

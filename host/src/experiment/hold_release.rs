@@ -313,7 +313,7 @@ pub fn write_svg(
     let panel =
         |caption: &str, y: &str, color: usize, f: &dyn Fn(&Sample) -> Option<f64>| XyPanel {
             caption: Some(caption.into()),
-            x_label: "t [s]".into(),
+            x_label: plot::axis_label("t", "s"),
             y_label: y.into(),
             series: vec![Series::line(
                 PALETTE[color % PALETTE.len()],
@@ -328,9 +328,12 @@ pub fn write_svg(
             fine_grid: true,
             ..XyPanel::default()
         };
-    let mut angle = panel("output angle (Fig. 5)", "output angle [rad]", 0, &|s| {
-        s.output_angle_rad
-    });
+    let mut angle = panel(
+        "output angle (Fig. 5)",
+        &plot::axis_label("output angle", "rad"),
+        0,
+        &|s| s.output_angle_rad,
+    );
     // The paper's number: the load held 14.5 s without vibration (Fig. 5).
     let paper_hold = model::paper::FIG5_HOLD_S;
     let (y0, y1) = angle.y_span();
@@ -350,14 +353,25 @@ pub fn write_svg(
     }
     let panels = [
         angle,
-        panel("cam speed", "w_n [rad/s]", 1, &|s| Some(s.cam_speed_rad_s)),
-        panel("motor current", "i_in [A]", 2, &|s| Some(s.current_a)),
+        panel("cam speed", &plot::axis_label("ω_n", "rad/s"), 1, &|s| {
+            Some(s.cam_speed_rad_s)
+        }),
+        panel("motor current", &plot::axis_label("i_in", "A"), 2, &|s| {
+            Some(s.current_a)
+        }),
     ];
+    // The title names the phases drawn (a run cut short has no release or after).
+    let phases: Vec<&str> = bands.iter().map(|b| b.label.as_str()).collect();
+    let title = if phases.is_empty() {
+        "Fig. 5: time history".to_string()
+    } else {
+        format!("Fig. 5: {}", phases.join(", "))
+    };
     Ok(plot::columns_figure(
         path,
         size,
         (470, 360),
-        Some("Fig. 5: hold, release, after"),
+        Some(&title),
         &panels,
     )?)
 }
