@@ -112,7 +112,7 @@ pub const KEYS: &[KeySpec] = &[
         "-",
         "four coefficients from -1 to 2 giving both meshes one working centre distance (within 0.001 module)",
         "[0.0, 0.0, 0.0, 0.0]",
-        None,
+        Some("profile_shift"),
         "profile shift coefficients x1..x4 (ISO 21771; `rig design --x`, `rig design search --write`)",
     ),
     KeySpec {
