@@ -225,8 +225,6 @@ fn from_calibration_file(
         let line = line_of(text, value.span().start);
         let typed = if spec.key == "z" {
             value.get_ref().clone().try_into::<[u32; 4]>().map(|_| ())
-        } else if spec.key == "profile_shift" {
-            value.get_ref().clone().try_into::<[f64; 4]>().map(|_| ())
         } else {
             value.get_ref().clone().try_into::<f64>().map(|_| ())
         };

@@ -38,7 +38,7 @@ fn empty_file_is_the_paper_rig() {
     assert_eq!(m.mu, model::MU_S_PAPER);
     let loaded = RigFile::parse_detailed("", "rig.toml").unwrap();
     assert!(loaded.present.is_empty());
-    assert_eq!(loaded.defaulted().len(), 17);
+    assert_eq!(loaded.defaulted().len(), 16);
 }
 
 #[test]
@@ -225,9 +225,7 @@ fn the_older_calibration_file_loads() {
     assert_eq!(loaded.format, FileFormat::CalibrationFile);
     assert_eq!(loaded.rig, RigFile::paper());
     assert_eq!(loaded.set_on_device().len(), 16);
-    // Only the profile shifts, which the older file never had (standard gears).
-    let defaulted: Vec<_> = loaded.defaulted().iter().map(|k| k.key).collect();
-    assert_eq!(defaulted, ["profile_shift"]);
+    assert!(loaded.defaulted().is_empty());
     assert_eq!(
         loaded.rig.to_wire().unwrap(),
         protocol::RigParameters::paper()
@@ -309,7 +307,7 @@ fn the_older_rig_files_load() {
     assert_eq!(r.model.as_ref().unwrap().effects[0].name, "thermal-drift");
     // The limits it did not have are the paper's.
     assert_eq!(r.to_wire().unwrap(), protocol::RigParameters::paper());
-    assert_eq!(loaded.defaulted().len(), 4);
+    assert_eq!(loaded.defaulted().len(), 3);
 }
 
 #[test]
