@@ -207,7 +207,11 @@ impl<F: NorFlash> CalibrationStore<F> {
         if !header_ok || crc32(&record[..body]) != crc {
             return Slot::Corrupt;
         }
-        let calibration = decode(&record[12..body]);
+        // Schema 1's payload is schema 2's without the shifts at its end: zero bytes there
+        // read as 0.0, standard gears.
+        let mut payload = [0u8; PAYLOAD_LEN];
+        payload[..layout.payload_len].copy_from_slice(&record[12..body]);
+        let calibration = decode(&payload);
         if calibration.validate().is_err() {
             return Slot::Corrupt;
         }
@@ -324,8 +328,8 @@ fn encode(c: &RigParameters, out: &mut [u8]) {
     }
 }
 
-/// The calibration in `b`, a payload of either schema: schema 1's (68 bytes) has no shifts.
-fn decode(b: &[u8]) -> RigParameters {
+/// The calibration in `b` (a schema 1 payload reads with its missing shifts as zeros).
+fn decode(b: &[u8; PAYLOAD_LEN]) -> RigParameters {
     let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
     let z = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
     RigParameters {
@@ -345,11 +349,7 @@ fn decode(b: &[u8]) -> RigParameters {
         max_release_load_nm: f(56),
         max_current_a: f(60),
         max_freq_hz: f(64),
-        profile_shift: if b.len() >= 84 {
-            [f(68), f(72), f(76), f(80)]
-        } else {
-            [0.0; 4]
-        },
+        profile_shift: [f(68), f(72), f(76), f(80)],
     }
 }
 
