@@ -267,7 +267,11 @@ fn a_shifted_design_with_unequal_tooth_sums_runs_on_the_virtual_rig() {
     .unwrap();
     let run = json(&["sim", "fig5", "--model", file.to_str().unwrap(), "--json"]);
     assert_eq!(run["z"], serde_json::json!([49, 51, 51, 50]), "{run}");
-    assert_eq!(run["x"], serde_json::json!([0.2, 0.3, 0.0, -0.017]), "{run}");
+    assert_eq!(
+        run["x"],
+        serde_json::json!([0.2, 0.3, 0.0, -0.017]),
+        "{run}"
+    );
     assert!(run["release_to_motion_s"].is_number(), "{run}");
 }
 

@@ -531,7 +531,10 @@ mod tests {
             ([12, 14, 12, 15], [0.8, 0.9, 0.5]),
         ] {
             for (module_mm, alpha_deg) in [(1.0f32, 20.0f32), (0.5, 14.5), (2.0, 25.0)] {
-                let (m, alpha) = (f64::from(module_mm) * 1e-3, f64::from(alpha_deg).to_radians());
+                let (m, alpha) = (
+                    f64::from(module_mm) * 1e-3,
+                    f64::from(alpha_deg).to_radians(),
+                );
                 let zu = z.map(u32::from);
                 let [x1, x2, x3] = x123.map(f64::from);
                 let mesh = model::involute::Mesh {
@@ -602,7 +605,9 @@ mod tests {
         assert_eq!(d.keeps_moving, f64::from(p.mu_d) * g.big_lambda() < 1.0);
         assert_eq!(d.holds_at_rest, f64::from(p.mu_s) * g.big_lambda() > 1.0);
         // Lambda for n = 1 with shifts is not the standard (49, 51, 50, 50) gear's.
-        let standard = model::GearSet::paper([49, 51, 50, 50]).unwrap().big_lambda();
+        let standard = model::GearSet::paper([49, 51, 50, 50])
+            .unwrap()
+            .big_lambda();
         assert!((g.big_lambda() - standard).abs() > 1e-3 * standard);
         // The same tooth counts without the shifts are refused naming the tooth counts.
         let unshifted = RigParameters {

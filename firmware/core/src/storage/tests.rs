@@ -353,10 +353,13 @@ fn a_schema_1_record_reads_as_standard_gears_and_the_next_save_is_schema_2() {
     assert_eq!(flash.data[PAGE + 4..PAGE + 6], STORAGE_SCHEMA.to_le_bytes());
     assert_eq!(flash.data[PAGE + 8], 8);
     assert_eq!(load(&flash).calibration, shifted);
-    assert_eq!(CalibrationStore::new(flash).read_slot(0), Slot::Valid {
-        seq: 7,
-        calibration: old
-    });
+    assert_eq!(
+        CalibrationStore::new(flash).read_slot(0),
+        Slot::Valid {
+            seq: 7,
+            calibration: old
+        }
+    );
 }
 
 #[test]
