@@ -29,24 +29,8 @@ impl Derived {
     /// `LOAD_LIMIT` at the cap; a new record asking for more is refused by
     /// [`check_board_caps`].
     pub(crate) fn new(p: &RigParameters, config: &CoreConfig) -> Result<Self, ParameterRejection> {
-        p.validate()?;
-        check_gear(p)?;
+        Self::check(p)?;
         let c = [p.c1_nmm_per_a, p.c2_nmm, p.c3_nmm_s_per_rad, p.c4_nmm].map(|c| c * 1e-3);
-        // `model::Calibration::is_plausible`, in f32 (the tests hold the two together):
-        // `validate` has checked the signs but allows a zero no-load current, which the
-        // model's vibrator cannot have.
-        let constants = [c[0], c[1], c[2], c[3], p.c5_a_s_per_rad, p.c6_a];
-        if !(constants.iter().all(|v| v.is_finite())
-            && c[0] > 0.0
-            && c[2] >= 0.0
-            && p.c5_a_s_per_rad >= 0.0
-            && p.c6_a > 0.0)
-        {
-            return Err(ParameterRejection::new(
-                ParameterField::C6,
-                RejectReason::OutOfRange,
-            ));
-        }
         let factors = GearFactors::new(
             p.z,
             p.profile_shift,
@@ -78,6 +62,30 @@ impl Derived {
             keeps_moving: p.mu_d * big_lambda < 1.0,
             holds_at_rest: p.mu_s * big_lambda > 1.0,
         })
+    }
+
+    /// [`Derived::new`]'s checks alone (`SetParameters` checks under the core lock; the
+    /// factors are computed once, when the stored record becomes active).
+    pub(crate) fn check(p: &RigParameters) -> Result<(), ParameterRejection> {
+        p.validate()?;
+        check_gear(p)?;
+        // `model::Calibration::is_plausible`, in f32 (the tests hold the two together):
+        // `validate` has checked the signs but allows a zero no-load current, which the
+        // model's vibrator cannot have.
+        let c = [p.c1_nmm_per_a, p.c2_nmm, p.c3_nmm_s_per_rad, p.c4_nmm].map(|c| c * 1e-3);
+        let constants = [c[0], c[1], c[2], c[3], p.c5_a_s_per_rad, p.c6_a];
+        if !(constants.iter().all(|v| v.is_finite())
+            && c[0] > 0.0
+            && c[2] >= 0.0
+            && p.c5_a_s_per_rad >= 0.0
+            && p.c6_a > 0.0)
+        {
+            return Err(ParameterRejection::new(
+                ParameterField::C6,
+                RejectReason::OutOfRange,
+            ));
+        }
+        Ok(())
     }
 }
 
