@@ -29,13 +29,13 @@ impl Derived {
     /// `LOAD_LIMIT` at the cap; a new record asking for more is refused by
     /// [`check_board_caps`].
     pub(crate) fn new(p: &RigParameters, config: &CoreConfig) -> Result<Self, ParameterRejection> {
-        Self::check(p)?;
+        let meshes = Self::checked_meshes(p)?;
         let c = [p.c1_nmm_per_a, p.c2_nmm, p.c3_nmm_s_per_rad, p.c4_nmm].map(|c| c * 1e-3);
-        let factors = GearFactors::new(
+        let factors = GearFactors::with_meshes(
             p.z,
-            p.profile_shift,
             p.module_mm * 1e-3,
             p.pressure_angle_deg.to_radians(),
+            meshes.as_ref(),
         );
         let e = p.eccentricity_mm * 1e-3;
         // Eq. (10): 2/pi mu_s tau_rot (axial force per torque) e + M w^2 e^2 / pi.
@@ -67,8 +67,14 @@ impl Derived {
     /// [`Derived::new`]'s checks alone (`SetParameters` checks under the core lock; the
     /// factors are computed once, when the stored record becomes active).
     pub(crate) fn check(p: &RigParameters) -> Result<(), ParameterRejection> {
+        Self::checked_meshes(p).map(|_| ())
+    }
+
+    /// [`Derived::check`], keeping a shifted gear's two meshes for [`Derived::new`] (`None`
+    /// for standard gears), so they are solved once.
+    fn checked_meshes(p: &RigParameters) -> Result<Option<[ShiftedMesh; 2]>, ParameterRejection> {
         p.validate()?;
-        check_gear(p)?;
+        let meshes = check_gear(p)?;
         // `model::Calibration::is_plausible`, in f32 (the tests hold the two together):
         // `validate` has checked the signs but allows a zero no-load current, which the
         // model's vibrator cannot have.
@@ -85,7 +91,7 @@ impl Derived {
                 RejectReason::OutOfRange,
             ));
         }
-        Ok(())
+        Ok(meshes)
     }
 }
 
@@ -106,16 +112,27 @@ pub(crate) struct GearFactors {
 impl GearFactors {
     /// For tooth counts `z`, profile shifts `x`, module `module` (m) and pressure angle
     /// `alpha` (rad, within 0..pi/4), of a gear set [`check_gear`] accepted.
+    #[cfg(test)]
     pub(crate) fn new(z: [u16; 4], x: [f32; 4], module: f32, alpha: f32) -> Self {
+        let meshes = (x != [0.0; 4]).then(|| shifted_meshes(z, x, alpha));
+        Self::with_meshes(z, module, alpha, meshes.as_ref())
+    }
+
+    /// For tooth counts `z`, module `module` (m), pressure angle `alpha` (rad) and, for
+    /// shifted gears, the two meshes ([`shifted_meshes`]).
+    fn with_meshes(
+        z: [u16; 4],
+        module: f32,
+        alpha: f32,
+        meshes: Option<&[ShiftedMesh; 2]>,
+    ) -> Self {
         let (c, s) = cos_sin(alpha);
         let t = s / c;
         let zf = z.map(f32::from);
         let axial_force_per_torque = 2.0 * (1.0 + zf[2] / zf[1]) / (module * zf[3] * c);
-        if x != [0.0; 4] {
-            let m12 = ShiftedMesh::new([zf[0], zf[1]], [x[0], x[1]], alpha, c, t);
-            let m34 = ShiftedMesh::new([zf[2], zf[3]], [x[2], x[3]], alpha, c, t);
+        if let Some([m12, m34]) = meshes {
             return Self {
-                big_lambda: shifted_lambda(zf, c, &m12, &m34),
+                big_lambda: shifted_lambda(zf, c, m12, m34),
                 axial_force_per_torque,
             };
         }
@@ -187,6 +204,16 @@ impl ShiftedMesh {
     }
 }
 
+/// The G1-G2 and G3-G4 meshes of tooth counts `z` and shifts `x` at pressure angle `alpha`.
+fn shifted_meshes(z: [u16; 4], x: [f32; 4], alpha: f32) -> [ShiftedMesh; 2] {
+    let (c, s) = cos_sin(alpha);
+    let (t, zf) = (s / c, z.map(f32::from));
+    [
+        ShiftedMesh::new([zf[0], zf[1]], [x[0], x[1]], alpha, c, t),
+        ShiftedMesh::new([zf[2], zf[3]], [x[2], x[3]], alpha, c, t),
+    ]
+}
+
 /// `model::gear::lambdas_of_meshes` in f32: the smaller of the static balance's
 /// pi cos alpha (h12 / cos alpha_w12 + h34 / cos alpha_w34) / (2 |R'_2 - R'_3|) (lengths in
 /// modules) and Willis' pi (h12 (1/Z1 + 1/Z2) + h34 (1/Z3 + 1/Z4)) / (1 - min(u, 1/u)).
@@ -254,14 +281,31 @@ fn sqrtf(x: f32) -> f32 {
 /// below 1e-13 up to pi/4 and 4e-11 at 1.5, far under f32's rounding): no range reduction,
 /// no f64.
 fn cos_sin(x: f32) -> (f32, f32) {
+    // Horner from the highest term: cos = 1 - x^2/2! (1 - x^2/(3*4) (1 - ...)), with the
+    // factors' reciprocals (folded at compile time: no division on the target).
+    const COS: [f32; 7] = [
+        1.0 / 2.0,
+        1.0 / 12.0,
+        1.0 / 30.0,
+        1.0 / 56.0,
+        1.0 / 90.0,
+        1.0 / 132.0,
+        1.0 / 182.0,
+    ];
+    const SIN: [f32; 7] = [
+        1.0 / 6.0,
+        1.0 / 20.0,
+        1.0 / 42.0,
+        1.0 / 72.0,
+        1.0 / 110.0,
+        1.0 / 156.0,
+        1.0 / 210.0,
+    ];
     let x2 = x * x;
     let (mut c, mut s) = (1.0f32, 1.0f32);
-    // Horner from the highest term: cos = 1 - x^2/2! (1 - x^2/(3*4) (1 - ...)).
-    for k in (1..=7).rev() {
-        let kc = (2 * k - 1) as f32 * (2 * k) as f32;
-        let ks = (2 * k) as f32 * (2 * k + 1) as f32;
-        c = 1.0 - x2 / kc * c;
-        s = 1.0 - x2 / ks * s;
+    for k in (0..7).rev() {
+        c = 1.0 - x2 * COS[k] * c;
+        s = 1.0 - x2 * SIN[k] * s;
     }
     (c, x * s)
 }
@@ -270,7 +314,7 @@ fn cos_sin(x: f32) -> (f32, f32) {
 /// the tests hold the two together), as the record field they concern: standard gears need
 /// Z1 + Z2 = Z3 + Z4; shifted ones the same working centre distance for both meshes
 /// (within [`model::gear::CENTRE_DISTANCE_TOLERANCE_MODULES`]).
-fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
+fn check_gear(p: &RigParameters) -> Result<Option<[ShiftedMesh; 2]>, ParameterRejection> {
     use ParameterField::{Module, PressureAngle, ProfileShift, Z};
     let z = p.z.map(u32::from);
     let alpha = p.pressure_angle_deg.to_radians();
@@ -288,16 +332,13 @@ fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
     } else if !(alpha > 0.0 && alpha < PI / 4.0) {
         (PressureAngle, RejectReason::OutOfRange)
     } else if standard {
-        return Ok(());
+        return Ok(None);
     } else {
-        let (c, s) = cos_sin(alpha);
-        let zf = p.z.map(f32::from);
-        let m12 = ShiftedMesh::new([zf[0], zf[1]], [x[0], x[1]], alpha, c, s / c);
-        let m34 = ShiftedMesh::new([zf[2], zf[3]], [x[2], x[3]], alpha, c, s / c);
-        let mismatch = (m12.centre_distance - m34.centre_distance).abs();
+        let meshes = shifted_meshes(p.z, x, alpha);
+        let mismatch = (meshes[0].centre_distance - meshes[1].centre_distance).abs();
         // NaN (a mesh without a working pressure angle) fails the comparison too.
         if mismatch <= CENTRE_DISTANCE_TOLERANCE {
-            return Ok(());
+            return Ok(Some(meshes));
         }
         (ProfileShift, RejectReason::Inconsistent)
     };
