@@ -29,14 +29,12 @@ impl Derived {
     /// `LOAD_LIMIT` at the cap; a new record asking for more is refused by
     /// [`check_board_caps`].
     pub(crate) fn new(p: &RigParameters, config: &CoreConfig) -> Result<Self, ParameterRejection> {
-        let meshes = Self::checked_meshes(p)?;
+        Self::check(p)?;
+        let alpha = p.pressure_angle_deg.to_radians();
+        let x = p.profile_shift;
+        let meshes = (x != [0.0; 4]).then(|| shifted_meshes(p.z, x, alpha));
         let c = [p.c1_nmm_per_a, p.c2_nmm, p.c3_nmm_s_per_rad, p.c4_nmm].map(|c| c * 1e-3);
-        let factors = GearFactors::with_meshes(
-            p.z,
-            p.module_mm * 1e-3,
-            p.pressure_angle_deg.to_radians(),
-            meshes.as_ref(),
-        );
+        let factors = GearFactors::with_meshes(p.z, p.module_mm * 1e-3, alpha, meshes.as_ref());
         let e = p.eccentricity_mm * 1e-3;
         // Eq. (10): 2/pi mu_s tau_rot (axial force per torque) e + M w^2 e^2 / pi.
         let per_load = 2.0 / PI * p.mu_s * factors.axial_force_per_torque * e;
@@ -66,15 +64,10 @@ impl Derived {
 
     /// [`Derived::new`]'s checks alone (`SetParameters` checks under the core lock; the
     /// factors are computed once, when the stored record becomes active).
+    /// A shifted gear's check solves only the two working centre distances.
     pub(crate) fn check(p: &RigParameters) -> Result<(), ParameterRejection> {
-        Self::checked_meshes(p).map(|_| ())
-    }
-
-    /// [`Derived::check`], keeping a shifted gear's two meshes for [`Derived::new`] (`None`
-    /// for standard gears), so they are solved once.
-    fn checked_meshes(p: &RigParameters) -> Result<Option<[ShiftedMesh; 2]>, ParameterRejection> {
         p.validate()?;
-        let meshes = check_gear(p)?;
+        check_gear(p)?;
         // `model::Calibration::is_plausible`, in f32 (the tests hold the two together):
         // `validate` has checked the signs but allows a zero no-load current, which the
         // model's vibrator cannot have.
@@ -91,7 +84,7 @@ impl Derived {
                 RejectReason::OutOfRange,
             ));
         }
-        Ok(meshes)
+        Ok(())
     }
 }
 
@@ -173,12 +166,9 @@ impl ShiftedMesh {
     /// (cosine `c`, tangent `t`): its working pressure angle and centre distance (what the
     /// check needs; the contact ratios follow on demand).
     fn new(z: [f32; 2], x: [f32; 2], alpha: f32, c: f32, t: f32) -> Self {
-        let z_sum = z[0] + z[1];
-        // ISO 21771 Eq. 52: inv alpha_w = 2 tan alpha (x1 + x2) / (z1 + z2) + inv alpha.
-        let (cos_w, sin_w) = inv_inverse_cos_sin(2.0 * t * (x[0] + x[1]) / z_sum + (t - alpha));
+        let (centre_distance, cos_w, sin_w) = working_centre_distance(z, x, alpha, c, t);
         let tan_w = sin_w / cos_w;
-        let reference = z_sum / 2.0;
-        let centre_distance = reference * c / cos_w;
+        let reference = (z[0] + z[1]) / 2.0;
         // Tip shortening k = x1 + x2 - y (never a lengthening), y = a_w - a in modules.
         let k = (x[0] + x[1] - (centre_distance - reference)).max(0.0);
         Self {
@@ -211,6 +201,22 @@ impl ShiftedMesh {
         );
         1.0 - a - b + a * a + b * b
     }
+}
+
+/// The working centre distance (modules) of the mesh of tooth counts `z` and shifts `x` at
+/// reference pressure angle `alpha` (cosine `c`, tangent `t`), with the cosine and sine of
+/// its working pressure angle: ISO 21771 Eq. 52, inv alpha_w = 2 tan alpha (x1 + x2) /
+/// (z1 + z2) + inv alpha, and a_w = a cos alpha / cos alpha_w.
+fn working_centre_distance(
+    z: [f32; 2],
+    x: [f32; 2],
+    alpha: f32,
+    c: f32,
+    t: f32,
+) -> (f32, f32, f32) {
+    let z_sum = z[0] + z[1];
+    let (cos_w, sin_w) = inv_inverse_cos_sin(2.0 * t * (x[0] + x[1]) / z_sum + (t - alpha));
+    (z_sum / 2.0 * c / cos_w, cos_w, sin_w)
 }
 
 /// The G1-G2 and G3-G4 meshes of tooth counts `z` and shifts `x` at pressure angle `alpha`.
@@ -268,9 +274,9 @@ fn inv_inverse_cos_sin(v: f32) -> (f32, f32) {
 /// Cube root of `x` > 0 by Newton's iteration from the exponent-thirding first guess (as
 /// [`sqrtf`]); only the start of [`inv_inverse_cos_sin`], so a few ulps do not matter.
 fn cbrtf(x: f32) -> f32 {
-    // The first guess is within 6 %; each step squares the error: 3 reach 1e-5.
+    // The first guess is within 6 %; each step squares the error: 2 reach 2e-5 (a start).
     let mut y = f32::from_bits(x.to_bits() / 3 + 0x2A51_4067);
-    for _ in 0..3 {
+    for _ in 0..2 {
         y = (2.0 * y + x / (y * y)) * (1.0 / 3.0);
     }
     y
@@ -293,8 +299,8 @@ fn sqrtf(x: f32) -> f32 {
 }
 
 /// cos and sin of `x` in 0..=1.5 by their Taylor series to x^14 / x^15 (truncation error
-/// below 1e-13 up to pi/4 and 4e-11 at 1.5, far under f32's rounding): no range reduction,
-/// no f64.
+/// 4e-11 at 1.5, far under f32's rounding; to x^8 / x^9 below 0.8 rad): no range
+/// reduction, no f64.
 fn cos_sin(x: f32) -> (f32, f32) {
     // Horner from the highest term: cos = 1 - x^2/2! (1 - x^2/(3*4) (1 - ...)), with the
     // factors' reciprocals (folded at compile time: no division on the target).
@@ -318,7 +324,9 @@ fn cos_sin(x: f32) -> (f32, f32) {
     ];
     let x2 = x * x;
     let (mut c, mut s) = (1.0f32, 1.0f32);
-    for k in (0..7).rev() {
+    // Below 0.8 rad five terms each leave under 3e-8 (x^10 / 10!): half f32's rounding.
+    let terms = if x2 < 0.64 { 5 } else { 7 };
+    for k in (0..terms).rev() {
         c = 1.0 - x2 * COS[k] * c;
         s = 1.0 - x2 * SIN[k] * s;
     }
@@ -329,7 +337,7 @@ fn cos_sin(x: f32) -> (f32, f32) {
 /// the tests hold the two together), as the record field they concern: standard gears need
 /// Z1 + Z2 = Z3 + Z4; shifted ones the same working centre distance for both meshes
 /// (within [`model::gear::CENTRE_DISTANCE_TOLERANCE_MODULES`]).
-fn check_gear(p: &RigParameters) -> Result<Option<[ShiftedMesh; 2]>, ParameterRejection> {
+fn check_gear(p: &RigParameters) -> Result<(), ParameterRejection> {
     use ParameterField::{Module, PressureAngle, ProfileShift, Z};
     let z = p.z.map(u32::from);
     let alpha = p.pressure_angle_deg.to_radians();
@@ -347,13 +355,15 @@ fn check_gear(p: &RigParameters) -> Result<Option<[ShiftedMesh; 2]>, ParameterRe
     } else if !(alpha > 0.0 && alpha < PI / 4.0) {
         (PressureAngle, RejectReason::OutOfRange)
     } else if standard {
-        return Ok(None);
+        return Ok(());
     } else {
-        let meshes = shifted_meshes(p.z, x, alpha);
-        let mismatch = (meshes[0].centre_distance - meshes[1].centre_distance).abs();
+        let (c, s) = cos_sin(alpha);
+        let (t, zf) = (s / c, p.z.map(f32::from));
+        let a12 = working_centre_distance([zf[0], zf[1]], [x[0], x[1]], alpha, c, t).0;
+        let a34 = working_centre_distance([zf[2], zf[3]], [x[2], x[3]], alpha, c, t).0;
         // NaN (a mesh without a working pressure angle) fails the comparison too.
-        if mismatch <= CENTRE_DISTANCE_TOLERANCE {
-            return Ok(Some(meshes));
+        if (a12 - a34).abs() <= CENTRE_DISTANCE_TOLERANCE {
+            return Ok(());
         }
         (ProfileShift, RejectReason::Inconsistent)
     };
