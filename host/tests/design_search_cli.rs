@@ -258,9 +258,9 @@ fn a_designed_gear_stops_on_the_virtual_rig_and_the_paper_s_keeps_falling() {
 }
 
 #[test]
-fn a_design_the_firmware_cannot_store_is_refused_with_the_reason() {
-    // Z1 + Z2 = 100, Z3 + Z4 = 101: valid geometry (one working centre distance), but the
-    // calibration record carries no shift and the firmware refuses unequal sums.
+fn a_shifted_design_with_unequal_tooth_sums_runs_on_the_virtual_rig() {
+    // Z1 + Z2 = 100, Z3 + Z4 = 101: one working centre distance through the shifts, which
+    // the stored record carries (protocol v7), so the firmware accepts it and releases.
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("unequal.toml");
     std::fs::write(
@@ -268,16 +268,70 @@ fn a_design_the_firmware_cannot_store_is_refused_with_the_reason() {
         "[gear]\nz = [49, 51, 51, 50]\nprofile_shift = [0.2, 0.3, 0.0, -0.017]\n",
     )
     .unwrap();
-    let out = rig()
-        .args(["sim", "fig5", "--model", file.to_str().unwrap()])
-        .assert()
-        .failure()
-        .get_output()
-        .stderr
-        .clone();
-    let err = String::from_utf8_lossy(&out);
-    assert!(
-        err.contains("Z1 + Z2 = 100") && err.contains("--max-sum-difference 0"),
-        "{err}"
+    let run = json(&["sim", "fig5", "--model", file.to_str().unwrap(), "--json"]);
+    assert_eq!(run["z"], serde_json::json!([49, 51, 51, 50]), "{run}");
+    assert_eq!(
+        run["x"],
+        serde_json::json!([0.2, 0.3, 0.0, -0.017]),
+        "{run}"
     );
+    assert!(run["release_to_motion_s"].is_number(), "{run}");
+}
+
+#[test]
+fn every_design_the_default_search_writes_runs_on_the_virtual_rig() {
+    // `rig design search --write` with its default options, then `rig sim fig5 --model`
+    // on each file: every one is stored by the virtual rig's firmware (unequal tooth sums
+    // included), held without vibration, released by it, and drawn with the file's gear.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("designs");
+    rig()
+        .args(["design", "search", "--json", "--write"])
+        .arg(&out)
+        .assert()
+        .success();
+    let mut files: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 10, "{files:?}");
+    let mut unequal_sums = 0;
+    for file in &files {
+        let text = std::fs::read_to_string(file).unwrap();
+        let gear: toml::Table = toml::from_str::<toml::Table>(&text).unwrap()["gear"]
+            .as_table()
+            .unwrap()
+            .clone();
+        let z: Vec<i64> = gear["z"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_integer().unwrap())
+            .collect();
+        unequal_sums += usize::from(z[0] + z[1] != z[2] + z[3]);
+        let run = json(&["sim", "fig5", "--model", file.to_str().unwrap(), "--json"]);
+        let name = file.display();
+        assert_eq!(run["z"], serde_json::json!(z), "{name}: {run}");
+        if let Some(x) = gear.get("profile_shift") {
+            let want: Vec<f64> = x
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_float().unwrap())
+                .collect();
+            assert_eq!(run["x"], serde_json::json!(want), "{name}: {run}");
+        }
+        assert_eq!(
+            run["held_without_vibration"],
+            Value::Bool(true),
+            "{name}: {run}"
+        );
+        assert!(run["release_to_motion_s"].is_number(), "{name}: {run}");
+        assert!(f(&run["mu_d_lambda"]) > 1.0, "{name}: {run}");
+    }
+    // The search closes tooth-sum differences by shift: some designs need the shifts on
+    // the wire (the ones the virtual rig refused before protocol v7).
+    assert!(unequal_sums >= 1, "{files:?}");
 }

@@ -144,6 +144,11 @@ pub struct GearSet {
     x: [f64; 4],
 }
 
+/// Smallest profile shift coefficient [`GearSet::shifted`] accepts.
+pub const PROFILE_SHIFT_MIN: f64 = -1.0;
+/// Largest profile shift coefficient [`GearSet::shifted`] accepts.
+pub const PROFILE_SHIFT_MAX: f64 = 2.0;
+
 /// Largest mismatch of the two working centre distances [`GearSet::shifted`] accepts, in
 /// modules (1 um at m = 1 mm: below any manufacturing tolerance of a centre distance).
 pub const CENTRE_DISTANCE_TOLERANCE_MODULES: f64 = 1e-3;
@@ -212,7 +217,7 @@ impl GearSet {
         pressure_angle: f64,
     ) -> Result<Self, GearError> {
         for (i, xi) in x.iter().enumerate() {
-            if !(xi.is_finite() && (-1.0..=2.0).contains(xi)) {
+            if !(xi.is_finite() && (PROFILE_SHIFT_MIN..=PROFILE_SHIFT_MAX).contains(xi)) {
                 #[allow(clippy::cast_possible_truncation, reason = "i < 4")]
                 return Err(GearError::BadShift { gear: i as u8 + 1 });
             }

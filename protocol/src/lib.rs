@@ -165,5 +165,7 @@ pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 /// v5: drive requests carry the host session ([`SessionId`]); only the owner's requests keep a
 /// release alive. v6: a drive before the current sensor's zero is measured is refused with
 /// [`NackCode::CurrentZeroPending`]; a capture chunk holds at most 10 samples, what the
-/// firmware sends ([`CAPTURE_CHUNK_SAMPLES`], stated once).
-pub const PROTOCOL_VERSION: u16 = 6;
+/// firmware sends ([`CAPTURE_CHUNK_SAMPLES`], stated once). v7: the parameter record ends
+/// with the gears' profile shifts (`RigParameters::profile_shift`,
+/// [`ParameterField::ProfileShift`]), so a shifted gear with Z1 + Z2 != Z3 + Z4 is stored.
+pub const PROTOCOL_VERSION: u16 = 7;

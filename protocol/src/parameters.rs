@@ -46,11 +46,16 @@ pub struct RigParameters {
     pub max_current_a: f32,
     /// Highest vibration frequency the firmware will drive, Hz.
     pub max_freq_hz: f32,
+    /// Profile shift coefficients x1..x4 (ISO 21771), all zero for standard gears. Last in
+    /// the record (protocol v7): Z1 + Z2 may differ from Z3 + Z4 when the shifts give both
+    /// meshes one working centre distance (the model decides: `model::GearSet::shifted`).
+    pub profile_shift: [f32; 4],
 }
 
 impl RigParameters {
-    /// Largest serialised size, bytes: 15 `f32` and four `u16` varints.
-    pub const MAX_WIRE_SIZE: usize = 15 * F32 + 4 * U16;
+    /// Largest serialised size, bytes: 19 `f32` (four of them the shifts) and four `u16`
+    /// varints.
+    pub const MAX_WIRE_SIZE: usize = 19 * F32 + 4 * U16;
 
     /// The paper's rig: Table 2 constants, gear set (49, 51, 50, 50), m 1 mm, 20 deg,
     /// e 1 mm, M_hat 3.82 kg, mu_s 0.271, mu_d 0.174.
@@ -75,6 +80,7 @@ impl RigParameters {
             max_release_load_nm: 3.68,
             max_current_a: 4.5,
             max_freq_hz: 15.0,
+            profile_shift: [0.0; 4],
         }
     }
 
@@ -91,7 +97,8 @@ impl RigParameters {
         .map(f64::from)
     }
 
-    /// The value of a scalar field, or `None` for [`ParameterField::Z`] (four integers).
+    /// The value of a scalar field, or `None` for [`ParameterField::Z`] (four integers) and
+    /// [`ParameterField::ProfileShift`] (four numbers).
     pub const fn get(&self, field: ParameterField) -> Option<f32> {
         use ParameterField as F;
         Some(match field {
@@ -111,6 +118,7 @@ impl RigParameters {
             F::MaxReleaseLoad => self.max_release_load_nm,
             F::MaxCurrent => self.max_current_a,
             F::MaxFreq => self.max_freq_hz,
+            F::ProfileShift => return None,
         })
     }
 
@@ -142,6 +150,14 @@ impl RigParameters {
         }
         for (field, in_range) in LIMIT_RULES {
             check(self, field, in_range)?;
+        }
+        // The shifts' range and the centre distances they give are the model's to judge
+        // (the firmware's gear check); here only what no gear can have.
+        if self.profile_shift.iter().any(|x| !x.is_finite()) {
+            return Err(ParameterRejection::new(
+                F::ProfileShift,
+                RejectReason::NotFinite,
+            ));
         }
         Ok(())
     }
@@ -249,11 +265,13 @@ pub enum ParameterField {
     MaxCurrent,
     /// `max_freq_hz`.
     MaxFreq,
+    /// `profile_shift`, the four profile shift coefficients (protocol v7).
+    ProfileShift,
 }
 
 impl ParameterField {
     /// Every field, in the record's order.
-    pub const ALL: [Self; 16] = [
+    pub const ALL: [Self; 17] = [
         Self::C1,
         Self::C2,
         Self::C3,
@@ -270,6 +288,7 @@ impl ParameterField {
         Self::MaxReleaseLoad,
         Self::MaxCurrent,
         Self::MaxFreq,
+        Self::ProfileShift,
     ];
 
     /// The user-facing name: the [`RigParameters`] field and the rig file's TOML key.
@@ -291,6 +310,7 @@ impl ParameterField {
             Self::MaxReleaseLoad => "max_release_load_nm",
             Self::MaxCurrent => "max_current_a",
             Self::MaxFreq => "max_freq_hz",
+            Self::ProfileShift => "profile_shift",
         }
     }
 
@@ -302,7 +322,7 @@ impl ParameterField {
             Self::C3 => "N mm s/rad",
             Self::C5 => "A s/rad",
             Self::C6 | Self::MaxCurrent => "A",
-            Self::Z | Self::MuS | Self::MuD => "",
+            Self::Z | Self::MuS | Self::MuD | Self::ProfileShift => "",
             Self::Module | Self::Eccentricity => "mm",
             Self::PressureAngle => "deg",
             Self::CarrierMass => "kg",

@@ -152,9 +152,10 @@ mod tests {
         // quantities moved to the once-a-second health sample. v4's output count per
         // capture sample came with 18 (not 32) samples per chunk: 4 bytes smaller. v6's
         // chunk of 10, what the firmware sends, took the largest frame from 278 to 165 bytes.
+        // v7's four profile shifts grew the parameter record, so the largest request, by 16.
         assert_eq!(MAX_MESSAGE_SIZE, 158);
         assert_eq!(MAX_FRAME_SIZE, 165);
-        assert_eq!(MAX_REQUEST_FRAME_SIZE, 83);
+        assert_eq!(MAX_REQUEST_FRAME_SIZE, 99);
         assert_eq!(TELEMETRY_FRAME, 63);
         assert_eq!(TELEMETRY_FRAME_TYPICAL, 55);
         assert_eq!(HEALTH_FRAME, 49);

@@ -113,6 +113,9 @@ pub const KEYS: &[KeySpec] = &[
         "-",
         "four coefficients from -1 to 2 giving both meshes one working centre distance (within 0.001 module)",
         "[0.0, 0.0, 0.0, 0.0]",
+        // On the record (`profile_shift`, protocol v7) but not a wire key: the older flat
+        // file never had it, and a file of standard gears leaves it out without being told
+        // it took a default.
         None,
         "profile shift coefficients x1..x4 (ISO 21771; `rig design --x`, `rig design search --write`)",
     ),

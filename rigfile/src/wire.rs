@@ -52,6 +52,7 @@ pub(crate) fn record_unchecked(rig: &RigFile) -> protocol::RigParameters {
             max_release_load_nm: f(rig.limits.max_release_load_nm),
             max_current_a: f(rig.limits.max_current_a),
             max_freq_hz: f(rig.limits.max_freq_hz),
+            profile_shift: rig.gear.profile_shift.map(f),
             ..protocol::RigParameters::paper()
         },
         &rig.calibration.constants,
@@ -79,6 +80,7 @@ impl RigFile {
         r.gear.z = record.z.map(u32::from);
         r.gear.module_mm = decimal(record.module_mm);
         r.gear.pressure_angle_deg = decimal(record.pressure_angle_deg);
+        r.gear.profile_shift = record.profile_shift.map(decimal);
         r.cam.eccentricity_mm = decimal(record.eccentricity_mm);
         r.cam.carrier_mass_kg = decimal(record.carrier_mass_kg);
         r.friction.mu_s = decimal(record.mu_s);
@@ -124,6 +126,21 @@ mod tests {
         assert!(text.contains("max_freq_hz = 12.0\n"), "{text}");
         let back = RigFile::parse(&text, "t.toml").unwrap();
         assert_eq!(back.to_wire().unwrap(), record);
+    }
+
+    #[test]
+    fn a_shifted_gear_reaches_the_record_and_back() {
+        // Z1 + Z2 = 100, Z3 + Z4 = 101: one working centre distance through the shifts.
+        let text = "[gear]\nz = [49, 51, 51, 50]\nprofile_shift = [0.2, 0.3, 0.0, -0.017]\n";
+        let rig = RigFile::parse(text, "shifted.toml").unwrap();
+        let record = rig.to_wire().unwrap();
+        assert_eq!(record.z, [49, 51, 51, 50]);
+        assert_eq!(record.profile_shift, [0.2, 0.3, 0.0, -0.017]);
+        let back = RigFile::from_wire(&record);
+        assert_eq!(back.gear.profile_shift, [0.2, 0.3, 0.0, -0.017]);
+        assert_eq!(back.gear_set().unwrap(), rig.gear_set().unwrap());
+        // The paper's standard gear stays all zero on the wire.
+        assert_eq!(RigFile::paper().to_wire().unwrap().profile_shift, [0.0; 4]);
     }
 
     #[test]

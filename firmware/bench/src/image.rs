@@ -347,6 +347,21 @@ fn session(b: &mut Bench) -> Result<(), Failed> {
     if b.persisted != 1 {
         return Err(Failed(fail::PERSIST, b.persisted));
     }
+    // A profile-shifted design with unequal tooth sums (`rig design search`'s): its two
+    // working pressure angles are solved under the lock, on receipt and on activation.
+    let shifted = RigParameters {
+        z: [54, 50, 50, 55],
+        profile_shift: [-0.1, -0.1, -0.4, -0.265_678_2],
+        ..calibration
+    };
+    b.request(
+        &Request::SetParameters(shifted),
+        request_kind::SET_CALIBRATION,
+    )?;
+    b.run_ms(10)?;
+    if b.persisted != 2 {
+        return Err(Failed(fail::PERSIST, b.persisted));
+    }
     Ok(())
 }
 

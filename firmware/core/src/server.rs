@@ -291,8 +291,7 @@ fn set_parameters(
     if !motor_idle || *persist != Persist::Idle {
         return Answer::nack(NackCode::Busy);
     }
-    let checked =
-        Derived::new(&parameters, config).and_then(|_| check_board_caps(&parameters, config));
+    let checked = Derived::check(&parameters).and_then(|()| check_board_caps(&parameters, config));
     match checked {
         Err(rejection) => Answer::nack(NackCode::ParametersRejected(rejection)),
         Ok(()) => {

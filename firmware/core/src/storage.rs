@@ -4,14 +4,21 @@
 //!
 //! ```text
 //! 0   magic "RCAL"            4
-//! 4   schema version u16      2   (STORAGE_SCHEMA)
-//! 6   payload length u16      2
+//! 4   schema version u16      2   (STORAGE_SCHEMA, 2)
+//! 6   payload length u16      2   (84)
 //! 8   sequence u32            4   (the newer record wins; wrapping compare)
-//! 12  calibration             68  (15 f32 and 4 u16 in protocol::RigParameters's field order)
-//! 80  CRC-32/ISO-HDLC of 0..80 4
-//! 84  0xFF padding to 96
-//! 96  commit marker           16  (written last, in a separate write)
+//! 12  calibration             84  (19 f32 and 4 u16 in protocol::RigParameters's field
+//!                                  order, the four profile shifts last)
+//! 96  CRC-32/ISO-HDLC of 0..96 4
+//! 100 0xFF padding to 112
+//! 112 commit marker           16  (written last, in a separate write)
 //! ```
+//!
+//! Schema 1 (firmware before protocol v7) is the same without the shifts: payload 68, CRC
+//! at 80, commit marker at 96. The schema in the header says where a slot's marker and CRC
+//! are, so such a record is still read, as standard gears (zero shift); it is never read
+//! with the other layout. Saving always writes schema 2 (firmware before v7 sees such a
+//! slot as empty: no marker at 96).
 //!
 //! Saving erases the slot that does not hold the newest record, writes the body, reads it
 //! back, then writes the commit marker. Power lost at any point leaves the previous record
@@ -25,13 +32,52 @@ use embedded_storage::nor_flash::{
 use protocol::{ParametersStatus, RigParameters};
 
 /// Layout version of the stored record; bump on any change to the layout above.
-pub const STORAGE_SCHEMA: u16 = 1;
+pub const STORAGE_SCHEMA: u16 = 2;
 
 const MAGIC: [u8; 4] = *b"RCAL";
-const PAYLOAD_LEN: usize = 68;
+const PAYLOAD_LEN: usize = 84;
 const BODY_LEN: usize = 12 + PAYLOAD_LEN;
 const CRC_END: usize = BODY_LEN + 4;
-const COMMIT_AT: usize = 96;
+const COMMIT_AT: usize = 112;
+
+/// Where a record of one schema keeps its CRC and commit marker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Layout {
+    schema: u16,
+    payload_len: usize,
+    commit_at: usize,
+}
+
+impl Layout {
+    /// What [`CalibrationStore::save`] writes.
+    const CURRENT: Self = Self {
+        schema: STORAGE_SCHEMA,
+        payload_len: PAYLOAD_LEN,
+        commit_at: COMMIT_AT,
+    };
+    /// Schema 1, before the profile shifts (read as zero shift).
+    const SCHEMA_1: Self = Self {
+        schema: 1,
+        payload_len: 68,
+        commit_at: 96,
+    };
+
+    /// The layout the header's schema field names; any other value is read as the current
+    /// one (and then fails its header check).
+    fn of(schema: u16) -> Self {
+        if schema == Self::SCHEMA_1.schema {
+            Self::SCHEMA_1
+        } else {
+            Self::CURRENT
+        }
+    }
+
+    const fn body_len(self) -> usize {
+        12 + self.payload_len
+    }
+}
+const _: () = assert!(Layout::SCHEMA_1.body_len() + 4 <= Layout::SCHEMA_1.commit_at);
+const _: () = assert!(Layout::SCHEMA_1.commit_at + COMMIT.len() <= RECORD_LEN);
 /// [`PAYLOAD_LEN`] and [`COMMIT_AT`] as the record's u16 field and a flash offset.
 #[allow(
     clippy::cast_possible_truncation,
@@ -143,22 +189,29 @@ impl<F: NorFlash> CalibrationStore<F> {
         if read.is_err() || (self.ecc_error)() {
             return Slot::Corrupt;
         }
-        if record[COMMIT_AT..] != COMMIT {
+        // The schema says where the marker is; a torn header (still erased) finds none.
+        let layout = Layout::of(u16::from_le_bytes([record[4], record[5]]));
+        if record[layout.commit_at..layout.commit_at + COMMIT.len()] != COMMIT {
             return Slot::Empty;
         }
+        let body = layout.body_len();
         let crc = u32::from_le_bytes([
-            record[BODY_LEN],
-            record[BODY_LEN + 1],
-            record[BODY_LEN + 2],
-            record[BODY_LEN + 3],
+            record[body],
+            record[body + 1],
+            record[body + 2],
+            record[body + 3],
         ]);
         let header_ok = record[..4] == MAGIC
-            && u16::from_le_bytes([record[4], record[5]]) == STORAGE_SCHEMA
-            && usize::from(u16::from_le_bytes([record[6], record[7]])) == PAYLOAD_LEN;
-        if !header_ok || crc32(&record[..BODY_LEN]) != crc {
+            && u16::from_le_bytes([record[4], record[5]]) == layout.schema
+            && usize::from(u16::from_le_bytes([record[6], record[7]])) == layout.payload_len;
+        if !header_ok || crc32(&record[..body]) != crc {
             return Slot::Corrupt;
         }
-        let calibration = decode(&record[12..BODY_LEN]);
+        // Schema 1's payload is schema 2's without the shifts at its end: zero bytes there
+        // read as 0.0, standard gears.
+        let mut payload = [0u8; PAYLOAD_LEN];
+        payload[..layout.payload_len].copy_from_slice(&record[12..body]);
+        let calibration = decode(&payload);
         if calibration.validate().is_err() {
             return Slot::Corrupt;
         }
@@ -269,13 +322,14 @@ fn encode(c: &RigParameters, out: &mut [u8]) {
         out[w..w + 2].copy_from_slice(&z.to_le_bytes());
         w += 2;
     }
-    for v in rest {
+    for v in rest.into_iter().chain(c.profile_shift) {
         out[w..w + 4].copy_from_slice(&v.to_le_bytes());
         w += 4;
     }
 }
 
-fn decode(b: &[u8]) -> RigParameters {
+/// The calibration in `b` (a schema 1 payload reads with its missing shifts as zeros).
+fn decode(b: &[u8; PAYLOAD_LEN]) -> RigParameters {
     let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
     let z = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
     RigParameters {
@@ -295,6 +349,7 @@ fn decode(b: &[u8]) -> RigParameters {
         max_release_load_nm: f(56),
         max_current_a: f(60),
         max_freq_hz: f(64),
+        profile_shift: [f(68), f(72), f(76), f(80)],
     }
 }
 

@@ -250,23 +250,12 @@ fn designed_gear(fitted: Option<&rigfile::RigFile>) -> Result<Option<model::Gear
         return Ok(None);
     };
     let gear = rig.gear_set()?;
-    let [z1, z2, z3, z4] = gear.z();
-    if z1 + z2 != z3 + z4 {
-        return Err(RigError::BadValue {
-            what: format!("--model: the designed gear {z1},{z2},{z3},{z4}"),
-            why: format!(
-                "Z1 + Z2 = {} but Z3 + Z4 = {}: the calibration record the firmware stores carries no profile shift yet, and the firmware refuses unequal tooth sums; simulate a design with Z1 + Z2 = Z3 + Z4 (`rig design search --max-sum-difference 0`)",
-                z1 + z2,
-                z3 + z4
-            ),
-        });
-    }
     Ok((gear != model::paper::RIG_GEARS).then_some(gear))
 }
 
 /// Builds the virtual rig around `gear`: the plant's gear and the stored record's tooth
-/// counts, module and pressure angle. The record carries no profile shift (the firmware's
-/// Lambda is that of standard gears with these tooth counts; docs/rig-file.md).
+/// counts, module, pressure angle and profile shifts (protocol v7), so the firmware's
+/// Lambda is the shifted gear's.
 fn use_gear(config: &mut sim::SimConfig, gear: model::GearSet) {
     config.plant.drive.gear = gear;
     config.calibration.z = gear.z().map(|v| u16::try_from(v).unwrap_or(u16::MAX));
@@ -274,5 +263,6 @@ fn use_gear(config: &mut sim::SimConfig, gear: model::GearSet) {
     {
         config.calibration.module_mm = (gear.module() * 1e3) as f32;
         config.calibration.pressure_angle_deg = gear.pressure_angle().to_degrees() as f32;
+        config.calibration.profile_shift = gear.shift().map(|x| x as f32);
     }
 }

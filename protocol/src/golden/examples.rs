@@ -56,7 +56,7 @@ pub(crate) fn worst_case_chunk() -> CaptureChunk {
 
 pub(crate) fn device_info() -> DeviceInfo {
     DeviceInfo {
-        protocol_version: 6,
+        protocol_version: 7,
         schema_hash: 0xDEAD_BEEF,
         firmware_version: FirmwareVersion {
             major: 0,
@@ -102,7 +102,13 @@ pub(crate) fn requests() -> std::vec::Vec<Named<Request>> {
         ("Request::GetParameters", GetParameters),
         (
             "Request::SetParameters",
-            SetParameters(RigParameters::paper()),
+            // A profile-shifted design (Z1 + Z2 = 100, Z3 + Z4 = 101, one working centre
+            // distance): the record's last field carries the shifts.
+            SetParameters(RigParameters {
+                z: [49, 51, 51, 50],
+                profile_shift: [0.2, 0.3, 0.0, -0.017],
+                ..RigParameters::paper()
+            }),
         ),
         ("Request::StartTelemetry", StartTelemetry { rate_hz: 200 }),
         ("Request::StopTelemetry", StopTelemetry),
@@ -411,6 +417,7 @@ fn leaf_index(leaf: &Leaf) -> usize {
             ParameterField::MaxReleaseLoad => 13,
             ParameterField::MaxCurrent => 14,
             ParameterField::MaxFreq => 15,
+            ParameterField::ProfileShift => 16,
         },
         Leaf::Reason(v) => match v {
             RejectReason::NotFinite => 0,

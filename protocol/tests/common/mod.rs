@@ -11,8 +11,9 @@ pub fn parameters() -> impl Strategy<Value = RigParameters> {
         proptest::array::uniform6(any::<f32>()),
         proptest::array::uniform4(any::<u16>()),
         proptest::array::uniform9(any::<f32>()),
+        proptest::array::uniform4(any::<f32>()),
     )
-        .prop_map(|(c, z, g)| RigParameters {
+        .prop_map(|(c, z, g, profile_shift)| RigParameters {
             c1_nmm_per_a: c[0],
             c2_nmm: c[1],
             c3_nmm_s_per_rad: c[2],
@@ -29,6 +30,7 @@ pub fn parameters() -> impl Strategy<Value = RigParameters> {
             max_release_load_nm: g[6],
             max_current_a: g[7],
             max_freq_hz: g[8],
+            profile_shift,
         })
 }
 

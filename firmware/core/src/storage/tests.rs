@@ -259,8 +259,8 @@ fn power_cut_at_every_step_keeps_the_previous_calibration() {
             assert_eq!(load(&retry.into_inner()).calibration, next);
             cuts += 1;
         }
-        // Erase + 12 body units + 2 commit units.
-        assert_eq!(cuts, 15, "generation {generation}");
+        // Erase + 14 body units + 2 commit units.
+        assert_eq!(cuts, 17, "generation {generation}");
         previous = Some(next);
     }
 }
@@ -292,7 +292,7 @@ fn other_schema_or_invalid_values_are_invalid() {
     store.save(&calibration(1)).unwrap();
     let mut flash = store.into_inner();
     // A record of another layout version (CRC recomputed so only the version differs).
-    flash.data[4] = 2;
+    flash.data[4] = 3;
     let crc = crc32(&flash.data[..BODY_LEN]);
     flash.data[BODY_LEN..CRC_END].copy_from_slice(&crc.to_le_bytes());
     assert_eq!(load(&flash).status, ParametersStatus::Invalid);
@@ -306,6 +306,84 @@ fn other_schema_or_invalid_values_are_invalid() {
     };
     store.save(&bad).unwrap();
     assert_eq!(load(&store.into_inner()).status, ParametersStatus::Invalid);
+}
+
+/// A committed schema-1 record (firmware before the profile shifts) of `c` at `slot`, as
+/// that firmware wrote it: payload 68 (no shifts), CRC over 0..80, marker at 96.
+fn write_schema_1(flash: &mut MemFlash, slot: usize, seq: u32, c: &RigParameters) {
+    let mut payload = [0u8; PAYLOAD_LEN];
+    encode(c, &mut payload);
+    let at = slot * PAGE;
+    let r = &mut flash.data[at..at + PAGE];
+    r.fill(0xFF);
+    r[..4].copy_from_slice(b"RCAL");
+    r[4..6].copy_from_slice(&1u16.to_le_bytes());
+    r[6..8].copy_from_slice(&68u16.to_le_bytes());
+    r[8..12].copy_from_slice(&seq.to_le_bytes());
+    r[12..80].copy_from_slice(&payload[..68]);
+    let crc = crc32(&r[..80]);
+    r[80..84].copy_from_slice(&crc.to_le_bytes());
+    r[96..112].copy_from_slice(&COMMIT);
+}
+
+#[test]
+fn a_schema_1_record_reads_as_standard_gears_and_the_next_save_is_schema_2() {
+    let old = RigParameters {
+        z: [52, 48, 50, 50],
+        ..calibration(4)
+    };
+    let mut flash = MemFlash::new();
+    write_schema_1(&mut flash, 0, 7, &old);
+    let loaded = load(&flash);
+    assert_eq!(loaded.status, ParametersStatus::Valid);
+    assert_eq!(loaded.calibration, old);
+    assert_eq!(loaded.calibration.profile_shift, [0.0; 4]);
+
+    // Saving a shifted gear writes schema 2 in the other slot; it wins (sequence 8), and
+    // the old slot still reads as before.
+    let shifted = RigParameters {
+        z: [49, 51, 51, 50],
+        profile_shift: [0.2, 0.3, 0.0, -0.017],
+        ..calibration(5)
+    };
+    let mut store = CalibrationStore::new(flash);
+    store.load();
+    store.save(&shifted).unwrap();
+    let flash = store.into_inner();
+    assert_eq!(flash.data[PAGE + 4..PAGE + 6], STORAGE_SCHEMA.to_le_bytes());
+    assert_eq!(flash.data[PAGE + 8], 8);
+    assert_eq!(load(&flash).calibration, shifted);
+    assert_eq!(
+        CalibrationStore::new(flash).read_slot(0),
+        Slot::Valid {
+            seq: 7,
+            calibration: old
+        }
+    );
+}
+
+#[test]
+fn a_record_is_never_read_with_the_other_schemas_layout() {
+    // A schema-2 record relabelled schema 1 (CRC and marker where schema 2 keeps them):
+    // schema 1's marker place (96) holds the CRC, so the slot is empty, not misread.
+    let mut store = CalibrationStore::new(MemFlash::new());
+    store.load();
+    store.save(&calibration(1)).unwrap();
+    let mut flash = store.into_inner();
+    flash.data[4] = 1;
+    assert_eq!(load(&flash).status, ParametersStatus::Defaults);
+
+    // A schema-1 record relabelled schema 2: no marker at 112, empty too.
+    let mut flash = MemFlash::new();
+    write_schema_1(&mut flash, 0, 1, &calibration(1));
+    flash.data[4] = 2;
+    assert_eq!(load(&flash).status, ParametersStatus::Defaults);
+
+    // Schema 1's header with schema 2's payload length: corrupt, never decoded.
+    let mut flash = MemFlash::new();
+    write_schema_1(&mut flash, 0, 1, &calibration(1));
+    flash.data[6] = 84;
+    assert_eq!(load(&flash).status, ParametersStatus::Invalid);
 }
 
 #[test]
@@ -352,7 +430,7 @@ fn torn_units_raising_ecc_errors_count_as_corrupt() {
     store.save(&calibration(1)).unwrap();
     let flash = store.into_inner();
     let mut ecc_seen = 0;
-    for cut in 0..15 {
+    for cut in 0..17 {
         let mut trial = flash.rebooted();
         trial.cut_at = Some(cut);
         let mut store = CalibrationStore::with_ecc_check(trial, take_ecc_error);
@@ -371,8 +449,8 @@ fn torn_units_raising_ecc_errors_count_as_corrupt() {
         let mut again = CalibrationStore::with_ecc_check(reader.into_inner(), take_ecc_error);
         assert_eq!(again.load().calibration, calibration(2), "cut at {cut}");
     }
-    // Every program cut (14 of the 15 steps; the first is the erase) left a torn unit.
-    assert_eq!(ecc_seen, 14);
+    // Every program cut (16 of the 17 steps; the first is the erase) left a torn unit.
+    assert_eq!(ecc_seen, 16);
 
     // Nothing valid anywhere but an unreadable slot: the defaults, flagged invalid.
     let mut flash = MemFlash::new();

@@ -280,6 +280,60 @@ fn set_calibration_persists_then_activates() {
 }
 
 #[test]
+fn a_shifted_gear_with_unequal_tooth_sums_is_stored_with_its_own_lambda() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    // The paper's gear coasts after the cam stops (mu_d Lambda 0.86).
+    assert!(rig.core.status().keeps_moving_after_stop);
+    // A design of `rig design search`: Z1 + Z2 = 104, Z3 + Z4 = 105, one working centre
+    // distance through the shifts; the model gives mu_d Lambda 1.97: it stops.
+    let new = RigParameters {
+        z: [54, 50, 50, 55],
+        profile_shift: [-0.1, -0.1, -0.4, -0.265_678_2],
+        ..RigParameters::paper()
+    };
+    let g = model::GearSet::shifted(
+        new.z.map(u32::from),
+        new.profile_shift.map(f64::from),
+        1e-3,
+        20f64.to_radians(),
+    )
+    .unwrap();
+    assert!(f64::from(new.mu_d) * g.big_lambda() > 1.9);
+    let seq = rig.send(&Request::SetParameters(new));
+    rig.step();
+    assert_eq!(rig.persisted, [new]);
+    assert!(rig.answered(seq, |r| *r == Reply::Ack));
+    assert_eq!(rig.reply(&Request::GetParameters), Reply::Parameters(new));
+    assert!(!rig.core.status().keeps_moving_after_stop);
+
+    let rejected = |field| {
+        Err(NackCode::ParametersRejected(ParameterRejection::new(
+            field,
+            RejectReason::Inconsistent,
+        )))
+    };
+    // x4 0.03 off: the working centre distances differ by about 0.03 module.
+    let mut off = new;
+    off.profile_shift[3] += 0.03;
+    assert_eq!(
+        rig.ack(&Request::SetParameters(off)),
+        rejected(ParameterField::ProfileShift)
+    );
+    // The same teeth without the shifts: unequal sums, refused naming the teeth.
+    let unshifted = RigParameters {
+        profile_shift: [0.0; 4],
+        ..new
+    };
+    assert_eq!(
+        rig.ack(&Request::SetParameters(unshifted)),
+        rejected(ParameterField::Z)
+    );
+    rig.step();
+    assert_eq!(rig.persisted.len(), 1);
+}
+
+#[test]
 fn limits_and_constants_the_host_cannot_lift() {
     let mut rig = Rig::new(0.0);
     rig.run_ms(150);
