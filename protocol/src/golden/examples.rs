@@ -56,7 +56,7 @@ pub(crate) fn worst_case_chunk() -> CaptureChunk {
 
 pub(crate) fn device_info() -> DeviceInfo {
     DeviceInfo {
-        protocol_version: 6,
+        protocol_version: 7,
         schema_hash: 0xDEAD_BEEF,
         firmware_version: FirmwareVersion {
             major: 0,
@@ -135,6 +135,8 @@ pub(crate) fn requests() -> std::vec::Vec<Named<Request>> {
             "Request::Simulation(SimCommand::SetSensorSupply)",
             Simulation(SimCommand::SetSensorSupply { volts: 4.75 }),
         ),
+        ("Request::StartStream", StartStream { rate_hz: 10_000 }),
+        ("Request::StopStream", StopStream),
     ]
 }
 
@@ -158,6 +160,8 @@ pub(crate) fn request_index(r: &Request) -> usize {
         Simulation(SimCommand::SetLoad { .. }) => 13,
         Simulation(SimCommand::SetSupplyVoltage { .. }) => 14,
         Simulation(SimCommand::SetSensorSupply { .. }) => 15,
+        StartStream { .. } => 16,
+        StopStream => 17,
     }
 }
 
@@ -186,6 +190,7 @@ pub(crate) fn nack_codes() -> std::vec::Vec<Named<NackCode>> {
         ("StorageFailed", StorageFailed),
         ("SimulationOnly", SimulationOnly),
         ("CurrentZeroPending", CurrentZeroPending),
+        ("StreamRate", StreamRate { fits_hz: 2_500 }),
     ]
 }
 
@@ -202,6 +207,7 @@ pub(crate) fn nack_index(c: &NackCode) -> usize {
         StorageFailed => 6,
         SimulationOnly => 7,
         CurrentZeroPending => 8,
+        StreamRate { .. } => 9,
     }
 }
 
@@ -235,6 +241,49 @@ pub(crate) fn reply_index(r: &Reply) -> usize {
         Reply::Faults { .. } => 3,
         Reply::Parameters(_) => 4,
     }
+}
+
+/// A stream block as the device sends it at 10 kHz: one control step of a vibrating cam
+/// (the current and cam count move every sample, the step's fields are held).
+pub(crate) fn stream_block() -> crate::StreamBlock {
+    let samples: std::vec::Vec<_> = (0..STREAM_BLOCK_SAMPLES)
+        .map(|k| {
+            let k16 = u16::try_from(k).unwrap();
+            crate::StreamSample {
+                current_adc: [2300, 2303, 2301, 2306, 2304, 2309, 2307, 2310, 2312, 2311][k],
+                cam_count: 40_000 + 16 * k16,
+                output_count: 1_200,
+                duty: 4_150,
+                tau_cam: 312,
+                status: (StatusFlags::HOST_RELEASE | StatusFlags::NOT_SELF_LOCKING).bits(),
+                state: 2,
+            }
+        })
+        .collect();
+    crate::StreamBlock::pack(123_450, &samples)
+}
+
+/// A stream block at its largest: every field jumps by its largest difference at every
+/// sample.
+pub(crate) fn worst_case_stream_block() -> (std::vec::Vec<crate::StreamSample>, crate::StreamBlock)
+{
+    let samples: std::vec::Vec<_> = (0..STREAM_BLOCK_SAMPLES)
+        .map(|k| {
+            let odd = k % 2 == 1;
+            crate::StreamSample {
+                current_adc: if odd { 0 } else { 0x8000 },
+                cam_count: if odd { 0 } else { 0x8000 },
+                output_count: if odd { 0 } else { 0x8000 },
+                duty: if odd { i16::MAX } else { i16::MIN },
+                tau_cam: if odd { i16::MAX } else { i16::MIN },
+                // The first sample's status takes 3 bytes, its state 1.
+                status: if odd { u16::MAX } else { 0xFFFE },
+                state: if odd { 0xFF } else { 0 },
+            }
+        })
+        .collect();
+    let block = crate::StreamBlock::pack(u32::MAX, &samples);
+    (samples, block)
 }
 
 /// One example of each device message (every reply inside `Reply`), in variant order.
@@ -286,6 +335,7 @@ pub(crate) fn device_messages() -> std::vec::Vec<(std::string::String, DeviceMes
             },
         ),
         ("DeviceMessage::Health", Health(health())),
+        ("DeviceMessage::StreamBlock", StreamBlock(stream_block())),
     ];
     out.extend(unsolicited.map(|(n, m)| (n.to_owned(), m)));
     out
@@ -301,6 +351,7 @@ pub(crate) fn device_index(m: &DeviceMessage) -> usize {
         CaptureDone { .. } => 3,
         FaultEvent { .. } => 4,
         Health(_) => 5,
+        StreamBlock(_) => 6,
     }
 }
 
