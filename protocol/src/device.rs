@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use crate::sizes::{TAG, U16, U32};
 use crate::{
     CaptureChunk, DeviceInfo, FaultFlags, HealthSample, ParameterRejection, ReplyKind,
-    RigParameters, TelemetrySample,
+    RigParameters, StreamBlock, TelemetrySample,
 };
 
 /// Device-to-host messages.
@@ -54,11 +54,14 @@ pub enum DeviceMessage {
     /// Supply, temperature, control-step timing and link counters, once per second while
     /// telemetry runs (unsolicited).
     Health(HealthSample),
+    /// [`crate::STREAM_BLOCK_SAMPLES`] consecutive samples of the continuous stream
+    /// (unsolicited, after `StartStream`).
+    StreamBlock(StreamBlock),
 }
 
 impl DeviceMessage {
-    /// Largest serialised size, bytes (a full capture chunk).
-    pub const MAX_WIRE_SIZE: usize = TAG + CaptureChunk::MAX_WIRE_SIZE;
+    /// Largest serialised size, bytes (a stream block of worst-case samples).
+    pub const MAX_WIRE_SIZE: usize = TAG + StreamBlock::MAX_WIRE_SIZE;
 
     /// A reply to the request with frame sequence number `request_seq`.
     pub const fn reply(request_seq: u16, reply: Reply) -> Self {
@@ -109,6 +112,7 @@ impl DeviceMessage {
             Self::CaptureDone { .. } => "CaptureDone",
             Self::FaultEvent { .. } => "FaultEvent",
             Self::Health(_) => "Health",
+            Self::StreamBlock(_) => "StreamBlock",
         }
     }
 }
@@ -195,6 +199,13 @@ pub enum NackCode {
     /// is centred on the measured zero, so nothing may drive before it exists. Ask again
     /// once the zero is measured; the request had no effect.
     CurrentZeroPending,
+    /// `StartStream` asked a rate the device does not stream at (only 10 kHz divided by a
+    /// whole number: [`crate::MAX_STREAM_RATE_HZ`]); names the highest rate at or below the
+    /// one asked that it does ([`crate::stream_rate_that_fits`]). `BadArgument` for 0.
+    StreamRate {
+        /// The rate to ask instead, Hz.
+        fits_hz: u16,
+    },
 }
 
 impl NackCode {
@@ -213,6 +224,7 @@ impl NackCode {
             Self::StorageFailed => "StorageFailed",
             Self::SimulationOnly => "SimulationOnly",
             Self::CurrentZeroPending => "CurrentZeroPending",
+            Self::StreamRate { .. } => "StreamRate",
         }
     }
 }
@@ -240,6 +252,11 @@ impl fmt::Display for NackCode {
             Self::SimulationOnly => f.write_str("simulation commands work only on the virtual rig"),
             Self::CurrentZeroPending => f.write_str(
                 "the current sensor's zero is still being measured (the overcurrent trip needs it)",
+            ),
+            Self::StreamRate { fits_hz } => write!(
+                f,
+                "the device streams at 10 kHz divided by a whole number; \
+                 the highest rate at or below the one asked is {fits_hz} Hz"
             ),
         }
     }

@@ -115,6 +115,7 @@ mod sequence;
 #[cfg(any(test, feature = "std"))]
 pub mod session;
 mod sizes;
+mod stream;
 mod telemetry;
 
 #[cfg(test)]
@@ -153,6 +154,11 @@ pub use sizes::{
     MAX_DEVICE_FRAME_SIZE, MAX_FRAME_SIZE, MAX_MESSAGE_SIZE, MAX_REPLY_FRAME_SIZE,
     MAX_REQUEST_FRAME_SIZE, cobs_max_encoded_len, varint_len,
 };
+pub use stream::{
+    MAX_STREAM_RATE_HZ, STREAM_BLOCK_SAMPLES, STREAM_DUTY_SCALE, STREAM_PACKED_MAX,
+    STREAM_STATE_FAULTED, STREAM_TAU_SCALE, StreamBlock, StreamDecoder, StreamEvent, StreamSample,
+    UnpackError, stream_rate_that_fits,
+};
 pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 
 /// Version of this wire format; bump it with every released layout change (every change
@@ -167,5 +173,7 @@ pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 /// [`NackCode::CurrentZeroPending`]; a capture chunk holds at most 10 samples, what the
 /// firmware sends ([`CAPTURE_CHUNK_SAMPLES`], stated once). v7: the parameter record ends
 /// with the gears' profile shifts (`RigParameters::profile_shift`,
-/// [`ParameterField::ProfileShift`]), so a shifted gear with Z1 + Z2 != Z3 + Z4 is stored.
+/// [`ParameterField::ProfileShift`]), so a shifted gear with Z1 + Z2 != Z3 + Z4 is stored;
+/// and the continuous stream (`StartStream`, `StopStream`, [`DeviceMessage::StreamBlock`],
+/// [`NackCode::StreamRate`]).
 pub const PROTOCOL_VERSION: u16 = 7;

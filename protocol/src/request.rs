@@ -88,6 +88,18 @@ pub enum Request {
     /// An operator action on the virtual rig (hang a load, change a supply). Real firmware
     /// answers `Nack(SimulationOnly)`; the virtual rig `Ack`.
     Simulation(SimCommand),
+    /// Starts the continuous stream of raw samples ([`crate::DeviceMessage::StreamBlock`])
+    /// at `rate_hz`: [`crate::MAX_STREAM_RATE_HZ`] (10 kHz, every ADC sample) divided by a
+    /// whole number; another rate is refused with `Nack(StreamRate { fits_hz })`, 0 with
+    /// `BadArgument`. Sample numbers start at 0; asking the running rate again changes
+    /// nothing. The stream stops on `StopStream`, and when no request is accepted for
+    /// [`crate::COMMS_TIMEOUT_MS`] (a host keeps it with `Heartbeat`s).
+    StartStream {
+        /// Samples per second.
+        rate_hz: u16,
+    },
+    /// Stops the continuous stream.
+    StopStream,
 }
 
 /// A host session's identity on a link shared by several processes: a number the host
@@ -157,7 +169,7 @@ impl ReplyKind {
 }
 
 /// Variants of [`Request`] in this version (tags `0..REQUEST_VARIANTS`).
-const REQUEST_VARIANTS: u32 = 14;
+const REQUEST_VARIANTS: u32 = 16;
 /// Tag of [`Request::Simulation`], and the commands of [`SimCommand`] it carries.
 const SIMULATION_TAG: u32 = 13;
 const SIM_COMMANDS: u32 = 3;
@@ -229,6 +241,8 @@ impl Request {
             Self::Simulation(SimCommand::SetLoad { .. }) => "Simulation(SetLoad)",
             Self::Simulation(SimCommand::SetSupplyVoltage { .. }) => "Simulation(SetSupplyVoltage)",
             Self::Simulation(SimCommand::SetSensorSupply { .. }) => "Simulation(SetSensorSupply)",
+            Self::StartStream { .. } => "StartStream",
+            Self::StopStream => "StopStream",
         }
     }
 
@@ -246,7 +260,9 @@ impl Request {
             | Self::StartCapture { .. }
             | Self::RezeroCurrent
             | Self::OpenLoop { .. }
-            | Self::Simulation(_) => ReplyKind::Ack,
+            | Self::Simulation(_)
+            | Self::StartStream { .. }
+            | Self::StopStream => ReplyKind::Ack,
         }
     }
 
@@ -266,7 +282,7 @@ impl Request {
     ///
     /// * Queries (`Hello`, `GetInfo`, `GetParameters`, `GetFaults`) and `Heartbeat`: yes.
     /// * State assignments (`Release`, `OpenLoop`, `StartTelemetry`, `StopTelemetry`,
-    ///   `Simulation`): yes. Each sets a state rather than stepping it, so a repeat lands in
+    ///   `StartStream`, `StopStream`, `Simulation`): yes. Each sets a state rather than stepping it, so a repeat lands in
     ///   the same state, and a repeat that the device now refuses (a fault latched in
     ///   between) reports that refusal truthfully. Repeating a lock (`Release(off)`,
     ///   `OpenLoop` 0 V) is the safe direction; a repeated release is still only live while
@@ -313,7 +329,8 @@ mod tests {
         // `Release { on: 2 }`: a known request with a bad field.
         assert!(Request::names_known_request(&[7, 2, 2, 0, 0, 0x20, 0x41]));
         // Tags past the last request, and a simulation command past the last.
-        assert!(!Request::names_known_request(&[7, 14]));
+        assert!(!Request::names_known_request(&[7, 16]));
+        assert!(Request::names_known_request(&[7, 15]));
         assert!(!Request::names_known_request(&[7, 0x80, 0x01]));
         assert!(!Request::names_known_request(&[7, 13, 3]));
         assert!(Request::names_known_request(&[7, 13, 2]));

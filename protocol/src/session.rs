@@ -150,6 +150,8 @@ pub enum Event {
         /// What went wrong.
         error: Error,
     },
+    /// A block of the continuous stream (feed it to a [`crate::StreamDecoder`]).
+    StreamBlock(crate::StreamBlock),
 }
 
 /// Counters of a session since it was made.
@@ -481,6 +483,7 @@ impl Session {
                 self.push_event(Event::Telemetry(t));
             }
             DeviceMessage::Health(h) => self.push_event(Event::Health(h)),
+            DeviceMessage::StreamBlock(b) => self.push_event(Event::StreamBlock(b)),
             DeviceMessage::CaptureChunk(c) => self.push_event(Event::CaptureChunk(c)),
             DeviceMessage::CaptureDone {
                 capture_id,

@@ -8,6 +8,7 @@
 
 use crate::framing::{CRC_LEN, FRAME_DELIMITERS};
 use crate::link::{DEFAULT_BAUD_RATE, MAX_TELEMETRY_RATE_HZ};
+use crate::stream::{MAX_STREAM_RATE_HZ, STREAM_BLOCK_SAMPLES};
 use crate::{
     BOARD_NAME_LEN, CAPTURE_CHUNK_SAMPLES, DeviceInfo, DeviceMessage, FIRMWARE_BUILD_LEN,
     HealthSample, NackCode, Reply, Request, RigParameters, TelemetrySample,
@@ -110,6 +111,27 @@ const _: () = assert!(
         <= DEFAULT_BAUD_RATE as usize * 2 / 3
 );
 
+/// A stream block frame as the device sends it at 10 kHz with the cam vibrating: sample
+/// numbers below 2^28 (7.4 h), the first sample absolute (12-bit current 2 bytes, the
+/// 16-bit counts 3, duty and tau_cam 3, status and state 1 each), each later sample 2
+/// bytes (a current step within +-15 counts and a cam step below 64 counts: 20 Hz is 16
+/// counts per sample), the held fields unchanged within the block.
+pub const STREAM_FRAME_TYPICAL: usize = frame_size(
+    TAG + varint_len((1 << 28) - 1)
+        + TAG
+        + (2 + 3 + 3 + 3 + 3 + 1 + 1)
+        + (STREAM_BLOCK_SAMPLES - 1) * 2,
+);
+
+/// Stream bytes per second at the top rate, typical data ([`STREAM_FRAME_TYPICAL`]).
+pub const STREAM_BYTES_PER_S_TYPICAL: usize =
+    STREAM_FRAME_TYPICAL * MAX_STREAM_RATE_HZ as usize / STREAM_BLOCK_SAMPLES;
+
+// The 10 kHz stream alone leaves more than a third of the default link for replies and
+// health; telemetry beside it must run slower (1 kHz telemetry is 55 kB/s of its own).
+const _: () =
+    assert!(STREAM_BYTES_PER_S_TYPICAL * BITS_PER_BYTE <= DEFAULT_BAUD_RATE as usize * 2 / 3);
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -152,13 +174,69 @@ mod tests {
         // quantities moved to the once-a-second health sample. v4's output count per
         // capture sample came with 18 (not 32) samples per chunk: 4 bytes smaller. v6's
         // chunk of 10, what the firmware sends, took the largest frame from 278 to 165 bytes.
-        // v7's four profile shifts grew the parameter record, so the largest request, by 16.
-        assert_eq!(MAX_MESSAGE_SIZE, 158);
-        assert_eq!(MAX_FRAME_SIZE, 165);
+        // v7's four profile shifts grew the parameter record, so the largest request, by 16;
+        // v7's stream block at its worst (every field jumping at every sample) is the
+        // largest message now; typical blocks are a quarter of it.
+        assert_eq!(MAX_MESSAGE_SIZE, 210);
+        assert_eq!(MAX_FRAME_SIZE, 217);
+        assert_eq!(STREAM_FRAME_TYPICAL, 50);
+        // 50,000 B/s of the link's 92,160 B/s (921,600 Bd at 10 bits a byte): 54 %.
+        assert_eq!(STREAM_BYTES_PER_S_TYPICAL, 50_000);
         assert_eq!(MAX_REQUEST_FRAME_SIZE, 99);
         assert_eq!(TELEMETRY_FRAME, 63);
         assert_eq!(TELEMETRY_FRAME_TYPICAL, 55);
         assert_eq!(HEALTH_FRAME, 49);
+    }
+
+    #[test]
+    #[allow(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        clippy::cast_possible_wrap,
+        reason = "synthetic signal: values in range by construction, counters wrap on purpose"
+    )]
+    fn typical_stream_frames_are_what_the_bound_says() {
+        use crate::{StreamBlock, StreamSample};
+        // One second at 10 kHz of a cam vibrating at 20 Hz (8,192 counts a turn: 16.4
+        // counts a sample), a 1 A (230-count) current swing at the cam frequency with
+        // +-3 counts of noise, duty and tau_cam moving per 1 ms step, the output creeping.
+        let mut total = 0usize;
+        let mut largest = 0usize;
+        let mut noise: u32 = 0x1234_5678;
+        for block in 0..1_000u32 {
+            let samples: std::vec::Vec<StreamSample> = (0..10u32)
+                .map(|k| {
+                    let n = block * 10 + k;
+                    noise = noise.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    let t = n as f32 / 10_000.0;
+                    let swing = 230.0 * (core::f32::consts::TAU * 20.0 * t).sin();
+                    let jitter = (noise >> 29) as f32 - 3.0;
+                    StreamSample {
+                        current_adc: (2300.0 + swing + jitter) as u16,
+                        cam_count: (n as f32 * 16.384) as u32 as u16,
+                        output_count: (n / 40) as u16,
+                        duty: (4_000 + (block % 50) * 3) as i16,
+                        tau_cam: 310 + (block / 50) as i16,
+                        status: crate::StatusFlags::HOST_RELEASE.bits(),
+                        state: 2,
+                    }
+                })
+                .collect();
+            let msg = DeviceMessage::StreamBlock(StreamBlock::pack(
+                (1 << 28) - 1 - 10_000 + block * 10,
+                &samples,
+            ));
+            let frame = crate::encode_frame_vec(u16::MAX, &msg).unwrap();
+            total += frame.len();
+            largest = largest.max(frame.len());
+        }
+        assert!(largest <= STREAM_FRAME_TYPICAL, "{largest}");
+        // Bytes in one second at 10 kHz: within the typical budget, about half the link
+        // (46,185 B/s when written: 50 % of 92,160).
+        assert!(total <= STREAM_BYTES_PER_S_TYPICAL, "{total}");
+        let link = DEFAULT_BAUD_RATE as usize / BITS_PER_BYTE;
+        assert_eq!(link, 92_160);
+        assert!(total * 100 / link <= 55, "{total} B/s of {link}");
     }
 
     #[test]

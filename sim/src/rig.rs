@@ -413,6 +413,12 @@ impl SimRig {
         &self.core
     }
 
+    /// The host closed the link (`firmware_core::Core::link_closed`): the continuous
+    /// stream stops.
+    pub fn link_closed(&mut self) {
+        self.core.link_closed();
+    }
+
     /// Whether the bridge drives the motor now: the firmware enables it and the hardware
     /// overcurrent trip has not broken it off.
     pub fn bridge_on(&self) -> bool {

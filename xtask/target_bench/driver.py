@@ -87,11 +87,12 @@ END = 0x10
 NOTE = 0x11
 DONE = 0x20
 FAIL = 0x21
-PHASES = {1: "locked", 2: "spin_up", 3: "vibrating", 4: "capture", 5: "stopping", 6: "fault"}
-TYPICAL_PHASES = ("locked", "spin_up", "vibrating", "capture")
+PHASES = {1: "locked", 2: "spin_up", 3: "vibrating", 4: "capture", 5: "stopping", 6: "fault",
+          7: "stream"}
+TYPICAL_PHASES = ("locked", "spin_up", "vibrating", "capture", "stream")
 STATES = {0: "locked", 1: "spin_up", 2: "vibrating", 3: "stopping", 4: "fault"}
 REQUESTS = {1: "Hello", 2: "StartTelemetry", 3: "Release", 4: "Heartbeat", 5: "StartCapture",
-            6: "SetParameters"}
+            6: "SetParameters", 7: "StartStream", 8: "StopStream"}
 FAILURES = {
     1: "a fault latched (fault bits {detail:#x})",
     2: "the supervisor did not reach Vibrating in time (target {detail} Hz)",
@@ -100,6 +101,7 @@ FAILURES = {
     5: "the calibration was not handed out for a flash write ({detail} writes)",
     6: "a request could not be encoded (request kind {detail})",
     7: "the bench image panicked",
+    8: "the 10 kHz stream skipped {detail} ADC samples (the link fell behind)",
 }
 
 # --- Memory map (memory.x: flash 512 KiB, RAM 96 KiB) --------------------------------
@@ -625,7 +627,8 @@ def describe(call):
         d["frame_complete"] = bool(tag >> 8)
     elif kind == "transmit":
         d["bytes"] = note & 0xFFFF
-        d["capture_uploading"] = bool(note >> 16)
+        d["capture_uploading"] = bool((note >> 16) & 1)
+        d["streaming"] = bool((note >> 17) & 1)
     return d
 
 
@@ -674,7 +677,8 @@ def summarise(calls, overhead, image_stack, costing, elapsed):
             key = ("receive", d["request"], 0, False)
         elif c["kind"] == "transmit":
             key = ("transmit", "capture upload" if d["capture_uploading"] else
-                   ("idle" if d["bytes"] == 0 else "frames"), 0, False)
+                   ("idle" if d["bytes"] == 0 else
+                    ("stream" if d["streaming"] else "frames")), 0, False)
         else:
             key = (c["kind"], "", 0, False)
         groups.setdefault(key, []).append(c)

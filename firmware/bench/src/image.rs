@@ -26,7 +26,7 @@ pub mod code {
     /// End of the measured call.
     pub const END: u32 = 0x10;
     /// Detail of the call just measured (step: revolution boundary bit 0, state after in
-    /// bits 8..; transmit: bytes returned, uploading bit 16).
+    /// bits 8..; transmit: bytes returned, uploading bit 16, streaming bit 17).
     pub const NOTE: u32 = 0x11;
     /// The session ended as planned.
     pub const DONE: u32 = 0x20;
@@ -48,6 +48,8 @@ pub mod phase {
     pub const STOPPING: u32 = 5;
     /// A fault latched.
     pub const FAULT: u32 = 6;
+    /// Vibrating with the continuous stream on (10 kHz).
+    pub const STREAM: u32 = 7;
 }
 
 /// Why a session failed (the `FAIL` argument's low byte).
@@ -66,6 +68,8 @@ pub mod fail {
     pub const ENCODE: u32 = 6;
     /// The image panicked.
     pub const PANIC: u32 = 7;
+    /// The 10 kHz stream skipped samples (the link fell behind); detail: how many.
+    pub const STREAM: u32 = 8;
 }
 
 /// Request kinds (the `BEGIN_RECEIVE` argument's low byte).
@@ -76,6 +80,8 @@ mod request_kind {
     pub const HEARTBEAT: u32 = 4;
     pub const START_CAPTURE: u32 = 5;
     pub const SET_CALIBRATION: u32 = 6;
+    pub const START_STREAM: u32 = 7;
+    pub const STOP_STREAM: u32 = 8;
 }
 
 /// Plant (and ADC) rate, Hz, as in the sim.
@@ -233,6 +239,7 @@ impl Bench {
                 SupervisorState::Locked => phase::LOCKED,
                 SupervisorState::SpinUp => phase::SPIN_UP,
                 SupervisorState::Vibrating if before.capture_recording => phase::CAPTURE,
+                SupervisorState::Vibrating if before.stream_rate_hz > 0 => phase::STREAM,
                 SupervisorState::Vibrating => phase::VIBRATING,
                 SupervisorState::Stopping => phase::STOPPING,
                 _ => phase::FAULT,
@@ -276,8 +283,10 @@ impl Bench {
         let mut t = self.tx_free_at_us;
         while t <= now {
             let n = measured_transmit(self.core, &mut self.tx_buf);
-            let uploading = u32::from(self.core.status().capture_uploading);
-            bench_marker(code::NOTE, n as u32 | uploading << 16);
+            let status = self.core.status();
+            let uploading = u32::from(status.capture_uploading);
+            let streaming = u32::from(status.stream_rate_hz > 0);
+            bench_marker(code::NOTE, n as u32 | uploading << 16 | streaming << 17);
             if n == 0 {
                 t = now + 1;
                 break;
@@ -332,6 +341,29 @@ fn session(b: &mut Bench) -> Result<(), Failed> {
         b.until_state(SupervisorState::Vibrating, 3000)?;
         b.run_ms(1500)?;
     }
+
+    // The continuous stream at 10 kHz (every ADC sample), telemetry at 100 Hz beside it
+    // (both at 1 kHz do not fit the link), vibrating at 10 Hz.
+    b.request(
+        &Request::StartTelemetry { rate_hz: 100 },
+        request_kind::START_TELEMETRY,
+    )?;
+    b.request(
+        &Request::StartStream { rate_hz: 10_000 },
+        request_kind::START_STREAM,
+    )?;
+    b.release(10.0)?;
+    b.run_ms(10)?;
+    b.until_state(SupervisorState::Vibrating, 3000)?;
+    b.run_ms(1500)?;
+    if b.status().stream_samples_skipped > 0 {
+        return Err(Failed(fail::STREAM, b.status().stream_samples_skipped));
+    }
+    b.request(&Request::StopStream, request_kind::STOP_STREAM)?;
+    b.request(
+        &Request::StartTelemetry { rate_hz: 1000 },
+        request_kind::START_TELEMETRY,
+    )?;
 
     b.release(0.0)?;
     b.until_state(SupervisorState::Locked, 3000)?;

@@ -42,6 +42,14 @@
 //! measured" throughout. The host's calibration check and `SetParameters` share
 //! [`check_rules`] (the model's `BoardLimits::check` and `Calibration::check`).
 //!
+//! # The continuous stream (issue 35)
+//! `StartStream { rate_hz }` sends every ADC sample (10 kHz, or 10 kHz divided by a whole
+//! number) with its step's cam and output counts, duty, tau_cam, status and state as
+//! `StreamBlock`s. The step only copies its readings into a ring of
+//! [`STREAM_RING_STEPS`] records; [`Core::transmit`] packs and frames the blocks. The
+//! stream stops on `StopStream`, without an accepted request for the comms timeout, and
+//! on [`Core::link_closed`].
+//!
 //! # Safety policy
 //! The motor runs only in `SpinUp` and `Vibrating`, only while a release is live (a host
 //! `Release` kept alive by its owner session's accepted drive requests within
@@ -79,6 +87,7 @@ mod release;
 mod server;
 mod speed_loop;
 pub mod storage;
+mod stream;
 mod supervisor;
 mod tx_queue;
 
@@ -101,4 +110,5 @@ pub use estimator::{Coefficients, EstimatorModel, RevolutionEstimate};
 pub use output_encoder::{OutputEncoder, OutputEncoderConfig};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;
+pub use stream::{STREAM_RING_STEPS, STREAM_STEP_SAMPLES};
 pub use tx_queue::TX_QUEUE_LEN;

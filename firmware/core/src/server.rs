@@ -97,6 +97,12 @@ impl Core {
                         },
                         other => self.handle(now_us, seq, other),
                     };
+                    // Any accepted request keeps the continuous stream alive.
+                    if matches!(answer, Answer::Now(ref r) if !matches!(r, Reply::Nack(_)))
+                        || matches!(answer, Answer::Later)
+                    {
+                        self.stream.refresh(now_us);
+                    }
                     self.answer(seq, answer);
                 }
                 Some(Err(Error::Decode { seq: Some(seq) })) => {
@@ -238,6 +244,19 @@ impl Core {
                     Ok(_) => Answer::Now(Reply::Ack),
                     Err(code) => Answer::nack(code),
                 }
+            }
+            Request::StartStream { rate_hz } => {
+                match crate::stream::stream_decimation(self.config.sample_rate_hz(), rate_hz) {
+                    Ok(decimation) => {
+                        self.stream.start(rate_hz, decimation, now);
+                        Answer::Now(Reply::Ack)
+                    }
+                    Err(code) => Answer::nack(code),
+                }
+            }
+            Request::StopStream => {
+                self.stream.stop();
+                Answer::Now(Reply::Ack)
             }
             Request::GetFaults => Answer::Now(self.faults_reply()),
             Request::ClearFaults => {

@@ -286,6 +286,7 @@ impl<T: Read + Write> Client<T> {
             Event::Telemetry(t) => self.queue(DeviceMessage::Telemetry(t)),
             Event::Health(h) => self.queue(DeviceMessage::Health(h)),
             Event::CaptureChunk(c) => self.queue(DeviceMessage::CaptureChunk(c)),
+            Event::StreamBlock(b) => self.queue(DeviceMessage::StreamBlock(b)),
             Event::CaptureDone {
                 capture_id,
                 total_samples,

@@ -380,6 +380,11 @@ fn run(
                 pending.truncate(before);
             }
             if master.hung_up() {
+                // The client is gone: its continuous stream stops (a board only learns it
+                // from the comms timeout).
+                if rig.core().status().stream_rate_hz > 0 {
+                    rig.link_closed();
+                }
                 // Nobody reads the line: the output is gone, as on a board's UART.
                 *lock(&shared.dropped_bytes) += pending.len() as u64;
                 pending.clear();
@@ -431,6 +436,40 @@ mod tests {
         let mut opts = ClientOptions::new(dev.port_name());
         opts.time_scale = dev.speed();
         Client::connect(io, opts).unwrap().0
+    }
+
+    #[test]
+    fn the_virtual_rig_streams_a_second_at_10_khz_with_nothing_lost() {
+        use protocol::{DeviceMessage, Request, StreamDecoder, StreamEvent};
+        let dev = VirtualDevice::paper(1.0).unwrap();
+        let mut client = connect(&dev);
+        // Heartbeats keep the stream alive past the comms timeout.
+        client.start_keep_alive();
+        client
+            .ack(&Request::StartStream { rate_hz: 10_000 })
+            .unwrap();
+        let mut decoder = StreamDecoder::new();
+        let mut last_seq = None;
+        // One second of device time: 10,000 samples, waiting on the device's blocks.
+        while decoder.samples < 10_000 {
+            match client.recv(Duration::from_secs(10)).unwrap() {
+                Some(DeviceMessage::StreamBlock(block)) => decoder.push(&block, |e| {
+                    if let StreamEvent::Sample { seq, .. } = e {
+                        last_seq = Some(seq);
+                    }
+                }),
+                Some(_) => {}
+                None => panic!("the stream stopped after {} samples", decoder.samples),
+            }
+        }
+        client.ack(&Request::StopStream).unwrap();
+        assert_eq!(
+            (decoder.lost, decoder.bad_blocks, decoder.restarts),
+            (0, 0, 0)
+        );
+        assert_eq!(last_seq, Some(decoder.samples as u32 - 1));
+        assert_eq!(dev.dropped_bytes(), 0);
+        dev.with_rig(|rig| assert_eq!(rig.core().status().stream_samples_skipped, 0));
     }
 
     #[test]

@@ -141,6 +141,8 @@ pub(crate) fn requests() -> std::vec::Vec<Named<Request>> {
             "Request::Simulation(SimCommand::SetSensorSupply)",
             Simulation(SimCommand::SetSensorSupply { volts: 4.75 }),
         ),
+        ("Request::StartStream", StartStream { rate_hz: 10_000 }),
+        ("Request::StopStream", StopStream),
     ]
 }
 
@@ -164,6 +166,8 @@ pub(crate) fn request_index(r: &Request) -> usize {
         Simulation(SimCommand::SetLoad { .. }) => 13,
         Simulation(SimCommand::SetSupplyVoltage { .. }) => 14,
         Simulation(SimCommand::SetSensorSupply { .. }) => 15,
+        StartStream { .. } => 16,
+        StopStream => 17,
     }
 }
 
@@ -192,6 +196,7 @@ pub(crate) fn nack_codes() -> std::vec::Vec<Named<NackCode>> {
         ("StorageFailed", StorageFailed),
         ("SimulationOnly", SimulationOnly),
         ("CurrentZeroPending", CurrentZeroPending),
+        ("StreamRate", StreamRate { fits_hz: 2_500 }),
     ]
 }
 
@@ -208,6 +213,7 @@ pub(crate) fn nack_index(c: &NackCode) -> usize {
         StorageFailed => 6,
         SimulationOnly => 7,
         CurrentZeroPending => 8,
+        StreamRate { .. } => 9,
     }
 }
 
@@ -241,6 +247,49 @@ pub(crate) fn reply_index(r: &Reply) -> usize {
         Reply::Faults { .. } => 3,
         Reply::Parameters(_) => 4,
     }
+}
+
+/// A stream block as the device sends it at 10 kHz: one control step of a vibrating cam
+/// (the current and cam count move every sample, the step's fields are held).
+pub(crate) fn stream_block() -> crate::StreamBlock {
+    let samples: std::vec::Vec<_> = (0..STREAM_BLOCK_SAMPLES)
+        .map(|k| {
+            let k16 = u16::try_from(k).unwrap();
+            crate::StreamSample {
+                current_adc: [2300, 2303, 2301, 2306, 2304, 2309, 2307, 2310, 2312, 2311][k],
+                cam_count: 40_000 + 16 * k16,
+                output_count: 1_200,
+                duty: 4_150,
+                tau_cam: 312,
+                status: (StatusFlags::HOST_RELEASE | StatusFlags::NOT_SELF_LOCKING).bits(),
+                state: 2,
+            }
+        })
+        .collect();
+    crate::StreamBlock::pack(123_450, &samples)
+}
+
+/// A stream block at its largest: every field jumps by its largest difference at every
+/// sample.
+pub(crate) fn worst_case_stream_block() -> (std::vec::Vec<crate::StreamSample>, crate::StreamBlock)
+{
+    let samples: std::vec::Vec<_> = (0..STREAM_BLOCK_SAMPLES)
+        .map(|k| {
+            let odd = k % 2 == 1;
+            crate::StreamSample {
+                current_adc: if odd { 0 } else { 0x8000 },
+                cam_count: if odd { 0 } else { 0x8000 },
+                output_count: if odd { 0 } else { 0x8000 },
+                duty: if odd { i16::MAX } else { i16::MIN },
+                tau_cam: if odd { i16::MAX } else { i16::MIN },
+                // The first sample's status takes 3 bytes, its state 1.
+                status: if odd { u16::MAX } else { 0xFFFE },
+                state: if odd { 0xFF } else { 0 },
+            }
+        })
+        .collect();
+    let block = crate::StreamBlock::pack(u32::MAX, &samples);
+    (samples, block)
 }
 
 /// One example of each device message (every reply inside `Reply`), in variant order.
@@ -292,6 +341,7 @@ pub(crate) fn device_messages() -> std::vec::Vec<(std::string::String, DeviceMes
             },
         ),
         ("DeviceMessage::Health", Health(health())),
+        ("DeviceMessage::StreamBlock", StreamBlock(stream_block())),
     ];
     out.extend(unsolicited.map(|(n, m)| (n.to_owned(), m)));
     out
@@ -307,6 +357,7 @@ pub(crate) fn device_index(m: &DeviceMessage) -> usize {
         CaptureDone { .. } => 3,
         FaultEvent { .. } => 4,
         Health(_) => 5,
+        StreamBlock(_) => 6,
     }
 }
 

@@ -477,10 +477,14 @@ impl Registry {
     pub fn size(&self, shape: &Shape, owner: &str, field: &str, cx: &Context) -> Size {
         match shape {
             Shape::Prim(p) => prim_size(p),
-            Shape::Str => (1, 1 + cx.capacity(owner, field)),
+            Shape::Str => {
+                let cap = cx.capacity(owner, field);
+                (1, crate::varint_len(cap as u64) + cap)
+            }
             Shape::Seq(elem) => {
                 let (_, max) = self.size(elem, owner, field, cx);
-                (1, 1 + cx.capacity(owner, field) * max)
+                let cap = cx.capacity(owner, field);
+                (1, crate::varint_len(cap as u64) + cap * max)
             }
             Shape::Array(n, elem) => {
                 let (min, max) = self.size(elem, owner, field, cx);

@@ -98,6 +98,7 @@ fn context() -> Context {
             ("DeviceInfo", "firmware_build", FIRMWARE_BUILD_LEN),
             ("DeviceInfo", "board", BOARD_NAME_LEN),
             ("CaptureChunk", "samples", CAPTURE_CHUNK_SAMPLES),
+            ("StreamBlock", "packed", STREAM_PACKED_MAX),
         ],
         flags: flags(),
     }
@@ -371,6 +372,7 @@ fn recorded_sizes_match_the_constants() {
     assert_eq!(max("HealthSample"), HealthSample::MAX_WIRE_SIZE);
     assert_eq!(max("CaptureSample"), CaptureSample::MAX_WIRE_SIZE);
     assert_eq!(max("CaptureChunk"), CaptureChunk::MAX_WIRE_SIZE);
+    assert_eq!(max("StreamBlock"), StreamBlock::MAX_WIRE_SIZE);
     assert_eq!(max("NackCode"), NackCode::MAX_WIRE_SIZE);
     assert_eq!(max("Reply"), Reply::MAX_WIRE_SIZE);
     assert_eq!(max("Request"), Request::MAX_WIRE_SIZE);
@@ -435,10 +437,19 @@ fn worst_case_sizes_are_exact() {
     assert_eq!(wire_len(&Reply::Parameters(params)), Reply::MAX_WIRE_SIZE);
     assert_eq!(
         wire_len(&DeviceMessage::CaptureChunk(chunk)),
+        TAG_LEN + CaptureChunk::MAX_WIRE_SIZE
+    );
+    let (_, block) = worst_case_stream_block();
+    assert_eq!(wire_len(&block), StreamBlock::MAX_WIRE_SIZE);
+    assert_eq!(
+        wire_len(&DeviceMessage::StreamBlock(block)),
         DeviceMessage::MAX_WIRE_SIZE
     );
     assert_eq!(wire_len(&(u16::MAX, set)), REQUEST_MESSAGE_SIZE);
 }
+
+/// An enum tag below 128.
+const TAG_LEN: usize = 1;
 
 /// Sequence number plus the largest request.
 const REQUEST_MESSAGE_SIZE: usize = 3 + Request::MAX_WIRE_SIZE;

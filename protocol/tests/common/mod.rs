@@ -144,6 +144,7 @@ fn nack_code() -> impl Strategy<Value = NackCode> {
         Just(NackCode::StorageFailed),
         Just(NackCode::SimulationOnly),
         Just(NackCode::CurrentZeroPending),
+        any::<u16>().prop_map(|fits_hz| NackCode::StreamRate { fits_hz }),
     ]
 }
 
@@ -232,6 +233,8 @@ pub fn request() -> impl Strategy<Value = Request> {
         (any::<f32>(), any::<u32>())
             .prop_map(|(volts, session)| Request::OpenLoop { volts, session }),
         sim_command().prop_map(Request::Simulation),
+        any::<u16>().prop_map(|rate_hz| Request::StartStream { rate_hz }),
+        Just(Request::StopStream),
     ]
 }
 
@@ -262,6 +265,62 @@ pub fn device_message() -> impl Strategy<Value = DeviceMessage> {
             device_time_us
         }),
         health().prop_map(DeviceMessage::Health),
+        (any::<u32>(), stream_samples()).prop_map(|(first_seq, samples)| {
+            DeviceMessage::StreamBlock(StreamBlock::pack(first_seq, &samples))
+        }),
+    ]
+}
+
+/// Any stream sample (every field over its whole range).
+pub fn stream_sample() -> impl Strategy<Value = StreamSample> {
+    (
+        any::<u16>(),
+        any::<u16>(),
+        any::<u16>(),
+        any::<i16>(),
+        any::<i16>(),
+        any::<u16>(),
+        any::<u8>(),
+    )
+        .prop_map(
+            |(current_adc, cam_count, output_count, duty, tau_cam, status, state)| StreamSample {
+                current_adc,
+                cam_count,
+                output_count,
+                duty,
+                tau_cam,
+                status,
+                state,
+            },
+        )
+}
+
+/// Up to a block of samples: arbitrary ones, or runs where only some fields move (as the
+/// device sends them), so both the delta and the held-field paths are exercised.
+pub fn stream_samples() -> impl Strategy<Value = std::vec::Vec<StreamSample>> {
+    prop_oneof![
+        proptest::collection::vec(stream_sample(), 0..=STREAM_BLOCK_SAMPLES),
+        (
+            stream_sample(),
+            proptest::collection::vec(
+                (any::<i8>(), any::<i8>(), any::<bool>()),
+                0..STREAM_BLOCK_SAMPLES
+            ),
+        )
+            .prop_map(|(first, steps)| {
+                let mut out = vec![first];
+                let mut s = first;
+                for (dc, dk, held) in steps {
+                    s.current_adc = s.current_adc.wrapping_add_signed(i16::from(dc));
+                    s.cam_count = s.cam_count.wrapping_add_signed(i16::from(dk));
+                    if held {
+                        s.duty = s.duty.wrapping_add(1);
+                        s.state ^= 0x80;
+                    }
+                    out.push(s);
+                }
+                out
+            }),
     ]
 }
 

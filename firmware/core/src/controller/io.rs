@@ -182,4 +182,9 @@ pub struct Status {
     pub capture_recording: bool,
     /// A capture is uploading.
     pub capture_uploading: bool,
+    /// The continuous stream's rate, Hz (0: off).
+    pub stream_rate_hz: u16,
+    /// ADC samples the stream skipped since it started because the link fell behind
+    /// (their stream samples reach the host as lost).
+    pub stream_samples_skipped: u32,
 }

@@ -58,6 +58,8 @@ pub struct Core {
     pub(crate) output_encoder: Option<crate::OutputEncoder>,
     pub(crate) output_count: Option<u16>,
     pub(crate) streams: Streams,
+    /// The continuous stream: the steps' ring and the block being packed.
+    pub(crate) stream: crate::stream::Stream,
     step_timing: StepTiming,
     overruns: u32,
     pub(crate) capture: Capture,
@@ -140,6 +142,7 @@ impl Core {
                 .write(config.output_encoder.map(crate::OutputEncoder::new));
             addr_of_mut!((*p).output_count).write(None);
             addr_of_mut!((*p).streams).write(Streams::default());
+            addr_of_mut!((*p).stream).write(crate::stream::Stream::default());
             addr_of_mut!((*p).step_timing).write(StepTiming::default());
             addr_of_mut!((*p).overruns).write(0);
             Capture::init_in(addr_of_mut!((*p).capture));
@@ -171,6 +174,7 @@ impl Core {
                 output_encoder: _,
                 output_count: _,
                 streams: _,
+                stream: _,
                 step_timing: _,
                 overruns: _,
                 capture: _,
@@ -287,14 +291,16 @@ impl Core {
     }
 
     /// Drains pending outgoing frame bytes into `out`; returns the count (0: nothing pending).
-    /// The stream samples the steps took are framed here, and capture chunks are
-    /// generated here, one per call and only in a call that framed no stream sample (so
-    /// one call's work stays bounded: `cargo xtask target-bench`'s `lock_cycles_worst`),
-    /// so replies and telemetry still go out while a capture uploads.
+    /// The telemetry and health samples the steps took are framed here; otherwise one
+    /// continuous-stream block is packed and framed from the steps' records; otherwise
+    /// one capture chunk is generated. One of the three per call (so one call's work
+    /// stays bounded: `cargo xtask target-bench`'s `lock_cycles_worst`), so replies and
+    /// telemetry still go out while a stream runs or a capture uploads.
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
-        // Bounded work under the binary's core lock: the stream samples the steps took, or
-        // else one capture message.
+        // Bounded work under the binary's core lock: the telemetry samples the steps took,
+        // or else one stream block, or else one capture message.
         if !self.frame_streams()
+            && !self.frame_stream_block()
             && self.capture.phase() == CapturePhase::Uploading
             && self.tx.len() < CAPTURE_IN_FLIGHT
             && self.tx.free() >= protocol::MAX_DEVICE_FRAME_SIZE + REPLY_RESERVE
@@ -303,6 +309,27 @@ impl Core {
             self.tx.push(&msg, REPLY_RESERVE);
         }
         self.tx.drain(out)
+    }
+
+    /// Packs and queues the next continuous-stream block, when the steps left enough
+    /// samples and the queue has room for it beside the replies' reserve (otherwise the
+    /// records wait in the ring); whether it did.
+    fn frame_stream_block(&mut self) -> bool {
+        if !self.stream.on() || self.tx.free() < protocol::MAX_DEVICE_FRAME_SIZE + REPLY_RESERVE {
+            return false;
+        }
+        let Some(block) = self.stream.next_block() else {
+            return false;
+        };
+        self.tx
+            .push(&protocol::DeviceMessage::StreamBlock(block), REPLY_RESERVE);
+        true
+    }
+
+    /// The host closed the link (the virtual rig's client went away; a board's UART cannot
+    /// tell, and the comms timeout stops the stream there): the stream stops.
+    pub fn link_closed(&mut self) {
+        self.stream.stop();
     }
 
     /// A snapshot of the core.
@@ -338,6 +365,8 @@ impl Core {
             control_overruns: self.overruns,
             capture_recording: self.capture.phase() == CapturePhase::Recording,
             capture_uploading: self.capture.phase() == CapturePhase::Uploading,
+            stream_rate_hz: self.stream.rate_hz(),
+            stream_samples_skipped: self.stream.skipped_total(),
         }
     }
 }

@@ -11,6 +11,7 @@ use super::{Core, Inputs, Outputs};
 use crate::capture::CapturePhase;
 use crate::current::ZeroResult;
 use crate::estimator::StepSamples;
+use crate::stream::StepRecord;
 use crate::supervisor::{RevolutionCheck, SupervisorInputs};
 
 impl Core {
@@ -87,12 +88,48 @@ impl Core {
             );
         }
         self.send_streams(now, speed);
+        self.record_stream_step(inputs.current_adc, prev_position, position, output);
         Outputs {
             duty: self.duty,
             enable: self.enable,
             persist: self.take_persist(now),
             capture: self.capture.phase() == CapturePhase::Recording,
         }
+    }
+
+    /// The continuous stream's part of the step: a copy of the readings into its ring (no
+    /// packing here; `Core::transmit` packs), and the stream's heartbeat.
+    fn record_stream_step(
+        &mut self,
+        adc: &[u16],
+        prev_position: i64,
+        position: i64,
+        output: Option<u16>,
+    ) {
+        if !self.stream.on() {
+            return;
+        }
+        if self
+            .stream
+            .check_timeout(self.now_us, self.config.comms_timeout_us)
+        {
+            return;
+        }
+        let mut state = self.supervisor.state() as u8;
+        if !self.faults.latched().is_empty() {
+            state |= protocol::STREAM_STATE_FAULTED;
+        }
+        let record = StepRecord {
+            cam_prev: low16(prev_position),
+            cam_now: low16(position),
+            output: output.unwrap_or(0),
+            duty: self.duty,
+            tau_cam_nm: self.estimator.last().map_or(0.0, |e| e.tau_cam_nm),
+            status: self.status_flags().bits(),
+            state,
+            ..StepRecord::default()
+        };
+        self.stream.record(adc, record);
     }
 
     /// Feeds the estimator; a completed revolution goes to the supervisor's load checks.

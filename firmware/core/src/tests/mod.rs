@@ -4,6 +4,7 @@
 mod faults;
 mod persist;
 mod server;
+mod stream;
 mod supervisor;
 
 use model::GearSet;
