@@ -10,11 +10,11 @@
 //! is free (the `host_tx` task), and a requested flash write is reported with
 //! `Core::persist_result` (the `persist` task). The session: boot and current zero,
 //! `Hello`, telemetry at 1 kHz, locked; release at 10 Hz (spin-up, vibrating), a 1 s
- //! capture at 10 kHz recorded and uploaded while vibrating; 5 Hz; 15 Hz; the continuous
- //! stream at 10 kHz for 1.5 s at 10 Hz with telemetry at 100 Hz (phase `stream`; the run
- //! fails if the link made it skip a sample); lock;
- //! `SetParameters` and its flash write, then again with a profile-shifted gear (its working
- //! pressure angles solved under the lock). Heartbeats every 100 ms keep the release alive.
+//! capture at 10 kHz recorded and uploaded while vibrating; 5 Hz; 15 Hz; the continuous
+//! stream at 10 kHz for 1.5 s at 10 Hz with telemetry at 100 Hz (phase `stream`; the run
+//! fails if the link made it skip a sample); lock;
+//! `SetParameters` and its flash write, then again with a profile-shifted gear (its working
+//! pressure angles solved under the lock). Heartbeats every 100 ms keep the release alive.
 //! The plant's load is 2 N m, its noise seed fixed: the run is deterministic.
 //!
 //! Each call made under the firmware's core lock is wrapped by `bench_marker` calls:
