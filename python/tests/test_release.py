@@ -134,6 +134,18 @@ def run_script(port, mode, seconds):
     return p
 
 
+def finish(p, timeout_s):
+    """The script's output once it has ended; a script still running after `timeout_s` is
+    killed (so it cannot hold its rig into the next test) and the test fails with what it
+    printed."""
+    try:
+        return p.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        out, err = p.communicate()
+        pytest.fail(f"still running {timeout_s} s after the signal; printed {out!r}, {err!r}")
+
+
 def served_state(served, clear=False):
     """Faults, the settled state and the cam's last speed (Hz) of the served rig, seen by a
     new client; `clear`: then clears the faults and returns the state after."""
@@ -149,11 +161,12 @@ def served_state(served, clear=False):
 
 def test_ctrl_c_in_a_release_block_leaves_the_rig_locked(served_realtime):
     served = served_realtime
+    # "released" is printed inside the `with` block: the signal lands in it, whatever the
+    # machine's load (no sleep to guess when).
     p = run_script(served.port, "ctrl-c", 600)
-    time.sleep(0.5)
     p.send_signal(signal.SIGINT)
-    out, err = p.communicate(timeout=30)
-    assert "ended_by exception" in out, err
+    out, err = finish(p, 30)
+    assert "ended_by exception" in out, (p.returncode, out, err)
     faults, state, cam_hz = served_state(served)
     # Locked by the library, not by the device's comms timeout.
     assert faults["latched"] == []
@@ -195,7 +208,8 @@ SWEEP_SCRIPT = textwrap.dedent(
     print("sweeping", flush=True)
     t0 = time.monotonic()
     try:
-        rig.torque_sweep(quick=True)
+        rig.torque_sweep(quick=True, progress=lambda done, total, line: print("point", done, flush=True))
+        print("finished", flush=True)
     except KeyboardInterrupt:
         print(f"interrupted after {time.monotonic() - t0:.1f} s", flush=True)
         rig.close()
@@ -211,10 +225,13 @@ def test_ctrl_c_stops_a_running_sweep_with_the_gear_locked(served):
         text=True,
     )
     assert p.stdout.readline().strip() == "sweeping"
-    time.sleep(1.5)
+    # The first point's progress line says the sweep runs (29 points to go): the signal
+    # lands mid-sweep on the rig's own progress, not after a guessed sleep.
+    first = p.stdout.readline().strip()
+    assert first == "point 1", (first, p.poll())
     p.send_signal(signal.SIGINT)
-    out, err = p.communicate(timeout=60)
-    assert out.startswith("interrupted after"), (out, err)
+    out, err = finish(p, 60)
+    assert out.startswith("interrupted after"), (p.returncode, out, err)
     faults, state, cam_hz = served_state(served)
     assert faults["latched"] == []
     assert state == "locked" and cam_hz < 0.1
