@@ -269,10 +269,32 @@ pub fn spawn(
     };
     let thread = std::thread::Builder::new()
         .name("backdrive_rig port".into())
-        .spawn(move || worker.run(rx))
+        .spawn(move || {
+            leave_stop_signals_to_python();
+            worker.run(rx)
+        })
         .map_err(|e| RigError::VirtualDevice(format!("cannot start the port's thread: {e}")))?;
     Ok((tx, thread))
 }
+
+/// Blocks SIGINT, SIGTERM and SIGHUP in the calling thread (the port's). Python runs its
+/// signal handlers in the main thread, which learns of a signal another thread received only
+/// when it next runs Python code: a Ctrl-C the kernel handed to this thread would leave a
+/// main thread asleep in `time.sleep` (inside a `with rig.release(...)`) without its
+/// KeyboardInterrupt. Blocked here, a process-directed signal goes to a thread that takes
+/// it. A failure leaves the thread as it was.
+#[cfg(unix)]
+fn leave_stop_signals_to_python() {
+    use nix::sys::signal::{SigSet, SigmaskHow, Signal, pthread_sigmask};
+    let mut set = SigSet::empty();
+    for signal in [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP] {
+        set.add(signal);
+    }
+    let _ = pthread_sigmask(SigmaskHow::SIG_BLOCK, Some(&set), None);
+}
+
+#[cfg(not(unix))]
+fn leave_stop_signals_to_python() {}
 
 #[cfg(test)]
 mod tests {
