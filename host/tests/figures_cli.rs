@@ -43,19 +43,10 @@ fn assert_prints_well(path: &Path, size: FigureSize) {
     );
 }
 
-/// The page width of the PDF `path`, pt (its first `/MediaBox`).
+/// The page width of the PDF `path`, pt.
 fn pdf_width_pt(path: &Path) -> f64 {
     let bytes = std::fs::read(path).unwrap();
-    let text = String::from_utf8_lossy(&bytes);
-    let at = text.find("/MediaBox").expect("a PDF page") + "/MediaBox".len();
-    let nums: Vec<f64> = text[at..]
-        .trim_start()
-        .trim_start_matches('[')
-        .split_whitespace()
-        .take(4)
-        .map(|n| n.trim_end_matches(']').parse().unwrap())
-        .collect();
-    nums[2] - nums[0]
+    reporting::check::pdf_page_pt(&bytes).expect("a PDF page").0
 }
 
 fn svgs_under(dir: &Path) -> Vec<PathBuf> {

@@ -343,6 +343,24 @@ fn points(e: &Element) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// The first page's size of the PDF `pdf` as printed, (width, height) in pt, read from its
+/// first `/MediaBox`; None when it has none that parses.
+pub fn pdf_page_pt(pdf: &[u8]) -> Option<(f64, f64)> {
+    let text = String::from_utf8_lossy(pdf);
+    let at = text.find("/MediaBox")? + "/MediaBox".len();
+    let nums: Vec<f64> = text[at..]
+        .trim_start()
+        .trim_start_matches('[')
+        .split_whitespace()
+        .take(4)
+        .map(|n| n.trim_end_matches(']').parse().ok())
+        .collect::<Option<_>>()?;
+    let [x0, y0, x1, y1] = nums[..] else {
+        return None;
+    };
+    Some((x1 - x0, y1 - y0))
+}
+
 /// The problems of the SVG figure `svg` printed `printed_width_in` inches wide: every text
 /// under [`MIN_TEXT_PT`] there, every text whose box lies on a line or point plotted in a
 /// framed plot area (the unfilled rectangles [`crate::plot`] draws around its plots), and

@@ -435,17 +435,9 @@ mod tests {
         .unwrap();
         assert!(bytes.starts_with(b"%PDF-"));
         // A page of the printed width: 3.5 in = 252 pt (the 200 x 100 px drawing scaled).
-        let text = String::from_utf8_lossy(&bytes);
-        let at = text.find("/MediaBox").unwrap();
-        let page: Vec<f64> = text[at + 9..]
-            .trim_start()
-            .trim_start_matches('[')
-            .split_whitespace()
-            .take(4)
-            .map(|n| n.trim_end_matches(']').parse().unwrap())
-            .collect();
+        let page = crate::check::pdf_page_pt(&bytes).expect("a page");
         assert!(
-            (page[2] - 252.0).abs() < 0.01 && (page[3] - 126.0).abs() < 0.01,
+            (page.0 - 252.0).abs() < 0.01 && (page.1 - 126.0).abs() < 0.01,
             "{page:?}"
         );
     }
