@@ -219,7 +219,9 @@ impl NativeRig {
                 spec.apply(&mut config.plant)?;
             }
             config.seed = seed;
-            let device = VirtualDevice::start(config, speed)?;
+            // The simulation thread starts with the stop signals blocked, as the port's.
+            let device =
+                worker::with_stop_signals_left_to_python(|| VirtualDevice::start(config, speed))?;
             let port = device.port_name().to_owned();
             let io = open_serial(&port, protocol::DEFAULT_BAUD_RATE)?;
             let mut opts = ClientOptions::new(format!("the virtual device ({port})"));

@@ -285,16 +285,49 @@ pub fn spawn(
 /// it. A failure leaves the thread as it was.
 #[cfg(unix)]
 fn leave_stop_signals_to_python() {
-    use nix::sys::signal::{SigSet, SigmaskHow, Signal, pthread_sigmask};
+    use nix::sys::signal::{SigmaskHow, pthread_sigmask};
+    let _ = pthread_sigmask(SigmaskHow::SIG_BLOCK, Some(&stop_signals()), None);
+}
+
+/// The signals that stop a script (Ctrl-C, `kill`, a closed terminal).
+#[cfg(unix)]
+fn stop_signals() -> nix::sys::signal::SigSet {
+    use nix::sys::signal::{SigSet, Signal};
     let mut set = SigSet::empty();
     for signal in [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP] {
         set.add(signal);
     }
-    let _ = pthread_sigmask(SigmaskHow::SIG_BLOCK, Some(&set), None);
+    set
 }
 
 #[cfg(not(unix))]
 fn leave_stop_signals_to_python() {}
+
+/// Runs `f` with SIGINT, SIGTERM and SIGHUP blocked in the calling thread, then restores its
+/// mask: every thread `f` starts (the in-process virtual rig's simulation thread) inherits
+/// the block and so, like the port's thread, leaves stop signals to Python's main thread.
+#[cfg(unix)]
+pub fn with_stop_signals_left_to_python<T>(f: impl FnOnce() -> T) -> T {
+    use nix::sys::signal::{SigSet, SigmaskHow, pthread_sigmask};
+    let mut before = SigSet::empty();
+    let blocked = pthread_sigmask(
+        SigmaskHow::SIG_BLOCK,
+        Some(&stop_signals()),
+        Some(&mut before),
+    )
+    .is_ok();
+    let out = f();
+    if blocked {
+        let _ = pthread_sigmask(SigmaskHow::SIG_SETMASK, Some(&before), None);
+    }
+    out
+}
+
+/// Runs `f` (no signal masks off Unix).
+#[cfg(not(unix))]
+pub fn with_stop_signals_left_to_python<T>(f: impl FnOnce() -> T) -> T {
+    f()
+}
 
 #[cfg(test)]
 mod tests {
@@ -351,5 +384,33 @@ mod tests {
         s.state = SupervisorState::Locked;
         rec.push(s, None);
         assert!(!lock(&rec.rows)[0].fresh);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn threads_started_inside_leave_stop_signals_to_the_caller_and_the_mask_comes_back() {
+        use nix::sys::signal::{SigSet, SigmaskHow, Signal, pthread_sigmask};
+        let mask = || {
+            let mut now = SigSet::empty();
+            pthread_sigmask(SigmaskHow::SIG_BLOCK, None, Some(&mut now)).unwrap();
+            now
+        };
+        let stops = [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP];
+        let before = stops.map(|s| mask().contains(s));
+        let inside = with_stop_signals_left_to_python(|| {
+            std::thread::spawn(move || {
+                let m = mask();
+                stops.map(|s| m.contains(s))
+            })
+            .join()
+            .unwrap()
+        });
+        assert_eq!(
+            inside,
+            [true, true, true],
+            "the started thread takes no stop signal"
+        );
+        let after = stops.map(|s| mask().contains(s));
+        assert_eq!(after, before, "the caller's mask is restored");
     }
 }
