@@ -144,7 +144,7 @@ pub use info::{
 };
 pub use link::{
     COMMS_TIMEOUT_MS, DEFAULT_BAUD_RATE, FAULT_HOLD_MS, HEARTBEAT_INTERVAL_MS,
-    MAX_TELEMETRY_RATE_HZ, REQUEST_WINDOW,
+    MAX_TELEMETRY_RATE_HZ, REQUEST_WINDOW, UART_BITS_PER_BYTE, link_bytes_per_s,
 };
 pub use parameters::{ParameterField, ParameterRejection, RejectReason, RigParameters};
 pub use request::{ReplyKind, Request, SessionId, SimCommand};

@@ -3,6 +3,15 @@
 /// UART baud rate both sides use by default (8N1).
 pub const DEFAULT_BAUD_RATE: u32 = 921_600;
 
+/// Bits on the line per byte at 8N1: a start bit, eight data bits, a stop bit.
+pub const UART_BITS_PER_BYTE: u32 = 10;
+
+/// Bytes per second a UART at `baud` carries at 8N1 (92,160 at [`DEFAULT_BAUD_RATE`]): no
+/// device sends faster, and a virtual rig paces its output to it.
+pub const fn link_bytes_per_s(baud: u32) -> u32 {
+    baud / UART_BITS_PER_BYTE
+}
+
 /// Highest telemetry rate the device accepts in `StartTelemetry`, Hz.
 pub const MAX_TELEMETRY_RATE_HZ: u16 = 1000;
 

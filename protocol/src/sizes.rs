@@ -98,7 +98,7 @@ const TELEMETRY_FRAME_TYPICAL: usize = frame_size(
 const HEALTH_FRAME: usize = frame_size(TAG + HealthSample::MAX_WIRE_SIZE);
 
 /// Bits on the line per byte at 8N1.
-const BITS_PER_BYTE: usize = 10;
+const BITS_PER_BYTE: usize = crate::link::UART_BITS_PER_BYTE as usize;
 
 // Telemetry alone can never fill the link, even at its worst case and the top rate.
 const _: () = assert!(

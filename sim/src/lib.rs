@@ -17,5 +17,5 @@ pub mod scenarios;
 pub use error::SimError;
 pub use link::{LineNoise, SimLink};
 pub use preset::{EffectSpec, Preset};
-pub use rig::{ADC_HZ, BenchSettings, Injections, SimConfig, SimRig, VIRTUAL_BOARD};
+pub use rig::{ADC_HZ, BenchSettings, Injections, SimConfig, SimRig, UART_WRITE, VIRTUAL_BOARD};
 pub use riglink::RigLink;

@@ -165,6 +165,27 @@ pub struct BenchSettings {
     pub commands: u32,
 }
 
+/// The device's UART to the host at 8N1 ([`SimRig::set_link_baud`]): the binary's `host_tx`
+/// task takes up to [`UART_WRITE`] bytes from [`Core::transmit`] and writes them, then
+/// takes the next; the line carries [`protocol::link_bytes_per_s`] of them per second of
+/// device time, so the core's transmit queue fills, and the stream skips samples, exactly
+/// as on the board when the link cannot carry everything.
+#[derive(Debug, Clone)]
+struct Uart {
+    /// Bytes per second on the line.
+    bytes_per_s: u64,
+    /// The write in flight and how much of it is on the line.
+    write: Vec<u8>,
+    sent: usize,
+    /// Line capacity not used yet, in bytes times [`ADC_HZ`] (exact integer pacing).
+    credit: u64,
+    /// Bytes on the line since the link was paced.
+    total: u64,
+}
+
+/// Bytes the binary's `host_tx` task takes from the core per write.
+pub const UART_WRITE: usize = 256;
+
 /// The closed-loop simulated rig.
 pub struct SimRig {
     plant: Plant,
@@ -181,6 +202,8 @@ pub struct SimRig {
     bench: BenchSettings,
     /// A debug probe halted the core ([`SimRig::debug_halt`]): no control steps run.
     halted: bool,
+    /// The paced link, or `None`: every byte leaves at the control step that framed it.
+    uart: Option<Uart>,
 }
 
 impl SimRig {
@@ -224,6 +247,68 @@ impl SimRig {
                 sensor_supply_v: None,
                 commands: 0,
             },
+            uart: None,
+        }
+    }
+
+    /// Paces the device's output to a UART at `baud` (8N1, in device time), as the board
+    /// sends it: [`SimRig::from_device`] never yields more than
+    /// [`protocol::link_bytes_per_s`] bytes per device second (plus the byte in flight),
+    /// and what does not fit waits in the core's transmit queue or is skipped there, as on
+    /// the board. `None` (the default) hands every byte out at the step that framed it.
+    pub fn set_link_baud(&mut self, baud: Option<u32>) {
+        self.uart = baud.map(|b| Uart {
+            bytes_per_s: u64::from(protocol::link_bytes_per_s(b)),
+            write: Vec::with_capacity(UART_WRITE),
+            sent: 0,
+            credit: 0,
+            total: 0,
+        });
+    }
+
+    /// The paced link's rate, bytes per second of device time (`None`: not paced).
+    pub fn link_bytes_per_s(&self) -> Option<u64> {
+        self.uart.as_ref().map(|u| u.bytes_per_s)
+    }
+
+    /// Bytes the paced link carried since [`SimRig::set_link_baud`] (0: not paced).
+    pub fn link_bytes_sent(&self) -> u64 {
+        self.uart.as_ref().map_or(0, |u| u.total)
+    }
+
+    /// `ticks` ADC ticks of the paced UART: the write in flight goes out at the line's
+    /// rate, and when it is done the next is taken from the core (an idle line keeps no
+    /// credit: the board's task polls again a tick later).
+    fn run_uart(&mut self, ticks: u64) {
+        let Self {
+            uart, core, outbox, ..
+        } = self;
+        let Some(uart) = uart else {
+            return;
+        };
+        let hz = u64::from(ADC_HZ);
+        uart.credit += ticks * uart.bytes_per_s;
+        loop {
+            if uart.sent == uart.write.len() {
+                let mut buf = [0u8; UART_WRITE];
+                let n = core.transmit(&mut buf);
+                uart.write.clear();
+                uart.sent = 0;
+                if n == 0 {
+                    uart.credit = 0;
+                    return;
+                }
+                uart.write.extend_from_slice(&buf[..n]);
+            }
+            let left = uart.write.len() - uart.sent;
+            let k = usize::try_from(uart.credit / hz).map_or(left, |c| c.min(left));
+            outbox.extend_from_slice(&uart.write[uart.sent..uart.sent + k]);
+            uart.sent += k;
+            uart.credit -= k as u64 * hz;
+            uart.total += k as u64;
+            if uart.sent < uart.write.len() {
+                return;
+            }
         }
     }
 
@@ -266,8 +351,11 @@ impl SimRig {
                 });
             self.tick += u64::from(n);
             left -= u64::from(n);
-            if !self.halted && self.tick.is_multiple_of(self.ticks_per_step as u64) {
-                self.control_step();
+            if !self.halted {
+                if self.tick.is_multiple_of(self.ticks_per_step as u64) {
+                    self.control_step();
+                }
+                self.run_uart(u64::from(n));
             }
         }
     }
@@ -326,6 +414,10 @@ impl SimRig {
         if let Some(cal) = out.persist {
             self.flash = Some(cal);
             self.core.persist_result(true);
+        }
+        if self.uart.is_some() {
+            // The paced UART takes the bytes at the line's rate (`SimRig::run_uart`).
+            return;
         }
         let mut buf = [0u8; 256];
         loop {

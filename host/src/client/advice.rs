@@ -35,6 +35,9 @@ pub fn nack_advice(code: NackCode) -> String {
             "the device is still measuring its current sensor's zero with the motor off (100 ms after boot or a re-zero), and it did not finish within {} s of the device's time: check `rig faults` and the sensor's supply, then try again",
             sim::riglink::ZERO_WAIT_S
         ),
+        NackCode::StreamRate { fits_hz } => format!(
+            "ask for --rate {fits_hz} (or a lower rate that divides 10 kHz; the link carries the stream beside the telemetry only up to the rate the device names)"
+        ),
         _ => "the firmware refused it for a reason this tool does not know: update the rig tool".into(),
     }
 }

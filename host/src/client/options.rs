@@ -72,6 +72,8 @@ pub struct LinkStats {
     pub heartbeats: u32,
     /// Telemetry samples missing from the stream (gaps in the sample counter).
     pub telemetry_lost: u64,
+    /// Bytes received from the device.
+    pub bytes_in: u64,
 }
 
 impl From<SessionStats> for LinkStats {
@@ -84,6 +86,7 @@ impl From<SessionStats> for LinkStats {
             retries: s.retries,
             heartbeats: s.heartbeats,
             telemetry_lost: s.telemetry_lost,
+            bytes_in: s.bytes_in,
         }
     }
 }

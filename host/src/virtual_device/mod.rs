@@ -23,6 +23,11 @@
 //! the machine cannot keep up (one turn of the loop covers at most 20 ms of wall time)
 //! virtual time falls behind: [`VirtualDevice::behind_s`] says by how much, and `rig sim
 //! serve` warns.
+//!
+//! Either way the device's output leaves at its UART's byte rate in device time
+//! ([`SimRig::set_link_baud`] at [`protocol::DEFAULT_BAUD_RATE`]: 92,160 B/s): a virtual
+//! rig never delivers faster than the board could, and a stream that does not fit beside
+//! the telemetry skips samples in the firmware core, numbered, as the board does.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -157,8 +162,10 @@ impl VirtualDevice {
         // The device says its time scale in `Info`, so any client scales its heartbeats.
         let mut config = config;
         config.core.time_scale = speed as f32;
+        let mut rig = SimRig::new(config);
+        rig.set_link_baud(Some(protocol::DEFAULT_BAUD_RATE));
         let shared = Arc::new(Shared {
-            rig: Mutex::new(SimRig::new(config)),
+            rig: Mutex::new(rig),
             noise_bytes: Mutex::new(0),
             stop: AtomicBool::new(false),
             dropped_bytes: Mutex::new(0),
@@ -470,6 +477,56 @@ mod tests {
         assert_eq!(last_seq, Some(decoder.samples as u32 - 1));
         assert_eq!(dev.dropped_bytes(), 0);
         dev.with_rig(|rig| assert_eq!(rig.core().status().stream_samples_skipped, 0));
+    }
+
+    #[test]
+    fn the_served_rig_never_sends_faster_than_its_uart() {
+        use protocol::{DeviceMessage, Request, StreamDecoder};
+        let dev = VirtualDevice::start_with_noise(
+            VirtualDevice::paper_config(&sim::Preset::paper()),
+            1.0,
+            None,
+        )
+        .unwrap();
+        let mut client = connect(&dev);
+        client.start_keep_alive();
+        // 1 kHz telemetry and the 10 kHz stream: about 76 kB/s with the cam at rest.
+        client.start_telemetry(1000).unwrap();
+        client
+            .ack(&Request::StartStream { rate_hz: 10_000 })
+            .unwrap();
+        let rate = f64::from(protocol::link_bytes_per_s(protocol::DEFAULT_BAUD_RATE));
+        let line = |dev: &VirtualDevice| dev.with_rig(|r| (r.time(), r.link_bytes_sent()));
+        let (t0, sent0) = line(&dev);
+        let seen0 = client.stats().bytes_in;
+        let mut decoder = StreamDecoder::new();
+        // Two seconds of device time, waiting on the device's clock.
+        while dev.time() < t0 + 2.0 {
+            match client.recv(Duration::from_secs(10)).unwrap() {
+                Some(DeviceMessage::StreamBlock(block)) => decoder.push(&block, |_| {}),
+                Some(_) => {}
+                None => panic!("the device went quiet"),
+            }
+        }
+        let (t1, sent1) = line(&dev);
+        let seen = client.stats().bytes_in - seen0;
+        client.ack(&Request::StopStream).unwrap();
+        let device_s = t1 - t0;
+        // The device never sent faster than its UART, on its own clock (the byte in
+        // flight aside), and the host saw no more than the device sent (plus what was on
+        // the way when the count began: less than one write of the UART).
+        assert!(
+            (sent1 - sent0) as f64 <= rate * device_s + 1.0,
+            "{} B in {device_s} s",
+            sent1 - sent0
+        );
+        assert!(
+            seen as f64 <= rate * device_s + sim::UART_WRITE as f64 + 1.0,
+            "the host saw {seen} B in {device_s} s of device time"
+        );
+        // And the stream fitted beside the telemetry: nothing lost.
+        assert_eq!((decoder.lost, decoder.bad_blocks), (0, 0));
+        assert!(decoder.samples >= 19_000, "{} samples", decoder.samples);
     }
 
     #[test]
