@@ -33,6 +33,7 @@ pub mod output_paths;
 pub mod ports;
 pub mod progress;
 pub mod provenance;
+pub mod recording;
 pub mod row_log;
 pub mod signals;
 pub mod sweep_report;

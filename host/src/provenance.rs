@@ -61,20 +61,42 @@ impl Provenance<'_> {
     /// The header: `#` lines, each ending in a newline, that CSV readers skip.
     pub fn header(&self) -> String {
         format!(
-            "# {} ({})\n# date: {}\n# host: rig {}\n# firmware: {}\n# calibration ({}): {}\n# window: {}\n{PLAN_PREFIX}{}\n{}",
-            self.procedure,
-            self.command,
-            reporting::UtcTime::of(self.date).iso(),
-            env!("CARGO_PKG_VERSION"),
-            identity(self.info),
-            self.info.parameters_status.name(),
-            serde_json::to_string(self.calibration).unwrap_or_default(),
+            "{}# window: {}\n{PLAN_PREFIX}{}\n{}",
+            device_header(
+                self.procedure,
+                self.command,
+                self.date,
+                self.info,
+                self.calibration
+            ),
             self.window,
             self.plan.one_line(),
             drive_line(self.regenerative),
         )
     }
 }
+
+/// The first lines of every measured file's header: the procedure and command line, the
+/// date, the host tool, the device's identity and its calibration, each a `#` line ending
+/// in a newline ([`Provenance::header`] and `rig record`'s files go on from here).
+pub fn device_header(
+    procedure: &str,
+    command: &str,
+    date: SystemTime,
+    info: &DeviceInfo,
+    calibration: &RigParameters,
+) -> String {
+    format!(
+        "# {procedure} ({command})\n# date: {}\n# host: rig {}\n# firmware: {}\n# calibration ({}): {}\n",
+        reporting::UtcTime::of(date).iso(),
+        env!("CARGO_PKG_VERSION"),
+        identity(info),
+        info.parameters_status.name(),
+        serde_json::to_string(calibration).unwrap_or_default(),
+    )
+}
+
+impl Provenance<'_> {}
 
 /// The provenance header of a sweep measured on the simulated rig in virtual time (`rig sim
 /// torque-sweep`, `rig demo`): what ran it and the drive the plant ran, so `rig explain`

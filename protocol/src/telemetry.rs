@@ -24,6 +24,21 @@ pub enum SupervisorState {
 }
 
 impl SupervisorState {
+    /// Every state, in variant order: `ALL[i]` is the state whose index (`state as u8`, as
+    /// [`crate::StreamSample::state`] carries it) is `i`.
+    pub const ALL: [Self; 5] = [
+        Self::Locked,
+        Self::SpinUp,
+        Self::Vibrating,
+        Self::Stopping,
+        Self::Fault,
+    ];
+
+    /// The state whose variant index is `index` (`None` for one this build does not know).
+    pub fn from_index(index: u8) -> Option<Self> {
+        Self::ALL.get(usize::from(index)).copied()
+    }
+
     /// Lower-case name for logs and CSV columns.
     pub const fn name(self) -> &'static str {
         match self {
@@ -104,4 +119,18 @@ pub struct TelemetrySample {
 impl TelemetrySample {
     /// Largest serialised size, bytes.
     pub const MAX_WIRE_SIZE: usize = U32 + U64 + 7 * F32 + TAG + U32 + U16;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_state_is_found_by_its_variant_index() {
+        for (i, s) in SupervisorState::ALL.iter().enumerate() {
+            assert_eq!(*s as usize, i);
+            assert_eq!(SupervisorState::from_index(i as u8), Some(*s));
+        }
+        assert_eq!(SupervisorState::from_index(5), None);
+    }
 }

@@ -14,7 +14,7 @@ use crate::RigError;
 pub use crate::connection::{Connection, DeviceOpts};
 
 /// The verbs that use a device, for messages.
-pub const DEVICE_VERBS: &str = "info, faults, clear, release, bringup, monitor, capture, calibrate, calibration, experiment, discover, flash and demo";
+pub const DEVICE_VERBS: &str = "info, faults, clear, release, bringup, monitor, capture, record, calibrate, calibration, experiment, discover, flash and demo";
 
 /// The device options as given on the command line (nothing defaulted), declared twice:
 /// before the verb (not global, so a verb without a device does not take them after its
@@ -76,7 +76,7 @@ device_args!(
     /// Device options before the verb: `rig --sim info`. Device verbs only.
     DeviceArgs,
     global = false,
-    heading = "Device options (for info, faults, clear, release, bringup, monitor, capture, calibrate, calibration, experiment, discover, demo; also after the verb)",
+    heading = "Device options (for info, faults, clear, release, bringup, monitor, capture, record, calibrate, calibration, experiment, discover, demo; also after the verb)",
     model = model,
     seed = seed
 );

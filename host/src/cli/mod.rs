@@ -29,6 +29,7 @@ pub mod info;
 pub mod log;
 pub mod monitor;
 pub mod ports;
+pub mod record;
 pub mod release;
 pub mod serve;
 pub mod sim;
@@ -160,6 +161,15 @@ pub enum Command {
         #[command(flatten)]
         device: VerbDeviceArgs,
     },
+    /// The continuous stream (every sample, up to 10 kHz) to a CSV or binary file, for --seconds or until Ctrl-C.
+    Record {
+        /// The verb's arguments.
+        #[command(flatten)]
+        args: record::RecordArgs,
+        /// Device options after the verb.
+        #[command(flatten)]
+        device: VerbDeviceArgs,
+    },
     /// The paper's vibrator calibration (C1-C6): measure, fit, plot, write the device.
     Calibrate {
         /// The verb's arguments.
@@ -265,6 +275,7 @@ impl Cli {
             Command::Bringup { args, device } => bringup::run(args, &before.resolve(&device)?),
             Command::Monitor { args, device } => monitor::run(args, &before.resolve(&device)?),
             Command::Capture { args, device } => capture::run(args, &before.resolve(&device)?),
+            Command::Record { args, device } => record::run(args, &before.resolve(&device)?),
             Command::Calibrate { args, device } => calibrate::run(args, &before.resolve(&device)?),
             Command::Calibration { args, device } => {
                 calibration::run(args, &before.resolve(&device)?)
