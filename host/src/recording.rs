@@ -120,8 +120,7 @@ pub struct StreamWriter<W: Write> {
     rate_hz: u16,
     decoder: StreamDecoder,
     gaps: u64,
-    cam: Unwrap,
-    output: Unwrap,
+    rows: StreamRows,
     frames: u16,
     events: Vec<StreamEvent>,
 }
@@ -161,8 +160,7 @@ impl<W: Write> StreamWriter<W> {
             rate_hz,
             decoder,
             gaps: 0,
-            cam: Unwrap::default(),
-            output: Unwrap::default(),
+            rows: StreamRows::new(rate_hz),
             frames: 0,
             events: Vec::new(),
         })
@@ -249,39 +247,121 @@ impl<W: Write> StreamWriter<W> {
                 f[STREAM_CSV_COLUMNS.len() - 1] = count.to_string();
                 f
             }
-            StreamEvent::Sample { seq, sample } => self.sample_fields(seq, &sample, rate),
+            StreamEvent::Sample { seq, sample } => self.sample_fields(seq, &sample),
         };
         self.out.write_all(csv_line(&fields).as_bytes())
     }
 
-    fn sample_fields(&mut self, seq: u32, s: &StreamSample, rate: f64) -> Vec<String> {
-        let cam = self.cam.next(s.cam_count);
-        let output = self.output.next(s.output_count);
-        let state = s.state & !protocol::STREAM_STATE_FAULTED;
-        let state = SupervisorState::from_index(state)
-            .map_or_else(|| format!("unknown_{state}"), |st| st.name().to_owned());
-        let status = protocol::StatusFlags::from_bits_retain(s.status)
-            .names()
-            .collect::<Vec<_>>()
-            .join("|");
-        // Counts fit an i32 for 2^31 counts (262,000 cam turns) from the first sample.
-        let clamp = |c: i64| i32::try_from(c).unwrap_or(if c < 0 { i32::MIN } else { i32::MAX });
+    fn sample_fields(&mut self, seq: u32, s: &StreamSample) -> Vec<String> {
+        let r = self.rows.row(seq, s);
         vec![
-            seq.to_string(),
-            format!("{:.6}", f64::from(seq) / rate),
-            s.current_adc.to_string(),
-            format!("{:.5}", current_amps(s.current_adc)),
-            cam.to_string(),
-            format!("{:.6}", cam_angle_rad(clamp(cam))),
-            output.to_string(),
-            format!("{:.6}", output_angle_rad(clamp(output))),
-            format!("{:.4}", f32::from(s.duty) / protocol::STREAM_DUTY_SCALE),
-            format!("{:.4}", f32::from(s.tau_cam) / protocol::STREAM_TAU_SCALE),
-            state,
-            u8::from(s.state & protocol::STREAM_STATE_FAULTED != 0).to_string(),
-            status,
+            r.seq.to_string(),
+            format!("{:.6}", r.t_s),
+            r.current_adc.to_string(),
+            format!("{:.5}", r.current_a),
+            r.cam_count.to_string(),
+            format!("{:.6}", r.cam_angle_rad),
+            r.output_count.to_string(),
+            format!("{:.6}", r.output_angle_rad),
+            format!("{:.4}", r.duty),
+            format!("{:.4}", r.tau_cam_nm),
+            r.state_name(),
+            u8::from(r.fault_latched).to_string(),
+            r.status_names(),
             "0".into(),
         ]
+    }
+}
+
+/// One stream sample in the CSV's units ([`STREAM_CSV_COLUMNS`]): what `rig record` writes
+/// and the Python binding hands to numpy.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamRow {
+    /// The sample's number from the stream's start.
+    pub seq: u32,
+    /// `seq` over the rate, s.
+    pub t_s: f64,
+    /// Current-sensor ADC code.
+    pub current_adc: u16,
+    /// Current, A.
+    pub current_a: f64,
+    /// Cam encoder count, unwrapped from the first sample.
+    pub cam_count: i64,
+    /// Cam angle, rad.
+    pub cam_angle_rad: f64,
+    /// Output encoder count, unwrapped from the first sample.
+    pub output_count: i64,
+    /// Output angle, rad.
+    pub output_angle_rad: f64,
+    /// PWM duty, -1..=1.
+    pub duty: f32,
+    /// The last revolution's tau_cam, N m.
+    pub tau_cam_nm: f32,
+    /// Supervisor state index (`SupervisorState::from_index`).
+    pub state: u8,
+    /// Whether a fault is latched.
+    pub fault_latched: bool,
+    /// Status flag bits.
+    pub status: u16,
+}
+
+impl StreamRow {
+    /// The supervisor state's name (`unknown_N` for one this build does not know).
+    pub fn state_name(&self) -> String {
+        SupervisorState::from_index(self.state).map_or_else(
+            || format!("unknown_{}", self.state),
+            |s| s.name().to_owned(),
+        )
+    }
+
+    /// The status flags' names joined by `|`.
+    pub fn status_names(&self) -> String {
+        protocol::StatusFlags::from_bits_retain(self.status)
+            .names()
+            .collect::<Vec<_>>()
+            .join("|")
+    }
+}
+
+/// Turns a stream's samples, in order, into [`StreamRow`]s (the counts unwrapped).
+#[derive(Debug, Clone, Copy)]
+pub struct StreamRows {
+    rate: f64,
+    cam: Unwrap,
+    output: Unwrap,
+}
+
+impl StreamRows {
+    /// For a stream at `rate_hz`.
+    pub fn new(rate_hz: u16) -> Self {
+        Self {
+            rate: f64::from(rate_hz.max(1)),
+            cam: Unwrap::default(),
+            output: Unwrap::default(),
+        }
+    }
+
+    /// Sample `seq`.
+    pub fn row(&mut self, seq: u32, s: &StreamSample) -> StreamRow {
+        let cam = self.cam.next(s.cam_count);
+        let output = self.output.next(s.output_count);
+        // Angles from counts within the i32 range (262,000 cam turns from the first sample).
+        let clamp = |c: i64| i32::try_from(c).unwrap_or(if c < 0 { i32::MIN } else { i32::MAX });
+        StreamRow {
+            seq,
+            t_s: f64::from(seq) / self.rate,
+            current_adc: s.current_adc,
+            current_a: current_amps(s.current_adc),
+            cam_count: cam,
+            cam_angle_rad: cam_angle_rad(clamp(cam)),
+            output_count: output,
+            output_angle_rad: output_angle_rad(clamp(output)),
+            duty: f32::from(s.duty) / protocol::STREAM_DUTY_SCALE,
+            tau_cam_nm: f32::from(s.tau_cam) / protocol::STREAM_TAU_SCALE,
+            state: s.state & !protocol::STREAM_STATE_FAULTED,
+            fault_latched: s.state & protocol::STREAM_STATE_FAULTED != 0,
+            status: s.status,
+        }
     }
 }
 

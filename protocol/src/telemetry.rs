@@ -127,9 +127,9 @@ mod tests {
 
     #[test]
     fn each_state_is_found_by_its_variant_index() {
-        for (i, s) in SupervisorState::ALL.iter().enumerate() {
-            assert_eq!(*s as usize, i);
-            assert_eq!(SupervisorState::from_index(i as u8), Some(*s));
+        for (i, s) in (0u8..).zip(SupervisorState::ALL) {
+            assert_eq!(s as u8, i);
+            assert_eq!(SupervisorState::from_index(i), Some(s));
         }
         assert_eq!(SupervisorState::from_index(5), None);
     }

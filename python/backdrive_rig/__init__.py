@@ -29,6 +29,7 @@ from typing import (
     Callable,
     Dict,
     Iterable,
+    Iterator,
     List,
     Mapping,
     Optional,
@@ -65,6 +66,7 @@ __all__ = [
     "Rig",
     "Release",
     "Recorder",
+    "Stream",
     "Report",
     "design",
     "explain",
@@ -72,6 +74,7 @@ __all__ = [
     "discover",
     "versions",
     "TELEMETRY_COLUMNS",
+    "STREAM_COLUMNS",
     "RigError",
     "BadValueError",
     "MissingFileError",
@@ -117,6 +120,9 @@ def _progress(progress: Union[Progress, bool, None], what: str) -> Tuple[Optiona
 
 #: The columns of ``rig monitor --csv`` (telemetry), in order; ``record`` adds ``seq``.
 TELEMETRY_COLUMNS: List[str] = list(_native.TELEMETRY_COLUMNS)
+#: The continuous stream's columns (``rig record``'s CSV columns and units, without its
+#: ``lost`` rows: a recording's ``lost`` and ``gaps`` say which samples never arrived).
+STREAM_COLUMNS: List[str] = list(_native.STREAM_COLUMNS)
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -291,7 +297,9 @@ class Release:
 class Recorder:
     """A background telemetry recording: the port's Rust thread stores every sample while
     Python does other work. Samples lost on the link (gaps in the device's sample counter)
-    are counted in :attr:`lost` and listed in :attr:`gaps`, never hidden."""
+    are counted in :attr:`lost` and listed in :attr:`gaps`, never hidden. Above 1 kHz (or
+    with ``stream=True``) it records the continuous stream instead: every ADC sample and
+    its control step, up to 10 kHz, with :data:`STREAM_COLUMNS`."""
 
     def __init__(self, rig: "Rig", native: Any):
         self._rig = rig
@@ -316,6 +324,12 @@ class Recorder:
     def gaps(self) -> List[Tuple[int, int]]:
         """(sequence number before, after) of each gap."""
         return list(self._native.gaps)
+
+    @property
+    def stream(self) -> bool:
+        """Whether this records the continuous stream (:data:`STREAM_COLUMNS`), not
+        telemetry (:data:`TELEMETRY_COLUMNS`)."""
+        return bool(self._native.stream)
 
     def __len__(self) -> int:
         return len(self._native)
@@ -369,6 +383,79 @@ class Recorder:
         return out
 
     def __enter__(self) -> "Recorder":
+        return self
+
+    def __exit__(
+        self,
+        exc_type: Optional[Type[BaseException]],
+        exc: Optional[BaseException],
+        tb: Optional[TracebackType],
+    ) -> Literal[False]:
+        self.stop()
+        return False
+
+
+class Stream:
+    """The continuous stream as numpy chunks: every ADC sample and its control step (up to
+    10 kHz), each chunk a dict of numpy arrays with :data:`STREAM_COLUMNS`. Iterate it (each
+    chunk waits, GIL released, until ``chunk_samples`` arrived or the stream ended) inside a
+    ``with`` block, which stops the stream on the way out::
+
+        with rig.stream(rate_hz=10000, seconds=60) as s:
+            for chunk in s:
+                np.mean(chunk["current_a"])
+
+    Samples that never arrived (the link was full, or a frame was damaged) are counted in
+    :attr:`lost` and placed in :attr:`gaps`, never hidden: ``chunk["seq"]`` jumps there."""
+
+    def __init__(self, recorder: Recorder, chunk_samples: int):
+        self._rec = recorder
+        self._chunk = chunk_samples
+        self.samples = 0
+        """Samples yielded so far."""
+
+    @property
+    def rate_hz(self) -> int:
+        """The stream's rate, Hz."""
+        return self._rec.rate_hz
+
+    @property
+    def done(self) -> bool:
+        """Whether the stream has ended (its ``seconds``, or stopped)."""
+        return self._rec.done
+
+    @property
+    def lost(self) -> int:
+        """Samples that never arrived so far."""
+        return self._rec.lost
+
+    @property
+    def gaps(self) -> List[Tuple[int, int]]:
+        """(sample number before, after) of each run of lost samples."""
+        return self._rec.gaps
+
+    def stop(self) -> None:
+        """Stops the stream (samples not yet taken stay for :meth:`take`)."""
+        self._rec.stop()
+
+    def take(self) -> Dict[str, np.ndarray]:
+        """The samples received since the last chunk, at once."""
+        data: Dict[str, np.ndarray] = self._rec.take(pandas=False)
+        self.samples += len(data["seq"])
+        return data
+
+    def __iter__(self) -> Iterator[Dict[str, np.ndarray]]:
+        return self
+
+    def __next__(self) -> Dict[str, np.ndarray]:
+        rig = self._rec._rig
+        rig._native.wait_samples(self._rec._native, self._chunk)
+        self._rec._raise_error()
+        if len(self._rec) == 0:
+            raise StopIteration
+        return self.take()
+
+    def __enter__(self) -> "Stream":
         return self
 
     def __exit__(
@@ -499,12 +586,18 @@ class Rig:
             )
         return Release(self, freq_hz, seconds, confirm_s)
 
-    def recorder(self, rate_hz: int = 1000, seconds: Optional[float] = None) -> Recorder:
+    def recorder(
+        self, rate_hz: int = 1000, seconds: Optional[float] = None, stream: Optional[bool] = None
+    ) -> Recorder:
         """Starts a background telemetry recording at ``rate_hz`` (the device's 1 kHz
         divided by a whole number) for ``seconds`` of device time, or until ``stop()``.
-        One recording runs at a time: a call from another thread while one runs waits
-        (queues) until it ends or is stopped; the same thread gets BadValueError."""
+        Above 1000 Hz, or with ``stream=True``, it records the continuous stream instead
+        (every sample at 10 kHz divided by a whole number, :data:`STREAM_COLUMNS`; a rate
+        the device cannot stream is refused naming the rate that fits). One recording runs
+        at a time: a call from another thread while one runs waits (queues) until it ends
+        or is stopped; the same thread gets BadValueError."""
         rate = _int_arg("rate_hz", rate_hz, 1, 2**32 - 1)
+        streamed = rate > 1000 if stream is None else bool(stream)
         secs = None if seconds is None else _float_arg("seconds", seconds)
         me = threading.get_ident()
         with self._recording_turn:
@@ -514,10 +607,21 @@ class Rig:
                         "record: a recording is already running on this rig in this thread: stop it first"
                     )
                 self._recording_turn.wait(0.05)
-            native = self._native.start_recording(rate, secs)
+            native = self._native.start_recording(rate, secs, streamed)
             rec = Recorder(self, native)
             self._recording_live, self._recording_thread = rec, me
             return rec
+
+    def stream(
+        self, rate_hz: int = 10000, seconds: Optional[float] = None, chunk_s: float = 0.1
+    ) -> Stream:
+        """The continuous stream at ``rate_hz`` (10 kHz divided by a whole number) for
+        ``seconds`` of device time or until stopped, as numpy chunks of ``chunk_s`` seconds
+        of samples (see :class:`Stream`; use it in a ``with`` block). The link carries the
+        10 kHz stream at the default 921,600 Bd beside telemetry up to 500 Hz."""
+        rate = _int_arg("rate_hz", rate_hz, 1, _native.MAX_STREAM_RATE_HZ)
+        chunk = max(1, int(round(_float_arg("chunk_s", chunk_s) * rate)))
+        return Stream(self.recorder(rate, seconds, stream=True), chunk)
 
     def _recording_ended(self, rec: Recorder) -> None:
         with self._recording_turn:
@@ -534,7 +638,9 @@ class Rig:
     def record(self, seconds: float, rate_hz: int = 1000, pandas: bool = True) -> Frame:
         """Telemetry for ``seconds`` of device time at ``rate_hz``: a DataFrame (or a dict
         of numpy arrays) with ``rig monitor --csv``'s columns and units, plus ``seq``;
-        ``attrs["lost"]`` and ``attrs["gaps"]`` report samples lost on the link."""
+        ``attrs["lost"]`` and ``attrs["gaps"]`` report samples lost on the link. Above
+        1000 Hz (up to 10 kHz) every sample of the continuous stream, with
+        :data:`STREAM_COLUMNS` (``rig record``'s columns)."""
         rec = self.recorder(rate_hz, seconds)
         try:
             rec.wait()

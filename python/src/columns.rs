@@ -8,6 +8,8 @@ use host::monitor::{CSV_HEADER as TELEMETRY_CSV_HEADER, MonitorRow};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
 
+use host::recording::{STREAM_CSV_COLUMNS, StreamRow};
+
 use crate::worker::Row;
 
 /// (name, dtype, bytes or list of str) per column.
@@ -133,4 +135,43 @@ pub fn capture<'py>(py: Python<'py>, cap: &Capture) -> PyResult<TypedColumns<'py
             ),
         ),
     ])
+}
+
+/// Stream samples as `rig record`'s CSV columns (its names and units, without `lost`: the
+/// recording's `lost` and `gaps` say what never arrived).
+pub fn stream<'py>(py: Python<'py>, rows: &[StreamRow]) -> PyResult<TypedColumns<'py>> {
+    let le = |f: &dyn Fn(&StreamRow) -> Vec<u8>| -> Bound<'py, PyAny> {
+        let bytes: Vec<u8> = rows.iter().flat_map(f).collect();
+        PyBytes::new(py, &bytes).into_any()
+    };
+    let mut out: TypedColumns<'py> = Vec::with_capacity(STREAM_CSV_COLUMNS.len());
+    for name in STREAM_CSV_COLUMNS {
+        let column = match name {
+            "seq" => ("<u4", le(&|r| r.seq.to_le_bytes().to_vec())),
+            "t_s" => ("<f8", f64_bytes(py, rows.iter().map(|r| r.t_s))),
+            "current_adc" => ("<u2", le(&|r| r.current_adc.to_le_bytes().to_vec())),
+            "current_a" => ("<f8", f64_bytes(py, rows.iter().map(|r| r.current_a))),
+            "cam_count" => ("<i8", le(&|r| r.cam_count.to_le_bytes().to_vec())),
+            "cam_angle_rad" => ("<f8", f64_bytes(py, rows.iter().map(|r| r.cam_angle_rad))),
+            "output_count" => ("<i8", le(&|r| r.output_count.to_le_bytes().to_vec())),
+            "output_angle_rad" => (
+                "<f8",
+                f64_bytes(py, rows.iter().map(|r| r.output_angle_rad)),
+            ),
+            "duty" => ("<f4", le(&|r| r.duty.to_le_bytes().to_vec())),
+            "tau_cam_nm" => ("<f4", le(&|r| r.tau_cam_nm.to_le_bytes().to_vec())),
+            "state" => (
+                "str",
+                PyList::new(py, rows.iter().map(StreamRow::state_name))?.into_any(),
+            ),
+            "fault_latched" => ("<u1", le(&|r| vec![u8::from(r.fault_latched)])),
+            "status" => (
+                "str",
+                PyList::new(py, rows.iter().map(StreamRow::status_names))?.into_any(),
+            ),
+            _ => continue,
+        };
+        out.push((name, column.0, column.1));
+    }
+    Ok(out)
 }

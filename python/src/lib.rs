@@ -241,5 +241,11 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     defaults.set_item("after_s", fig5.after_s)?;
     m.add("HOLD_RELEASE_DEFAULTS", defaults)?;
     m.add("TELEMETRY_COLUMNS", host::monitor::CSV_HEADER.to_vec())?;
+    m.add(
+        "STREAM_COLUMNS",
+        host::recording::STREAM_CSV_COLUMNS[..host::recording::STREAM_CSV_COLUMNS.len() - 1]
+            .to_vec(),
+    )?;
+    m.add("MAX_STREAM_RATE_HZ", protocol::MAX_STREAM_RATE_HZ)?;
     Ok(())
 }

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use host::RigError;
 use host::client::{Client, ClientOptions, open_serial};
 use host::connection::{Connection, DeviceOpts};
-use host::experiment::bench::{Bench, DeviceBench, Operator};
+use host::experiment::bench::{Bench, DeviceBench, Operator, RigLink};
 use host::experiment::sweep::{self, SweepSetup, Window};
 use host::experiment::{Plan, hold_release};
 use host::reports::{ClearReport, FaultsReport, InfoReport};
@@ -373,12 +373,15 @@ impl NativeRig {
     }
 
     /// Starts recording telemetry at `rate_hz` for `seconds` of device time (None: until
-    /// stopped); returns the recording.
+    /// stopped), or with `stream` the continuous stream (every sample, `rig record`'s
+    /// columns); returns the recording.
+    #[pyo3(signature = (rate_hz, seconds, stream = false))]
     fn start_recording(
         &self,
         py: Python<'_>,
         rate_hz: u32,
         seconds: Option<f64>,
+        stream: bool,
     ) -> PyResult<NativeRecording> {
         self.call(py, move |w| {
             if w.recording.is_some() {
@@ -387,19 +390,48 @@ impl NativeRig {
                     "a recording is already running on this rig: stop it first",
                 ));
             }
-            let hz = u16::try_from(rate_hz).map_err(|_| {
-                bad(
-                    format!("rate_hz {rate_hz}"),
-                    "too high: the device sends telemetry at most at 1000 Hz",
-                )
-            })?;
-            host::limits::check_telemetry_rate("rate_hz", hz)?;
-            let duration_us = match seconds {
-                Some(s) => Some((host::limits::check_seconds("seconds", s)? * 1e6).round() as u64),
+            let max = if stream {
+                protocol::MAX_STREAM_RATE_HZ
+            } else {
+                protocol::MAX_TELEMETRY_RATE_HZ
+            };
+            let hz = u16::try_from(rate_hz)
+                .ok()
+                .filter(|hz| (1..=max).contains(hz))
+                .ok_or_else(|| {
+                    bad(
+                        format!("rate_hz {rate_hz}"),
+                        format!(
+                            "out of range: telemetry runs at 1 to 1000 Hz, the continuous stream (stream=True, or any rate above 1000 Hz) at 1 to {} Hz",
+                            protocol::MAX_STREAM_RATE_HZ
+                        ),
+                    )
+                })?;
+            let seconds = match seconds {
+                Some(s) => Some(host::limits::check_seconds("seconds", s)?),
                 None => None,
             };
-            let rec = Arc::new(Recording::new(duration_us));
-            w.bench.session.client.start_telemetry(hz)?;
+            let rec = if stream {
+                let rec = Arc::new(Recording::stream(hz, seconds));
+                w.bench.keep_alive(true);
+                if let Err(e) = w
+                    .bench
+                    .session
+                    .client
+                    .ack(&protocol::Request::StartStream { rate_hz: hz })
+                {
+                    if w.release.is_none() {
+                        w.bench.keep_alive(false);
+                    }
+                    return Err(e);
+                }
+                rec
+            } else {
+                host::limits::check_telemetry_rate("rate_hz", hz)?;
+                let rec = Arc::new(Recording::new(seconds.map(|s| (s * 1e6).round() as u64)));
+                w.bench.session.client.start_telemetry(hz)?;
+                rec
+            };
             w.recording = Some(rec.clone());
             Ok(NativeRecording {
                 inner: rec,
@@ -419,7 +451,11 @@ impl NativeRig {
                 Some(_) => return Ok(()),
                 None => {}
             }
-            w.bench.session.client.stop_telemetry()
+            if rec.stream.is_some() {
+                w.end_stream()
+            } else {
+                w.bench.session.client.stop_telemetry()
+            }
         })
     }
 
@@ -430,6 +466,26 @@ impl NativeRig {
                 return Ok(());
             }
             py.detach(|| std::thread::sleep(Duration::from_millis(10)));
+            py.check_signals()?;
+            if lock(&self.jobs).is_none() {
+                return Err(closed());
+            }
+        }
+    }
+
+    /// Waits (GIL released) until `recording` holds `samples` samples or is done; Ctrl-C
+    /// raises KeyboardInterrupt.
+    fn wait_samples(
+        &self,
+        py: Python<'_>,
+        recording: &NativeRecording,
+        samples: usize,
+    ) -> PyResult<()> {
+        loop {
+            if recording.inner.done.load(Ordering::SeqCst) || recording.inner.len() >= samples {
+                return Ok(());
+            }
+            py.detach(|| std::thread::sleep(Duration::from_millis(5)));
             py.check_signals()?;
             if lock(&self.jobs).is_none() {
                 return Err(closed());
@@ -698,13 +754,30 @@ impl NativeRecording {
 
     /// Samples held now.
     fn __len__(&self) -> usize {
-        lock(&self.inner.rows).len()
+        self.inner.len()
+    }
+
+    /// Whether it records the continuous stream (else telemetry).
+    #[getter]
+    fn stream(&self) -> bool {
+        self.inner.stream.is_some()
     }
 
     /// The samples so far as columns (the monitor CSV's names and units; numeric columns as
     /// little-endian f64 bytes, NaN where the CSV is empty); `take` empties the buffer.
     #[pyo3(signature = (take = false))]
     fn columns<'py>(&self, py: Python<'py>, take: bool) -> PyResult<TypedColumns<'py>> {
+        if let Some(part) = &self.inner.stream {
+            let rows = {
+                let mut rows = lock(&part.rows);
+                if take {
+                    std::mem::take(&mut *rows)
+                } else {
+                    rows.clone()
+                }
+            };
+            return crate::columns::stream(py, &rows);
+        }
         let rows = {
             let mut rows = lock(&self.inner.rows);
             if take {

@@ -17,7 +17,10 @@ use std::time::{Duration, Instant};
 use host::RigError;
 use host::experiment::bench::{Bench, DeviceBench, RigLink};
 use host::monitor::Freshness;
-use protocol::{DeviceMessage, HealthSample, TelemetrySample};
+use host::recording::{StreamRow, StreamRows};
+use protocol::{
+    DeviceMessage, HealthSample, StreamBlock, StreamDecoder, StreamEvent, TelemetrySample,
+};
 
 /// A unit of work for the port's thread.
 pub type Job = Box<dyn FnOnce(&mut Worker) + Send + 'static>;
@@ -85,6 +88,20 @@ pub struct Recording {
     /// The device's sequence of the last sample.
     last_seq: Mutex<Option<u32>>,
     freshness: Mutex<Freshness>,
+    /// A recording of the continuous stream (every sample, `rig record`'s rows) instead of
+    /// telemetry.
+    pub stream: Option<StreamPart>,
+}
+
+/// The continuous stream's side of a [`Recording`].
+#[derive(Debug)]
+pub struct StreamPart {
+    /// The samples so far (Python takes them).
+    pub rows: Mutex<Vec<StreamRow>>,
+    /// Sample number to end before (from `seconds`; none: until stopped).
+    pub end_seq: Option<u32>,
+    convert: Mutex<StreamRows>,
+    decoder: Mutex<StreamDecoder>,
 }
 
 impl Recording {
@@ -93,6 +110,73 @@ impl Recording {
         Self {
             duration_us,
             ..Self::default()
+        }
+    }
+
+    /// A recording of the continuous stream at `rate_hz` for `seconds` of device time
+    /// (`seconds * rate_hz` samples; None: until stopped).
+    pub fn stream(rate_hz: u16, seconds: Option<f64>) -> Self {
+        let mut decoder = StreamDecoder::new();
+        // Samples are numbered from 0 at the start: any lost before the first are counted.
+        decoder.push(&StreamBlock::pack(0, &[]), |_| {});
+        Self {
+            stream: Some(StreamPart {
+                rows: Mutex::default(),
+                end_seq: seconds.map(|s| {
+                    (s * f64::from(rate_hz))
+                        .round()
+                        .clamp(1.0, f64::from(u32::MAX)) as u32
+                }),
+                convert: Mutex::new(StreamRows::new(rate_hz)),
+                decoder: Mutex::new(decoder),
+            }),
+            ..Self::default()
+        }
+    }
+
+    /// Takes a stream block: its samples (up to the end asked), and the samples lost before
+    /// it counted and placed.
+    pub fn push_block(&self, block: &StreamBlock) {
+        let Some(part) = &self.stream else {
+            return;
+        };
+        if self.done.load(Ordering::SeqCst) {
+            return;
+        }
+        let end = part.end_seq.unwrap_or(u32::MAX);
+        let mut events = Vec::new();
+        lock(&part.decoder).push(block, |e| events.push(e));
+        let mut convert = lock(&part.convert);
+        let mut rows = lock(&part.rows);
+        for e in events {
+            match e {
+                StreamEvent::Lost { first_seq, count } => {
+                    let count = count.min(end.saturating_sub(first_seq));
+                    if count > 0 {
+                        *lock(&self.lost) += u64::from(count);
+                        lock(&self.gaps)
+                            .push((first_seq.wrapping_sub(1), first_seq.wrapping_add(count)));
+                    }
+                }
+                StreamEvent::Sample { seq, sample } if seq < end => {
+                    rows.push(convert.row(seq, &sample));
+                }
+                StreamEvent::Sample { .. } => {}
+            }
+        }
+        if lock(&part.decoder)
+            .expected_seq()
+            .is_some_and(|next| next >= end)
+        {
+            self.done.store(true, Ordering::SeqCst);
+        }
+    }
+
+    /// Samples held now.
+    pub fn len(&self) -> usize {
+        match &self.stream {
+            Some(part) => lock(&part.rows).len(),
+            None => lock(&self.rows).len(),
         }
     }
 
@@ -178,6 +262,17 @@ impl Worker {
         locked
     }
 
+    /// Stops the continuous stream, and the heartbeats it needed unless a release is live.
+    pub fn end_stream(&mut self) -> Result<(), RigError> {
+        if self.release.is_none() {
+            self.bench.keep_alive(false);
+        }
+        self.bench
+            .session
+            .client
+            .ack(&protocol::Request::StopStream)
+    }
+
     /// Takes the unsolicited messages that arrived (during a job too) into the recording.
     fn drain(&mut self) -> Result<(), RigError> {
         let wait = if self.release.is_some() || self.recording.is_some() {
@@ -199,6 +294,15 @@ impl Worker {
                         rec.push(t, self.health);
                         if rec.done.load(Ordering::SeqCst) {
                             self.recording = None;
+                        }
+                    }
+                }
+                Some(DeviceMessage::StreamBlock(b)) => {
+                    if let Some(rec) = &self.recording {
+                        rec.push_block(&b);
+                        if rec.done.load(Ordering::SeqCst) {
+                            self.recording = None;
+                            self.end_stream()?;
                         }
                     }
                 }
@@ -224,6 +328,13 @@ impl Worker {
             } else if unconfirmed {
                 let _ = self.end_release("keep-alive");
             }
+        }
+        // The continuous stream stops at the comms timeout without requests: heartbeats
+        // go on while it runs (a release's end turns them off).
+        if self.recording.as_ref().is_some_and(|r| r.stream.is_some())
+            && !self.bench.session.client.keeping_alive()
+        {
+            self.bench.keep_alive(true);
         }
         if let Err(e) = self.drain()
             && let Some(rec) = self.recording.take()
