@@ -232,3 +232,19 @@ fn ctrl_c_mid_record_on_a_served_rig_leaves_a_complete_file() {
         "{stdout}"
     );
 }
+
+#[test]
+fn help_states_the_rates_each_link_carries() {
+    let out = rig()
+        .args(["record", "--help"])
+        .assert()
+        .success()
+        .get_output()
+        .clone();
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        help.contains("921,600 Bd") && help.contains("92,160 B/s"),
+        "{help}"
+    );
+    assert!(help.contains("4,000,000 Bd"), "{help}");
+}

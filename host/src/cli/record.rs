@@ -35,8 +35,8 @@ pub struct RecordArgs {
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
     /// csv: one row per sample, units in the column names, a `lost` row per run of lost
-    /// samples; bin: the raw stream blocks behind a header, about 4 bytes a sample (turn
-    /// it into CSV with --decode).
+    /// samples; bin: the stream's frames behind a header, about 5 bytes a sample (turn it
+    /// into CSV with --decode).
     #[arg(long, value_enum, default_value_t = StreamFormat::Csv)]
     format: StreamFormat,
     /// Replace --out if it exists.
@@ -48,7 +48,7 @@ pub struct RecordArgs {
 }
 
 /// The rates each link carries, for `rig record --help` (docs/recording.md says more).
-pub const RATES_HELP: &str = "Rates per link: at 921,600 Bd (the default; 92,160 B/s) the 10 kHz stream (about 30-46 kB/s) fits beside telemetry up to 500 Hz; with telemetry at 1 kHz the link is full and the device skips samples, each counted as lost. The virtual rig (--sim, rig sim serve) paces its output at the same byte rate.";
+pub const RATES_HELP: &str = "Rates per link (8N1, typical frames): at 921,600 Bd (the default; 92,160 B/s) the 10 kHz stream (about 50 kB/s, 30 kB/s with the cam at rest) fits beside telemetry up to 500 Hz; with 1 kHz telemetry (55 kB/s) the link is full while the cam vibrates, and the device skips stream samples, each reported as lost: stream at 5 kHz or less then. At 4,000,000 Bd (400,000 B/s; not yet negotiated) everything fits. The virtual rig (--sim, rig sim serve) sends at the same byte rate as a board.";
 
 /// How long the stream may stay silent before the recording gives up, device seconds.
 const SILENCE_S: f64 = 2.0;
