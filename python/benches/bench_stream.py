@@ -33,6 +33,23 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def port_thread_cpu_s() -> float:
+    """CPU seconds of this process's port threads (the Rust thread that reads the link,
+    named `backdrive_rig port`; Linux truncates thread names to 15 bytes)."""
+    total = 0.0
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            with open(f"/proc/self/task/{tid}/comm") as f:
+                if f.read().strip() != "backdrive_rig p":
+                    continue
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        except OSError:
+            pass
+    return total
+
+
 def run(rig_cli: str, minutes: float, rate: int) -> dict:
     serve = subprocess.Popen(
         [rig_cli, "sim", "serve", "--json", "--speed", "1"],
@@ -55,6 +72,7 @@ def run(rig_cli: str, minutes: float, rate: int) -> dict:
             worker.start()
             bytes0 = rig.link_stats()["bytes_in"]
             serve_cpu0, cpu0, started = cpu_s(serve.pid), time.process_time(), time.monotonic()
+            port0 = port_thread_cpu_s()
             received, gaps_seen, next_seq = 0, 0, 0
             with rig.stream(rate_hz=rate, seconds=seconds, chunk_s=1.0) as s:
                 for chunk in s:
@@ -66,6 +84,7 @@ def run(rig_cli: str, minutes: float, rate: int) -> dict:
             wall = time.monotonic() - started
             cpu = time.process_time() - cpu0
             serve_cpu = cpu_s(serve.pid) - serve_cpu0
+            port_cpu = port_thread_cpu_s() - port0
             link_bytes = rig.link_stats()["bytes_in"] - bytes0
             stop.set()
             worker.join()
@@ -82,6 +101,7 @@ def run(rig_cli: str, minutes: float, rate: int) -> dict:
                 "link_bytes": link_bytes,
                 "link_use_percent": round(100.0 * link_bytes / (LINK_BYTES_PER_S * device_s), 1),
                 "host_cpu_percent": round(100.0 * cpu / wall, 1),
+                "port_thread_cpu_percent": round(100.0 * port_cpu / wall, 1),
                 "served_rig_cpu_percent": round(100.0 * serve_cpu / wall, 1),
                 "busy_thread_spins": spins[0],
             }
