@@ -114,9 +114,10 @@ fn duty_compare(duty: f32, full_scale: f32) -> Option<u32> {
     Some((duty.abs().min(1.0) * full_scale) as u32)
 }
 
-/// The host link's baud rate, Bd (USART2 at 921,600 8N1 on the ST-LINK's VCP).
+/// The host link's baud rate at boot, Bd (USART2 at 921,600 8N1 on the ST-LINK's VCP;
+/// `SetBaud` may switch it to `protocol::FAST_BAUD_RATE`, `set_host_baud`).
 #[cfg(any(target_os = "none", test))]
-const HOST_BAUD: u32 = 921_600;
+const HOST_BAUD: u32 = protocol::DEFAULT_BAUD_RATE;
 
 /// USART2's kernel clock, Hz: PCLK1 = SYSCLK, 170 MHz from the HSE crystal.
 #[cfg(any(target_os = "none", test))]
@@ -604,6 +605,33 @@ mod app {
         }
     }
 
+    /// Switches USART2 (both directions) to `baud` once its last byte has left: with 8x
+    /// oversampling and the exact divider where one exists (4,000,000 Bd at 170 MHz: BRR
+    /// 0x52, `firmware_core::usart_brr_over8`), else as embassy-stm32 rounds it. Only a
+    /// board confirms what the ST-LINK V3 virtual COM port carries at the far end.
+    fn set_host_baud(tx: &mut UartTx<'static, Async>, baud: u32) {
+        use embassy_stm32::pac::usart::{regs, vals};
+        let _ = tx.blocking_flush();
+        match firmware_core::usart_brr_over8(crate::USART_KERNEL_HZ, baud) {
+            Some(brr) => {
+                let r = embassy_stm32::pac::USART2;
+                r.cr1().modify(|w| w.set_ue(false));
+                r.presc().write(|w| w.set_prescaler(vals::Presc::DIV1));
+                r.brr().write_value(regs::Brr(u32::from(brr)));
+                r.cr1().modify(|w| {
+                    w.set_over8(vals::Over8::from_bits(1));
+                    w.set_ue(true);
+                });
+            }
+            None => {
+                if tx.set_baudrate(baud).is_err() {
+                    warn!("host link: {} Bd refused by the USART", baud);
+                }
+            }
+        }
+        info!("host link at {} Bd", baud);
+    }
+
     /// The core's frames out to the host, polled every millisecond when idle.
     #[embassy_executor::task]
     async fn host_tx(core: &'static SharedCore, mut tx: UartTx<'static, Async>) {
@@ -612,6 +640,12 @@ mod app {
         loop {
             let n = core.lock(|c| c.borrow_mut().transmit(&mut buf));
             if n == 0 {
+                // The line is quiet (the last write is done): a rate the host agreed with
+                // `SetBaud`, or the fall-back to the default, takes effect now.
+                let now = Instant::now().as_micros();
+                if let Some(baud) = core.lock(|c| c.borrow_mut().take_baud_switch(now)) {
+                    set_host_baud(&mut tx, baud);
+                }
                 idle.next().await;
             } else if let Err(e) = tx.write(&buf[..n]).await {
                 warn!("host link transmit error: {}", e);

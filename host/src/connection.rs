@@ -129,14 +129,16 @@ impl DeviceOpts {
             let port = self.resolve_port()?;
             (None, port.clone(), port)
         };
-        let io = open_serial(&port, self.baud)?;
+        // Every device starts at the default rate; a faster one is agreed after `Hello`.
+        let io = open_serial(&port, protocol::DEFAULT_BAUD_RATE)?;
         let mut opts = ClientOptions::new(name);
         if self.sim {
             opts.time_scale = self.speed;
             // Pseudo-terminal bytes wait for a kernel worker: on a busy machine, long.
             opts.reply_timeout = std::time::Duration::from_secs(1);
         }
-        let (client, info) = Client::connect(io, opts)?;
+        let (mut client, info) = Client::connect(io, opts)?;
+        client.agree_baud(&info, self.baud)?;
         Ok(Connection {
             client,
             info,

@@ -219,6 +219,7 @@ mod tests {
             uptime_s: 3_600,
             capabilities: protocol::Capabilities::OUTPUT_ENCODER,
             time_scale: 1.0,
+            max_baud: protocol::DEFAULT_BAUD_RATE,
         }
     }
 

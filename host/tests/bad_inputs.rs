@@ -121,6 +121,7 @@ impl FakeDevice {
                                     uptime_s: 1,
                                     capabilities: Capabilities::empty(),
                                     time_scale: 1.0,
+                                    max_baud: protocol::DEFAULT_BAUD_RATE,
                                 };
                                 seq = seq.wrapping_add(1);
                                 let reply = DeviceMessage::reply(request_seq, Reply::Info(info));

@@ -248,3 +248,38 @@ fn help_states_the_rates_each_link_carries() {
     );
     assert!(help.contains("4,000,000 Bd"), "{help}");
 }
+
+#[test]
+fn at_4_mbaud_the_stream_records_beside_the_link_and_another_rate_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("fast.csv");
+    rig()
+        .args([
+            "--sim",
+            "--speed",
+            "2",
+            "--baud",
+            "4000000",
+            "record",
+            "--seconds",
+            "0.5",
+        ])
+        .arg("--out")
+        .arg(&csv)
+        .assert()
+        .success();
+    let (_, rows) = csv_rows(&csv);
+    assert_eq!(rows.len(), 5_000);
+    assert_whole(&rows);
+    let out = rig()
+        .args(["--sim", "--baud", "2000000", "info"])
+        .assert()
+        .failure()
+        .get_output()
+        .clone();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--baud 2000000") && err.contains("--baud 4000000"),
+        "{err}"
+    );
+}

@@ -45,6 +45,10 @@ pub struct DeviceInfo {
     /// protocol (the comms timeout, the fault hold, `device_time_us`) is device time, so a
     /// host divides its heartbeat interval by this.
     pub time_scale: f32,
+    /// The fastest link rate the device switches to on `Request::SetBaud`, Bd
+    /// ([`crate::FAST_BAUD_RATE`] on the Nucleo firmware; [`crate::DEFAULT_BAUD_RATE`] on a
+    /// device that cannot switch).
+    pub max_baud: u32,
 }
 
 impl DeviceInfo {
@@ -58,7 +62,8 @@ impl DeviceInfo {
         + TAG
         + U32
         + U16
-        + F32;
+        + F32
+        + U32;
 }
 
 /// Firmware version, semantic-versioning style.

@@ -143,8 +143,9 @@ pub use info::{
     ParametersStatus, ResetCause,
 };
 pub use link::{
-    COMMS_TIMEOUT_MS, DEFAULT_BAUD_RATE, FAULT_HOLD_MS, HEARTBEAT_INTERVAL_MS,
-    MAX_TELEMETRY_RATE_HZ, REQUEST_WINDOW, UART_BITS_PER_BYTE, link_bytes_per_s,
+    BAUD_CONFIRM_MS, COMMS_TIMEOUT_MS, DEFAULT_BAUD_RATE, FAST_BAUD_RATE, FAULT_HOLD_MS,
+    HEARTBEAT_INTERVAL_MS, MAX_TELEMETRY_RATE_HZ, REQUEST_WINDOW, UART_BITS_PER_BYTE,
+    link_bytes_per_s,
 };
 pub use parameters::{ParameterField, ParameterRejection, RejectReason, RigParameters};
 pub use request::{ReplyKind, Request, SessionId, SimCommand};
@@ -152,7 +153,7 @@ pub use schema::SCHEMA_HASH;
 pub use sequence::SeqTracker;
 pub use sizes::{
     MAX_DEVICE_FRAME_SIZE, MAX_FRAME_SIZE, MAX_MESSAGE_SIZE, MAX_REPLY_FRAME_SIZE,
-    MAX_REQUEST_FRAME_SIZE, cobs_max_encoded_len, varint_len,
+    MAX_REQUEST_FRAME_SIZE, cobs_max_encoded_len, stream_rate_for_link, varint_len,
 };
 pub use stream::{
     MAX_STREAM_RATE_HZ, STREAM_BLOCK_SAMPLES, STREAM_DUTY_SCALE, STREAM_PACKED_MAX,
@@ -175,5 +176,7 @@ pub use telemetry::{StatusFlags, SupervisorState, TelemetrySample};
 /// with the gears' profile shifts (`RigParameters::profile_shift`,
 /// [`ParameterField::ProfileShift`]), so a shifted gear with Z1 + Z2 != Z3 + Z4 is stored;
 /// and the continuous stream (`StartStream`, `StopStream`, [`DeviceMessage::StreamBlock`],
-/// [`NackCode::StreamRate`]).
-pub const PROTOCOL_VERSION: u16 = 7;
+/// [`NackCode::StreamRate`]). v8: the link's rate is agreed after `Hello`
+/// ([`DeviceInfo::max_baud`], `Request::SetBaud`, [`FAST_BAUD_RATE`]), and a stream the link
+/// cannot carry beside the telemetry is refused with `StreamRate` naming the rate that fits.
+pub const PROTOCOL_VERSION: u16 = 8;

@@ -3,6 +3,19 @@
 /// UART baud rate both sides use by default (8N1).
 pub const DEFAULT_BAUD_RATE: u32 = 921_600;
 
+/// The fast link (issue 35): 4,000,000 Bd, exactly what the STM32G474's USART gives from its
+/// 170 MHz clock with 8x oversampling (USARTDIV = 2 x 170 MHz / 4 Mbaud = 85). A host and a
+/// device that both support it agree on it after `Hello` ([`crate::Request::SetBaud`],
+/// [`crate::DeviceInfo::max_baud`]); otherwise, and whenever the switch fails, both run at
+/// [`DEFAULT_BAUD_RATE`]. The Nucleo's ST-LINK V3 virtual COM port is documented for up to
+/// 16 Mbaud; that it carries 4 Mbaud cleanly only a board can confirm.
+pub const FAST_BAUD_RATE: u32 = 4_000_000;
+
+/// After switching to a baud rate agreed by [`crate::Request::SetBaud`], a device that
+/// accepts no request at the new rate within this long (device time) goes back to
+/// [`DEFAULT_BAUD_RATE`], ms: a host that could not follow finds it there.
+pub const BAUD_CONFIRM_MS: u32 = 1000;
+
 /// Bits on the line per byte at 8N1: a start bit, eight data bits, a stop bit.
 pub const UART_BITS_PER_BYTE: u32 = 10;
 

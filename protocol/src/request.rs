@@ -100,6 +100,15 @@ pub enum Request {
     },
     /// Stops the continuous stream.
     StopStream,
+    /// Switches the link to `baud` (8N1), at most the device's [`crate::DeviceInfo::max_baud`]
+    /// and either that or [`crate::DEFAULT_BAUD_RATE`]; another rate is refused with
+    /// `BadArgument`. The device sends its `Ack` at the old rate, then switches; a device
+    /// that accepts no request at the new rate within [`crate::BAUD_CONFIRM_MS`] goes back
+    /// to the default rate.
+    SetBaud {
+        /// The new rate, Bd.
+        baud: u32,
+    },
 }
 
 /// A host session's identity on a link shared by several processes: a number the host
@@ -169,7 +178,7 @@ impl ReplyKind {
 }
 
 /// Variants of [`Request`] in this version (tags `0..REQUEST_VARIANTS`).
-const REQUEST_VARIANTS: u32 = 16;
+const REQUEST_VARIANTS: u32 = 17;
 /// Tag of [`Request::Simulation`], and the commands of [`SimCommand`] it carries.
 const SIMULATION_TAG: u32 = 13;
 const SIM_COMMANDS: u32 = 3;
@@ -243,6 +252,7 @@ impl Request {
             Self::Simulation(SimCommand::SetSensorSupply { .. }) => "Simulation(SetSensorSupply)",
             Self::StartStream { .. } => "StartStream",
             Self::StopStream => "StopStream",
+            Self::SetBaud { .. } => "SetBaud",
         }
     }
 
@@ -262,7 +272,8 @@ impl Request {
             | Self::OpenLoop { .. }
             | Self::Simulation(_)
             | Self::StartStream { .. }
-            | Self::StopStream => ReplyKind::Ack,
+            | Self::StopStream
+            | Self::SetBaud { .. } => ReplyKind::Ack,
         }
     }
 
@@ -294,10 +305,15 @@ impl Request {
     ///   stored; read it back with `GetParameters` instead.
     /// * `StartCapture`: no. A second start discards the first capture and records anew.
     /// * `RezeroCurrent`: no. A second re-zero restarts the measurement; ask `GetFaults`.
+    /// * `SetBaud`: no. A device that switched no longer hears the old rate; ask `GetInfo`
+    ///   at the new one, and go back to the default when it does not answer.
     pub const fn retry_safe(&self) -> bool {
         !matches!(
             self,
-            Self::SetParameters(_) | Self::StartCapture { .. } | Self::RezeroCurrent
+            Self::SetParameters(_)
+                | Self::StartCapture { .. }
+                | Self::RezeroCurrent
+                | Self::SetBaud { .. }
         )
     }
 }
@@ -329,8 +345,8 @@ mod tests {
         // `Release { on: 2 }`: a known request with a bad field.
         assert!(Request::names_known_request(&[7, 2, 2, 0, 0, 0x20, 0x41]));
         // Tags past the last request, and a simulation command past the last.
-        assert!(!Request::names_known_request(&[7, 16]));
-        assert!(Request::names_known_request(&[7, 15]));
+        assert!(!Request::names_known_request(&[7, 17]));
+        assert!(Request::names_known_request(&[7, 16]));
         assert!(!Request::names_known_request(&[7, 0x80, 0x01]));
         assert!(!Request::names_known_request(&[7, 13, 3]));
         assert!(Request::names_known_request(&[7, 13, 2]));

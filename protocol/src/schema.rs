@@ -65,7 +65,7 @@ mod tests {
         // Protocol v1's hash (of its schema text) is not this version's.
         assert_ne!(SCHEMA_HASH, 0xBCD3_DE6D);
         // Pinned so a bump is deliberate; the snapshot records it, so the hash moves too.
-        assert_eq!(crate::PROTOCOL_VERSION, 7);
-        assert!(WIRE_SNAPSHOT.contains("\nprotocol_version: 7\n"));
+        assert_eq!(crate::PROTOCOL_VERSION, 8);
+        assert!(WIRE_SNAPSHOT.contains("\nprotocol_version: 8\n"));
     }
 }

@@ -132,6 +132,33 @@ pub const STREAM_BYTES_PER_S_TYPICAL: usize =
 const _: () =
     assert!(STREAM_BYTES_PER_S_TYPICAL * BITS_PER_BYTE <= DEFAULT_BAUD_RATE as usize * 2 / 3);
 
+/// The highest stream rate at or below `rate_hz` (10 kHz divided by a whole number) that a
+/// link at `baud` carries beside telemetry at `telemetry_hz` (0: off) with typical frames
+/// ([`STREAM_FRAME_TYPICAL`], a typical telemetry frame and the health sample once a
+/// second), leaving a third of the link for replies and capture chunks, as the telemetry's
+/// own budget does. What `StartStream` is refused with (`NackCode::StreamRate`) when it is
+/// below the rate asked; `None` for 0, or when not even 1 Hz fits.
+pub fn stream_rate_for_link(rate_hz: u16, telemetry_hz: u16, baud: u32) -> Option<u16> {
+    let budget = u64::from(crate::link::link_bytes_per_s(baud)) * 2 / 3;
+    let telemetry = if telemetry_hz == 0 {
+        0
+    } else {
+        (TELEMETRY_FRAME_TYPICAL as u64) * u64::from(telemetry_hz) + HEALTH_FRAME as u64
+    };
+    let mut rate = crate::stream::stream_rate_that_fits(rate_hz)?;
+    loop {
+        // Blocks of STREAM_BLOCK_SAMPLES, one frame each.
+        let stream = (STREAM_FRAME_TYPICAL as u64) * u64::from(rate) / STREAM_BLOCK_SAMPLES as u64;
+        if telemetry + stream <= budget {
+            return Some(rate);
+        }
+        if rate == 1 {
+            return None;
+        }
+        rate = crate::stream::stream_rate_that_fits(rate - 1)?;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -164,6 +191,39 @@ mod tests {
                 "{v}"
             );
         }
+    }
+
+    #[test]
+    fn the_stream_is_refused_beside_telemetry_the_link_cannot_carry() {
+        use crate::link::{DEFAULT_BAUD_RATE, FAST_BAUD_RATE};
+        // 921,600 Bd: two thirds of 92,160 B/s is 61,440 B/s. The 10 kHz stream alone
+        // (50,000 B/s) fits, and beside 200 Hz telemetry (11,000 + 49 B/s).
+        assert_eq!(
+            stream_rate_for_link(10_000, 0, DEFAULT_BAUD_RATE),
+            Some(10_000)
+        );
+        assert_eq!(
+            stream_rate_for_link(10_000, 200, DEFAULT_BAUD_RATE),
+            Some(10_000)
+        );
+        // Beside 1 kHz telemetry (55,049 B/s) 6,391 B/s are left: 1,250 Hz (6,250 B/s).
+        assert_eq!(
+            stream_rate_for_link(10_000, 1000, DEFAULT_BAUD_RATE),
+            Some(1_250)
+        );
+        // 4,000,000 Bd (266,666 B/s of 400,000): everything fits.
+        assert_eq!(
+            stream_rate_for_link(10_000, 1000, FAST_BAUD_RATE),
+            Some(10_000)
+        );
+        // Rates that are not 10 kHz divided by a whole number come down to one that is.
+        assert_eq!(
+            stream_rate_for_link(3_000, 0, DEFAULT_BAUD_RATE),
+            Some(2_500)
+        );
+        assert_eq!(stream_rate_for_link(0, 0, DEFAULT_BAUD_RATE), None);
+        // A link too slow even for telemetry.
+        assert_eq!(stream_rate_for_link(10_000, 1000, 9_600), None);
     }
 
     #[test]

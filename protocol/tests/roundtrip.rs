@@ -260,9 +260,10 @@ fn forged_info(build_len: u8, board_len: u8) -> Vec<u8> {
     body.push(board_len);
     body.extend((0..board_len).map(|i| b'a' + i));
     // parameters_status Valid, reset_cause PowerOn, uptime 300 s, capabilities SIMULATION,
-    // time scale 1.0 (f32 little-endian).
+    // time scale 1.0 (f32 little-endian), max baud 921,600 (varint).
     body.extend([0x00, 0x00, 0xac, 0x02, 0x08]);
     body.extend(1.0f32.to_le_bytes());
+    body.extend([0x80, 0xa0, 0x38]);
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&body);
     body.extend_from_slice(&crc.to_le_bytes());
     let mut encoded = vec![0; cobs_max_encoded_len(body.len())];
@@ -281,6 +282,7 @@ fn oversized_names_are_rejected_not_truncated() {
     assert_eq!(info.uptime_s, 300);
     assert_eq!(info.capabilities, Capabilities::SIMULATION);
     assert_eq!(info.time_scale, 1.0);
+    assert_eq!(info.max_baud, 921_600);
     assert_eq!(ok.msg.reply_to(), Some(1));
     for (build, board) in [(21, 16), (20, 17)] {
         assert_eq!(

@@ -251,8 +251,8 @@ impl SimRig {
         }
     }
 
-    /// Paces the device's output to a UART at `baud` (8N1, in device time), as the board
-    /// sends it: [`SimRig::from_device`] never yields more than
+    /// Paces the device's output to a UART at `baud` (8N1, in device time; from then on at
+    /// the rate the host agrees with `SetBaud`), as the board sends it: [`SimRig::from_device`] never yields more than
     /// [`protocol::link_bytes_per_s`] bytes per device second (plus the byte in flight),
     /// and what does not fit waits in the core's transmit queue or is skipped there, as on
     /// the board. `None` (the default) hands every byte out at the step that framed it.
@@ -280,10 +280,13 @@ impl SimRig {
     /// rate, and when it is done the next is taken from the core (an idle line keeps no
     /// credit: the board's task polls again a tick later).
     fn run_uart(&mut self, ticks: u64) {
+        let now_us = self.now_us();
         let Self {
             uart, core, outbox, ..
         } = self;
         let Some(uart) = uart else {
+            // Unpaced: a rate the host agreed is taken at once (nothing to pace).
+            let _ = core.take_baud_switch(now_us);
             return;
         };
         let hz = u64::from(ADC_HZ);
@@ -296,6 +299,11 @@ impl SimRig {
                 uart.sent = 0;
                 if n == 0 {
                     uart.credit = 0;
+                    // The line is quiet: a rate the host agreed takes effect now, as the
+                    // binary switches its USART (`Core::take_baud_switch`).
+                    if let Some(baud) = core.take_baud_switch(now_us) {
+                        uart.bytes_per_s = u64::from(protocol::link_bytes_per_s(baud));
+                    }
                     return;
                 }
                 uart.write.extend_from_slice(&buf[..n]);

@@ -33,6 +33,8 @@ fn run(baud: u32, telemetry_hz: u16, ms: u32) -> (SimRig, Seen) {
         rig.to_device(&encode_frame_vec(seq, req).unwrap());
     };
     rig.to_device(&Session::OPENING);
+    // The stream first: started beside telemetry the link could not carry, it is refused.
+    send(&mut rig, &Request::StartStream { rate_hz: 10_000 });
     if telemetry_hz > 0 {
         send(
             &mut rig,
@@ -41,7 +43,6 @@ fn run(baud: u32, telemetry_hz: u16, ms: u32) -> (SimRig, Seen) {
             },
         );
     }
-    send(&mut rig, &Request::StartStream { rate_hz: 10_000 });
     let t0 = rig.time();
     let mut deframer = DeviceDeframer::new();
     let mut seen = Seen::default();
@@ -114,4 +115,40 @@ fn a_link_too_slow_for_the_stream_skips_numbered_samples_never_sends_faster() {
     let skipped = u64::from(rig.core().status().stream_samples_skipped);
     assert!(d.lost <= skipped, "{} lost, {skipped} skipped", d.lost);
     assert!(seen.telemetry > 0);
+}
+
+#[test]
+fn a_rate_agreed_with_set_baud_paces_the_link_once_the_ack_is_out() {
+    let mut rig = SimRig::new(SimConfig::paper());
+    rig.set_link_baud(Some(DEFAULT_BAUD_RATE));
+    rig.to_device(&Session::OPENING);
+    rig.to_device(
+        &encode_frame_vec(
+            1,
+            &Request::SetBaud {
+                baud: protocol::FAST_BAUD_RATE,
+            },
+        )
+        .unwrap(),
+    );
+    rig.advance(0.01);
+    let mut out = Vec::new();
+    rig.from_device(&mut out);
+    let mut acked = false;
+    DeviceDeframer::new().push(&out, |f| {
+        acked |= matches!(f.unwrap().msg.as_reply(), Some(protocol::Reply::Ack));
+    });
+    assert!(acked, "the Ack left at the old rate");
+    assert_eq!(
+        rig.link_bytes_per_s(),
+        Some(u64::from(link_bytes_per_s(protocol::FAST_BAUD_RATE)))
+    );
+    assert_eq!(rig.core().link_baud(), protocol::FAST_BAUD_RATE);
+    // No request at the new rate within BAUD_CONFIRM_MS: both back to the default.
+    rig.advance(f64::from(protocol::BAUD_CONFIRM_MS) / 1000.0 + 0.01);
+    assert_eq!(rig.core().link_baud(), DEFAULT_BAUD_RATE);
+    assert_eq!(
+        rig.link_bytes_per_s(),
+        Some(u64::from(link_bytes_per_s(DEFAULT_BAUD_RATE)))
+    );
 }

@@ -375,6 +375,10 @@ pub struct CoreConfig {
     /// Device seconds per wall-clock second, reported in `Info` (`DeviceInfo::time_scale`):
     /// 1 on a board; the virtual rig served at `--speed N` reports N.
     pub time_scale: f32,
+    /// The fastest host link rate `SetBaud` switches to, Bd (`DeviceInfo::max_baud`):
+    /// [`protocol::FAST_BAUD_RATE`] (the Nucleo's USART2 and the virtual rig);
+    /// [`protocol::DEFAULT_BAUD_RATE`] for a device that cannot switch.
+    pub max_baud: u32,
     /// Current sensor.
     pub current: CurrentSensorConfig,
     /// Motor model and drive limits.
@@ -447,6 +451,7 @@ impl Default for CoreConfig {
                 protocol::Capabilities::empty()
             },
             time_scale: 1.0,
+            max_baud: protocol::FAST_BAUD_RATE,
             current: CurrentSensorConfig::default(),
             motor: MotorConfig::default(),
             speed_loop: SpeedLoopConfig::default(),

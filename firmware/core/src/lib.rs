@@ -82,6 +82,7 @@ mod current;
 mod encoder;
 mod estimator;
 mod faults;
+mod link;
 mod output_encoder;
 mod release;
 mod server;
@@ -107,6 +108,7 @@ pub use config::{
 };
 pub use controller::{BoardInputs, BootInfo, Core, Inputs, Outputs, Status, check_rules};
 pub use estimator::{Coefficients, EstimatorModel, RevolutionEstimate};
+pub use link::usart_brr_over8;
 pub use output_encoder::{OutputEncoder, OutputEncoderConfig};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;

@@ -97,11 +97,13 @@ impl Core {
                         },
                         other => self.handle(now_us, seq, other),
                     };
-                    // Any accepted request keeps the continuous stream alive.
+                    // Any accepted request keeps the continuous stream alive, and confirms
+                    // the link's rate after a switch.
                     if matches!(answer, Answer::Now(ref r) if !matches!(r, Reply::Nack(_)))
                         || matches!(answer, Answer::Later)
                     {
                         self.stream.refresh(now_us);
+                        self.link.confirmed();
                     }
                     self.answer(seq, answer);
                 }
@@ -154,6 +156,7 @@ impl Core {
             uptime_s: whole_seconds(now_us),
             capabilities: self.config.capabilities,
             time_scale: self.config.time_scale,
+            max_baud: self.config.max_baud,
         }
     }
 
@@ -248,10 +251,32 @@ impl Core {
             Request::StartStream { rate_hz } => {
                 match crate::stream::stream_decimation(self.config.sample_rate_hz(), rate_hz) {
                     Ok(decimation) => {
-                        self.stream.start(rate_hz, decimation, now);
-                        Answer::Now(Reply::Ack)
+                        // The link must carry it beside the telemetry running.
+                        let telemetry_hz = match self.streams.telemetry_period {
+                            0 => 0,
+                            period => {
+                                u16::try_from(self.config.control_hz / period).unwrap_or(u16::MAX)
+                            }
+                        };
+                        match protocol::stream_rate_for_link(rate_hz, telemetry_hz, self.link.baud)
+                        {
+                            Some(fits) if fits == rate_hz => {
+                                self.stream.start(rate_hz, decimation, now);
+                                Answer::Now(Reply::Ack)
+                            }
+                            Some(fits_hz) => Answer::nack(NackCode::StreamRate { fits_hz }),
+                            None => Answer::nack(NackCode::BadArgument),
+                        }
                     }
                     Err(code) => Answer::nack(code),
+                }
+            }
+            Request::SetBaud { baud } => {
+                if baud == protocol::DEFAULT_BAUD_RATE || baud == self.config.max_baud {
+                    self.link.pending = Some(baud);
+                    Answer::Now(Reply::Ack)
+                } else {
+                    Answer::nack(NackCode::BadArgument)
                 }
             }
             Request::StopStream => {

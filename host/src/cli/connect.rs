@@ -29,7 +29,10 @@ macro_rules! device_args {
             /// $RIG_PORT, else the only ST-LINK port plugged in.
             #[arg(long, global = $global, value_name = "PORT", conflicts_with = "sim")]
             pub port: Option<String>,
-            /// Baud rate of the serial port [default: 921600, the firmware's UART].
+            /// Link rate to agree on with the device after `Hello`: 921600 (the default, where
+            /// every device starts) or the device's fastest (`rig info`: max_baud; 4000000 on
+            /// the Nucleo firmware and the virtual rig). When the device is not heard at the
+            /// new rate both go back to 921600 and the verb stops, saying so.
             #[arg(long, global = $global, value_name = "BAUD", value_parser = parse_baud)]
             pub baud: Option<u32>,
             /// Use the virtual device: the firmware core and a simulated rig on a pseudo-terminal.

@@ -53,6 +53,9 @@ pub struct InfoReport {
     /// The bridge's decay mode: `brake` (slow decay, the Pololu G2: power returns) or
     /// `coast` (`Capabilities::BRAKING_DECAY` clear).
     pub decay: &'static str,
+    /// The fastest link rate the device agrees to (`--baud`), Bd; every link starts at
+    /// 921,600.
+    pub max_baud: u32,
 }
 
 /// Lower-case name of a calibration status.
@@ -94,6 +97,7 @@ impl InfoReport {
             } else {
                 "coast"
             },
+            max_baud: info.max_baud,
         }
     }
 }

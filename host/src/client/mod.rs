@@ -314,10 +314,63 @@ impl<T: Read + Write> Client<T> {
 }
 
 impl Client<Box<dyn serialport::SerialPort>> {
-    /// Opens serial port `port` at `baud` and connects (see [`Client::connect`]).
+    /// Opens serial port `port` at the default rate, connects (see [`Client::connect`])
+    /// and agrees on `baud` with the device ([`Client::agree_baud`]).
     pub fn open(port: &str, baud: u32) -> Result<(Self, DeviceInfo), RigError> {
-        let io = open_serial(port, baud)?;
-        Self::connect(io, ClientOptions::new(port))
+        let io = open_serial(port, protocol::DEFAULT_BAUD_RATE)?;
+        let (mut client, info) = Self::connect(io, ClientOptions::new(port))?;
+        client.agree_baud(&info, baud)?;
+        Ok((client, info))
+    }
+
+    /// Switches the link from the default rate to `baud` (protocol v8, `SetBaud`): refused
+    /// before anything is sent unless it is the default or the device's `max_baud` (its
+    /// `Info`). The device answers at the old rate and switches; this side switches its
+    /// port and asks `GetInfo` at the new rate. When no answer comes, both go back to
+    /// [`protocol::DEFAULT_BAUD_RATE`] (the device after [`protocol::BAUD_CONFIRM_MS`]) and
+    /// the error says so; the link then works at the default rate.
+    pub fn agree_baud(&mut self, info: &DeviceInfo, baud: u32) -> Result<(), RigError> {
+        let default = protocol::DEFAULT_BAUD_RATE;
+        if baud == default {
+            return Ok(());
+        }
+        if baud != info.max_baud {
+            return Err(RigError::BadValue {
+                what: format!("--baud {baud}"),
+                why: format!(
+                    "{} switches to {} Bd at most (its Info's max_baud) and runs at {default} Bd otherwise: give --baud {} or leave --baud out",
+                    self.opts.port_name, info.max_baud, info.max_baud
+                ),
+            });
+        }
+        self.ack(&Request::SetBaud { baud })?;
+        // The device switches once its Ack has left the line; a moment for the last bytes.
+        std::thread::sleep(Duration::from_millis(5));
+        let port_err = |e: serialport::Error| RigError::BadValue {
+            what: format!("--baud {baud}"),
+            why: format!("the serial port refused the rate: {e}; leave --baud out"),
+        };
+        self.io.set_baud_rate(baud).map_err(port_err)?;
+        if self.info().is_ok() {
+            return Ok(());
+        }
+        // Not heard at the new rate: both sides back to the default.
+        self.io.set_baud_rate(default).map_err(port_err)?;
+        let back_by = Instant::now()
+            + Duration::from_millis(u64::from(protocol::BAUD_CONFIRM_MS) * 2)
+                .div_f64(self.opts.time_scale.max(1e-9));
+        while Instant::now() < back_by {
+            if self.info().is_ok() {
+                break;
+            }
+        }
+        Err(RigError::BadValue {
+            what: format!("--baud {baud}"),
+            why: format!(
+                "{} did not answer at {baud} Bd (the cable or the ST-LINK's virtual COM port may not carry it): both went back to {default} Bd; leave --baud out",
+                self.opts.port_name
+            ),
+        })
     }
 }
 

@@ -30,6 +30,7 @@ fn device_info(protocol_version: u16, schema_hash: u32) -> DeviceInfo {
         uptime_s: 12,
         capabilities: Capabilities::empty(),
         time_scale: 1.0,
+        max_baud: protocol::DEFAULT_BAUD_RATE,
     }
 }
 

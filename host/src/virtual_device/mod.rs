@@ -490,11 +490,13 @@ mod tests {
         .unwrap();
         let mut client = connect(&dev);
         client.start_keep_alive();
-        // 1 kHz telemetry and the 10 kHz stream: about 76 kB/s with the cam at rest.
-        client.start_telemetry(1000).unwrap();
+        // The 10 kHz stream and then 1 kHz telemetry: about 76 kB/s with the cam at rest
+        // (asked the other way round, the stream would be refused: the device budgets the
+        // link for a vibrating cam, `protocol::stream_rate_for_link`).
         client
             .ack(&Request::StartStream { rate_hz: 10_000 })
             .unwrap();
+        client.start_telemetry(1000).unwrap();
         let rate = f64::from(protocol::link_bytes_per_s(protocol::DEFAULT_BAUD_RATE));
         let line = |dev: &VirtualDevice| dev.with_rig(|r| (r.time(), r.link_bytes_sent()));
         let (t0, sent0) = line(&dev);
@@ -527,6 +529,37 @@ mod tests {
         // And the stream fitted beside the telemetry: nothing lost.
         assert_eq!((decoder.lost, decoder.bad_blocks), (0, 0));
         assert!(decoder.samples >= 19_000, "{} samples", decoder.samples);
+    }
+
+    #[test]
+    fn the_link_agreed_at_4_mbaud_carries_the_stream_beside_1_khz_telemetry() {
+        use protocol::{FAST_BAUD_RATE, NackCode, Request};
+        let dev = VirtualDevice::paper(1.0).unwrap();
+        let mut client = connect(&dev);
+        client.start_telemetry(1000).unwrap();
+        // At 921,600 Bd the link cannot carry it: refused naming the rate that fits.
+        let e = client
+            .ack(&Request::StartStream { rate_hz: 10_000 })
+            .unwrap_err();
+        assert_eq!(e.refusal(), Some(NackCode::StreamRate { fits_hz: 1_250 }));
+        let info = client.info().unwrap();
+        assert_eq!(info.max_baud, FAST_BAUD_RATE);
+        client.agree_baud(&info, FAST_BAUD_RATE).unwrap();
+        dev.with_rig(|r| {
+            assert_eq!(r.core().link_baud(), FAST_BAUD_RATE);
+            assert_eq!(r.link_bytes_per_s(), Some(400_000));
+        });
+        client.start_keep_alive();
+        client
+            .ack(&Request::StartStream { rate_hz: 10_000 })
+            .unwrap();
+        // Requests at the new rate confirm it: it stays past BAUD_CONFIRM_MS.
+        let t0 = dev.time();
+        while dev.time() < t0 + 1.5 {
+            client.recv(Duration::from_millis(50)).unwrap();
+        }
+        assert_eq!(dev.with_rig(|r| r.core().link_baud()), FAST_BAUD_RATE);
+        client.ack(&Request::StopStream).unwrap();
     }
 
     #[test]

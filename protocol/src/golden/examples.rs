@@ -56,7 +56,7 @@ pub(crate) fn worst_case_chunk() -> CaptureChunk {
 
 pub(crate) fn device_info() -> DeviceInfo {
     DeviceInfo {
-        protocol_version: 7,
+        protocol_version: 8,
         schema_hash: 0xDEAD_BEEF,
         firmware_version: FirmwareVersion {
             major: 0,
@@ -70,6 +70,7 @@ pub(crate) fn device_info() -> DeviceInfo {
         uptime_s: 3_600,
         capabilities: Capabilities::OUTPUT_ENCODER | Capabilities::BUS_VOLTAGE,
         time_scale: 1.0,
+        max_baud: crate::FAST_BAUD_RATE,
     }
 }
 
@@ -143,6 +144,7 @@ pub(crate) fn requests() -> std::vec::Vec<Named<Request>> {
         ),
         ("Request::StartStream", StartStream { rate_hz: 10_000 }),
         ("Request::StopStream", StopStream),
+        ("Request::SetBaud", SetBaud { baud: 4_000_000 }),
     ]
 }
 
@@ -168,6 +170,7 @@ pub(crate) fn request_index(r: &Request) -> usize {
         Simulation(SimCommand::SetSensorSupply { .. }) => 15,
         StartStream { .. } => 16,
         StopStream => 17,
+        SetBaud { .. } => 18,
     }
 }
 

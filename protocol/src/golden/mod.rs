@@ -422,6 +422,7 @@ fn worst_case_sizes_are_exact() {
         uptime_s: u32::MAX,
         capabilities: Capabilities::from_bits_retain(u16::MAX),
         time_scale: f32::MAX,
+        max_baud: u32::MAX,
     };
     assert_eq!(wire_len(&info), DeviceInfo::MAX_WIRE_SIZE);
     let chunk = worst_case_chunk();

@@ -167,14 +167,14 @@ fn device_info() -> impl Strategy<Value = DeviceInfo> {
         (any::<[u8; 3]>(), any::<u16>(), any::<u32>()),
         ("[0-9a-f]{0,12}(-dirty)?", "[a-z0-9µ-]{0,8}"),
         (status, reset, any::<u32>(), any::<u16>()),
-        0.001f32..1.0e6,
+        (0.001f32..1.0e6, any::<u32>()),
     )
         .prop_map(
             |(
                 (v, protocol_version, schema_hash),
                 (build, board),
                 (parameters_status, reset_cause, uptime_s, capabilities),
-                time_scale,
+                (time_scale, max_baud),
             )| DeviceInfo {
                 protocol_version,
                 schema_hash,
@@ -190,6 +190,7 @@ fn device_info() -> impl Strategy<Value = DeviceInfo> {
                 uptime_s,
                 capabilities: Capabilities::from_bits_retain(capabilities),
                 time_scale,
+                max_baud,
             },
         )
 }
@@ -235,6 +236,7 @@ pub fn request() -> impl Strategy<Value = Request> {
         sim_command().prop_map(Request::Simulation),
         any::<u16>().prop_map(|rate_hz| Request::StartStream { rate_hz }),
         Just(Request::StopStream),
+        any::<u32>().prop_map(|baud| Request::SetBaud { baud }),
     ]
 }
 

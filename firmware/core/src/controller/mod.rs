@@ -60,6 +60,8 @@ pub struct Core {
     pub(crate) streams: Streams,
     /// The continuous stream: the steps' ring and the block being packed.
     pub(crate) stream: crate::stream::Stream,
+    /// The host link's agreed rate.
+    pub(crate) link: crate::link::LinkRate,
     step_timing: StepTiming,
     overruns: u32,
     pub(crate) capture: Capture,
@@ -143,6 +145,7 @@ impl Core {
             addr_of_mut!((*p).output_count).write(None);
             addr_of_mut!((*p).streams).write(Streams::default());
             addr_of_mut!((*p).stream).write(crate::stream::Stream::default());
+            addr_of_mut!((*p).link).write(crate::link::LinkRate::default());
             addr_of_mut!((*p).step_timing).write(StepTiming::default());
             addr_of_mut!((*p).overruns).write(0);
             Capture::init_in(addr_of_mut!((*p).capture));
@@ -175,6 +178,7 @@ impl Core {
                 output_count: _,
                 streams: _,
                 stream: _,
+                link: _,
                 step_timing: _,
                 overruns: _,
                 capture: _,
@@ -324,6 +328,20 @@ impl Core {
         self.tx
             .push(&protocol::DeviceMessage::StreamBlock(block), REPLY_RESERVE);
         true
+    }
+
+    /// The host link's agreed rate, Bd (`Request::SetBaud`).
+    pub fn link_baud(&self) -> u32 {
+        self.link.baud
+    }
+
+    /// The rate the UART must switch to now, once (call it when the UART has sent
+    /// everything): after an accepted `SetBaud` whose `Ack` has left the transmit queue, or
+    /// back to [`protocol::DEFAULT_BAUD_RATE`] when no request was accepted at the new rate
+    /// within [`protocol::BAUD_CONFIRM_MS`] of device time.
+    pub fn take_baud_switch(&mut self, now_us: u64) -> Option<u32> {
+        let idle = self.tx.len() == 0;
+        self.link.take_switch(now_us, idle)
     }
 
     /// The host closed the link (the virtual rig's client went away; a board's UART cannot

@@ -223,3 +223,40 @@ fn a_restart_numbers_from_zero_and_the_running_rate_again_changes_nothing() {
     });
     assert_eq!(last, Some(0));
 }
+
+#[test]
+fn a_stream_the_link_cannot_carry_beside_telemetry_is_refused_naming_the_rate_that_fits() {
+    let mut rig = Rig::new(0.0);
+    rig.run_ms(150);
+    rig.ack(&Request::StartTelemetry { rate_hz: 1000 }).unwrap();
+    // 921,600 Bd: beside 1 kHz telemetry two thirds of the link leave room for 1,250 Hz.
+    assert_eq!(
+        rig.ack(&Request::StartStream { rate_hz: 10_000 }),
+        Err(NackCode::StreamRate { fits_hz: 1_250 })
+    );
+    assert_eq!(rig.core.status().stream_rate_hz, 0);
+    rig.ack(&Request::StartStream { rate_hz: 1_250 }).unwrap();
+    rig.ack(&Request::StopStream).unwrap();
+    // At the fast rate everything fits: switch (the Ack leaves first), then ask again.
+    assert_eq!(
+        rig.ack(&Request::SetBaud { baud: 1_000_000 }),
+        Err(NackCode::BadArgument)
+    );
+    rig.ack(&Request::SetBaud {
+        baud: protocol::FAST_BAUD_RATE,
+    })
+    .unwrap();
+    assert_eq!(rig.core.link_baud(), protocol::DEFAULT_BAUD_RATE);
+    // The switch waits for the transmit queue to empty (the Ack and the telemetry sent).
+    let mut switched = None;
+    for _ in 0..20 {
+        rig.run_ms(1);
+        if let Some(b) = rig.core.take_baud_switch(rig.now_us) {
+            switched = Some(b);
+            break;
+        }
+    }
+    assert_eq!(switched, Some(protocol::FAST_BAUD_RATE));
+    rig.ack(&Request::StartStream { rate_hz: 10_000 }).unwrap();
+    assert_eq!(rig.core.link_baud(), protocol::FAST_BAUD_RATE);
+}
