@@ -62,3 +62,14 @@ def test_a_rate_the_stream_cannot_run_names_the_rate_that_fits(rig):
     with rig.stream(rate_hz=2500, seconds=0.1) as s:
         n = sum(len(c["seq"]) for c in s)
     assert n == 250
+
+
+def test_the_fast_link_is_agreed_on_a_served_rig(served):
+    from backdrive_rig import Rig
+
+    with Rig.open(served.port, baud=4000000) as rig:
+        assert rig.info()["max_baud"] == 4000000
+        df = rig.record(seconds=0.2, rate_hz=10000)
+        assert len(df) == 2000 and df.attrs["lost"] == 0
+    with pytest.raises(BadValueError, match="--baud 4000000"):
+        Rig.open(served.port, baud=2000000)
