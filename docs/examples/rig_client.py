@@ -22,7 +22,7 @@ import sys
 import time
 import zlib
 
-PROTOCOL_VERSION = 7
+PROTOCOL_VERSION = 8
 
 
 # --- framing -------------------------------------------------------------------------
