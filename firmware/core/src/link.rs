@@ -65,7 +65,7 @@ pub const fn usart_brr_over8(kernel_hz: u32, baud: u32) -> Option<u16> {
         return None;
     }
     let twice = 2 * kernel_hz as u64;
-    if twice % baud as u64 != 0 {
+    if !twice.is_multiple_of(baud as u64) {
         return None;
     }
     let div = twice / baud as u64;
@@ -105,8 +105,10 @@ mod tests {
 
     #[test]
     fn a_switch_waits_for_the_ack_and_falls_back_unconfirmed() {
-        let mut link = LinkRate::default();
-        link.pending = Some(protocol::FAST_BAUD_RATE);
+        let mut link = LinkRate {
+            pending: Some(protocol::FAST_BAUD_RATE),
+            ..LinkRate::default()
+        };
         // The Ack is still queued: no switch yet.
         assert_eq!(link.take_switch(1_000, false), None);
         assert_eq!(

@@ -75,7 +75,6 @@ impl TxQueue {
     }
 
     /// Whether nothing waits.
-    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }

@@ -340,7 +340,7 @@ impl Core {
     /// back to [`protocol::DEFAULT_BAUD_RATE`] when no request was accepted at the new rate
     /// within [`protocol::BAUD_CONFIRM_MS`] of device time.
     pub fn take_baud_switch(&mut self, now_us: u64) -> Option<u32> {
-        let idle = self.tx.len() == 0;
+        let idle = self.tx.is_empty();
         self.link.take_switch(now_us, idle)
     }
 
