@@ -117,7 +117,7 @@ fn duty_compare(duty: f32, full_scale: f32) -> Option<u32> {
 /// The host link's baud rate at boot, Bd (USART2 at 921,600 8N1 on the ST-LINK's VCP;
 /// `SetBaud` may switch it to `protocol::FAST_BAUD_RATE`, `set_host_baud`).
 #[cfg(any(target_os = "none", test))]
-const HOST_BAUD: u32 = protocol::DEFAULT_BAUD_RATE;
+const HOST_BAUD: u32 = 921_600;
 
 /// USART2's kernel clock, Hz: PCLK1 = SYSCLK, 170 MHz from the HSE crystal.
 #[cfg(any(target_os = "none", test))]
