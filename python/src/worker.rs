@@ -29,6 +29,10 @@ pub type Job = Box<dyn FnOnce(&mut Worker) + Send + 'static>;
 const TURN: Duration = Duration::from_millis(5);
 /// Longest the thread sleeps on an idle link (nothing live, nothing recording).
 const IDLE: Duration = Duration::from_millis(50);
+/// A stream recording with no block for this long (device seconds, then 2 s of wall time
+/// more) has stopped: the device ends the stream when no request reaches it within the
+/// comms timeout (a host starved of CPU), and the recording fails saying so.
+const STREAM_SILENCE_S: f64 = 2.0;
 
 /// Locks `m`, whatever a panicking holder left (the data are plain values).
 pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -102,6 +106,8 @@ pub struct StreamPart {
     pub end_seq: Option<u32>,
     convert: Mutex<StreamRows>,
     decoder: Mutex<StreamDecoder>,
+    /// When the last block (or the start) arrived, wall clock.
+    last_block: Mutex<Option<Instant>>,
 }
 
 impl Recording {
@@ -129,6 +135,7 @@ impl Recording {
                 }),
                 convert: Mutex::new(StreamRows::new(rate_hz)),
                 decoder: Mutex::new(decoder),
+                last_block: Mutex::new(Some(Instant::now())),
             }),
             ..Self::default()
         }
@@ -143,6 +150,7 @@ impl Recording {
         if self.done.load(Ordering::SeqCst) {
             return;
         }
+        *lock(&part.last_block) = Some(Instant::now());
         let end = part.end_seq.unwrap_or(u32::MAX);
         let mut events = Vec::new();
         lock(&part.decoder).push(block, |e| events.push(e));
@@ -340,6 +348,19 @@ impl Worker {
             && let Some(rec) = self.recording.take()
         {
             rec.fail(&e);
+        }
+        let silence = self.wall(STREAM_SILENCE_S) + Duration::from_secs(2);
+        let stalled = self.recording.as_ref().is_some_and(|r| {
+            r.stream
+                .as_ref()
+                .is_some_and(|p| lock(&p.last_block).is_some_and(|t| t.elapsed() > silence))
+        });
+        if stalled && let Some(rec) = self.recording.take() {
+            let _ = self.end_stream();
+            rec.fail(&RigError::Protocol(format!(
+                "the stream stopped: no samples for {STREAM_SILENCE_S} s (the device ends it when no request reaches it within {} ms: was this process starved of CPU?)",
+                protocol::COMMS_TIMEOUT_MS
+            )));
         }
     }
 
