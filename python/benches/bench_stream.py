@@ -15,6 +15,7 @@ import argparse
 import json
 import os
 import subprocess
+import sys
 import threading
 import time
 
@@ -81,6 +82,13 @@ def run(rig_cli: str, minutes: float, rate: int) -> dict:
                     gaps_seen += int(seq[0] != next_seq) + int(np.count_nonzero(np.diff(seq) != 1))
                     next_seq = int(seq[-1]) + 1
                     received += len(seq)
+                    if received % (60 * rate) < len(seq):
+                        print(
+                            f"{received / rate:.0f} s of samples, {s.lost} lost, "
+                            f"{time.monotonic() - started:.0f} s wall",
+                            file=sys.stderr,
+                            flush=True,
+                        )
             wall = time.monotonic() - started
             cpu = time.process_time() - cpu0
             serve_cpu = cpu_s(serve.pid) - serve_cpu0
