@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from backdrive_rig import Rig
+from backdrive_rig import Rig, RigError
 
 #: The link's byte rate at 921,600 Bd, 8N1 (protocol::link_bytes_per_s).
 LINK_BYTES_PER_S = 921_600 // 10
@@ -75,7 +75,9 @@ def run(rig_cli: str, minutes: float, rate: int) -> dict:
             serve_cpu0, cpu0, started = cpu_s(serve.pid), time.process_time(), time.monotonic()
             port0 = port_thread_cpu_s()
             received, gaps_seen, next_seq = 0, 0, 0
+            stopped_by = None
             with rig.stream(rate_hz=rate, seconds=seconds, chunk_s=1.0) as s:
+              try:
                 for chunk in s:
                     seq = chunk["seq"]
                     # The numbering end to end: a jump is a gap (also in s.gaps).
@@ -89,6 +91,9 @@ def run(rig_cli: str, minutes: float, rate: int) -> dict:
                             file=sys.stderr,
                             flush=True,
                         )
+              except RigError as e:
+                # The figures up to the stop are still reported, with why it stopped.
+                stopped_by = str(e)
             wall = time.monotonic() - started
             cpu = time.process_time() - cpu0
             serve_cpu = cpu_s(serve.pid) - serve_cpu0
@@ -99,6 +104,7 @@ def run(rig_cli: str, minutes: float, rate: int) -> dict:
             device_s = received / rate if received else seconds
             return {
                 "rate_hz": rate,
+                "stopped_by": stopped_by,
                 "device_s": seconds,
                 "wall_s": round(wall, 1),
                 "expected_samples": int(round(seconds * rate)),
