@@ -69,7 +69,7 @@ def run(rig_cli: str, minutes: float, rate: int) -> dict:
                     sum(i * i for i in range(2000))
                     spins[0] += 1
 
-            worker = threading.Thread(target=busy)
+            worker = threading.Thread(target=busy, daemon=True)
             worker.start()
             bytes0 = rig.link_stats()["bytes_in"]
             serve_cpu0, cpu0, started = cpu_s(serve.pid), time.process_time(), time.monotonic()
