@@ -10,7 +10,8 @@
 //! of at most [`MAX_TERMS`] terms, each a coefficient times a product of drivers (speed and
 //! load in half-integer powers up to 3, the others to the first power) and optionally a
 //! dimensionless function of one driver over a scale of the same unit: `1 - exp(-x / s)`
-//! (a rise that saturates) or `exp(-x / s)` (a fall that fades). Each coefficient's unit is
+//! (a rise that saturates), `exp(-x / s)` (a fall that fades) or `1 / (1 + (x / s)^2)` (a
+//! fall past a corner). Each coefficient's unit is
 //! A over its term's units and each scale's unit is its driver's, so every law's unit is A
 //! whatever it is; [`Law::unit`] recomputes it from the pieces and the search keeps only
 //! laws it finds in A, and a function's argument must come out dimensionless.
@@ -25,7 +26,7 @@
 //! its terms (scales aside) is in the best law of at least [`MIN_SHARE`] of the
 //! block-bootstrap resamples.
 //! It is only looked for when the verdict leaves a significant lack of fit, so effect-free
-//! data never gets one.
+//! data never gets one. `EXPLAIN_DIAG_LAW=1` prints the search's steps to stderr.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -191,7 +192,17 @@ pub enum Shape {
     Saturating,
     /// `exp(-x / s)`: a fall that fades above s.
     Fading,
+    /// `1 / (1 + (x / s)^2)`: a fall past s as a first-order filter's power (a drive that
+    /// stops following above a corner).
+    Corner,
 }
+
+/// A term's identity with its scale left out: its drivers' powers and, for a shape, whether
+/// it rises and of which driver.
+type Family = (Vec<(Driver, i32)>, Option<(bool, Driver)>);
+
+/// Groupings of the points for held-out validation: each point's group and the count.
+type Groupings = Vec<(Vec<usize>, usize)>;
 
 /// One term of a law: a coefficient times `drivers` (each to a power in halves) times an
 /// optional shape of one driver over a scale.
@@ -237,9 +248,13 @@ impl LawTerm {
         )
     }
 
-    /// Identity of the term with its scale left out (the bootstrap compares these).
-    fn family(&self) -> (Vec<(Driver, i32)>, Option<(Shape, Driver)>) {
-        (self.powers.clone(), self.shape.map(|(s, d, _)| (s, d)))
+    /// Identity of the term with its scale left out, and the two falls (fading, past a
+    /// corner) as one: the bootstrap compares these, and a law has one term of each.
+    fn family(&self) -> Family {
+        (
+            self.powers.clone(),
+            self.shape.map(|(s, d, _)| (s == Shape::Saturating, d)),
+        )
     }
 }
 
@@ -249,6 +264,9 @@ struct Column {
     term: LawTerm,
     values: Vec<f64>,
     grid: usize,
+    /// The term's family ([`LawTerm::family`]) as a number: columns that differ only in
+    /// their scale share it.
+    family: usize,
 }
 
 /// The drivers' values at every point, with what an expression needs to read them.
@@ -310,7 +328,9 @@ impl DriverValues {
         values.retain(|_, v| {
             let (lo, hi) = v
                 .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                    (a.min(x), b.max(x))
+                });
             hi - lo > 1e-9 * hi.abs().max(lo.abs()).max(1e-300)
         });
         let signed = values
@@ -379,6 +399,7 @@ fn columns(dv: &DriverValues, n: usize) -> Vec<Column> {
         products.push(vec![(tau, 2), (d, 2)]);
     }
     let mut out = Vec::new();
+    let mut families = Vec::new();
     let mut push = |powers: Vec<(Driver, i32)>, shape: Option<(Shape, Driver, f64)>, grid| {
         if powers.iter().any(|&(d, _)| !has(d)) {
             return;
@@ -402,14 +423,25 @@ fn columns(dv: &DriverValues, n: usize) -> Vec<Column> {
                     None => 1.0,
                     Some((Shape::Saturating, d, s)) => 1.0 - (-dv.magnitude(d, k) / s).exp(),
                     Some((Shape::Fading, d, s)) => (-dv.magnitude(d, k) / s).exp(),
+                    Some((Shape::Corner, d, s)) => 1.0 / (1.0 + (dv.magnitude(d, k) / s).powi(2)),
                 };
                 p * g
             })
             .collect();
+        let term = LawTerm::new(powers, shape);
+        let key = term.family();
+        let family = match families.iter().position(|f| *f == key) {
+            Some(i) => i,
+            None => {
+                families.push(key);
+                families.len() - 1
+            }
+        };
         out.push(Column {
-            term: LawTerm::new(powers, shape),
+            term,
             values,
             grid,
+            family,
         });
     };
     for p in &products {
@@ -429,7 +461,7 @@ fn columns(dv: &DriverValues, n: usize) -> Vec<Column> {
         let (a, b) = ((0.5 * lo).max(0.02 * hi), 2.0 * hi);
         for j in 0..SCALES {
             let s = a * (b / a).powf(j as f64 / (SCALES - 1) as f64);
-            for shape in [Shape::Saturating, Shape::Fading] {
+            for shape in [Shape::Saturating, Shape::Fading, Shape::Corner] {
                 for prefactor in [vec![], vec![(w, 2)], vec![(tau, 2)]] {
                     push(prefactor, Some((shape, d, s)), SCALES);
                 }
@@ -493,7 +525,7 @@ pub struct ProposedLaw {
 }
 
 /// The groups a held-out validation leaves out one at a time, and what they are.
-fn holdout_groups(points: &TestPoints) -> Option<(Vec<(Vec<usize>, usize)>, String)> {
+fn holdout_groups(points: &TestPoints) -> Option<(Groupings, String)> {
     let n = points.len();
     let mut sets = Vec::new();
     let mut what = Vec::new();
@@ -550,6 +582,7 @@ fn holdout_rmse(sets: &[(Vec<Moments>, Moments)], nb: usize, chosen: &[usize]) -
 }
 
 /// The best law (column indices) on moments `m` by BIC, with its BIC gain over none.
+/// The best law (column indices) on moments `m` by BIC, with its BIC gain over none.
 fn best_law(m: &Moments, columns: &[Column]) -> Option<(Vec<usize>, f64)> {
     let nb = columns.len();
     let n = m.rows;
@@ -567,23 +600,36 @@ fn best_law(m: &Moments, columns: &[Column]) -> Option<(Vec<usize>, f64)> {
         n * ((sse + m.within).max(1e-300) / n).ln() + k
     };
     let none = bic(m.yy, &[]);
+    let g = |a: usize, b: usize| m.gram[a * nb + b];
     let mut best: Option<(Vec<usize>, f64)> = None;
-    let mut consider = |chosen: Vec<usize>| {
-        if let Some((_, sse)) = least_squares(m, nb, &chosen) {
-            let b = bic(sse, &chosen);
-            if best.as_ref().is_none_or(|(_, s)| b < *s) {
-                best = Some((chosen, b));
-            }
+    let mut consider = |chosen: &[usize], sse: f64| {
+        let b = bic(sse.max(0.0), chosen);
+        if best.as_ref().is_none_or(|(_, s)| b < *s) {
+            best = Some((chosen.to_vec(), b));
         }
     };
     for a in 0..nb {
-        consider(vec![a]);
+        // Least squares on one or two columns in closed form (a touch of ridge, as
+        // `least_squares`).
+        let gaa = g(a, a) * (1.0 + 1e-10);
+        if gaa > 0.0 {
+            consider(&[a], m.yy - m.xy[a] * m.xy[a] / gaa);
+        }
         if MAX_TERMS >= 2 {
             for b in 0..a {
                 // Two terms of one family (a shape at two scales) are one law's business.
-                if columns[a].term.family() != columns[b].term.family() {
-                    consider(vec![b, a]);
+                if columns[a].family == columns[b].family {
+                    continue;
                 }
+                let gbb = g(b, b) * (1.0 + 1e-10);
+                let gab = g(a, b);
+                let det = gaa * gbb - gab * gab;
+                if det.is_nan() || det <= 1e-12 * gaa * gbb {
+                    continue;
+                }
+                let (xa, xb) = (m.xy[a], m.xy[b]);
+                let fitted = (gbb * xa * xa - 2.0 * gab * xa * xb + gaa * xb * xb) / det;
+                consider(&[b, a], m.yy - fitted);
             }
         }
     }
@@ -615,7 +661,13 @@ pub fn propose(
         .map(|(m, f)| m - f)
         .collect();
     let cols: Vec<&[f64]> = columns.iter().map(|c| c.values.as_slice()).collect();
-    let by_block = grouped_moments(points, &cols, &y, |k| points.block[k] as usize, points.blocks);
+    let by_block = grouped_moments(
+        points,
+        &cols,
+        &y,
+        |k| points.block[k] as usize,
+        points.blocks,
+    );
     let total = Moments::total(&by_block, nb);
     let (chosen, bic_gain) = best_law(&total, &columns)?;
     let diag = std::env::var_os("EXPLAIN_DIAG_LAW").is_some();
@@ -668,7 +720,7 @@ pub fn propose(
     };
     // The block bootstrap of the search: how often each of the law's terms (scales aside)
     // is in the best law of a resample.
-    let families: Vec<_> = chosen.iter().map(|&c| columns[c].term.family()).collect();
+    let families: Vec<usize> = chosen.iter().map(|&c| columns[c].family).collect();
     let mut counts = vec![0usize; families.len()];
     let mut drawn = 0usize;
     for draws in crate::bootstrap::block_draws(SEED, by_block.len()).take(RESAMPLES) {
@@ -681,7 +733,7 @@ pub fn propose(
         drawn += 1;
         if let Some((c, _)) = best_law(&m, &columns) {
             for (count, f) in counts.iter_mut().zip(&families) {
-                if c.iter().any(|&c| columns[c].term.family() == *f) {
+                if c.iter().any(|&c| columns[c].family == *f) {
                     *count += 1;
                 }
             }
@@ -691,7 +743,9 @@ pub fn propose(
     // The law, or else its terms that survive the bootstrap on their own: each term in the
     // best law of at least MIN_SHARE of the resamples, and the held-out levels predicted
     // better than with the generic shape and with nothing.
-    let firm: Vec<usize> = (0..chosen.len()).filter(|&i| share_of(i) >= MIN_SHARE).collect();
+    let firm: Vec<usize> = (0..chosen.len())
+        .filter(|&i| share_of(i) >= MIN_SHARE)
+        .collect();
     let (chosen, bootstrap_share) = if firm.len() == chosen.len() {
         let share = (0..chosen.len()).map(share_of).fold(1.0, f64::min);
         (chosen, share)
@@ -778,8 +832,7 @@ fn render(law: &Law, dv: &DriverValues, mut out: ProposedLaw) -> ProposedLaw {
                 h if h % 2 == 0 => format!("{v}^{}", h / 2),
                 h => format!("{v}^{}", h as f64 / 2.0),
             });
-            out.units
-                .insert(d.variable().to_string(), d.unit().text());
+            out.units.insert(d.variable().to_string(), d.unit().text());
             word.push(if h == 2 {
                 d.variable().to_string()
             } else {
@@ -803,13 +856,14 @@ fn render(law: &Law, dv: &DriverValues, mut out: ProposedLaw) -> ProposedLaw {
             factors.push(match shape {
                 Shape::Saturating => format!("(1 - exp(-{x} / {sname}))"),
                 Shape::Fading => format!("exp(-{x} / {sname})"),
+                Shape::Corner => format!("1 / (1 + ({x} / {sname})^2)"),
             });
             word.push(match shape {
                 Shape::Saturating => format!("(1 - exp(-{} / {sname}))", d.variable()),
                 Shape::Fading => format!("exp(-{} / {sname})", d.variable()),
+                Shape::Corner => format!("1 / (1 + ({} / {sname})^2)", d.variable()),
             });
-            out.units
-                .insert(d.variable().to_string(), d.unit().text());
+            out.units.insert(d.variable().to_string(), d.unit().text());
             out.units.insert(sname.clone(), d.unit().text());
             out.params.insert(sname.clone(), s);
             params.push(format!(

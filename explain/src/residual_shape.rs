@@ -393,11 +393,7 @@ fn block_moments(points: &TestPoints, bases: &[Basis], y: &[f64]) -> Vec<Moments
 
 /// Weighted least squares of the residual on the bases `chosen`, from moments `m`:
 /// coefficients and SSE.
-pub(crate) fn least_squares(
-    m: &Moments,
-    nb: usize,
-    chosen: &[usize],
-) -> Option<(Vec<f64>, f64)> {
+pub(crate) fn least_squares(m: &Moments, nb: usize, chosen: &[usize]) -> Option<(Vec<f64>, f64)> {
     let p = chosen.len();
     if p == 0 {
         return Some((Vec::new(), m.yy));
