@@ -39,6 +39,7 @@ pub mod options;
 pub mod parallel;
 pub mod plausibility;
 pub mod points;
+pub mod proposed_law;
 pub mod report_files;
 pub mod residual_shape;
 pub mod robust;
@@ -338,6 +339,11 @@ pub struct Explanation {
     /// The shape of what remains, when the verdict is `unexplained` or `partly-explained`:
     /// a sparse description over a generic basis and a ready `[[user_effects]]` entry.
     pub residual_shape: Option<residual_shape::ResidualShape>,
+    /// A law proposed for what remains, when the verdict is `unexplained` or
+    /// `partly-explained` and a law of the search ([`proposed_law`]: units right by
+    /// construction) predicts held-out levels better than the generic shape and survives
+    /// the bootstrap; `null` otherwise.
+    pub proposed_law: Option<proposed_law::ProposedLaw>,
     /// The finding in words.
     pub finding: String,
     /// The report folder, when one was written.
@@ -1309,6 +1315,11 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
             inclusion_probabilities.insert(f.name.clone(), p);
         }
     }
+    let residual_shape = matches!(verdict, Verdict::Unexplained | Verdict::PartlyExplained)
+        .then(|| residual_shape::residual_shape(&points, after));
+    let proposed_law = residual_shape
+        .as_ref()
+        .and_then(|shape| proposed_law::propose(&points, after, shape, &j.lack_of_fit));
     let mut explanation = Explanation {
         verdict,
         effects,
@@ -1347,8 +1358,8 @@ pub fn explain(data: &Dataset, rig: &RigFile, options: &Options) -> Result<Outco
         steps,
         gap_before: j.gap_before,
         gap_after: j.gap_after,
-        residual_shape: matches!(verdict, Verdict::Unexplained | Verdict::PartlyExplained)
-            .then(|| residual_shape::residual_shape(&points, after)),
+        residual_shape,
+        proposed_law,
         lack_of_fit: j.lack_of_fit,
         finding: String::new(),
         report_dir: None,

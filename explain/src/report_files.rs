@@ -67,6 +67,21 @@ fn lack_of_fit_text(e: &Explanation) -> String {
             s.push_str(" A ready [[user_effects]] entry is in the JSON (`residual_shape.user_effect`) and the report: name it, paste it into the rig file and refit.");
         }
     }
+    if let Some(law) = &e.proposed_law {
+        let _ = write!(
+            s,
+            " A proposed law (units checked: the expression is in A): {} = {}; held out by {} it predicts to {:.1} mA RMSE{}, where the generic shape gets {:.1} mA; in {:.0} % of the resamples. Its [[user_effects]] entry is in the JSON (`proposed_law.user_effect`).",
+            law.expression,
+            law.words,
+            law.held_out,
+            law.holdout_rmse_a * 1e3,
+            law.pure_error_a
+                .map(|p| format!(" against a pure error of {:.1} mA", p * 1e3))
+                .unwrap_or_default(),
+            law.generic_holdout_rmse_a * 1e3,
+            100.0 * law.bootstrap_share
+        );
+    }
     s
 }
 
@@ -533,6 +548,30 @@ pub fn markdown(e: &Explanation, source: &str) -> String {
                 shape.user_effect
             );
         }
+    }
+    if let Some(law) = &e.proposed_law {
+        let units = law
+            .units
+            .iter()
+            .map(|(k, u)| format!("`{k}` {u}"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let _ = writeln!(
+            s,
+            "## A proposed law\n\n`{}` (A), with {units}: {}.\n\nHeld out by {}: RMSE {:.1} mA with the law, {:.1} mA with the generic shape, {:.1} mA with neither{}; BIC gain {:.1}; the same law wins in {:.0} % of the block-bootstrap resamples.\n\n```toml\n{}```\n",
+            law.expression,
+            law.words,
+            law.held_out,
+            law.holdout_rmse_a * 1e3,
+            law.generic_holdout_rmse_a * 1e3,
+            law.residual_holdout_rmse_a * 1e3,
+            law.pure_error_a
+                .map(|p| format!("; pure error {:.1} mA", p * 1e3))
+                .unwrap_or_default(),
+            law.bic_gain,
+            100.0 * law.bootstrap_share,
+            law.user_effect
+        );
     }
     if !e.lack_of_fit.locations.is_empty() {
         let _ = writeln!(

@@ -292,18 +292,19 @@ fn fmt(v: f64) -> String {
 
 /// Weighted moments of the bases and the residual: the Gram matrix (B x B), the bases times
 /// the residual, the residual's square sum, the rows and the rows' spread within points.
-/// Moments add, so a bootstrap resample of blocks is a weighted sum of the blocks' moments.
+/// Moments add, so a bootstrap resample of blocks is a weighted sum of the blocks' moments
+/// (and a fit without one group is the total less that group's).
 #[derive(Debug, Clone)]
-struct Moments {
-    gram: Vec<f64>,
-    xy: Vec<f64>,
-    yy: f64,
-    rows: f64,
-    within: f64,
+pub(crate) struct Moments {
+    pub(crate) gram: Vec<f64>,
+    pub(crate) xy: Vec<f64>,
+    pub(crate) yy: f64,
+    pub(crate) rows: f64,
+    pub(crate) within: f64,
 }
 
 impl Moments {
-    fn zero(b: usize) -> Self {
+    pub(crate) fn zero(b: usize) -> Self {
         Self {
             gram: vec![0.0; b * b],
             xy: vec![0.0; b],
@@ -313,7 +314,7 @@ impl Moments {
         }
     }
 
-    fn add_scaled(&mut self, other: &Moments, s: f64) {
+    pub(crate) fn add_scaled(&mut self, other: &Moments, s: f64) {
         self.gram
             .iter_mut()
             .zip(&other.gram)
@@ -326,24 +327,45 @@ impl Moments {
         self.rows += s * other.rows;
         self.within += s * other.within;
     }
+
+    /// The sum of `parts`.
+    pub(crate) fn total(parts: &[Moments], b: usize) -> Self {
+        let mut out = Moments::zero(b);
+        for m in parts {
+            out.add_scaled(m, 1.0);
+        }
+        out
+    }
 }
 
-/// The moments of each bootstrap block of `points` for residual `y`.
-fn block_moments(points: &TestPoints, bases: &[Basis], y: &[f64]) -> Vec<Moments> {
-    let nb = bases.len();
-    let blocks = points.blocks.max(1);
-    let mut out = vec![Moments::zero(nb); blocks];
+/// The moments of residual `y` on the columns `cols` (each a value per point of `points`),
+/// one set per group: point `k` goes to group `group_of(k)` (clamped to `groups - 1`).
+pub(crate) fn grouped_moments(
+    points: &TestPoints,
+    cols: &[&[f64]],
+    y: &[f64],
+    group_of: impl Fn(usize) -> usize,
+    groups: usize,
+) -> Vec<Moments> {
+    let nb = cols.len();
+    let groups = groups.max(1);
+    let mut out = vec![Moments::zero(nb); groups];
+    let mut x = vec![0.0; nb];
     for k in 0..y.len() {
-        let m = &mut out[(points.block[k] as usize).min(blocks - 1)];
+        let m = &mut out[group_of(k).min(groups - 1)];
         let w = points.weight[k];
         m.yy += w * y[k] * y[k];
         m.rows += w;
         m.within += points.within_ss[k];
-        for (i, bi) in bases.iter().enumerate() {
-            let xi = bi.values[k];
-            m.xy[i] += w * xi * y[k];
-            for (j, bj) in bases.iter().enumerate().take(i + 1) {
-                m.gram[i * nb + j] += w * xi * bj.values[k];
+        for (xi, c) in x.iter_mut().zip(cols) {
+            *xi = c[k];
+        }
+        for i in 0..nb {
+            let wxi = w * x[i];
+            m.xy[i] += wxi * y[k];
+            let row = &mut m.gram[i * nb..i * nb + i + 1];
+            for (g, xj) in row.iter_mut().zip(&x) {
+                *g += wxi * xj;
             }
         }
     }
@@ -357,9 +379,21 @@ fn block_moments(points: &TestPoints, bases: &[Basis], y: &[f64]) -> Vec<Moments
     out
 }
 
+/// The moments of each bootstrap block of `points` for residual `y`.
+fn block_moments(points: &TestPoints, bases: &[Basis], y: &[f64]) -> Vec<Moments> {
+    let cols: Vec<&[f64]> = bases.iter().map(|b| b.values.as_slice()).collect();
+    grouped_moments(
+        points,
+        &cols,
+        y,
+        |k| points.block[k] as usize,
+        points.blocks,
+    )
+}
+
 /// Weighted least squares of the residual on the bases `chosen`, from moments `m`:
 /// coefficients and SSE.
-fn least_squares(m: &Moments, nb: usize, chosen: &[usize]) -> Option<(Vec<f64>, f64)> {
+pub(crate) fn least_squares(m: &Moments, nb: usize, chosen: &[usize]) -> Option<(Vec<f64>, f64)> {
     let p = chosen.len();
     if p == 0 {
         return Some((Vec::new(), m.yy));
@@ -427,10 +461,7 @@ pub fn residual_shape(points: &TestPoints, fit: &Fit) -> ResidualShape {
         .map(|(m, f)| m - f)
         .collect();
     let by_block = block_moments(points, &bases, &y);
-    let mut total = Moments::zero(nb);
-    for m in &by_block {
-        total.add_scaled(m, 1.0);
-    }
+    let total = Moments::total(&by_block, nb);
     let chosen = select(&total, nb);
     let (coefficients, sse1) = least_squares(&total, nb, &chosen).unwrap_or((Vec::new(), total.yy));
     // Block bootstrap of the selection.
