@@ -536,6 +536,15 @@ impl Session {
         self.release_waiting(now);
         if let Some((every, last)) = self.keep_alive
             && now.saturating_sub(last) >= every
+        {
+            // A new heartbeat supersedes one still unanswered: the device's comms timeout
+            // counts the requests it receives, not the replies this side has read, so a
+            // reply late behind a busy link (a 10 kHz stream read by a starved host) must
+            // not hold the next heartbeat back. Its late reply counts as stale.
+            self.pending.retain(|_, p| !p.heartbeat);
+        }
+        if let Some((every, last)) = self.keep_alive
+            && now.saturating_sub(last) >= every
             && self.pending.len() < REQUEST_WINDOW
         {
             self.keep_alive = Some((every, now));
@@ -797,6 +806,35 @@ mod tests {
             }
         }
         assert_eq!(beats, 1);
+    }
+
+    #[test]
+    fn heartbeats_keep_their_interval_when_no_reply_comes_back() {
+        // Replies stuck behind a busy link: three queries and every heartbeat unanswered
+        // for two seconds; the device must still receive a heartbeat every interval.
+        let mut s = Session::default().with_id(7);
+        let mut dev = Device::default();
+        s.keep_alive(Some(ms(150)), ms(0));
+        for _ in 0..REQUEST_WINDOW - 1 {
+            s.send(Request::GetFaults, ms(0));
+        }
+        let mut beats = Vec::new();
+        for t in (0..=2000).step_by(10) {
+            while let Some(bytes) = s.poll_transmit(ms(t)) {
+                for f in dev.requests(&bytes) {
+                    if f.msg == (Request::Heartbeat { session: 7 }) {
+                        beats.push((t, f.seq));
+                    }
+                }
+            }
+            while s.poll(ms(t)).is_some() {}
+        }
+        let times: Vec<u64> = beats.iter().map(|b| b.0).collect();
+        assert_eq!(times, (1..=13).map(|k| 150 * k).collect::<Vec<_>>());
+        // The late reply to a superseded heartbeat is stale, not an error.
+        s.receive(&dev.say(&DeviceMessage::ack(beats[0].1)), ms(2000));
+        assert!(s.poll(ms(2000)).is_none());
+        assert_eq!(s.stats().stale_replies, 1);
     }
 
     #[test]
