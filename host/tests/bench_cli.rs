@@ -17,6 +17,7 @@ use assert_cmd::Command;
 use serde_json::Value;
 
 mod support {
+    pub mod child;
     pub mod cli;
 }
 use support::cli::data_rows;
@@ -474,23 +475,25 @@ fn monitor_plain_has_bus_voltage_and_output_angle() {
 
 #[test]
 fn sighup_locks_a_release_and_is_named() {
-    let child = rig_child(&["--sim", "release", "on", "--freq", "5"])
+    let mut child = rig_child(&["--sim", "release", "on", "--freq", "5"])
         .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
+        .stderr(Stdio::inherit())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(2500));
+    // Once it vibrates, on its own progress lines (not a guessed sleep).
+    let lines = support::child::Output::read(child.stdout.take().unwrap());
+    lines.wait_for("vibrating", 1, "vibration");
     let _ = std::process::Command::new("kill")
         .args(["-HUP", &child.id().to_string()])
         .status();
     let out = child.wait_with_output().unwrap();
-    let stdout = text(&out.stdout);
+    let stdout = lines.all();
     assert!(
         stdout.contains("locked after") && stdout.contains("SIGHUP"),
         "{stdout}"
     );
     // Issue 33: a signal ends every verb with 128 + its number (SIGHUP 1), not 0.
-    assert_eq!(out.status.code(), Some(129), "{}", text(&out.stderr));
+    assert_eq!(out.status.code(), Some(129), "stderr above");
 }
 
 #[test]

@@ -11,6 +11,7 @@ use assert_cmd::Command;
 use serde_json::Value;
 
 mod support {
+    pub mod child;
     pub mod cli;
     pub mod served;
 }
@@ -251,7 +252,9 @@ fn ctrl_c_locks_the_gear_and_keeps_completed_rounds() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_secs(3));
+    // Mid-round, on the child's own progress: its first round began.
+    let err = support::child::Output::read(child.stderr.take().unwrap());
+    err.wait_for("round 1:", 1, "the first round");
     let sent = std::process::Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
@@ -268,8 +271,7 @@ fn ctrl_c_locks_the_gear_and_keeps_completed_rounds() {
         );
         std::thread::sleep(Duration::from_millis(50));
     };
-    let mut err = String::new();
-    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+    let err = err.all();
     assert_eq!(status.code(), Some(130), "{err}");
     assert!(err.contains("the gear is locked"), "{err}");
 }

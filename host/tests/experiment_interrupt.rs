@@ -19,21 +19,43 @@ fn spawn(args: &[&str], stdin: Stdio) -> Child {
         .unwrap()
 }
 
-/// SIGINT to `child` after `after`; its exit code and stderr.
-fn interrupt(child: Child, after: Duration) -> (Option<i32>, String) {
-    std::thread::sleep(after);
+mod support {
+    pub mod child;
+}
+use support::child::{Output, wait_for_handler};
+
+/// When to send SIGINT: once the child said something, or once it handles SIGINT.
+enum When<'a> {
+    /// Its stderr showed this text this many times.
+    Said(&'a str, usize),
+    /// Its SIGINT handler is installed (the procedure says nothing while it runs).
+    Handles,
+}
+
+/// SIGINT to `child` at `when` (its own progress, never a guessed sleep); its exit code
+/// and stderr.
+fn interrupt(mut child: Child, when: When) -> (Option<i32>, String) {
+    let stdout = Output::read(child.stdout.take().unwrap());
+    let stderr = Output::read(child.stderr.take().unwrap());
+    match when {
+        When::Said(text, count) => stderr.wait_for(text, count, &format!("{text:?} x{count}")),
+        When::Handles => wait_for_handler(child.id(), 2),
+    }
     let sent = std::process::Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
         .unwrap();
     assert!(sent.success());
     let t0 = Instant::now();
-    let out = child.wait_with_output().unwrap();
-    assert!(t0.elapsed() < Duration::from_secs(30), "slow to stop");
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "slow to stop");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let _ = stdout.all();
+    (status.code(), stderr.all())
 }
 
 fn assert_locked_130((code, err): (Option<i32>, String)) {
@@ -58,13 +80,15 @@ fn ctrl_c_during_a_hold_release_locks() {
         ],
         Stdio::null(),
     );
-    assert_locked_130(interrupt(child, Duration::from_millis(1500)));
+    // Mid-hold: its 60 s hold began.
+    assert_locked_130(interrupt(child, When::Said("hold: 60 s", 1)));
 }
 
 #[test]
 fn ctrl_c_during_a_backdrive_test_locks() {
     let child = spawn(&["backdrive", "--hold", "60"], Stdio::null());
-    assert_locked_130(interrupt(child, Duration::from_millis(1500)));
+    // Wherever the signal lands once the child handles it (before the 60 s hold or in it).
+    assert_locked_130(interrupt(child, When::Handles));
 }
 
 #[test]
@@ -88,7 +112,7 @@ fn ctrl_c_at_an_operator_prompt_locks() {
         let mut child = spawn(&args, Stdio::piped());
         // Stdin stays open and silent: the prompt waits.
         let stdin = child.stdin.take().unwrap();
-        let (code, err) = interrupt(child, Duration::from_millis(1500));
+        let (code, err) = interrupt(child, When::Said("then Enter", 1));
         drop(stdin);
         assert!(
             err.contains("then Enter"),
@@ -122,7 +146,7 @@ fn an_answer_then_ctrl_c_at_the_next_prompt_keeps_the_answered_rows() {
         assert!(t0.elapsed() < Duration::from_secs(60), "no row written");
         std::thread::sleep(Duration::from_millis(50));
     }
-    let result = interrupt(child, Duration::from_millis(500));
+    let result = interrupt(child, When::Said("then Enter", 2));
     drop(stdin);
     assert_locked_130(result);
     let body = std::fs::read_to_string(&csv).unwrap();

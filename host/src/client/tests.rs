@@ -44,7 +44,17 @@ fn fake_device(
 
 /// As [`fake_device`], with messages of any layout (an older protocol's, for example).
 fn fake_device_of<M: serde::Serialize + Send + 'static>(
+    answer: impl FnMut(u16, Request) -> Vec<(u16, M)> + Send + 'static,
+) -> Client<PipeEnd> {
+    // A fake device answers at once, but a loaded machine may run its thread late: a
+    // reply that is coming never times out.
+    fake_device_timing_out(answer, ANSWERED)
+}
+
+/// As [`fake_device_of`], waiting `reply_timeout` for each reply (a test of silence).
+fn fake_device_timing_out<M: serde::Serialize + Send + 'static>(
     mut answer: impl FnMut(u16, Request) -> Vec<(u16, M)> + Send + 'static,
+    reply_timeout: Duration,
 ) -> Client<PipeEnd> {
     let (host, mut dev) = memory_pipe(Duration::from_millis(2));
     thread::spawn(move || {
@@ -69,9 +79,15 @@ fn fake_device_of<M: serde::Serialize + Send + 'static>(
         }
     });
     let mut opts = ClientOptions::new("test pipe");
-    opts.reply_timeout = Duration::from_millis(50);
+    opts.reply_timeout = reply_timeout;
     Client::new(host, opts)
 }
+
+/// Reply timeout of the fake devices: only a fake device that stopped trips it.
+const ANSWERED: Duration = Duration::from_secs(10);
+
+/// Reply timeout of the tests whose fake device stays silent on purpose.
+const TIMES_OUT: Duration = Duration::from_millis(50);
 
 /// A well-behaved device: Info for hello, Ack for the rest.
 fn good_answer(seq: u16, req: Request) -> Vec<(u16, DeviceMessage)> {
@@ -175,13 +191,18 @@ fn a_v1_device_says_flash_the_firmware() {
 fn lost_replies_are_retried_for_idempotent_requests_only() {
     let calls = Arc::new(AtomicU32::new(0));
     let seen = Arc::clone(&calls);
-    let mut c = fake_device(move |seq, req| {
-        // The first try of every request goes unanswered.
-        if seen.fetch_add(1, Ordering::SeqCst).is_multiple_of(2) {
-            return vec![];
-        }
-        good_answer(seq, req)
-    });
+    // Each try waits 1 s: the unanswered one times out, the answered one (on a loaded
+    // machine, late) does not.
+    let mut c = fake_device_timing_out(
+        move |seq, req| {
+            // The first try of every request goes unanswered.
+            if seen.fetch_add(1, Ordering::SeqCst).is_multiple_of(2) {
+                return vec![];
+            }
+            good_answer(seq, req)
+        },
+        Duration::from_secs(1),
+    );
     c.info().unwrap();
     assert_eq!(c.stats().retries, 1);
     calls.store(0, Ordering::SeqCst);
@@ -196,7 +217,7 @@ fn lost_replies_are_retried_for_idempotent_requests_only() {
 
 #[test]
 fn silent_device_is_a_clear_error() {
-    let mut c = fake_device(|_, _| vec![]);
+    let mut c = fake_device_timing_out(|_, _| Vec::<(u16, DeviceMessage)>::new(), TIMES_OUT);
     let e = c.hello().unwrap_err().to_string();
     assert!(e.contains("no reply"), "{e}");
     assert!(e.contains("test pipe"), "{e}");
@@ -314,7 +335,16 @@ fn heartbeats_keep_a_release_alive_while_waiting() {
     // upper bound is tight.
     c.opts.time_scale = 10.0;
     let waited = std::time::Instant::now();
-    assert!(c.recv(Duration::from_millis(500)).unwrap().is_none());
+    // Waiting inside the client (it heartbeats meanwhile): 0.5 s, and on until the device
+    // counted three heartbeats (a starved client sends them late, never fewer than due).
+    while waited.elapsed() < Duration::from_millis(500) || beats.load(Ordering::SeqCst) < 3 {
+        assert!(c.recv(Duration::from_millis(100)).unwrap().is_none());
+        assert!(
+            waited.elapsed() < ANSWERED,
+            "{} heartbeats in {ANSWERED:?}",
+            beats.load(Ordering::SeqCst)
+        );
+    }
     let due = waited.elapsed().as_secs_f64() / c.opts.heartbeat_interval().as_secs_f64();
     assert_eq!(c.stats().stale_replies, 0, "heartbeat acks are expected");
     c.release(false, 0.0).unwrap();
@@ -361,9 +391,15 @@ fn telemetry_gaps_are_counted() {
     });
     c.start_telemetry(100).unwrap();
     let mut got = Vec::new();
-    while let Some(t) = c.next_telemetry(Duration::from_millis(50)).unwrap() {
-        got.push(t.seq);
+    // Up to the last sample sent (however late a loaded machine runs the fake device),
+    // then nothing more.
+    while got.last() != Some(&6) {
+        match c.next_telemetry(ANSWERED).unwrap() {
+            Some(t) => got.push(t.seq),
+            None => panic!("the telemetry stopped after {got:?}"),
+        }
     }
+    assert!(c.next_telemetry(TIMES_OUT).unwrap().is_none());
     assert_eq!(got, vec![1, 2, 5, 6]);
     assert_eq!(c.stats().telemetry_lost, 2);
 }
