@@ -134,7 +134,7 @@ const _: () =
 
 /// The highest stream rate at or below `rate_hz` (10 kHz divided by a whole number) that a
 /// link at `baud` carries beside telemetry at `telemetry_hz` (0: off) with typical frames
-/// ([`STREAM_FRAME_TYPICAL`], a typical telemetry frame and the health sample once a
+/// (50 B a stream frame, a typical telemetry frame and the health sample once a
 /// second), leaving a third of the link for replies and capture chunks, as the telemetry's
 /// own budget does. What `StartStream` is refused with (`NackCode::StreamRate`) when it is
 /// below the rate asked; `None` for 0, or when not even 1 Hz fits.
