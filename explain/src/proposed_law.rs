@@ -75,7 +75,7 @@ pub enum Driver {
 }
 
 /// The base units the drivers carry, in the order of a [`Unit`]'s exponents.
-const BASE_UNITS: [&str; 6] = ["A", "rad/s", "N m", "s", "K", "N"];
+pub const BASE_UNITS: [&str; 6] = ["A", "rad/s", "N m", "s", "K", "N"];
 
 /// A unit: exponents (in halves) of [`BASE_UNITS`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

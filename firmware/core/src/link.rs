@@ -57,7 +57,7 @@ impl LinkRate {
 
 /// The BRR value of an STM32 USART at `kernel_hz` giving exactly `baud` with 8x
 /// oversampling (CR1.OVER8 = 1), by RM0440's rule (section 37.5.7): USARTDIV =
-/// 2 x f_ck / baud; BRR[15:4] = USARTDIV[15:4], BRR[3] = 0, BRR[2:0] = USARTDIV[3:0] >> 1.
+/// 2 x f_ck / baud; `BRR[15:4] = USARTDIV[15:4]`, `BRR[3] = 0`, `BRR[2:0] = USARTDIV[3:0] >> 1`.
 /// `None` when the division is not exact or USARTDIV is out of the register's range
 /// (16..=0xFFFF).
 pub const fn usart_brr_over8(kernel_hz: u32, baud: u32) -> Option<u16> {
