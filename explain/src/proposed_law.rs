@@ -36,7 +36,7 @@ use serde::Serialize;
 use crate::fit::Fit;
 use crate::lack_of_fit::LackOfFit;
 use crate::points::TestPoints;
-use crate::residual_shape::{Moments, ResidualShape, grouped_moments, least_squares};
+use crate::residual_shape::{Moments, ResidualShape, grouped_moments, least_squares, residual};
 use crate::terms::{ModelAt, Needs};
 
 /// Most terms in a law.
@@ -146,7 +146,7 @@ impl Unit {
 }
 
 impl Driver {
-    /// Every driver.
+    /// Every driver: speed and load first, then the others.
     pub const ALL: [Driver; 8] = [
         Driver::Speed,
         Driver::Load,
@@ -386,14 +386,7 @@ fn columns(dv: &DriverValues, n: usize) -> Vec<Column> {
         }
     }
     // The others to the first power, alone or times speed or load.
-    for d in [
-        Driver::Time,
-        Driver::TempRise,
-        Driver::Current,
-        Driver::FrictionCurrent,
-        Driver::InertiaCurrent,
-        Driver::AxialForce,
-    ] {
+    for &d in &Driver::ALL[2..] {
         products.push(vec![(d, 2)]);
         products.push(vec![(w, 2), (d, 2)]);
         products.push(vec![(tau, 2), (d, 2)]);
@@ -653,13 +646,7 @@ pub fn propose(
         return None;
     }
     let nb = columns.len();
-    let predicted = fit.predict(points);
-    let y: Vec<f64> = points
-        .current
-        .iter()
-        .zip(&predicted)
-        .map(|(m, f)| m - f)
-        .collect();
+    let y = residual(points, fit);
     let cols: Vec<&[f64]> = columns.iter().map(|c| c.values.as_slice()).collect();
     let by_block = grouped_moments(
         points,

@@ -449,17 +449,21 @@ fn select(m: &Moments, nb: usize) -> Vec<usize> {
     chosen
 }
 
+/// Measured minus `fit`'s current at every point of `points`, A.
+pub(crate) fn residual(points: &TestPoints, fit: &Fit) -> Vec<f64> {
+    points
+        .current
+        .iter()
+        .zip(fit.predict(points))
+        .map(|(m, f)| m - f)
+        .collect()
+}
+
 /// The shape of the residual of `fit` on `points`.
 pub fn residual_shape(points: &TestPoints, fit: &Fit) -> ResidualShape {
     let bases = bases(points);
     let nb = bases.len();
-    let predicted = fit.predict(points);
-    let y: Vec<f64> = points
-        .current
-        .iter()
-        .zip(&predicted)
-        .map(|(m, f)| m - f)
-        .collect();
+    let y = residual(points, fit);
     let by_block = block_moments(points, &bases, &y);
     let total = Moments::total(&by_block, nb);
     let chosen = select(&total, nb);
