@@ -14,7 +14,7 @@ use clap::Args;
 use serde::Serialize;
 
 use crate::RigError;
-use crate::virtual_device::{VirtualDevice, WallNoise};
+use crate::virtual_device::{FirmwareDevice, VirtualDevice, WallNoise};
 use sim::{EffectSpec, Preset, SimConfig};
 
 /// Arguments of `rig sim serve`.
@@ -40,6 +40,13 @@ pub struct ServeArgs {
     /// flash) and, when it has a fitted [model], runs with those effects.
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
+    /// Serve the firmware image itself on the emulated STM32G474 (processor in the loop):
+    /// the ELF runs instruction by instruction against the same plant; without a value, the
+    /// release image `cargo xtask firmware` builds (target/thumbv7em-none-eabihf/release/firmware).
+    /// Needs the Unicorn engine (`cargo xtask setup` installs it). Runs as fast as this
+    /// machine allows, at most --speed.
+    #[arg(long, value_name = "ELF", num_args = 0..=1, default_missing_value = "")]
+    pub firmware: Option<PathBuf>,
     /// Print one JSON line with the port when ready.
     #[arg(long)]
     pub json: bool,
@@ -89,9 +96,84 @@ pub fn config(a: &ServeArgs) -> Result<SimConfig, RigError> {
     Ok(config)
 }
 
+/// Runs `rig sim serve --firmware`: the image on the emulated board.
+fn run_firmware(a: &ServeArgs, config: SimConfig) -> Result<ExitCode, RigError> {
+    let stop = super::connect::interrupt_flag();
+    let noise = (a.line_noise_bytes_per_s > 0.0).then_some(WallNoise {
+        bytes_per_s: a.line_noise_bytes_per_s,
+        seed: a.seed,
+    });
+    let elf = a.firmware.as_deref().filter(|p| !p.as_os_str().is_empty());
+    let dev = FirmwareDevice::start(elf, config.plant, a.seed, a.speed, noise)?;
+    let mut out = std::io::stdout().lock();
+    if a.json {
+        let ready = FirmwareReady {
+            port: dev.port_name().to_string(),
+            speed: a.speed,
+            preset: a.preset.clone(),
+            effects: a.effects.clone(),
+            seed: a.seed,
+            warnings: unseen_warnings(a),
+            firmware: dev.elf().display().to_string(),
+        };
+        super::print_json_line(&mut out, &ready)?;
+    } else {
+        writeln!(
+            out,
+            "firmware {} on the emulated STM32G474 ({} preset) on {}; open it with `rig --port {} info`. Ctrl-C stops it.",
+            dev.elf().display(),
+            a.preset,
+            dev.port_name(),
+            dev.port_name()
+        )?;
+    }
+    out.flush()?;
+    drop(out);
+    let started = std::time::Instant::now();
+    let mut said = false;
+    while !stop.load(Ordering::SeqCst) {
+        std::thread::sleep(Duration::from_millis(20));
+        if let Some(e) = dev.error() {
+            return Err(RigError::VirtualDevice(e));
+        }
+        let wall = started.elapsed().as_secs_f64();
+        if !said && wall > 5.0 {
+            said = true;
+            eprintln!(
+                "the emulated board runs at {:.2}x real time on this machine",
+                dev.time() / wall
+            );
+        }
+    }
+    drop(dev);
+    Ok(crate::signals::exit_code())
+}
+
+/// What `rig sim serve --firmware --json` prints when ready: [`Ready`]'s keys and the image.
+#[derive(Debug, Serialize)]
+pub struct FirmwareReady {
+    /// The pseudo-terminal to open as a serial port.
+    pub port: String,
+    /// The most device seconds per wall-clock second asked for.
+    pub speed: f64,
+    /// The preset.
+    pub preset: String,
+    /// The effects hidden in the plant (as given).
+    pub effects: Vec<String>,
+    /// Seed of the sensor noise.
+    pub seed: u64,
+    /// Why an effect hidden cannot show to a client.
+    pub warnings: Vec<String>,
+    /// The firmware ELF running.
+    pub firmware: String,
+}
+
 /// Runs `rig sim serve`.
 pub fn run(a: ServeArgs) -> Result<ExitCode, RigError> {
     let config = config(&a)?;
+    if a.firmware.is_some() {
+        return run_firmware(&a, config);
+    }
     let stop = super::connect::interrupt_flag();
     let noise = (a.line_noise_bytes_per_s > 0.0).then_some(WallNoise {
         bytes_per_s: a.line_noise_bytes_per_s,

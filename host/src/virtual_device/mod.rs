@@ -39,7 +39,10 @@ use model::plant::Plant;
 use crate::RigError;
 use sim::{ADC_HZ, SimConfig, SimRig};
 
+mod firmware;
 mod pty;
+
+pub use firmware::{FirmwareDevice, default_firmware_elf};
 
 pub use pty::PtyMaster;
 
@@ -95,8 +98,8 @@ pub struct WallNoise {
     pub seed: u64,
 }
 
-struct Shared {
-    rig: Mutex<SimRig>,
+struct Shared<D> {
+    rig: Mutex<D>,
     noise_bytes: Mutex<u64>,
     stop: AtomicBool,
     dropped_bytes: Mutex<u64>,
@@ -108,8 +111,50 @@ struct Shared {
 pub struct VirtualDevice {
     port: String,
     speed: f64,
-    shared: Arc<Shared>,
+    shared: Arc<Shared<SimRig>>,
     thread: Option<JoinHandle<()>>,
+}
+
+/// What the device loop drives: the firmware core's virtual rig ([`SimRig`]) or the
+/// firmware image on the emulated board ([`emu::Board`]).
+pub trait Served: Send + 'static {
+    /// Host bytes arrive.
+    fn to_device(&mut self, bytes: &[u8]);
+    /// Runs for `seconds` of device time.
+    fn advance(&mut self, seconds: f64);
+    /// The device's output since the last call.
+    fn from_device(&mut self, out: &mut Vec<u8>);
+    /// Device time, s.
+    fn time(&self) -> f64;
+    /// Whether the device drives the bridge for a host (a release or open-loop volts).
+    fn driving(&self) -> bool;
+    /// The port was closed: a continuous stream a core knows of stops (a board's image
+    /// only learns it from the comms timeout).
+    fn link_closed(&mut self) {}
+}
+
+impl Served for SimRig {
+    fn to_device(&mut self, bytes: &[u8]) {
+        SimRig::to_device(self, bytes);
+    }
+    fn advance(&mut self, seconds: f64) {
+        SimRig::advance(self, seconds);
+    }
+    fn from_device(&mut self, out: &mut Vec<u8>) {
+        SimRig::from_device(self, out);
+    }
+    fn time(&self) -> f64 {
+        SimRig::time(self)
+    }
+    fn driving(&self) -> bool {
+        let status = self.core().status();
+        status.host_release || status.open_loop_volts.is_some()
+    }
+    fn link_closed(&mut self) {
+        if self.core().status().stream_rate_hz > 0 {
+            SimRig::link_closed(self);
+        }
+    }
 }
 
 impl std::fmt::Debug for VirtualDevice {
@@ -152,30 +197,12 @@ impl VirtualDevice {
                 why: "must be a positive number (1 = real time)".into(),
             });
         }
-        let fail = |what: &str, e: &dyn std::fmt::Display| {
-            RigError::VirtualDevice(format!(
-                "{what}: {e} (pseudo-terminals must be available: /dev/ptmx)"
-            ))
-        };
-        let (master, port) =
-            PtyMaster::open().map_err(|e| fail("cannot open a pseudo-terminal pair", &e))?;
         // The device says its time scale in `Info`, so any client scales its heartbeats.
         let mut config = config;
         config.core.time_scale = speed as f32;
         let mut rig = SimRig::new(config);
         rig.set_link_baud(Some(protocol::DEFAULT_BAUD_RATE));
-        let shared = Arc::new(Shared {
-            rig: Mutex::new(rig),
-            noise_bytes: Mutex::new(0),
-            stop: AtomicBool::new(false),
-            dropped_bytes: Mutex::new(0),
-            behind_s: Mutex::new(0.0),
-        });
-        let worker = Arc::clone(&shared);
-        let thread = std::thread::Builder::new()
-            .name("virtual-device".into())
-            .spawn(move || run(master, &worker, speed, noise, pacing))
-            .map_err(|e| fail("cannot start the simulation thread", &e))?;
+        let (port, shared, thread) = spawn(rig, speed, noise, pacing)?;
         Ok(Self {
             port,
             speed,
@@ -293,15 +320,47 @@ impl Drop for VirtualDevice {
     }
 }
 
+/// A device loop's parts: the port's name, the state it shares, its thread.
+type Spawned<D> = (String, Arc<Shared<D>>, JoinHandle<()>);
+
+/// Puts `rig` on a new pseudo-terminal and starts its loop.
+fn spawn<D: Served>(
+    rig: D,
+    speed: f64,
+    noise: Option<WallNoise>,
+    pacing: Pacing,
+) -> Result<Spawned<D>, RigError> {
+    let fail = |what: &str, e: &dyn std::fmt::Display| {
+        RigError::VirtualDevice(format!(
+            "{what}: {e} (pseudo-terminals must be available: /dev/ptmx)"
+        ))
+    };
+    let (master, port) =
+        PtyMaster::open().map_err(|e| fail("cannot open a pseudo-terminal pair", &e))?;
+    let shared = Arc::new(Shared {
+        rig: Mutex::new(rig),
+        noise_bytes: Mutex::new(0),
+        stop: AtomicBool::new(false),
+        dropped_bytes: Mutex::new(0),
+        behind_s: Mutex::new(0.0),
+    });
+    let worker = Arc::clone(&shared);
+    let thread = std::thread::Builder::new()
+        .name("virtual-device".into())
+        .spawn(move || run(master, &*worker, speed, noise, pacing))
+        .map_err(|e| fail("cannot start the simulation thread", &e))?;
+    Ok((port, shared, thread))
+}
+
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // The simulation is plain data: a panic elsewhere does not make it unusable.
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// The device loop: host bytes in, time advanced, device bytes out.
-fn run(
+fn run<D: Served>(
     mut master: PtyMaster,
-    shared: &Shared,
+    shared: &Shared<D>,
     speed: f64,
     noise: Option<WallNoise>,
     pacing: Pacing,
@@ -364,8 +423,7 @@ fn run(
             if ticks > 0.0 {
                 rig.advance(ticks * tick);
             }
-            let status = rig.core().status();
-            let driving = status.host_release || status.open_loop_volts.is_some();
+            let driving = rig.driving();
             if driving && master.hung_up() {
                 // The port was closed (the client quit or died) with a release live: that
                 // host is gone for good, and no other client may keep its release alive.
@@ -389,9 +447,7 @@ fn run(
             if master.hung_up() {
                 // The client is gone: its continuous stream stops (a board only learns it
                 // from the comms timeout).
-                if rig.core().status().stream_rate_hz > 0 {
-                    rig.link_closed();
-                }
+                rig.link_closed();
                 // Nobody reads the line: the output is gone, as on a board's UART.
                 *lock(&shared.dropped_bytes) += pending.len() as u64;
                 pending.clear();

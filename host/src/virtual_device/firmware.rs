@@ -1,0 +1,161 @@
+//! The firmware image in the loop (`rig sim serve --firmware`, `--sim --firmware`): the
+//! release ELF running on the emulated STM32G474 ([`emu::Board`]) with the virtual rig's
+//! plant, on a pseudo-terminal like the virtual device, through the same device loop
+//! ([`super::Served`]): the bytes a client sends cross the emulated USART at its baud, and
+//! every answer is the image's own.
+//!
+//! The emulation runs at whatever speed this machine allows (about 0.1-0.5x real time
+//! here): device time then runs slower than the wall clock, the loop says by how much
+//! ([`FirmwareDevice::behind_s`]), and a client's heartbeats, paced by the wall clock for a
+//! device that reports real time (the image does), only come more often in device time than
+//! on a board: never too rarely.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::thread::JoinHandle;
+
+use model::plant::{Plant, PlantParams};
+
+use super::{Pacing, Served, Shared, WallNoise, lock, spawn};
+use crate::RigError;
+
+/// The board and the first error it ran into (the loop keeps serving what it has).
+pub struct ImageRig {
+    board: emu::Board,
+    /// Why the emulation stopped, if it did.
+    pub error: Option<String>,
+}
+
+impl Served for ImageRig {
+    fn to_device(&mut self, bytes: &[u8]) {
+        self.board.to_device(bytes);
+    }
+    fn advance(&mut self, seconds: f64) {
+        if self.error.is_none()
+            && let Err(e) = self.board.advance(seconds)
+        {
+            self.error = Some(e.to_string());
+        }
+    }
+    fn from_device(&mut self, out: &mut Vec<u8>) {
+        self.board.from_device(out);
+    }
+    fn time(&self) -> f64 {
+        self.board.time()
+    }
+    fn driving(&self) -> bool {
+        // The image's own state is not visible from outside; its bridge enable is.
+        self.board.bridge().enable
+    }
+}
+
+/// The release image `cargo xtask firmware` builds, in this source tree's `target`.
+pub fn default_firmware_elf() -> PathBuf {
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("..")
+                .join("target")
+        });
+    target
+        .join("thumbv7em-none-eabihf")
+        .join("release")
+        .join("firmware")
+}
+
+/// The emulated board with the firmware image, on a pseudo-terminal, until dropped.
+pub struct FirmwareDevice {
+    port: String,
+    elf: PathBuf,
+    shared: Arc<Shared<ImageRig>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for FirmwareDevice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FirmwareDevice")
+            .field("port", &self.port)
+            .field("elf", &self.elf)
+            .finish()
+    }
+}
+
+impl FirmwareDevice {
+    /// Loads `elf` (None: [`default_firmware_elf`]) onto the emulated board around `plant`
+    /// and serves it at `speed` times the wall clock at most, with `noise` on the line.
+    pub fn start(
+        elf: Option<&Path>,
+        plant: PlantParams,
+        seed: u64,
+        speed: f64,
+        noise: Option<WallNoise>,
+    ) -> Result<Self, RigError> {
+        let elf = elf.map_or_else(default_firmware_elf, Path::to_path_buf);
+        if !elf.exists() {
+            return Err(RigError::BadValue {
+                what: format!("--firmware {}", elf.display()),
+                why: "no such file: build the release image with `cargo xtask firmware` (or give the ELF to run)".into(),
+            });
+        }
+        let board = emu::Board::new(emu::BoardConfig {
+            elf: elf.clone(),
+            plant,
+            seed,
+        })
+        .map_err(|e| RigError::VirtualDevice(e.to_string()))?;
+        let rig = ImageRig { board, error: None };
+        let (port, shared, thread) = spawn(rig, speed, noise, Pacing::BoardTime)?;
+        Ok(Self {
+            port,
+            elf,
+            shared,
+            thread: Some(thread),
+        })
+    }
+
+    /// The pseudo-terminal's port name.
+    pub fn port_name(&self) -> &str {
+        &self.port
+    }
+
+    /// The image running.
+    pub fn elf(&self) -> &Path {
+        &self.elf
+    }
+
+    /// Device time since power-on, s.
+    pub fn time(&self) -> f64 {
+        lock(&self.shared.rig).board.time()
+    }
+
+    /// Device seconds the board fell behind the wall clock (times the speed asked).
+    pub fn behind_s(&self) -> f64 {
+        *lock(&self.shared.behind_s)
+    }
+
+    /// Why the emulation stopped, if it did.
+    pub fn error(&self) -> Option<String> {
+        lock(&self.shared.rig).error.clone()
+    }
+
+    /// Runs `f` on the emulated board (the emulation pauses meanwhile).
+    pub fn with_board<R>(&self, f: impl FnOnce(&mut emu::Board) -> R) -> R {
+        f(&mut lock(&self.shared.rig).board)
+    }
+
+    /// Runs `f` on the plant, as an operator's hand at the rig.
+    pub fn with_plant<R>(&self, f: impl FnOnce(&mut Plant) -> R) -> R {
+        self.with_board(|b| f(b.plant_mut()))
+    }
+}
+
+impl Drop for FirmwareDevice {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::SeqCst);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
