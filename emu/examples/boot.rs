@@ -8,6 +8,7 @@ fn main() {
         elf: elf.into(),
         plant,
         seed: 1,
+        time_scale: None,
     })
     .unwrap();
     let t = std::time::Instant::now();

@@ -28,7 +28,13 @@ pub struct BoardConfig {
     pub plant: PlantParams,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// Device seconds per wall-clock second the board will be paced at, written into the
+    /// image's `RIG_TIME_SCALE` so that `Info` reports it (`None`: the image's own, 1.0).
+    pub time_scale: Option<f32>,
 }
+
+/// The image's symbol for its reported time scale (an `f32` in flash).
+pub const TIME_SCALE_SYMBOL: &str = "RIG_TIME_SCALE";
 
 /// The plant as the board's surroundings.
 pub struct PlantEnv {
@@ -132,7 +138,19 @@ impl Board {
             code: 0,
             button: false,
         };
+        let scale_at = image.symbols.get(TIME_SCALE_SYMBOL).copied();
         let mut machine = Machine::new(image, Box::new(env))?;
+        if let Some(scale) = config.time_scale {
+            let Some(at) = scale_at else {
+                return Err(EmuError::Image {
+                    path: config.elf.display().to_string(),
+                    why: format!(
+                        "no `{TIME_SCALE_SYMBOL}` symbol: the image cannot report the emulated board's pace; build it from this tree (cargo xtask firmware)"
+                    ),
+                });
+            };
+            machine.patch_flash(at, &scale.to_le_bytes())?;
+        }
         machine.power_on();
         Ok(Self {
             machine,

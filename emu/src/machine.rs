@@ -212,6 +212,16 @@ impl Machine {
         Ok(())
     }
 
+    /// Writes `bytes` into the image in flash at `address` (and its boot alias), before
+    /// power-on: a value the emulator hands the image (its pace).
+    pub fn patch_flash(&mut self, address: u32, bytes: &[u8]) -> Result<(), EmuError> {
+        self.api.write(self.uc, address.into(), bytes)?;
+        if let Some(offset) = address.checked_sub(FLASH.0).filter(|o| *o < ALIAS_LEN) {
+            self.api.write(self.uc, offset.into(), bytes)?;
+        }
+        Ok(())
+    }
+
     /// The engine's memory, for the board's own reads and writes.
     pub fn mem(&self) -> Mem {
         Mem {

@@ -41,6 +41,7 @@ fn board(elf: PathBuf) -> emu::Board {
         elf,
         plant: PlantParams::paper(gear, Load::Torque(0.0)),
         seed: 1,
+        time_scale: None,
     })
     .unwrap()
 }

@@ -145,15 +145,19 @@ pub const CURRENT_SAMPLE_RATE_HZ: u32 = hw::CURRENT_SAMPLE_RATE_HZ as u32;
 const PWM_REPETITION: u16 = (2 * MOTOR_PWM_FREQUENCY.0 / CURRENT_SAMPLE_RATE_HZ - 1) as u16;
 /// TIM1's counter clock, Hz: the APB2 timer clock, SYSCLK undivided ([`config`]).
 const TIM1_CLOCK_HZ: u32 = hw::SYSCLK_HZ as u32;
-/// TIM1's auto-reload, prescaler 1: centre-aligned, the counter runs 0 → ARR → 0, and
-/// `ARR + 1` = clock / (2 × [`MOTOR_PWM_FREQUENCY`]) = 4250 (what embassy's `SimplePwm`
-/// chose for the same frequency; written directly, so the image has no run-time 64-bit
-/// division for it). The compare value for 100 % duty is `ARR + 1`.
+/// TIM1's auto-reload, prescaler 1: centre-aligned, the counter runs 0 → ARR → 0, one
+/// period is `2 ARR` clocks (RM0440 28.3.3), so ARR = clock / (2 × [`MOTOR_PWM_FREQUENCY`])
+/// = 4250: 20,000.0 Hz, and the ADC's blocks (the control steps) come every 1,000.0 us of
+/// the device's clock. (4249, embassy's `SimplePwm` choice for the same frequency, runs at
+/// 20,004.7 Hz: every step 0.24 us early, telemetry at 250 Hz 3,999 us apart; the image on
+/// the emulated board showed it.) Written directly, so the image has no run-time 64-bit
+/// division for it. The compare value for 100 % duty is `ARR + 1`.
 const PWM_ARR: u16 = {
     let clocks = TIM1_CLOCK_HZ / (2 * MOTOR_PWM_FREQUENCY.0);
-    // ARR + 1 (full duty) must fit the 16-bit compare register too.
-    assert!(clocks >= 2 && clocks <= u16::MAX as u32);
-    (clocks - 1) as u16
+    // An exact period, and ARR + 1 (full duty) must fit the 16-bit compare register too.
+    assert!(clocks * 2 * MOTOR_PWM_FREQUENCY.0 == TIM1_CLOCK_HZ);
+    assert!(clocks >= 2 && clocks < u16::MAX as u32);
+    clocks as u16
 };
 /// TIM1 CH1's compare value for 100 % duty.
 const PWM_FULL_DUTY: u16 = PWM_ARR + 1;
@@ -230,6 +234,8 @@ pub const BRIDGE: BridgeBoard = BridgeBoard {
 pub fn core_config() -> CoreConfig {
     let mut config = CoreConfig {
         output_encoder: OUTPUT_ENCODER,
+        // 1.0 on a board; an emulated board's pace (`crate::RIG_TIME_SCALE`).
+        time_scale: crate::time_scale(),
         ..CoreConfig::default()
     };
     // The bus divider is fitted (main.rs reads it every step): `Info` says so, and health
@@ -516,7 +522,7 @@ impl CamMotor {
         crate::safety::enable_break_interrupt();
     }
 
-    /// Compare value for 100 % duty (4250 at 170 MHz / 2 / 20 kHz).
+    /// Compare value for 100 % duty (4251: ARR + 1, ARR = 170 MHz / 2 / 20 kHz).
     pub fn max_duty(&self) -> u32 {
         u32::from(PWM_FULL_DUTY)
     }

@@ -89,6 +89,29 @@ const IDENTITY: &str = match core::str::from_utf8(IDENTITY_BYTES.split_at(IDENTI
 #[unsafe(no_mangle)]
 static RIG_FIRMWARE_ID: [u8; IDENTITY_LEN + 1] = IDENTITY_BYTES;
 
+/// Device seconds per wall-clock second, as `Info` reports it (`time_scale`): 1.0 on
+/// silicon. The emulated board (`rig sim serve --firmware`, crate `emu`) runs slower than
+/// real time and writes its pace into this flash word before boot, so clients scale their
+/// heartbeats by it; read volatile so the value is taken from the image, not folded in.
+#[cfg(target_os = "none")]
+#[used]
+#[allow(unsafe_code)] // `no_mangle`: a fixed name for the emulator to look up.
+#[unsafe(no_mangle)]
+static RIG_TIME_SCALE: f32 = 1.0;
+
+/// [`RIG_TIME_SCALE`] as the image holds it (1.0 unless an emulator set its pace).
+#[cfg(target_os = "none")]
+pub fn time_scale() -> f32 {
+    // SAFETY: a plain read of an aligned, initialised static (never written by code).
+    #[allow(unsafe_code)]
+    let scale = unsafe { core::ptr::read_volatile(&raw const RIG_TIME_SCALE) };
+    if scale.is_finite() && scale > 0.0 {
+        scale
+    } else {
+        1.0
+    }
+}
+
 #[cfg(not(target_os = "none"))]
 fn main() {
     println!(

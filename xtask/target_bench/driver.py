@@ -940,8 +940,8 @@ def boot_checks(writes, symbols, final, enable_bsrr, enable_bit, lowest_stack=No
         "patched)")
     arr = final.get(TIM1_BASE + 0x2C)
     cr1 = final.get(TIM1_BASE + 0x00, 0)
-    add("TIM1: centre-aligned, ARR 4249 (20 kHz at 170 MHz)",
-        arr == 4249 and cr1 >> 5 & 3 == 0b10, f"ARR {arr}, CR1 {cr1:#x}")
+    add("TIM1: centre-aligned, ARR 4250 (period 2 ARR: 20 kHz at 170 MHz)",
+        arr == 4250 and cr1 >> 5 & 3 == 0b10, f"ARR {arr}, CR1 {cr1:#x}")
     bdtr_writes = [(k, v) for k, (_, a, v) in enumerate(writes) if a == TIM1_BASE + 0x44]
     locked = [k for k, v in bdtr_writes if v >> 8 & 3 == 2 and v >> 12 & 1 and v >> 13 & 1
               and not v >> 14 & 1 and v >> 10 & 1]

@@ -226,28 +226,31 @@ impl Timer {
         }
         let limit = self.ticks(now);
         loop {
-            let next = self.next_events().into_iter().min_by_key(|(k, _)| *k);
-            let Some((k, what)) = next.filter(|(k, _)| *k <= limit) else {
+            let events = self.next_events();
+            let Some(k) = events.iter().map(|(k, _)| *k).min().filter(|k| *k <= limit) else {
                 break;
             };
+            // Every event of that tick at once (an update and a compare can coincide).
             let at = self.t0 + k * self.div();
             self.handled = k;
-            if what == 0 {
-                self.events += 1;
-                let rep = u64::from(self.rcr) + 1;
-                let update = self.kind != Kind::Advanced || (self.events - 1) % rep == 0;
-                if update {
-                    self.update_event(at, false);
-                    fired.update = true;
-                    each(at);
-                    if self.dier & 1 != 0 {
-                        fired.update_irq = true;
+            for (_, what) in events.into_iter().filter(|(t, _)| *t == k) {
+                if what == 0 {
+                    self.events += 1;
+                    let rep = u64::from(self.rcr) + 1;
+                    let update = self.kind != Kind::Advanced || (self.events - 1) % rep == 0;
+                    if update {
+                        self.update_event(at, false);
+                        fired.update = true;
+                        each(at);
+                        if self.dier & 1 != 0 {
+                            fired.update_irq = true;
+                        }
                     }
-                }
-            } else {
-                self.sr |= 1 << what;
-                if self.dier & (1 << what) != 0 {
-                    fired.irq = true;
+                } else {
+                    self.sr |= 1 << what;
+                    if self.dier & (1 << what) != 0 {
+                        fired.irq = true;
+                    }
                 }
             }
         }
@@ -418,9 +421,10 @@ impl Timer {
     /// output and CH1 are on (`None`: the output is at its idle level, low).
     pub fn ch1_duty(&self) -> Option<f64> {
         let on = self.cr1 & 1 != 0 && self.bdtr & (1 << 15) != 0 && self.ccer & 1 != 0;
+        // PWM mode 1, centre-aligned: high while CNT < CCR1, CNT sweeping 0..ARR..0.
         on.then(|| {
-            let full = f64::from(self.arr_active) + 1.0;
-            (f64::from(self.ccr_active[0]) / full).clamp(0.0, 1.0)
+            let arr = f64::from(self.arr_active.max(1));
+            (f64::from(self.ccr_active[0]) / arr).clamp(0.0, 1.0)
         })
     }
 

@@ -50,6 +50,17 @@ impl Served for ImageRig {
     }
 }
 
+/// Device time the pace is measured over before serving, s.
+const PACE_TRIAL_S: f64 = 0.3;
+
+/// The pace for a board that runs at `measured` device seconds per wall second when
+/// `asked` was asked: four fifths of what was measured (room for a busier moment), in steps
+/// of 0.05, at least 0.05, never above `asked`.
+pub fn pace_for(asked: f64, measured: f64) -> f64 {
+    let sustainable = ((0.8 * measured) / 0.05).floor() * 0.05;
+    asked.min(sustainable.max(0.05))
+}
+
 /// The release image `cargo xtask firmware` builds, in this source tree's `target`.
 pub fn default_firmware_elf() -> PathBuf {
     let target = std::env::var_os("CARGO_TARGET_DIR")
@@ -69,6 +80,8 @@ pub fn default_firmware_elf() -> PathBuf {
 pub struct FirmwareDevice {
     port: String,
     elf: PathBuf,
+    pace: f64,
+    measured: f64,
     shared: Arc<Shared<ImageRig>>,
     thread: Option<JoinHandle<()>>,
 }
@@ -99,17 +112,29 @@ impl FirmwareDevice {
                 why: "no such file: build the release image with `cargo xtask firmware` (or give the ELF to run)".into(),
             });
         }
-        let board = emu::Board::new(emu::BoardConfig {
+        let config = |time_scale| emu::BoardConfig {
             elf: elf.clone(),
-            plant,
+            plant: plant.clone(),
             seed,
-        })
-        .map_err(|e| RigError::VirtualDevice(e.to_string()))?;
+            time_scale,
+        };
+        let fail = |e: emu::EmuError| RigError::VirtualDevice(e.to_string());
+        // The pace: what this machine sustains (measured over the first 0.3 s of device
+        // time, with a fifth spare), never more than asked; the image reports it in `Info`.
+        let mut trial = emu::Board::new(config(None)).map_err(fail)?;
+        let started = std::time::Instant::now();
+        trial.advance(PACE_TRIAL_S).map_err(fail)?;
+        let measured = PACE_TRIAL_S / started.elapsed().as_secs_f64().max(1e-6);
+        drop(trial);
+        let pace = pace_for(speed, measured);
+        let board = emu::Board::new(config(Some(pace as f32))).map_err(fail)?;
         let rig = ImageRig { board, error: None };
-        let (port, shared, thread) = spawn(rig, speed, noise, Pacing::BoardTime)?;
+        let (port, shared, thread) = spawn(rig, pace, noise, Pacing::BoardTime)?;
         Ok(Self {
             port,
             elf,
+            pace,
+            measured,
             shared,
             thread: Some(thread),
         })
@@ -118,6 +143,16 @@ impl FirmwareDevice {
     /// The pseudo-terminal's port name.
     pub fn port_name(&self) -> &str {
         &self.port
+    }
+
+    /// Device seconds per wall-clock second the board is served at (and reports).
+    pub fn pace(&self) -> f64 {
+        self.pace
+    }
+
+    /// The emulation's speed measured at start, device seconds per wall second.
+    pub fn measured_speed(&self) -> f64 {
+        self.measured
     }
 
     /// The image running.
