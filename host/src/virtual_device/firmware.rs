@@ -194,3 +194,104 @@ impl Drop for FirmwareDevice {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::*;
+    use crate::client::{Client, ClientOptions, open_serial};
+    use crate::virtual_device::VirtualDevice;
+
+    /// The release image and the emulator, or None (skipped with a message) when this
+    /// machine has neither; `cargo xtask test` sets RIG_REQUIRE_EMULATOR, which makes their
+    /// absence a failure.
+    fn image() -> Option<PathBuf> {
+        let elf = default_firmware_elf();
+        let missing = if !elf.exists() {
+            Some(format!("no firmware image at {} (cargo xtask firmware)", elf.display()))
+        } else {
+            emu::emulator().err().map(|e| e.to_string())
+        };
+        match missing {
+            None => Some(elf),
+            Some(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
+            Some(why) => {
+                eprintln!("skipped: {why}");
+                None
+            }
+        }
+    }
+
+    /// Releases at 10 Hz with telemetry at 1 kHz; returns (mean cam speed, mean tau_cam)
+    /// over `hold_s` of device time once the speed settled, after checking that the samples
+    /// come 1 ms apart in device time with no sequence gap.
+    fn release_10_hz(port: &str, hold_s: f64) -> (f64, f64) {
+        let io = open_serial(port, protocol::DEFAULT_BAUD_RATE).unwrap();
+        let (mut client, _) = Client::connect(io, ClientOptions::new(port)).unwrap();
+        client.start_telemetry(1000).unwrap();
+        client.release(true, 10.0).unwrap();
+        let target = std::f64::consts::TAU * 10.0;
+        let mut settled_at = None;
+        let mut last: Option<protocol::TelemetrySample> = None;
+        let (mut speed, mut tau, mut n) = (0.0, 0.0, 0.0);
+        loop {
+            let s = client
+                .next_telemetry(Duration::from_secs(10))
+                .unwrap()
+                .expect("telemetry keeps coming");
+            if let Some(prev) = &last {
+                assert_eq!(s.seq, prev.seq + 1, "a telemetry sample went missing");
+                // 1 kHz in device time; each step reads the clock after its interrupt's
+                // latency, which varies by a few microseconds (on silicon too).
+                let dt = s.device_time_us - prev.device_time_us;
+                assert!((995..=1005).contains(&dt), "samples {dt} us apart");
+            }
+            let t = s.device_time_us as f64 * 1e-6;
+            assert!(s.faults.is_empty(), "faults during the release: {}", s.faults);
+            if settled_at.is_none() && (f64::from(s.cam_speed_rad_s) - target).abs() < 0.02 * target {
+                // Settled: one more second for the estimate's filters, then the hold.
+                settled_at = Some(t + 1.0);
+            }
+            if let Some(from) = settled_at
+                && t >= from
+            {
+                speed += f64::from(s.cam_speed_rad_s);
+                tau += f64::from(s.tau_cam_nm);
+                n += 1.0;
+                if t >= from + hold_s {
+                    break;
+                }
+            }
+            assert!(t < 30.0, "10 Hz not reached and held by {t} s of device time");
+            last = Some(s);
+        }
+        client.release(false, 0.0).unwrap();
+        (speed / n, tau / n)
+    }
+
+    #[test]
+    fn the_release_image_holds_10_hz_with_telemetry_whole_and_estimates_as_the_virtual_rig() {
+        let Some(elf) = image() else { return };
+        let config = VirtualDevice::paper_config(&sim::Preset::paper());
+        let dev = FirmwareDevice::start(Some(&elf), config.plant.clone(), 1, 1.0, None).unwrap();
+        let (image_speed, image_tau) = release_10_hz(dev.port_name(), 2.0);
+        assert!(dev.error().is_none(), "{:?}", dev.error());
+        let target = std::f64::consts::TAU * 10.0;
+        assert!((image_speed - target).abs() < 0.01 * target, "held {image_speed} rad/s");
+        // The same plant and seed behind the firmware core in process.
+        let virt = VirtualDevice::start(config, 1.0).unwrap();
+        let (_, core_tau) = release_10_hz(virt.port_name(), 2.0);
+        eprintln!(
+            "held {image_speed:.3} rad/s; tau_cam: image {:.3} N mm, virtual rig {:.3} N mm",
+            image_tau * 1e3,
+            core_tau * 1e3
+        );
+        assert!(
+            (image_tau - core_tau).abs() <= 0.5e-3,
+            "tau_cam: image {:.3} N mm, virtual rig {:.3} N mm",
+            image_tau * 1e3,
+            core_tau * 1e3
+        );
+    }
+}
