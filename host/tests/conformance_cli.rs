@@ -32,12 +32,17 @@ const CHECKS: [&str; 16] = [
 ];
 
 fn conformance(server: &Server) -> Value {
+    conformance_with(server, &[], Duration::from_secs(120))
+}
+
+fn conformance_with(server: &Server, env: &[(&str, &str)], timeout: Duration) -> Value {
     let out = Command::cargo_bin("rig")
         .unwrap()
         .env_remove("RIG_PORT")
         .env_remove("RIG_ALLOW_MOTION")
+        .envs(env.iter().copied())
         .args(["--port", &server.port, "conformance", "--json"])
-        .timeout(Duration::from_secs(120))
+        .timeout(timeout)
         .output()
         .unwrap();
     let v: Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
@@ -64,7 +69,9 @@ fn check_all_pass(v: &Value, speed: f64) {
     }
     assert_eq!(v["passed"], true);
     assert_eq!(v["motion"], true);
-    assert_eq!(v["time_scale"], speed);
+    // Info carries the scale as f32.
+    let scale = v["time_scale"].as_f64().unwrap();
+    assert!((scale - speed).abs() < 1e-6, "time scale {scale}, want {speed}");
     assert_eq!(v["protocol_version"], protocol::PROTOCOL_VERSION);
 }
 
@@ -92,6 +99,43 @@ fn a_served_rig_passes_every_check_at_real_time() {
 fn a_served_rig_passes_every_check_faster_than_real_time() {
     let server = Server::start_at("5", &[]);
     check_all_pass(&conformance(&server), 5.0);
+}
+
+/// Whether the release image and the emulator are here (else the test skips, saying why;
+/// `cargo xtask test` sets RIG_REQUIRE_EMULATOR, which makes their absence a failure).
+fn emulated_board_ready() -> bool {
+    let elf = host::virtual_device::default_firmware_elf();
+    let missing = if !elf.exists() {
+        Some(format!("no firmware image at {} (cargo xtask firmware)", elf.display()))
+    } else {
+        emu::emulator().err().map(|e| e.to_string())
+    };
+    match missing {
+        None => true,
+        Some(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
+        Some(why) => {
+            eprintln!("skipped: {why}");
+            false
+        }
+    }
+}
+
+#[test]
+fn the_release_image_on_the_emulated_board_passes_every_check() {
+    if !emulated_board_ready() {
+        return;
+    }
+    // The image itself (processor in the loop), at the pace this machine sustains, which
+    // it reports in Info. It is not a simulation to the tool: motion is allowed by hand.
+    let server = Server::start_at("1", &["--firmware"]);
+    let pace = server.ready["speed"].as_f64().unwrap();
+    let v = conformance_with(
+        &server,
+        &[("RIG_ALLOW_MOTION", "1")],
+        Duration::from_secs(900),
+    );
+    check_all_pass(&v, pace);
+    assert_eq!(v["board"], "nucleo-g474re", "{v:#}");
 }
 
 #[test]

@@ -50,6 +50,10 @@ impl Served for ImageRig {
     }
 }
 
+/// Device time the board runs before its port is announced, s (the image's boot takes
+/// about 20 ms).
+const BOOT_S: f64 = 0.1;
+
 /// Device time the pace is measured over before serving, s.
 const PACE_TRIAL_S: f64 = 0.3;
 
@@ -127,7 +131,10 @@ impl FirmwareDevice {
         let measured = PACE_TRIAL_S / started.elapsed().as_secs_f64().max(1e-6);
         drop(trial);
         let pace = pace_for(speed, measured);
-        let board = emu::Board::new(config(Some(pace as f32))).map_err(fail)?;
+        let mut board = emu::Board::new(config(Some(pace as f32))).map_err(fail)?;
+        // Powered up before anyone opens the port, as a board on the bench: the image has
+        // booted and listens on its UART by the time the port is announced.
+        board.advance(BOOT_S).map_err(fail)?;
         let rig = ImageRig { board, error: None };
         let (port, shared, thread) = spawn(rig, pace, noise, Pacing::BoardTime)?;
         Ok(Self {
