@@ -222,6 +222,15 @@ impl Machine {
         Ok(())
     }
 
+    /// Fault injection: moves the stack pointer to `bytes` above the MPU's stack guard, so
+    /// the next push overflows into it (as a deeper call chain would). Returns the guard
+    /// (base, size), or None when the image configured none.
+    pub fn inject_stack_overflow(&mut self, bytes: u32) -> Option<(u32, u32)> {
+        let (base, size) = self.bus.scs.guard()?;
+        self.api.set_reg(self.uc, uc::REG_SP, (base + size + bytes) & !7);
+        Some((base, size))
+    }
+
     /// The engine's memory, for the board's own reads and writes.
     pub fn mem(&self) -> Mem {
         Mem {
@@ -385,11 +394,15 @@ impl Machine {
         self.faults.push((self.st.cycles, at));
         let ipsr = self.api.reg(self.uc, uc::REG_IPSR) & 0x1FF;
         if ipsr == exc::HARD_FAULT || ipsr == 2 {
+            let broke = self.bus.lockup();
+            self.faults.push((
+                self.st.cycles,
+                format!("{why} inside the HardFault handler: lockup (TIM1 broken by SYSCFG_CFGR2.CLL: {broke})"),
+            ));
             self.lockup = Some(Lockup {
                 pc,
                 why: format!("{why} inside the HardFault handler (lockup)"),
             });
-            self.bus.lockup();
             return;
         }
         let number = if number == exc::HARD_FAULT {
@@ -474,15 +487,23 @@ impl Machine {
             words.push(0);
         }
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        if api.write(e, frame.into(), &bytes).is_err()
-            || !self.bus.scs.stack_allowed(frame, frame_len)
-        {
-            // Stacking into the guard or outside RAM: on silicon a MemManage/BusFault on
-            // stacking escalates; here as there, the handler runs on what is left.
-            self.bus
-                .scs
-                .record_fault(exc::MEM_MANAGE, "stacking error (MSTKERR)");
+        let in_ram = frame >= RAM.0 && frame + frame_len <= RAM.0 + RAM.1;
+        if !in_ram || !self.bus.scs.stack_allowed(frame, frame_len) {
+            // Stacking into the stack guard (or off RAM) faults (MSTKERR); the HardFault it
+            // escalates to stacks at the same place and faults again: the core locks up
+            // (ARMv7-M B1.5.15) until a reset, with SYSCFG_CFGR2.CLL breaking TIM1.
+            self.bus.scs.record_fault(exc::MEM_MANAGE, "stacking error (MSTKERR)");
+            let why =
+                format!("exception {number}'s frame at {frame:#010x} falls in the stack guard: lockup");
+            let broke = self.bus.lockup();
+            self.faults.push((
+                self.st.cycles,
+                format!("{why} (TIM1 broken by SYSCFG_CFGR2.CLL: {broke})"),
+            ));
+            self.lockup = Some(Lockup { pc: return_pc, why });
+            return;
         }
+        let _ = api.write(e, frame.into(), &bytes);
         let exc_return = match (thread, psp, fpca) {
             (false, _, false) => 0xFFFF_FFF1,
             (false, _, true) => 0xFFFF_FFE1,

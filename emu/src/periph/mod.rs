@@ -255,12 +255,18 @@ impl Bus {
         self.reset = None;
     }
 
-    /// The core locked up: with SYSCFG_CFGR2.CLL, TIM1 breaks (RM0440 28.3.16).
-    pub fn lockup(&mut self) {
+    /// The core locked up: with SYSCFG_CFGR2.CLL, TIM1 breaks (RM0440 28.3.16). Returns
+    /// whether the main output was switched off by it.
+    pub fn lockup(&mut self) -> bool {
         self.locked_up = true;
-        if self.syscfg.get(0x1C) & 1 != 0 && self.tim1.break_in() {
+        if self.syscfg.get(0x1C) & 1 == 0 {
+            return false;
+        }
+        let before = self.tim1.hw_breaks;
+        if self.tim1.break_in() {
             self.scs.pend(TIM1_BRK);
         }
+        self.tim1.hw_breaks > before || self.tim1.bdtr & (1 << 15) == 0
     }
 
     /// A reset the peripherals asked for (watchdog, SYSRESETREQ), with its cause.

@@ -65,6 +65,8 @@ pub struct Timer {
     pub encoder_offset: u16,
     /// Update events since the counter started (centre-aligned: over/underflows).
     events: u64,
+    /// Breaks that switched the main output off (MOE cleared by hardware).
+    pub hw_breaks: u32,
 }
 
 impl Timer {
@@ -100,6 +102,7 @@ impl Timer {
             handled: 0,
             encoder_offset: 0,
             events: 0,
+            hw_breaks: 0,
         }
     }
 
@@ -400,6 +403,9 @@ impl Timer {
     pub fn break_in(&mut self) -> bool {
         if self.bdtr & (1 << 12) == 0 {
             return false;
+        }
+        if self.bdtr & (1 << 15) != 0 {
+            self.hw_breaks += 1;
         }
         self.bdtr &= !(1 << 15);
         let new = self.sr & (1 << 7) == 0;

@@ -301,4 +301,132 @@ mod tests {
             core_tau * 1e3
         );
     }
+
+    fn serve(elf: &Path) -> FirmwareDevice {
+        let config = VirtualDevice::paper_config(&sim::Preset::paper());
+        FirmwareDevice::start(Some(elf), config.plant, 1, 1.0, None).unwrap()
+    }
+
+    fn client(dev: &FirmwareDevice) -> (Client<crate::client::SerialTransport>, protocol::DeviceInfo) {
+        let io = open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).unwrap();
+        Client::connect(io, ClientOptions::new(dev.port_name())).unwrap()
+    }
+
+    /// Telemetry until `done` holds for a sample, within `limit_s` of device time.
+    fn until(
+        client: &mut Client<crate::client::SerialTransport>,
+        limit_s: f64,
+        what: &str,
+        mut done: impl FnMut(&protocol::TelemetrySample) -> bool,
+    ) -> protocol::TelemetrySample {
+        let mut first = None;
+        loop {
+            let s = client
+                .next_telemetry(Duration::from_secs(10))
+                .unwrap()
+                .unwrap_or_else(|| panic!("telemetry stopped before {what}"));
+            let t = s.device_time_us as f64 * 1e-6;
+            let t0 = *first.get_or_insert(t);
+            if done(&s) {
+                return s;
+            }
+            assert!(t - t0 < limit_s, "no {what} within {limit_s} s of device time");
+        }
+    }
+
+    /// Runs the board until it has reset, within `limit_s` of device time.
+    fn until_reset(dev: &FirmwareDevice, limit_s: f64) -> (u64, &'static str) {
+        let from = dev.time();
+        loop {
+            if let Some(r) = dev.with_board(|b| b.machine().resets.first().copied()) {
+                return r;
+            }
+            assert!(dev.time() - from < limit_s, "no reset within {limit_s} s of device time");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    #[test]
+    fn a_jammed_cam_trips_comp3_and_the_break_clears_the_main_output_in_hardware() {
+        let Some(elf) = image() else { return };
+        let dev = serve(&elf);
+        let (mut c, _) = client(&dev);
+        c.start_telemetry(1000).unwrap();
+        c.release(true, 10.0).unwrap();
+        until(&mut c, 5.0, "spin-up", |s| s.cam_speed_rad_s > 20.0);
+        // The arm on the vibrator shaft meets a stop: the cam cannot turn.
+        dev.with_plant(|p| p.set_cam(model::plant::CamSetup::Blocked));
+        let s = until(&mut c, 2.0, "a latched fault", |s| !s.faults.is_empty());
+        let breaks = dev.with_board(|b| b.machine().bus.tim1.hw_breaks);
+        assert!(breaks >= 1, "no hardware break; faults {}", s.faults);
+        assert!(
+            s.faults.contains(protocol::FaultFlags::HW_OVERCURRENT),
+            "the core latched {} without the trip",
+            s.faults
+        );
+        // The break interrupt and the core then hold the bridge off.
+        until(&mut c, 1.0, "the bridge off", |_| true);
+        let bridge = dev.with_board(|b| b.bridge());
+        assert!(!bridge.enable && bridge.duty.is_none(), "{bridge:?}");
+        let peak = dev.with_plant(|p| p.state().current.abs());
+        assert!(peak < 1.0, "current {peak} A after the trip");
+    }
+
+    #[test]
+    fn a_stopped_time_driver_hangs_the_tasks_and_the_watchdog_resets_into_a_safe_boot() {
+        let Some(elf) = image() else { return };
+        let dev = serve(&elf);
+        // TIM2 stops (the time driver's counter): every timed task hangs; the control loop,
+        // paced by the ADC, goes on, but the watchdog's feeder never runs again.
+        dev.with_board(|b| b.machine_mut().bus.tim2.cr1 &= !1);
+        let (at, cause) = until_reset(&dev, 2.0);
+        assert!(cause.contains("IWDG"), "{cause}");
+        // The IWDG's ~250 ms (LSI at 32 kHz) after its last feed.
+        let t = at as f64 / 170e6;
+        assert!(t < 0.1 + 0.1 + 0.3, "reset at {t} s");
+        let (_, info) = client(&dev);
+        assert_eq!(info.reset_cause, protocol::ResetCause::Watchdog);
+        assert!(!dev.with_board(|b| b.bridge().enable));
+    }
+
+    #[test]
+    fn a_stack_overflow_into_the_guard_locks_up_breaks_tim1_and_ends_in_a_watchdog_reset() {
+        let Some(elf) = image() else { return };
+        let dev = serve(&elf);
+        let (mut c, _) = client(&dev);
+        c.start_telemetry(1000).unwrap();
+        c.release(true, 10.0).unwrap();
+        until(&mut c, 5.0, "spin-up", |s| s.cam_speed_rad_s > 20.0);
+        // The stack pointer right above the MPU guard, as a call chain too deep would leave it.
+        let guard = dev.with_board(|b| b.machine_mut().inject_stack_overflow(8));
+        assert!(guard.is_some(), "the image set no stack guard");
+        // Locked up, nothing refreshes the window watchdog: it resets the chip within its
+        // ~2 ms deadline, before the IWDG would.
+        let (_, cause) = until_reset(&dev, 2.0);
+        assert!(cause.contains("WWDG"), "{cause}");
+        let faults = dev.with_board(|b| b.machine().faults.clone());
+        let lockup = faults.iter().find(|(_, f)| f.contains("lockup")).expect("a lockup");
+        assert!(lockup.1.contains("stack guard"), "{faults:?}");
+        assert!(lockup.1.contains("CLL: true"), "TIM1 kept switching: {faults:?}");
+        drop(c);
+        let (_, info) = client(&dev);
+        assert_eq!(info.reset_cause, protocol::ResetCause::Watchdog);
+    }
+
+    #[test]
+    fn ten_seconds_of_closed_loop_keep_the_stack_2_kib_above_its_guard() {
+        let Some(elf) = image() else { return };
+        let dev = serve(&elf);
+        let (mut c, _) = client(&dev);
+        c.start_telemetry(1000).unwrap();
+        c.release(true, 10.0).unwrap();
+        let t0 = until(&mut c, 5.0, "telemetry", |_| true).device_time_us;
+        until(&mut c, 11.0, "10 s of release", |s| s.device_time_us - t0 >= 10_000_000);
+        c.release(false, 0.0).unwrap();
+        let (lowest, guard) = dev.with_board(|b| (b.machine().lowest_sp(), b.machine().bus.scs.guard()));
+        let (base, size) = guard.expect("a stack guard");
+        let margin = i64::from(lowest) - i64::from(base + size);
+        eprintln!("lowest stack pointer {lowest:#x}, guard top {:#x}: margin {margin} B", base + size);
+        assert!(margin >= 2048, "margin {margin} B");
+    }
 }
