@@ -1,7 +1,7 @@
 //! Processor in the loop: the firmware's own ELF, instruction by instruction, on an
 //! emulated STM32G474 whose peripherals are driven by the rig's simulated plant.
 //!
-//! The CPU is the Unicorn engine's Cortex-M4 with its FPU ([`unicorn`], loaded at run
+//! The CPU is the Unicorn engine's Cortex-M4 with its FPU (loaded at run
 //! time from the pinned PyPI wheel). Unicorn has the instruction set but none of the
 //! Cortex-M system: this crate adds the NVIC (priorities, pending, BASEPRI/PRIMASK, exception
 //! entry and return with the FP frame, tail-chaining), SysTick, DWT's cycle counter, the MPU's

@@ -100,6 +100,8 @@ pub struct Machine {
     pub bus: Bus,
     pub(crate) st: State,
     block_insns: HashMap<u32, u32>,
+    // Boxed: the engine holds each window's address.
+    #[allow(clippy::vec_box)]
     windows: Vec<Box<Window>>,
     sleeping: bool,
     event: bool,
@@ -227,7 +229,8 @@ impl Machine {
     /// (base, size), or None when the image configured none.
     pub fn inject_stack_overflow(&mut self, bytes: u32) -> Option<(u32, u32)> {
         let (base, size) = self.bus.scs.guard()?;
-        self.api.set_reg(self.uc, uc::REG_SP, (base + size + bytes) & !7);
+        self.api
+            .set_reg(self.uc, uc::REG_SP, (base + size + bytes) & !7);
         Some((base, size))
     }
 
@@ -405,9 +408,8 @@ impl Machine {
             });
             return;
         }
-        let number = if number == exc::HARD_FAULT {
-            number
-        } else if self.bus.scs.fault_enabled(number) {
+        // A configurable fault that is not enabled escalates to HardFault.
+        let number = if number == exc::HARD_FAULT || self.bus.scs.fault_enabled(number) {
             number
         } else {
             exc::HARD_FAULT
@@ -492,9 +494,12 @@ impl Machine {
             // Stacking into the stack guard (or off RAM) faults (MSTKERR); the HardFault it
             // escalates to stacks at the same place and faults again: the core locks up
             // (ARMv7-M B1.5.15) until a reset, with SYSCFG_CFGR2.CLL breaking TIM1.
-            self.bus.scs.record_fault(exc::MEM_MANAGE, "stacking error (MSTKERR)");
-            let why =
-                format!("exception {number}'s frame at {frame:#010x} falls in the stack guard: lockup");
+            self.bus
+                .scs
+                .record_fault(exc::MEM_MANAGE, "stacking error (MSTKERR)");
+            let why = format!(
+                "exception {number}'s frame at {frame:#010x} falls in the stack guard: lockup"
+            );
             let broke = self.bus.lockup();
             self.faults.push((
                 self.st.cycles,
@@ -596,8 +601,8 @@ impl Machine {
     pub fn registers(&self) -> [u32; 17] {
         let (api, e) = (self.api, self.uc);
         let mut out = [0u32; 17];
-        for k in 0..13 {
-            out[k] = api.reg(e, uc::REG_R0 + k as i32);
+        for (k, r) in out.iter_mut().take(13).enumerate() {
+            *r = api.reg(e, uc::REG_R0 + k as i32);
         }
         out[13] = api.reg(e, uc::REG_SP);
         out[14] = api.reg(e, uc::REG_LR);

@@ -71,7 +71,10 @@ fn check_all_pass(v: &Value, speed: f64) {
     assert_eq!(v["motion"], true);
     // Info carries the scale as f32.
     let scale = v["time_scale"].as_f64().unwrap();
-    assert!((scale - speed).abs() < 1e-6, "time scale {scale}, want {speed}");
+    assert!(
+        (scale - speed).abs() < 1e-6,
+        "time scale {scale}, want {speed}"
+    );
     assert_eq!(v["protocol_version"], protocol::PROTOCOL_VERSION);
 }
 
@@ -106,7 +109,10 @@ fn a_served_rig_passes_every_check_faster_than_real_time() {
 fn emulated_board_ready() -> bool {
     let elf = host::virtual_device::default_firmware_elf();
     let missing = if !elf.exists() {
-        Some(format!("no firmware image at {} (cargo xtask firmware)", elf.display()))
+        Some(format!(
+            "no firmware image at {} (cargo xtask firmware)",
+            elf.display()
+        ))
     } else {
         emu::emulator().err().map(|e| e.to_string())
     };

@@ -354,10 +354,7 @@ impl Bus {
     /// Runs every peripheral event up to `now`, in time order, and refreshes the
     /// interrupt lines.
     pub fn advance(&mut self, now: u64, mem: &Mem) {
-        loop {
-            let Some(t) = self.next_event(0).filter(|t| *t <= now) else {
-                break;
-            };
+        while let Some(t) = self.next_event(0).filter(|t| *t <= now) {
             self.step_events(t, mem);
         }
         self.scs.advance(now);
@@ -420,15 +417,15 @@ impl Bus {
         }
         while let Some(b) = self.usart.rx_step(t) {
             if let Some(b) = b {
-                if self.usart.rx_dma() {
-                    if let Some(k) = self.dma.channel_for(usart::RDR) {
-                        let addr = self.dma.ch[k].memory_address();
-                        mem.write(addr, &[b]);
-                        if self.dma.transferred(k) {
-                            self.scs.pend(dma::IRQ[k]);
-                        }
-                        continue;
+                if self.usart.rx_dma()
+                    && let Some(k) = self.dma.channel_for(usart::RDR)
+                {
+                    let addr = self.dma.ch[k].memory_address();
+                    mem.write(addr, &[b]);
+                    if self.dma.transferred(k) {
+                        self.scs.pend(dma::IRQ[k]);
                     }
+                    continue;
                 }
                 self.usart.store(b);
             }

@@ -318,7 +318,7 @@ impl Scs {
             0xE000_E200..=0xE000_E21C => irq_word(&self.pending, 0xE000_E200),
             0xE000_E280..=0xE000_E29C => irq_word(&self.pending, 0xE000_E280),
             0xE000_E300..=0xE000_E31C => {
-                let w = ((a - 0xE000_E300) / 4) as u32;
+                let w = (a - 0xE000_E300) / 4;
                 self.active
                     .iter()
                     .filter(|n| **n >= exc::IRQ0 && (**n - exc::IRQ0) / 32 == w)
@@ -386,10 +386,10 @@ impl Scs {
         let set_bits = |arr: &mut [bool; IRQS], base: u32, to: bool| {
             let w = ((a - base) / 4) as usize;
             for b in 0..32 {
-                if v >> b & 1 != 0 {
-                    if let Some(x) = arr.get_mut(w * 32 + b) {
-                        *x = to;
-                    }
+                if v >> b & 1 != 0
+                    && let Some(x) = arr.get_mut(w * 32 + b)
+                {
+                    *x = to;
                 }
             }
         };

@@ -295,7 +295,7 @@ impl Flash {
             return None;
         }
         match self.half.take() {
-            None if address % 8 == 0 => {
+            None if address.is_multiple_of(8) => {
                 self.half = Some((address, value));
                 None
             }

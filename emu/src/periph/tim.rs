@@ -202,10 +202,10 @@ impl Timer {
         for ch in 0..4 {
             let v = u64::from(self.ccr_active[ch]);
             // Compare channels only matter with their interrupt on.
-            if self.dier & (1 << (ch + 1)) != 0 {
-                if let Some(k) = self.next_at(v) {
-                    out.push((k, ch as u32 + 1));
-                }
+            if self.dier & (1 << (ch + 1)) != 0
+                && let Some(k) = self.next_at(v)
+            {
+                out.push((k, ch as u32 + 1));
             }
         }
         out
@@ -240,7 +240,8 @@ impl Timer {
                 if what == 0 {
                     self.events += 1;
                     let rep = u64::from(self.rcr) + 1;
-                    let update = self.kind != Kind::Advanced || (self.events - 1) % rep == 0;
+                    let update =
+                        self.kind != Kind::Advanced || (self.events - 1).is_multiple_of(rep);
                     if update {
                         self.update_event(at, false);
                         fired.update = true;

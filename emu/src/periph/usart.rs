@@ -128,14 +128,15 @@ impl Usart {
 
     /// The receive side's event at `now`, if due: a byte to store (DMA or RDR).
     pub fn rx_step(&mut self, now: u64) -> Option<Option<u8>> {
-        if let Some(t) = self.idle_at {
-            if t <= now && self.rx_next.is_none_or(|r| r > t) {
-                self.idle_at = None;
-                if self.receiving() {
-                    self.isr |= 1 << 4;
-                }
-                return Some(None);
+        if let Some(t) = self.idle_at
+            && t <= now
+            && self.rx_next.is_none_or(|r| r > t)
+        {
+            self.idle_at = None;
+            if self.receiving() {
+                self.isr |= 1 << 4;
             }
+            return Some(None);
         }
         let t = self.rx_next?;
         if t > now {

@@ -38,7 +38,7 @@ impl Served for ImageRig {
             self.error = Some(e.to_string());
         }
     }
-    fn from_device(&mut self, out: &mut Vec<u8>) {
+    fn device_output(&mut self, out: &mut Vec<u8>) {
         self.board.from_device(out);
     }
     fn time(&self) -> f64 {
@@ -118,7 +118,7 @@ impl FirmwareDevice {
         }
         let config = |time_scale| emu::BoardConfig {
             elf: elf.clone(),
-            plant: plant.clone(),
+            plant,
             seed,
             time_scale,
         };
@@ -216,7 +216,10 @@ mod tests {
     fn image() -> Option<PathBuf> {
         let elf = default_firmware_elf();
         let missing = if !elf.exists() {
-            Some(format!("no firmware image at {} (cargo xtask firmware)", elf.display()))
+            Some(format!(
+                "no firmware image at {} (cargo xtask firmware)",
+                elf.display()
+            ))
         } else {
             emu::emulator().err().map(|e| e.to_string())
         };
@@ -255,8 +258,13 @@ mod tests {
                 assert!((995..=1005).contains(&dt), "samples {dt} us apart");
             }
             let t = s.device_time_us as f64 * 1e-6;
-            assert!(s.faults.is_empty(), "faults during the release: {}", s.faults);
-            if settled_at.is_none() && (f64::from(s.cam_speed_rad_s) - target).abs() < 0.02 * target {
+            assert!(
+                s.faults.is_empty(),
+                "faults during the release: {}",
+                s.faults
+            );
+            if settled_at.is_none() && (f64::from(s.cam_speed_rad_s) - target).abs() < 0.02 * target
+            {
                 // Settled: one more second for the estimate's filters, then the hold.
                 settled_at = Some(t + 1.0);
             }
@@ -270,7 +278,10 @@ mod tests {
                     break;
                 }
             }
-            assert!(t < 30.0, "10 Hz not reached and held by {t} s of device time");
+            assert!(
+                t < 30.0,
+                "10 Hz not reached and held by {t} s of device time"
+            );
             last = Some(s);
         }
         client.release(false, 0.0).unwrap();
@@ -281,11 +292,14 @@ mod tests {
     fn the_release_image_holds_10_hz_with_telemetry_whole_and_estimates_as_the_virtual_rig() {
         let Some(elf) = image() else { return };
         let config = VirtualDevice::paper_config(&sim::Preset::paper());
-        let dev = FirmwareDevice::start(Some(&elf), config.plant.clone(), 1, 1.0, None).unwrap();
+        let dev = FirmwareDevice::start(Some(&elf), config.plant, 1, 1.0, None).unwrap();
         let (image_speed, image_tau) = release_10_hz(dev.port_name(), 2.0);
         assert!(dev.error().is_none(), "{:?}", dev.error());
         let target = std::f64::consts::TAU * 10.0;
-        assert!((image_speed - target).abs() < 0.01 * target, "held {image_speed} rad/s");
+        assert!(
+            (image_speed - target).abs() < 0.01 * target,
+            "held {image_speed} rad/s"
+        );
         // The same plant and seed behind the firmware core in process.
         let virt = VirtualDevice::start(config, 1.0).unwrap();
         let (_, core_tau) = release_10_hz(virt.port_name(), 2.0);
@@ -307,7 +321,9 @@ mod tests {
         FirmwareDevice::start(Some(elf), config.plant, 1, 1.0, None).unwrap()
     }
 
-    fn client(dev: &FirmwareDevice) -> (Client<crate::client::SerialTransport>, protocol::DeviceInfo) {
+    fn client(
+        dev: &FirmwareDevice,
+    ) -> (Client<crate::client::SerialTransport>, protocol::DeviceInfo) {
         let io = open_serial(dev.port_name(), protocol::DEFAULT_BAUD_RATE).unwrap();
         Client::connect(io, ClientOptions::new(dev.port_name())).unwrap()
     }
@@ -330,7 +346,10 @@ mod tests {
             if done(&s) {
                 return s;
             }
-            assert!(t - t0 < limit_s, "no {what} within {limit_s} s of device time");
+            assert!(
+                t - t0 < limit_s,
+                "no {what} within {limit_s} s of device time"
+            );
         }
     }
 
@@ -341,7 +360,10 @@ mod tests {
             if let Some(r) = dev.with_board(|b| b.machine().resets.first().copied()) {
                 return r;
             }
-            assert!(dev.time() - from < limit_s, "no reset within {limit_s} s of device time");
+            assert!(
+                dev.time() - from < limit_s,
+                "no reset within {limit_s} s of device time"
+            );
             std::thread::sleep(Duration::from_millis(5));
         }
     }
@@ -405,9 +427,15 @@ mod tests {
         let (_, cause) = until_reset(&dev, 2.0);
         assert!(cause.contains("WWDG"), "{cause}");
         let faults = dev.with_board(|b| b.machine().faults.clone());
-        let lockup = faults.iter().find(|(_, f)| f.contains("lockup")).expect("a lockup");
+        let lockup = faults
+            .iter()
+            .find(|(_, f)| f.contains("lockup"))
+            .expect("a lockup");
         assert!(lockup.1.contains("stack guard"), "{faults:?}");
-        assert!(lockup.1.contains("CLL: true"), "TIM1 kept switching: {faults:?}");
+        assert!(
+            lockup.1.contains("CLL: true"),
+            "TIM1 kept switching: {faults:?}"
+        );
         drop(c);
         let (_, info) = client(&dev);
         assert_eq!(info.reset_cause, protocol::ResetCause::Watchdog);
@@ -421,12 +449,18 @@ mod tests {
         c.start_telemetry(1000).unwrap();
         c.release(true, 10.0).unwrap();
         let t0 = until(&mut c, 5.0, "telemetry", |_| true).device_time_us;
-        until(&mut c, 11.0, "10 s of release", |s| s.device_time_us - t0 >= 10_000_000);
+        until(&mut c, 11.0, "10 s of release", |s| {
+            s.device_time_us - t0 >= 10_000_000
+        });
         c.release(false, 0.0).unwrap();
-        let (lowest, guard) = dev.with_board(|b| (b.machine().lowest_sp(), b.machine().bus.scs.guard()));
+        let (lowest, guard) =
+            dev.with_board(|b| (b.machine().lowest_sp(), b.machine().bus.scs.guard()));
         let (base, size) = guard.expect("a stack guard");
         let margin = i64::from(lowest) - i64::from(base + size);
-        eprintln!("lowest stack pointer {lowest:#x}, guard top {:#x}: margin {margin} B", base + size);
+        eprintln!(
+            "lowest stack pointer {lowest:#x}, guard top {:#x}: margin {margin} B",
+            base + size
+        );
         assert!(margin >= 2048, "margin {margin} B");
     }
 }

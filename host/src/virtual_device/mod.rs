@@ -122,8 +122,8 @@ pub trait Served: Send + 'static {
     fn to_device(&mut self, bytes: &[u8]);
     /// Runs for `seconds` of device time.
     fn advance(&mut self, seconds: f64);
-    /// The device's output since the last call.
-    fn from_device(&mut self, out: &mut Vec<u8>);
+    /// The device's output since the last call, appended to `out`.
+    fn device_output(&mut self, out: &mut Vec<u8>);
     /// Device time, s.
     fn time(&self) -> f64;
     /// Whether the device drives the bridge for a host (a release or open-loop volts).
@@ -140,7 +140,7 @@ impl Served for SimRig {
     fn advance(&mut self, seconds: f64) {
         SimRig::advance(self, seconds);
     }
-    fn from_device(&mut self, out: &mut Vec<u8>) {
+    fn device_output(&mut self, out: &mut Vec<u8>) {
         SimRig::from_device(self, out);
     }
     fn time(&self) -> f64 {
@@ -439,7 +439,7 @@ fn run<D: Served>(
                 && quiet_virtual > HOST_QUIET_S
                 && quiet_virtual > (now - last_rx.1).as_secs_f64();
             let before = pending.len();
-            rig.from_device(&mut pending);
+            rig.device_output(&mut pending);
             if pending.len() > MAX_PENDING {
                 *lock(&shared.dropped_bytes) += (pending.len() - before) as u64;
                 pending.truncate(before);
