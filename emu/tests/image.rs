@@ -10,27 +10,34 @@ use std::path::PathBuf;
 use model::plant::{Load, PlantParams};
 use protocol::{Deframer, DeviceMessage, Reply, Request};
 
-fn image() -> Option<PathBuf> {
-    let elf = std::env::var_os("RIG_FIRMWARE_ELF")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .join("../target/thumbv7em-none-eabihf/release/firmware")
-        });
-    let missing = if !elf.exists() {
+/// Both release images (braking, the default, and coasting) where `cargo xtask firmware
+/// --both` kept them, else the last one built; empty (skipped, with a message) when this
+/// machine lacks the images or the emulator, unless RIG_REQUIRE_EMULATOR is set.
+fn images() -> Vec<PathBuf> {
+    let release =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/thumbv7em-none-eabihf/release");
+    let mut elfs: Vec<PathBuf> = ["firmware-brake", "firmware-coast"]
+        .iter()
+        .map(|n| release.join(n))
+        .filter(|p| p.exists())
+        .collect();
+    if elfs.is_empty() && release.join("firmware").exists() {
+        elfs.push(release.join("firmware"));
+    }
+    let missing = if elfs.is_empty() {
         Some(format!(
-            "no firmware image at {} (cargo xtask firmware)",
-            elf.display()
+            "no firmware image in {} (cargo xtask firmware)",
+            release.display()
         ))
     } else {
         emu::emulator().err().map(|e| e.to_string())
     };
     match missing {
-        None => Some(elf),
+        None => elfs,
         Some(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
         Some(why) => {
             eprintln!("skipped: {why}");
-            None
+            Vec::new()
         }
     }
 }
@@ -76,33 +83,83 @@ fn ask(b: &mut emu::Board, seq: u16, req: &Request, within_s: f64) -> Reply {
 }
 
 #[test]
-fn the_release_image_boots_runs_its_control_loop_and_answers_hello() {
-    let Some(elf) = image() else { return };
-    let mut b = board(elf);
-    b.advance(0.05).unwrap();
-    let m = b.machine();
-    assert!(m.faults.is_empty(), "faults at boot: {:?}", m.faults);
-    assert!(m.resets.is_empty(), "resets at boot: {:?}", m.resets);
-    assert!(
-        m.unmodelled().is_empty(),
-        "the image touched unmodelled addresses: {:x?}",
-        m.unmodelled()
-    );
-    // The control executor (UART4's vector, IRQ 52) runs once per 1 ms ADC block.
-    let steps = m.exceptions_taken.get(&(16 + 52)).copied().unwrap_or(0);
-    assert!((40..=55).contains(&steps), "{steps} control steps in 50 ms");
-    let reply = ask(
-        &mut b,
-        1,
-        &Request::Hello {
+fn the_release_images_boot_run_their_control_loop_and_answer_hello() {
+    for elf in images() {
+        let name = elf.display().to_string();
+        let mut b = board(elf);
+        b.advance(0.05).unwrap();
+        let m = b.machine();
+        assert!(
+            m.faults.is_empty(),
+            "{name}: faults at boot: {:?}",
+            m.faults
+        );
+        assert!(
+            m.resets.is_empty(),
+            "{name}: resets at boot: {:?}",
+            m.resets
+        );
+        assert!(
+            m.unmodelled().is_empty(),
+            "{name}: the image touched unmodelled addresses: {:x?}",
+            m.unmodelled()
+        );
+        assert!(
+            m.bus.lockup_breaks_tim1(),
+            "{name}: SYSCFG_CFGR2.CLL clear after boot"
+        );
+        // The control executor (UART4's vector, IRQ 52) runs once per 1 ms ADC block: 50
+        // in 50 ms less the boot's first milliseconds.
+        let steps = m.exceptions_taken.get(&(16 + 52)).copied().unwrap_or(0);
+        assert!(
+            (40..=50).contains(&steps),
+            "{name}: {steps} control steps in 50 ms"
+        );
+        let reply = ask(
+            &mut b,
+            1,
+            &Request::Hello {
+                protocol_version: protocol::PROTOCOL_VERSION,
+                schema_hash: protocol::SCHEMA_HASH,
+            },
+            0.1,
+        );
+        let Reply::Info(info) = reply else {
+            panic!("{name}: Hello answered {reply:?}")
+        };
+        assert_eq!(info.protocol_version, protocol::PROTOCOL_VERSION);
+        assert_eq!(info.board.as_str(), "nucleo-g474re");
+        assert_eq!(info.time_scale, 1.0, "{name}: a board's own pace");
+        let braking = info
+            .capabilities
+            .contains(protocol::Capabilities::BRAKING_DECAY);
+        assert_eq!(
+            braking,
+            !name.ends_with("coast"),
+            "{name}: the image's bridge"
+        );
+    }
+}
+
+#[test]
+fn the_pace_the_emulator_writes_is_what_the_image_reports() {
+    for elf in images().into_iter().take(1) {
+        let gear = model::GearSet::paper(model::paper::RIG_Z).unwrap();
+        let mut b = emu::Board::new(emu::BoardConfig {
+            elf,
+            plant: PlantParams::paper(gear, Load::Torque(0.0)),
+            seed: 1,
+            time_scale: Some(0.25),
+        })
+        .unwrap();
+        b.advance(0.03).unwrap();
+        let req = Request::Hello {
             protocol_version: protocol::PROTOCOL_VERSION,
             schema_hash: protocol::SCHEMA_HASH,
-        },
-        0.1,
-    );
-    let Reply::Info(info) = reply else {
-        panic!("Hello answered {reply:?}")
-    };
-    assert_eq!(info.protocol_version, protocol::PROTOCOL_VERSION);
-    assert_eq!(info.board.as_str(), "nucleo-g474re");
+        };
+        let Reply::Info(info) = ask(&mut b, 7, &req, 0.1) else {
+            panic!("no Info")
+        };
+        assert_eq!(info.time_scale, 0.25);
+    }
 }

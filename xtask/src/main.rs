@@ -26,7 +26,7 @@ fn main() -> ExitCode {
         Some("test") => test(),
         Some("firmware") => firmware_task(&args[1..]),
         Some("flash") => flash(),
-        Some("setup") => setup(),
+        Some("setup") => setup().and_then(|()| setup_emulator()),
         Some("fuzz") => fuzz_smoke(),
         Some("target-bench") => target_bench(&args[1..]),
         Some("python") => python_task(true),
@@ -111,6 +111,15 @@ fn setup() -> Result {
             })?;
         }
     }
+    Ok(())
+}
+
+/// `cargo xtask setup`'s second half: the pinned Unicorn (and Capstone) in the project's venv
+/// (`target/target-bench-venv`), for the target bench and the emulated board (`rig sim
+/// serve --firmware`).
+fn setup_emulator() -> Result {
+    let python = target_bench::python_env(&target_dir())?;
+    eprintln!("==> the emulator is installed ({})", python.display());
     Ok(())
 }
 
@@ -400,12 +409,15 @@ fn bench_run(options: target_bench::Options, python: &Path) -> Result {
 /// CI's target bench (`target-bench --check`) after the firmware build; skipped, saying
 /// why, only when the emulator's Python packages cannot be installed (no python3, no venv
 /// module, no network for pip).
-fn bench_check() -> Result {
+/// The target bench's check; returns whether the emulator (the venv's Unicorn, which the
+/// emulated board of `rig sim serve --firmware` loads too) is installed.
+fn bench_check() -> Result<bool> {
     let python = match target_bench::python_env(&target_dir()) {
         Ok(python) => python,
         Err(e) => {
             println!("target bench: SKIPPED, the emulator cannot be installed: {e}");
-            return Ok(());
+            println!("emulated-board tests: skipped for the same reason");
+            return Ok(false);
         }
     };
     eprintln!("\n==> target bench (--check)");
@@ -413,7 +425,8 @@ fn bench_check() -> Result {
         json: false,
         check: true,
     };
-    bench_run(options, &python)
+    bench_run(options, &python)?;
+    Ok(true)
 }
 
 fn test() -> Result {
@@ -426,7 +439,7 @@ fn test() -> Result {
     for image in Image::BOTH {
         firmware(image)?;
     }
-    bench_check()?;
+    let emulator = bench_check()?;
     run(
         "model, protocol and firmware-core build for the thumb target",
         {
@@ -483,6 +496,11 @@ fn test() -> Result {
         c.args(["test", "--workspace"]);
         // The host's `rig flash` tests check the image built above.
         c.env("RIG_FIRMWARE_ELF", firmware_elf());
+        // The emulated board's tests run both images built above; with the emulator
+        // installed, a missing piece is a failure, not a skip.
+        if emulator {
+            c.env("RIG_REQUIRE_EMULATOR", "1");
+        }
         c
     })?;
     // `cargo test --workspace` built target/debug/rig for the CLI tests: reused.

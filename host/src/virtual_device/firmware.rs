@@ -65,19 +65,24 @@ pub fn pace_for(asked: f64, measured: f64) -> f64 {
     asked.min(sustainable.max(0.05))
 }
 
-/// The release image `cargo xtask firmware` builds, in this source tree's `target`.
+/// The release image `cargo xtask firmware` builds, in this source tree's `target`: the
+/// default (braking) image's kept copy `firmware-brake`, else `firmware` (the last built).
 pub fn default_firmware_elf() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
+    let release = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| {
             Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("..")
                 .join("target")
-        });
-    target
+        })
         .join("thumbv7em-none-eabihf")
-        .join("release")
-        .join("firmware")
+        .join("release");
+    let brake = release.join("firmware-brake");
+    if brake.exists() {
+        brake
+    } else {
+        release.join("firmware")
+    }
 }
 
 /// The emulated board with the firmware image, on a pseudo-terminal, until dropped.
