@@ -9,7 +9,7 @@ use protocol::DeviceInfo;
 use crate::RigError;
 use crate::client::{Client, ClientOptions, SerialTransport, open_serial};
 use crate::ports;
-use crate::virtual_device::VirtualDevice;
+use crate::virtual_device::{FirmwareDevice, VirtualDevice};
 
 /// The device to talk to, with every default applied.
 #[derive(Debug, Clone, PartialEq)]
@@ -22,6 +22,9 @@ pub struct DeviceOpts {
     pub sim: bool,
     /// With `sim`: virtual seconds per wall-clock second.
     pub speed: f64,
+    /// With `sim`: run the firmware image on the emulated board ([`FirmwareDevice`]): the
+    /// ELF given, or (`Some(None)`) the default release image.
+    pub firmware: Option<Option<PathBuf>>,
     /// With `sim`: the virtual rig's sensor-noise seed (`None`: its default, 1).
     pub seed: Option<u64>,
     /// With `sim`: a rig file (a fitted `[model]`, or a plain rig); the virtual device is
@@ -37,6 +40,7 @@ impl Default for DeviceOpts {
             baud: protocol::DEFAULT_BAUD_RATE,
             sim: false,
             speed: 1.0,
+            firmware: None,
             seed: None,
             model: None,
         }
@@ -51,6 +55,8 @@ pub struct Connection {
     pub info: DeviceInfo,
     /// The virtual device (dropped after the client: fields drop in order).
     pub device: Option<VirtualDevice>,
+    /// The emulated board running the firmware image (`--sim --firmware`).
+    pub board: Option<FirmwareDevice>,
 }
 
 impl Connection {
@@ -113,7 +119,22 @@ impl DeviceOpts {
                 why: "only the virtual device has a noise seed (a real rig's noise is its own): add --sim, or leave --seed out".into(),
             });
         }
-        let (device, port, name) = if self.sim {
+        let mut board = None;
+        let (device, port, name) = if let (true, Some(elf)) = (self.sim, &self.firmware) {
+            let mut config = match &self.model {
+                Some(path) => VirtualDevice::fitted_config(path)?,
+                None => VirtualDevice::paper_config(&sim::Preset::paper()),
+            };
+            if let Some(seed) = self.seed {
+                config.seed = seed;
+            }
+            let dev =
+                FirmwareDevice::start(elf.as_deref(), config.plant, config.seed, self.speed, None)?;
+            let port = dev.port_name().to_owned();
+            let name = format!("the firmware image on the emulated board ({port})");
+            board = Some(dev);
+            (None, port, name)
+        } else if self.sim {
             let mut config = match &self.model {
                 Some(path) => VirtualDevice::fitted_config(path)?,
                 None => VirtualDevice::paper_config(&sim::Preset::paper()),
@@ -132,7 +153,10 @@ impl DeviceOpts {
         // Every device starts at the default rate; a faster one is agreed after `Hello`.
         let io = open_serial(&port, protocol::DEFAULT_BAUD_RATE)?;
         let mut opts = ClientOptions::new(name);
-        if self.sim {
+        if board.is_some() {
+            // The image reports the board's pace in `Info`; the client takes it from there.
+            opts.reply_timeout = std::time::Duration::from_secs(1);
+        } else if self.sim {
             opts.time_scale = self.speed;
             // Pseudo-terminal bytes wait for a kernel worker: on a busy machine, long.
             opts.reply_timeout = std::time::Duration::from_secs(1);
@@ -143,6 +167,7 @@ impl DeviceOpts {
             client,
             info,
             device,
+            board,
         })
     }
 }

@@ -41,6 +41,11 @@ macro_rules! device_args {
             /// With --sim: run the virtual device this many times faster than real time [default: 1].
             #[arg(long, global = $global, value_name = "FACTOR", value_parser = parse_speed)]
             pub speed: Option<f64>,
+            /// With --sim: the firmware image itself on the emulated STM32G474 (processor in
+            /// the loop) instead of the firmware core: `--firmware=ELF`, or alone the release image
+            /// `cargo xtask firmware` builds, as `rig sim serve --firmware`.
+            #[arg(long, global = $global, value_name = "ELF", num_args = 0..=1, require_equals = true)]
+            pub firmware: Option<Option<PathBuf>>,
             $(
             /// With --sim: the virtual rig's sensor-noise seed, as `rig sim serve --seed`
             /// [default: 1]; the same seed gives the same noise draws.
@@ -64,6 +69,7 @@ macro_rules! device_args {
                     ("--baud", self.baud.is_some()),
                     ("--sim", self.sim),
                     ("--speed", self.speed.is_some()),
+                    ("--firmware", self.firmware.is_some()),
                     $(("--seed", self.$seed.is_some()),)?
                     $(("--model", self.$model.is_some()),)?
                 ]
@@ -115,6 +121,7 @@ impl From<DiscoverDeviceArgs> for VerbDeviceArgs {
             baud: d.baud,
             sim: d.sim,
             speed: d.speed,
+            firmware: d.firmware,
             seed: None,
             model: None,
         }
@@ -128,6 +135,7 @@ impl From<DemoDeviceArgs> for VerbDeviceArgs {
             baud: d.baud,
             sim: d.sim,
             speed: d.speed,
+            firmware: d.firmware,
             seed: None,
             model: d.model,
         }
@@ -159,7 +167,7 @@ impl DeviceArgs {
             Some(option) => Err(RigError::BadValue {
                 what: (*option).into(),
                 why: format!(
-                    "`rig {verb}` uses no device, so it takes no device options (--port, --baud, --sim, --speed, --seed, --model); they go with {DEVICE_VERBS}{}",
+                    "`rig {verb}` uses no device, so it takes no device options (--port, --baud, --sim, --speed, --firmware, --seed, --model); they go with {DEVICE_VERBS}{}",
                     if *option == "--model" && matches!(verb, "sim" | "compare") {
                         format!(" (`rig {verb}` takes its own --model after its verb)")
                     } else {
@@ -180,11 +188,19 @@ impl DeviceArgs {
                 why: "cannot be used with --sim (the virtual device opens its own port): give one of them".into(),
             });
         }
+        let firmware = after.firmware.clone().or_else(|| self.firmware.clone());
+        if firmware.is_some() && !sim {
+            return Err(RigError::BadValue {
+                what: "--firmware".into(),
+                why: "runs the image on the virtual device's emulated board: add --sim (a real rig runs what was flashed: `rig flash`)".into(),
+            });
+        }
         let defaults = DeviceOpts::default();
         Ok(DeviceOpts {
             port,
             baud: after.baud.or(self.baud).unwrap_or(defaults.baud),
             sim,
+            firmware,
             speed: after.speed.or(self.speed).unwrap_or(defaults.speed),
             seed: after.seed.or(self.seed),
             model: after.model.clone().or_else(|| self.model.clone()),

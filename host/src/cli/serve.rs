@@ -41,11 +41,11 @@ pub struct ServeArgs {
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
     /// Serve the firmware image itself on the emulated STM32G474 (processor in the loop):
-    /// the ELF runs instruction by instruction against the same plant; without a value, the
+    /// the ELF runs instruction by instruction against the same plant: `--firmware=ELF`, or alone the
     /// release image `cargo xtask firmware` builds (target/thumbv7em-none-eabihf/release/firmware).
     /// Needs the Unicorn engine (`cargo xtask setup` installs it). Runs as fast as this
     /// machine allows, at most --speed.
-    #[arg(long, value_name = "ELF", num_args = 0..=1)]
+    #[arg(long, value_name = "ELF", num_args = 0..=1, require_equals = true)]
     pub firmware: Option<Option<PathBuf>>,
     /// Print one JSON line with the port when ready.
     #[arg(long)]
