@@ -629,14 +629,15 @@ mod app {
     }
 
     /// Switches USART2 (both directions) to `baud` once its last byte has left: with 8x
-    /// oversampling and the exact divider where one exists (4,000,000 Bd at 170 MHz: BRR
-    /// 0x52, `firmware_core::usart_brr_over8`), else as embassy-stm32 rounds it. Only a
-    /// board confirms what the ST-LINK V3 virtual COM port carries at the far end.
+    /// oversampling and the nearest even divider when it is within 1.5 % (4,000,000 Bd at
+    /// 170 MHz: BRR 0x53, 3,953,488 Bd, -1.16 %; `firmware_core::usart_brr_over8`), else as
+    /// embassy-stm32 rounds it. Only a board confirms what the ST-LINK V3 virtual COM port
+    /// carries at the far end.
     fn set_host_baud(tx: &mut UartTx<'static, Async>, baud: u32) {
         use embassy_stm32::pac::usart::{regs, vals};
         let _ = tx.blocking_flush();
         match firmware_core::usart_brr_over8(crate::USART_KERNEL_HZ, baud) {
-            Some(brr) => {
+            Some((brr, _)) => {
                 let r = embassy_stm32::pac::USART2;
                 r.cr1().modify(|w| w.set_ue(false));
                 r.presc().write(|w| w.set_prescaler(vals::Presc::DIV1));
