@@ -468,4 +468,17 @@ mod tests {
         );
         assert!(margin >= 2048, "margin {margin} B");
     }
+
+    #[test]
+    fn the_fast_link_runs_the_emulated_usart_at_what_its_register_gives() {
+        let Some(elf) = image() else { return };
+        let dev = serve(&elf);
+        let (mut c, info) = client(&dev);
+        assert_eq!(info.max_baud, protocol::FAST_BAUD_RATE);
+        c.agree_baud(&info, protocol::FAST_BAUD_RATE).unwrap();
+        c.faults().unwrap();
+        // BRR 0x53 with OVER8: USARTDIV 86, 2 x 170 MHz / 86.
+        let baud = dev.with_board(|b| b.machine().bus.usart.baud());
+        assert_eq!(baud, 3_953_488);
+    }
 }
