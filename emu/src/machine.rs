@@ -679,7 +679,7 @@ unsafe extern "C" fn on_bad_access(
     kind: i32,
     address: u64,
     _size: i32,
-    _value: i64,
+    value: i64,
     user: *mut c_void,
 ) -> bool {
     let m = unsafe { &mut *user.cast::<Machine>() };
@@ -691,7 +691,10 @@ unsafe extern "C" fn on_bad_access(
         // stores the word either way, so a refused one is put back after this run.
         let old = m.api.read_u32(m.uc, address.into());
         let now = m.st.cycles;
-        if !m.bus.flash_write(address, _value as u32, old, now) {
+        if m.bus.flash_write(address, value as u32, old, now) {
+            // Programmed (the engine does not store into read-only memory by itself).
+            let _ = m.api.write_u32(m.uc, address.into(), value as u32);
+        } else {
             m.bus.flash_restore.push((address, old));
             m.st.deadline = 0;
         }

@@ -331,8 +331,9 @@ impl Bus {
         }
     }
 
-    /// The earliest pending peripheral event after `now`.
-    pub fn next_event(&self, now: u64) -> Option<u64> {
+    /// The earliest peripheral event that needs processing (timers, conversions, the line,
+    /// the watchdogs).
+    fn next_due(&self) -> Option<u64> {
         let trig = self.adc.waits_for_tim1() && self.tim1.trgo_on_update();
         [
             self.tim1.next_event(trig),
@@ -343,6 +344,17 @@ impl Bus {
             self.usart.next_event(),
             self.iwdg.running.then_some(self.iwdg.expires),
             self.wwdg.next_event(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    /// The earliest moment after `now` something happens: an event to process, a SysTick
+    /// wrap, the end of a flash operation (a sleeping core wakes to look).
+    pub fn next_event(&self, now: u64) -> Option<u64> {
+        [
+            self.next_due(),
             self.scs.next_event(now),
             (self.flash.busy_until > now).then_some(self.flash.busy_until),
         ]
@@ -354,7 +366,7 @@ impl Bus {
     /// Runs every peripheral event up to `now`, in time order, and refreshes the
     /// interrupt lines.
     pub fn advance(&mut self, now: u64, mem: &Mem) {
-        while let Some(t) = self.next_event(0).filter(|t| *t <= now) {
+        while let Some(t) = self.next_due().filter(|t| *t <= now) {
             self.step_events(t, mem);
         }
         self.scs.advance(now);

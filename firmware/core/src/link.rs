@@ -77,11 +77,7 @@ pub const fn usart_brr_over8(kernel_hz: u32, baud: u32) -> Option<(u16, u32)> {
         return None;
     }
     let actual = twice / div;
-    let error = if actual > baud as u64 {
-        actual - baud as u64
-    } else {
-        baud as u64 - actual
-    };
+    let error = actual.abs_diff(baud as u64);
     if error * 1000 > MAX_BAUD_ERROR_PERMILLE as u64 * baud as u64 {
         return None;
     }

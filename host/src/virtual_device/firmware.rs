@@ -481,4 +481,37 @@ mod tests {
         let baud = dev.with_board(|b| b.machine().bus.usart.baud());
         assert_eq!(baud, 3_953_488);
     }
+
+    #[test]
+    fn a_calibration_written_is_programmed_into_the_emulated_flash_and_survives_a_reset() {
+        let Some(elf) = image() else { return };
+        let dev = serve(&elf);
+        let (mut c, info) = client(&dev);
+        assert_eq!(info.parameters_status, protocol::ParametersStatus::Defaults);
+        let mut params = protocol::RigParameters::paper();
+        params.mu_s = 0.27;
+        let t0 = dev.time();
+        let r = c.set_calibration(&params);
+        let (erases, programs, faults) = dev.with_board(|b| {
+            let f = &b.machine().bus.flash;
+            (f.erases, f.programs, b.machine().faults.clone())
+        });
+        eprintln!(
+            "erases {erases}, programs {programs}, {:.3} s, faults {faults:?}",
+            dev.time() - t0
+        );
+        r.unwrap();
+        assert!(
+            erases >= 1 && programs >= 1,
+            "{erases} erases, {programs} programs"
+        );
+        // A reset (SYSRESETREQ from outside: the probe's reset) boots with it.
+        dev.with_board(|b| b.machine_mut().bus.scs.reset_requested = true);
+        until_reset(&dev, 1.0);
+        drop(c);
+        std::thread::sleep(Duration::from_millis(200));
+        let (mut c, info) = client(&dev);
+        assert_eq!(info.parameters_status, protocol::ParametersStatus::Valid);
+        assert_eq!(c.calibration().unwrap().mu_s, 0.27);
+    }
 }
