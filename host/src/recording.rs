@@ -53,9 +53,9 @@ pub const STREAM_CSV_COLUMNS: [&str; 14] = [
 /// How a recording is written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum StreamFormat {
-    /// One row per sample ([`STREAM_CSV_COLUMNS`]) after the provenance's `#` lines.
+    /// One row per sample (the columns of `STREAM_CSV_COLUMNS`) after the provenance's `#` lines.
     Csv,
-    /// The header and the raw `StreamBlock` frames (about 4 bytes a sample): `rig record
+    /// The header and the raw `StreamBlock` frames (3 to 5 bytes a sample, fewer while the signals move slowly): `rig record
     /// --decode` turns it into the CSV.
     Bin,
 }

@@ -35,7 +35,7 @@ pub struct RecordArgs {
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
     /// csv: one row per sample, units in the column names, a `lost` row per run of lost
-    /// samples; bin: the stream's frames behind a header, about 5 bytes a sample (turn it
+    /// samples; bin: the stream's frames behind a header, 3 to 5 bytes a sample (turn it
     /// into CSV with --decode).
     #[arg(long, value_enum, default_value_t = StreamFormat::Csv)]
     format: StreamFormat,
