@@ -107,19 +107,10 @@ fn a_served_rig_passes_every_check_faster_than_real_time() {
 /// Whether the release image and the emulator are here (else the test skips, saying why;
 /// `cargo xtask test` sets RIG_REQUIRE_EMULATOR, which makes their absence a failure).
 fn emulated_board_ready() -> bool {
-    let elf = host::virtual_device::default_firmware_elf();
-    let missing = if !elf.exists() {
-        Some(format!(
-            "no firmware image at {} (cargo xtask firmware)",
-            elf.display()
-        ))
-    } else {
-        emu::emulator().err().map(|e| e.to_string())
-    };
-    match missing {
-        None => true,
-        Some(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
-        Some(why) => {
+    match host::virtual_device::emulated_board_ready() {
+        Ok(_) => true,
+        Err(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
+        Err(why) => {
             eprintln!("skipped: {why}");
             false
         }

@@ -283,3 +283,43 @@ fn at_4_mbaud_the_stream_records_beside_the_link_and_another_rate_is_refused() {
         "{err}"
     );
 }
+
+/// Whether the release image and the emulator are here (else the test skips, saying why;
+/// `cargo xtask test` sets RIG_REQUIRE_EMULATOR, which makes their absence a failure).
+fn emulated_board_ready() -> bool {
+    match host::virtual_device::emulated_board_ready() {
+        Ok(_) => true,
+        Err(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
+        Err(why) => {
+            eprintln!("skipped: {why}");
+            false
+        }
+    }
+}
+
+#[test]
+fn the_release_image_streams_10_khz_through_its_usart_at_both_link_rates() {
+    if !emulated_board_ready() {
+        return;
+    }
+    for baud in ["921600", "4000000"] {
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("image.csv");
+        let out = rig()
+            .args(["--sim", "--firmware", "--baud", baud])
+            .args(["record", "--rate", "10000", "--seconds", "1", "--out"])
+            .arg(&csv)
+            .assert()
+            .success()
+            .get_output()
+            .clone();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            stdout.contains("recorded 10000 samples at 10000 Hz (1 s), 0 lost"),
+            "{baud} Bd: {stdout}"
+        );
+        let (_, rows) = csv_rows(&csv);
+        assert_eq!(rows.len(), 10_000, "{baud} Bd");
+        assert_whole(&rows);
+    }
+}

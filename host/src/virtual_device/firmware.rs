@@ -85,6 +85,20 @@ pub fn default_firmware_elf() -> PathBuf {
     }
 }
 
+/// The default image and the emulator, ready to serve: the image's path, or what is
+/// missing with what to do.
+pub fn emulated_board_ready() -> Result<PathBuf, String> {
+    let elf = default_firmware_elf();
+    if !elf.exists() {
+        return Err(format!(
+            "no firmware image at {}: build it with `cargo xtask firmware`",
+            elf.display()
+        ));
+    }
+    emu::emulator().map_err(|e| e.to_string())?;
+    Ok(elf)
+}
+
 /// The emulated board with the firmware image, on a pseudo-terminal, until dropped.
 pub struct FirmwareDevice {
     port: String,
@@ -219,19 +233,10 @@ mod tests {
     /// machine has neither; `cargo xtask test` sets RIG_REQUIRE_EMULATOR, which makes their
     /// absence a failure.
     fn image() -> Option<PathBuf> {
-        let elf = default_firmware_elf();
-        let missing = if !elf.exists() {
-            Some(format!(
-                "no firmware image at {} (cargo xtask firmware)",
-                elf.display()
-            ))
-        } else {
-            emu::emulator().err().map(|e| e.to_string())
-        };
-        match missing {
-            None => Some(elf),
-            Some(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
-            Some(why) => {
+        match emulated_board_ready() {
+            Ok(elf) => Some(elf),
+            Err(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
+            Err(why) => {
                 eprintln!("skipped: {why}");
                 None
             }

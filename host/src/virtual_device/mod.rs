@@ -42,7 +42,7 @@ use sim::{ADC_HZ, SimConfig, SimRig};
 mod firmware;
 mod pty;
 
-pub use firmware::{FirmwareDevice, default_firmware_elf};
+pub use firmware::{FirmwareDevice, default_firmware_elf, emulated_board_ready};
 
 pub use pty::PtyMaster;
 
