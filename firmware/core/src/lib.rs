@@ -108,7 +108,7 @@ pub use config::{
 };
 pub use controller::{BoardInputs, BootInfo, Core, Inputs, Outputs, Status, check_rules};
 pub use estimator::{Coefficients, EstimatorModel, RevolutionEstimate};
-pub use link::usart_brr_over8;
+pub use link::{MAX_BAUD_ERROR_PERMILLE, usart_brr_over8};
 pub use output_encoder::{OutputEncoder, OutputEncoderConfig};
 pub use server::FIRMWARE_VERSION;
 pub use speed_loop::FeedForward;
