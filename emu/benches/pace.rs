@@ -6,20 +6,12 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use model::plant::{Load, PlantParams};
 use protocol::Request;
 
 fn board() -> emu::Board {
     let elf = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../target/thumbv7em-none-eabihf/release/firmware-brake");
-    let gear = model::GearSet::paper(model::paper::RIG_Z).unwrap();
-    emu::Board::new(emu::BoardConfig {
-        elf,
-        plant: PlantParams::paper(gear, Load::Torque(0.0)),
-        seed: 1,
-        time_scale: None,
-    })
-    .unwrap_or_else(|e| panic!("{e}"))
+    emu::Board::new(emu::BoardConfig::paper(elf)).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn send(b: &mut emu::Board, seq: u16, req: &Request) {

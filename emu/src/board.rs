@@ -33,6 +33,20 @@ pub struct BoardConfig {
     pub time_scale: Option<f32>,
 }
 
+impl BoardConfig {
+    /// `elf` on the paper's (49, 50) rig with no load, noise seed 1, the image's own pace.
+    pub fn paper(elf: impl Into<PathBuf>) -> Self {
+        let gear =
+            model::GearSet::paper(model::paper::RIG_Z).expect("the paper's gear set is valid");
+        Self {
+            elf: elf.into(),
+            plant: PlantParams::paper(gear, model::plant::Load::Torque(0.0)),
+            seed: 1,
+            time_scale: None,
+        }
+    }
+}
+
 /// The image's symbol for its reported time scale (an `f32` in flash).
 pub const TIME_SCALE_SYMBOL: &str = "RIG_TIME_SCALE";
 

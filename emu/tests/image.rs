@@ -7,7 +7,6 @@
 
 use std::path::PathBuf;
 
-use model::plant::{Load, PlantParams};
 use protocol::{Deframer, DeviceMessage, Reply, Request};
 
 /// Both release images (braking, the default, and coasting) where `cargo xtask firmware
@@ -43,14 +42,7 @@ fn images() -> Vec<PathBuf> {
 }
 
 fn board(elf: PathBuf) -> emu::Board {
-    let gear = model::GearSet::paper(model::paper::RIG_Z).unwrap();
-    emu::Board::new(emu::BoardConfig {
-        elf,
-        plant: PlantParams::paper(gear, Load::Torque(0.0)),
-        seed: 1,
-        time_scale: None,
-    })
-    .unwrap()
+    emu::Board::new(emu::BoardConfig::paper(elf)).unwrap()
 }
 
 /// Sends `req` and runs the board until a reply comes (device time, at most `within_s`).
@@ -144,12 +136,9 @@ fn the_release_images_boot_run_their_control_loop_and_answer_hello() {
 #[test]
 fn the_pace_the_emulator_writes_is_what_the_image_reports() {
     for elf in images().into_iter().take(1) {
-        let gear = model::GearSet::paper(model::paper::RIG_Z).unwrap();
         let mut b = emu::Board::new(emu::BoardConfig {
-            elf,
-            plant: PlantParams::paper(gear, Load::Torque(0.0)),
-            seed: 1,
             time_scale: Some(0.25),
+            ..emu::BoardConfig::paper(elf)
         })
         .unwrap();
         b.advance(0.03).unwrap();

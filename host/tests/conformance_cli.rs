@@ -7,6 +7,7 @@ use assert_cmd::Command;
 use serde_json::Value;
 
 mod support {
+    pub mod emulated;
     pub mod served;
 }
 use support::served::Server;
@@ -104,22 +105,9 @@ fn a_served_rig_passes_every_check_faster_than_real_time() {
     check_all_pass(&conformance(&server), 5.0);
 }
 
-/// Whether the release image and the emulator are here (else the test skips, saying why;
-/// `cargo xtask test` sets RIG_REQUIRE_EMULATOR, which makes their absence a failure).
-fn emulated_board_ready() -> bool {
-    match host::virtual_device::emulated_board_ready() {
-        Ok(_) => true,
-        Err(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
-        Err(why) => {
-            eprintln!("skipped: {why}");
-            false
-        }
-    }
-}
-
 #[test]
 fn the_release_image_on_the_emulated_board_passes_every_check() {
-    if !emulated_board_ready() {
+    if !support::emulated::ready() {
         return;
     }
     // The image itself (processor in the loop), at the pace this machine sustains, which

@@ -10,6 +10,7 @@ use std::time::Duration;
 use assert_cmd::Command;
 
 mod support {
+    pub mod emulated;
     pub mod served;
 }
 use support::served::Server;
@@ -284,22 +285,9 @@ fn at_4_mbaud_the_stream_records_beside_the_link_and_another_rate_is_refused() {
     );
 }
 
-/// Whether the release image and the emulator are here (else the test skips, saying why;
-/// `cargo xtask test` sets RIG_REQUIRE_EMULATOR, which makes their absence a failure).
-fn emulated_board_ready() -> bool {
-    match host::virtual_device::emulated_board_ready() {
-        Ok(_) => true,
-        Err(why) if std::env::var_os("RIG_REQUIRE_EMULATOR").is_some() => panic!("{why}"),
-        Err(why) => {
-            eprintln!("skipped: {why}");
-            false
-        }
-    }
-}
-
 #[test]
 fn the_release_image_streams_10_khz_through_its_usart_at_both_link_rates() {
-    if !emulated_board_ready() {
+    if !support::emulated::ready() {
         return;
     }
     for baud in ["921600", "4000000"] {

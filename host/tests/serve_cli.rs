@@ -494,3 +494,37 @@ fn python_example_reads_info_and_telemetry() {
     assert_eq!(server.json(&["info", "--json"])["board"], "virtual");
     assert_eq!(server.interrupt().code(), Some(130));
 }
+
+#[test]
+fn a_firmware_image_that_is_not_there_or_not_an_elf_is_refused_with_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nope.elf");
+    let out = rig()
+        .args(["sim", "serve"])
+        .arg(format!("--firmware={}", missing.display()))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        e.contains("--firmware") && e.contains("cargo xtask firmware"),
+        "{e}"
+    );
+    // A file that is not an ELF: named, with what to give instead (needs the emulator
+    // only after the file is read, so it is checked first).
+    let text = dir.path().join("notes.txt");
+    std::fs::write(&text, "not an image").unwrap();
+    let out = rig()
+        .args(["sim", "serve"])
+        .arg(format!("--firmware={}", text.display()))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("notes.txt"), "{e}");
+    // On a device verb, --firmware needs --sim.
+    let out = rig().args(["--firmware", "info"]).output().unwrap();
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("--firmware") && e.contains("add --sim"), "{e}");
+}

@@ -108,12 +108,14 @@ fn run_firmware(a: &ServeArgs, config: SimConfig) -> Result<ExitCode, RigError> 
     let mut out = std::io::stdout().lock();
     if a.json {
         let ready = FirmwareReady {
-            port: dev.port_name().to_string(),
-            speed: dev.pace(),
-            preset: a.preset.clone(),
-            effects: a.effects.clone(),
-            seed: a.seed,
-            warnings: unseen_warnings(a),
+            ready: Ready {
+                port: dev.port_name().to_string(),
+                speed: dev.pace(),
+                preset: a.preset.clone(),
+                effects: a.effects.clone(),
+                seed: a.seed,
+                warnings: unseen_warnings(a),
+            },
             firmware: dev.elf().display().to_string(),
         };
         super::print_json_line(&mut out, &ready)?;
@@ -152,21 +154,13 @@ fn run_firmware(a: &ServeArgs, config: SimConfig) -> Result<ExitCode, RigError> 
     Ok(crate::signals::exit_code())
 }
 
-/// What `rig sim serve --firmware --json` prints when ready: [`Ready`]'s keys and the image.
+/// What `rig sim serve --firmware --json` prints when ready: [`Ready`]'s keys (`speed`:
+/// the pace served at, which `Info` reports) and the image.
 #[derive(Debug, Serialize)]
 pub struct FirmwareReady {
-    /// The pseudo-terminal to open as a serial port.
-    pub port: String,
-    /// Device seconds per wall-clock second served at (and reported in `Info`).
-    pub speed: f64,
-    /// The preset.
-    pub preset: String,
-    /// The effects hidden in the plant (as given).
-    pub effects: Vec<String>,
-    /// Seed of the sensor noise.
-    pub seed: u64,
-    /// Why an effect hidden cannot show to a client.
-    pub warnings: Vec<String>,
+    /// The keys every served rig prints.
+    #[serde(flatten)]
+    pub ready: Ready,
     /// The firmware ELF running.
     pub firmware: String,
 }
