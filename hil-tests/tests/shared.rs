@@ -34,6 +34,7 @@ fn device_bench(
         client,
         info,
         device,
+        board: None,
     })
 }
 

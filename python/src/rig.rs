@@ -233,6 +233,7 @@ impl NativeRig {
                 client,
                 info,
                 device: Some(device),
+                board: None,
             })
         })
         .map_err(to_py)?;
