@@ -383,10 +383,40 @@ fn bench_run(options: target_bench::Options, python: &Path) -> Result {
         target_bench::boot_only_figures(&boot, coast_usage, &result),
     );
     target_bench::add_images(&mut result, images)?;
+    // The image itself over 10 s of a 10 Hz release on the emulated board (crate `emu`):
+    // the lowest stack pointer of boot and run against the guard.
+    let mut closed = serde_json::Map::new();
+    for image in Image::BOTH {
+        closed.insert(image.name().into(), closed_loop(&image.kept_elf())?);
+    }
+    result["closed_loop"] = serde_json::Value::Object(closed.clone());
     if options.json {
         println!("{result}");
     } else {
         print!("{}", target_bench::table(&result));
+        for (name, run) in &closed {
+            println!(
+                "image {name}  closed loop {} s on the emulated board: lowest stack pointer {} B above the guard (>= {CLOSED_LOOP_MARGIN_MIN}), {} resets, {} faults, {} unmodelled accesses, release live: {}",
+                run["seconds"], run["stack_margin_bytes"], run["resets"], run["faults"], run["unmodelled"], run["bridge_enabled"]
+            );
+        }
+    }
+    let bad: Vec<String> = closed
+        .iter()
+        .filter(|(_, r)| {
+            r["stack_margin_bytes"].as_i64().is_none_or(|m| m < CLOSED_LOOP_MARGIN_MIN)
+                || r["resets"] != 0
+                || r["faults"] != 0
+                || r["unmodelled"] != 0
+                || r["bridge_enabled"] != true
+        })
+        .map(|(name, r)| format!("{name}: {r}"))
+        .collect();
+    if options.check && !bad.is_empty() {
+        return Err(format!(
+            "the closed-loop run on the emulated board fails: {}",
+            bad.join("; ")
+        ));
     }
     let over = target_bench::over_budget(&result);
     if options.check && !over.is_empty() {
@@ -404,6 +434,31 @@ fn bench_run(options: target_bench::Options, python: &Path) -> Result {
         ));
     }
     Ok(())
+}
+
+/// The stack margin the closed-loop run must keep above the MPU guard, bytes.
+const CLOSED_LOOP_MARGIN_MIN: i64 = 2048;
+
+/// Runs `elf` on the emulated board through a 10 s release (`emu`'s `closed_loop`
+/// example) and returns its JSON line.
+fn closed_loop(elf: &Path) -> Result<serde_json::Value> {
+    eprintln!("\n==> 10 s of release on the emulated board: {}", elf.display());
+    let out = cargo()
+        .args(["run", "-q", "--package", "emu", "--example", "closed_loop", "--"])
+        .arg(elf)
+        .arg("10")
+        .output()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "the closed-loop run of {} failed: {}",
+            elf.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text.lines().last().unwrap_or("");
+    serde_json::from_str(line).map_err(|e| format!("closed_loop printed no JSON ({e}): {text}"))
 }
 
 /// CI's target bench (`target-bench --check`) after the firmware build; skipped, saying
