@@ -40,7 +40,15 @@ fn main() {
     };
     send(&mut b, 1, &hello);
     step(&mut b, 0.01);
-    send(&mut b, 2, &Request::Release { on: true, target_hz: 10.0, session: 1 });
+    send(
+        &mut b,
+        2,
+        &Request::Release {
+            on: true,
+            target_hz: 10.0,
+            session: 1,
+        },
+    );
     let mut seq = 2u16;
     let ticks = (seconds / 0.1).round() as usize;
     for _ in 0..ticks {

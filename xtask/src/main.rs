@@ -397,14 +397,21 @@ fn bench_run(options: target_bench::Options, python: &Path) -> Result {
         for (name, run) in &closed {
             println!(
                 "image {name}  closed loop {} s on the emulated board: lowest stack pointer {} B above the guard (>= {CLOSED_LOOP_MARGIN_MIN}), {} resets, {} faults, {} unmodelled accesses, release live: {}",
-                run["seconds"], run["stack_margin_bytes"], run["resets"], run["faults"], run["unmodelled"], run["bridge_enabled"]
+                run["seconds"],
+                run["stack_margin_bytes"],
+                run["resets"],
+                run["faults"],
+                run["unmodelled"],
+                run["bridge_enabled"]
             );
         }
     }
     let bad: Vec<String> = closed
         .iter()
         .filter(|(_, r)| {
-            r["stack_margin_bytes"].as_i64().is_none_or(|m| m < CLOSED_LOOP_MARGIN_MIN)
+            r["stack_margin_bytes"]
+                .as_i64()
+                .is_none_or(|m| m < CLOSED_LOOP_MARGIN_MIN)
                 || r["resets"] != 0
                 || r["faults"] != 0
                 || r["unmodelled"] != 0
@@ -442,9 +449,20 @@ const CLOSED_LOOP_MARGIN_MIN: i64 = 2048;
 /// Runs `elf` on the emulated board through a 10 s release (`emu`'s `closed_loop`
 /// example) and returns its JSON line.
 fn closed_loop(elf: &Path) -> Result<serde_json::Value> {
-    eprintln!("\n==> 10 s of release on the emulated board: {}", elf.display());
+    eprintln!(
+        "\n==> 10 s of release on the emulated board: {}",
+        elf.display()
+    );
     let out = cargo()
-        .args(["run", "-q", "--package", "emu", "--example", "closed_loop", "--"])
+        .args([
+            "run",
+            "-q",
+            "--package",
+            "emu",
+            "--example",
+            "closed_loop",
+            "--",
+        ])
         .arg(elf)
         .arg("10")
         .output()
