@@ -183,6 +183,19 @@ struct Uart {
     total: u64,
 }
 
+/// Bytes per second the Nucleo's USART2 carries at `baud`: never more than the nominal
+/// rate's ([`protocol::link_bytes_per_s`]), and no more than its divider gives at 170 MHz
+/// (`firmware_core::usart_brr_over8`: 4,000,000 Bd runs at 3,953,488 Bd, 395,348 B/s), so
+/// the virtual rig never sends faster than the board.
+pub fn board_bytes_per_s(baud: u32) -> u64 {
+    let nominal = u64::from(protocol::link_bytes_per_s(baud));
+    let board = firmware_core::usart_brr_over8(model::hardware::board::SYSCLK_HZ as u32, baud)
+        .map_or(nominal, |(_, actual)| {
+            u64::from(protocol::link_bytes_per_s(actual))
+        });
+    nominal.min(board)
+}
+
 /// Bytes the binary's `host_tx` task takes from the core per write.
 pub const UART_WRITE: usize = 256;
 
@@ -258,7 +271,7 @@ impl SimRig {
     /// the board. `None` (the default) hands every byte out at the step that framed it.
     pub fn set_link_baud(&mut self, baud: Option<u32>) {
         self.uart = baud.map(|b| Uart {
-            bytes_per_s: u64::from(protocol::link_bytes_per_s(b)),
+            bytes_per_s: board_bytes_per_s(b),
             write: Vec::with_capacity(UART_WRITE),
             sent: 0,
             credit: 0,
@@ -302,7 +315,7 @@ impl SimRig {
                     // The line is quiet: a rate the host agreed takes effect now, as the
                     // binary switches its USART (`Core::take_baud_switch`).
                     if let Some(baud) = core.take_baud_switch(now_us) {
-                        uart.bytes_per_s = u64::from(protocol::link_bytes_per_s(baud));
+                        uart.bytes_per_s = board_bytes_per_s(baud);
                     }
                     return;
                 }

@@ -48,7 +48,7 @@ pub struct RecordArgs {
 }
 
 /// The rates each link carries, for `rig record --help` (docs/recording.md says more).
-pub const RATES_HELP: &str = "Rates per link (8N1, typical frames): at 921,600 Bd (the default; 92,160 B/s) the 10 kHz stream (about 50 kB/s, 30 kB/s with the cam at rest) fits beside telemetry up to 200 Hz; beside 1 kHz telemetry (55 kB/s) the device refuses it naming 1,250 Hz, the rate that fits; telemetry started after the stream is not refused, and when the link runs full the device skips stream samples, each reported as lost. At 4,000,000 Bd (--baud 4000000: 400,000 B/s) everything fits. The virtual rig (--sim, rig sim serve) sends at the same byte rate as a board.";
+pub const RATES_HELP: &str = "Rates per link (8N1, typical frames): at 921,600 Bd (the default; 92,160 B/s) the 10 kHz stream (about 50 kB/s, 30 kB/s with the cam at rest) fits beside telemetry up to 200 Hz; beside 1 kHz telemetry (55 kB/s) the device refuses it naming 1,250 Hz, the rate that fits; telemetry started after the stream is not refused, and when the link runs full the device skips stream samples, each reported as lost. At 4,000,000 Bd (--baud 4000000; the board's USART runs it at 3,953,488 Bd, 395,348 B/s) everything fits. The virtual rig (--sim, rig sim serve) sends at the same byte rate as a board.";
 
 /// How long the stream may stay silent before the recording gives up, device seconds.
 const SILENCE_S: f64 = 2.0;

@@ -652,7 +652,8 @@ mod tests {
         client.agree_baud(&info, FAST_BAUD_RATE).unwrap();
         dev.with_rig(|r| {
             assert_eq!(r.core().link_baud(), FAST_BAUD_RATE);
-            assert_eq!(r.link_bytes_per_s(), Some(400_000));
+            // 4,000,000 Bd as the board's USART gives it: 3,953,488 Bd.
+            assert_eq!(r.link_bytes_per_s(), Some(395_348));
         });
         client.start_keep_alive();
         client
