@@ -17,5 +17,8 @@ pub mod scenarios;
 pub use error::SimError;
 pub use link::{LineNoise, SimLink};
 pub use preset::{EffectSpec, Preset};
-pub use rig::{ADC_HZ, BenchSettings, Injections, SimConfig, SimRig, UART_WRITE, VIRTUAL_BOARD};
+pub use rig::{
+    ADC_HZ, BenchSettings, Injections, SimConfig, SimRig, UART_WRITE, VIRTUAL_BOARD,
+    board_bytes_per_s,
+};
 pub use riglink::RigLink;
