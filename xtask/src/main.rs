@@ -481,8 +481,7 @@ fn closed_loop(elf: &Path) -> Result<serde_json::Value> {
 
 /// CI's target bench (`target-bench --check`) after the firmware build; skipped, saying
 /// why, only when the emulator's Python packages cannot be installed (no python3, no venv
-/// module, no network for pip).
-/// The target bench's check; returns whether the emulator (the venv's Unicorn, which the
+/// module, no network for pip). Returns whether the emulator (the venv's Unicorn, which the
 /// emulated board of `rig sim serve --firmware` loads too) is installed.
 fn bench_check() -> Result<bool> {
     let python = match target_bench::python_env(&target_dir()) {

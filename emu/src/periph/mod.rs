@@ -149,8 +149,6 @@ pub struct Bus {
     comp_out: bool,
     /// The last scan's analog values.
     analog: Analog,
-    /// The core locked up (SYSCFG_CFGR2.CLL breaks TIM1).
-    locked_up: bool,
     /// Flash words to restore after an illegal write went through: (address, old).
     pub flash_restore: Vec<(u32, u32)>,
 }
@@ -216,7 +214,6 @@ impl Bus {
                 ntc_pin_v: 0.0,
                 vdda_v: 3.3,
             },
-            locked_up: false,
             flash_restore: Vec::new(),
         }
     }
@@ -251,14 +248,12 @@ impl Bus {
         self.usart.lost += incoming.len() as u64;
         self.iwdg = Iwdg::default();
         self.wwdg = Wwdg::default();
-        self.locked_up = false;
         self.reset = None;
     }
 
     /// The core locked up: with SYSCFG_CFGR2.CLL, TIM1 breaks (RM0440 28.3.16). Returns
     /// whether the main output was switched off by it.
     pub fn lockup(&mut self) -> bool {
-        self.locked_up = true;
         if self.syscfg.get(0x1C) & 1 == 0 {
             return false;
         }
@@ -502,15 +497,20 @@ impl Bus {
     pub fn read(&mut self, a: u32, size: u32, now: u64, pc: u32, mem: &Mem) -> u32 {
         let aligned = a & !3;
         let shift = 8 * (a & 3);
-        let (enc_cam, enc_out) = self.env.encoder_counts();
         let value = match block(a) {
             Some((base, "TIM1")) => self.tim1.read(aligned - base, now, 0),
             Some((base, "TIM2")) => {
                 self.tim2.advance(now, |_| {});
                 self.tim2.read(aligned - base, now, 0)
             }
-            Some((base, "TIM3")) => self.tim3.read(aligned - base, now, enc_out),
-            Some((base, "TIM4")) => self.tim4.read(aligned - base, now, enc_cam),
+            Some((base, "TIM3")) => {
+                self.tim3
+                    .read(aligned - base, now, self.env.encoder_counts().1)
+            }
+            Some((base, "TIM4")) => {
+                self.tim4
+                    .read(aligned - base, now, self.env.encoder_counts().0)
+            }
             Some((base, "WWDG")) => self.wwdg.read(aligned - base, now),
             Some((base, "IWDG")) => self.iwdg.read(aligned - base),
             Some((base, "USART2")) => {
@@ -582,7 +582,6 @@ impl Bus {
                 (old & !(mask(size) << o_shift)) | ((v & mask(size)) << o_shift)
             }
         };
-        let (enc_cam, enc_out) = self.env.encoder_counts();
         let ok = match block(a) {
             Some((base, "TIM1")) => {
                 let o = aligned - base;
@@ -605,11 +604,13 @@ impl Bus {
             }
             Some((base, "TIM3")) => {
                 let o = aligned - base;
+                let enc_out = self.env.encoder_counts().1;
                 let old = self.tim3.read(o, now, enc_out).unwrap_or(0);
                 self.tim3.write(o, merge(old), now, enc_out).is_some()
             }
             Some((base, "TIM4")) => {
                 let o = aligned - base;
+                let enc_cam = self.env.encoder_counts().0;
                 let old = self.tim4.read(o, now, enc_cam).unwrap_or(0);
                 self.tim4.write(o, merge(old), now, enc_cam).is_some()
             }

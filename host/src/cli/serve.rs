@@ -96,26 +96,42 @@ pub fn config(a: &ServeArgs) -> Result<SimConfig, RigError> {
     Ok(config)
 }
 
+/// The random bytes `--line-noise-bytes-per-s` mixes into the line, if any.
+fn line_noise(a: &ServeArgs) -> Option<WallNoise> {
+    (a.line_noise_bytes_per_s > 0.0).then_some(WallNoise {
+        bytes_per_s: a.line_noise_bytes_per_s,
+        seed: a.seed,
+    })
+}
+
+/// The ready line's keys for a rig served on `port` at `speed`, with the warnings (also
+/// printed to stderr) about effects no client can see.
+fn ready(a: &ServeArgs, port: &str, speed: f64) -> Ready {
+    let warnings = unseen_warnings(a);
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    Ready {
+        port: port.to_string(),
+        speed,
+        preset: a.preset.clone(),
+        effects: a.effects.clone(),
+        seed: a.seed,
+        warnings,
+    }
+}
+
 /// Runs `rig sim serve --firmware`: the image on the emulated board.
 fn run_firmware(a: &ServeArgs, config: SimConfig) -> Result<ExitCode, RigError> {
     let stop = super::connect::interrupt_flag();
-    let noise = (a.line_noise_bytes_per_s > 0.0).then_some(WallNoise {
-        bytes_per_s: a.line_noise_bytes_per_s,
-        seed: a.seed,
-    });
+    let noise = line_noise(a);
     let elf = a.firmware.clone().flatten();
     let dev = FirmwareDevice::start(elf.as_deref(), config.plant, a.seed, a.speed, noise)?;
+    let ready = ready(a, dev.port_name(), dev.pace());
     let mut out = std::io::stdout().lock();
     if a.json {
         let ready = FirmwareReady {
-            ready: Ready {
-                port: dev.port_name().to_string(),
-                speed: dev.pace(),
-                preset: a.preset.clone(),
-                effects: a.effects.clone(),
-                seed: a.seed,
-                warnings: unseen_warnings(a),
-            },
+            ready,
             firmware: dev.elf().display().to_string(),
         };
         super::print_json_line(&mut out, &ready)?;
@@ -172,25 +188,11 @@ pub fn run(a: ServeArgs) -> Result<ExitCode, RigError> {
         return run_firmware(&a, config);
     }
     let stop = super::connect::interrupt_flag();
-    let noise = (a.line_noise_bytes_per_s > 0.0).then_some(WallNoise {
-        bytes_per_s: a.line_noise_bytes_per_s,
-        seed: a.seed,
-    });
+    let noise = line_noise(&a);
     let dev = VirtualDevice::start_with_noise(config, a.speed, noise)?;
-    let warnings = unseen_warnings(&a);
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
+    let ready = ready(&a, dev.port_name(), a.speed);
     let mut out = std::io::stdout().lock();
     if a.json {
-        let ready = Ready {
-            port: dev.port_name().to_string(),
-            speed: a.speed,
-            preset: a.preset.clone(),
-            effects: a.effects.clone(),
-            seed: a.seed,
-            warnings,
-        };
         super::print_json_line(&mut out, &ready)?;
     } else {
         writeln!(

@@ -363,6 +363,15 @@ mod tests {
         }
     }
 
+    /// A client with telemetry at 1 kHz and a 10 Hz release past its spin-up (above 20 rad/s).
+    fn spun_up(dev: &FirmwareDevice) -> Client<crate::client::SerialTransport> {
+        let (mut c, _) = client(dev);
+        c.start_telemetry(1000).unwrap();
+        c.release(true, 10.0).unwrap();
+        until(&mut c, 5.0, "spin-up", |s| s.cam_speed_rad_s > 20.0);
+        c
+    }
+
     /// Runs the board until it has reset, within `limit_s` of device time.
     fn until_reset(dev: &FirmwareDevice, limit_s: f64) -> (u64, &'static str) {
         let from = dev.time();
@@ -382,10 +391,7 @@ mod tests {
     fn a_jammed_cam_trips_comp3_and_the_break_clears_the_main_output_in_hardware() {
         let Some(elf) = image() else { return };
         let dev = serve(&elf);
-        let (mut c, _) = client(&dev);
-        c.start_telemetry(1000).unwrap();
-        c.release(true, 10.0).unwrap();
-        until(&mut c, 5.0, "spin-up", |s| s.cam_speed_rad_s > 20.0);
+        let mut c = spun_up(&dev);
         // The arm on the vibrator shaft meets a stop: the cam cannot turn.
         dev.with_plant(|p| p.set_cam(model::plant::CamSetup::Blocked));
         let s = until(&mut c, 2.0, "a latched fault", |s| !s.faults.is_empty());
@@ -425,10 +431,7 @@ mod tests {
     fn a_stack_overflow_into_the_guard_locks_up_breaks_tim1_and_ends_in_a_watchdog_reset() {
         let Some(elf) = image() else { return };
         let dev = serve(&elf);
-        let (mut c, _) = client(&dev);
-        c.start_telemetry(1000).unwrap();
-        c.release(true, 10.0).unwrap();
-        until(&mut c, 5.0, "spin-up", |s| s.cam_speed_rad_s > 20.0);
+        let c = spun_up(&dev);
         // The stack pointer right above the MPU guard, as a call chain too deep would leave it.
         let guard = dev.with_board(|b| b.machine_mut().inject_stack_overflow(8));
         assert!(guard.is_some(), "the image set no stack guard");
