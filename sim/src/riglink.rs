@@ -135,16 +135,43 @@ pub fn release<L: RigLink + ?Sized>(link: &mut L, hz: f32) -> Result<(), L::Erro
             target_hz: hz,
             session: 0,
         },
-    )?;
-    link.keep_alive(true);
-    Ok(())
+    )
+}
+
+/// Whether `req` starts (or keeps) a host drive that needs heartbeats: a release on, an
+/// open-loop voltage other than 0.
+pub fn starts_drive(req: &Request) -> bool {
+    match req {
+        Request::Release { on, .. } => *on,
+        Request::OpenLoop { volts, .. } => *volts != 0.0,
+        _ => false,
+    }
 }
 
 /// Sends a drive request (`Release`, `OpenLoop`) and requires an `Ack`. A rig still
 /// measuring its current sensor's zero (just booted, or re-zeroing) refuses a drive with
 /// `CurrentZeroPending`: asked again every [`ZERO_RETRY_S`] for at most [`ZERO_WAIT_S`] of
 /// the rig's clock, then that refusal stands.
+///
+/// A drive that starts is kept alive from the moment it is sent, not from its `Ack`: the
+/// rig drives as soon as it reads the request, so an `Ack` lost on a noisy line (its retry
+/// comes a reply timeout later, as long as the rig's comms timeout) must not leave the drive
+/// without heartbeats. Accepted, the heartbeats go on while the drive does and stop when it
+/// stops; refused or unanswered, they stop (a drive the rig took anyway lapses at its comms
+/// timeout, the safe end).
 pub fn drive<L: RigLink + ?Sized>(link: &mut L, req: &Request) -> Result<(), L::Error> {
+    let on = starts_drive(req);
+    if on {
+        link.keep_alive(true);
+    }
+    let answer = drive_once(link, req);
+    if answer.is_ok() || on {
+        link.keep_alive(answer.is_ok() && on);
+    }
+    answer
+}
+
+fn drive_once<L: RigLink + ?Sized>(link: &mut L, req: &Request) -> Result<(), L::Error> {
     // Waits of ZERO_RETRY_S each (the link's own clock), so no reading of the clock is needed.
     let mut waits = 0;
     loop {

@@ -75,25 +75,37 @@ impl<T: Read + Write> Client<T> {
             on,
             target_hz,
             session: 0,
-        })?;
-        self.set_keep_alive(on);
-        Ok(())
+        })
     }
 
     /// Drives the vibrator with a fixed voltage `volts` (open loop, for calibration); 0
     /// stops it. Kept alive by heartbeats like a release; waits for the current zero as
     /// [`Client::release`] does.
     pub fn open_loop(&mut self, volts: f32) -> Result<(), RigError> {
-        self.drive(&Request::OpenLoop { volts, session: 0 })?;
-        self.set_keep_alive(volts != 0.0);
-        Ok(())
+        self.drive(&Request::OpenLoop { volts, session: 0 })
     }
 
     /// Sends a drive request and requires an `Ack`, asking again while the device refuses
     /// it with `CurrentZeroPending`, as the scenarios' [`sim::riglink::drive`] does (every
     /// [`sim::riglink::ZERO_RETRY_S`] of device time, for at most
     /// [`sim::riglink::ZERO_WAIT_S`]); then that refusal stands, with its reason.
+    ///
+    /// Heartbeats as [`sim::riglink::drive`] sends them: from the moment a drive that starts
+    /// is sent (an `Ack` lost on the line is retried a reply timeout later, as long as the
+    /// device's comms timeout), on while it runs, off once it stops or is refused.
     fn drive(&mut self, req: &Request) -> Result<(), RigError> {
+        let on = sim::riglink::starts_drive(req);
+        if on {
+            self.set_keep_alive(true);
+        }
+        let answer = self.drive_once(req);
+        if answer.is_ok() || on {
+            self.set_keep_alive(answer.is_ok() && on);
+        }
+        answer
+    }
+
+    fn drive_once(&mut self, req: &Request) -> Result<(), RigError> {
         use sim::riglink::{ZERO_RETRY_S, ZERO_WAIT_S};
         let scale = self.opts.time_scale;
         let give_up =

@@ -365,6 +365,41 @@ fn heartbeats_keep_a_release_alive_while_waiting() {
 }
 
 #[test]
+fn a_drive_is_heartbeated_while_its_lost_ack_is_retried() {
+    // The device drives as soon as it reads a release; its Ack is lost on the line. The
+    // retry comes a reply timeout later (the device's own comms timeout, 500 ms), so the
+    // client must heartbeat from the moment it sends the release, not from its Ack: the
+    // device counts the heartbeats read between the first release and its retry. Requests
+    // reach it in the order they were sent, so the count does not race the retry.
+    let between = Arc::new(AtomicU32::new(0));
+    let counter = Arc::clone(&between);
+    let mut releases = 0;
+    let mut c = fake_device_timing_out(
+        move |seq, req| {
+            match req {
+                Request::Release { on: true, .. } => {
+                    releases += 1;
+                    if releases == 1 {
+                        return Vec::new(); // the Ack lost
+                    }
+                }
+                Request::Heartbeat { .. } if releases == 1 => {
+                    counter.fetch_add(1, Ordering::SeqCst);
+                }
+                _ => {}
+            }
+            good_answer(seq, req)
+        },
+        Duration::from_millis(u64::from(protocol::COMMS_TIMEOUT_MS)),
+    );
+    c.release(true, 10.0).unwrap();
+    assert!(c.keeping_alive());
+    let n = between.load(Ordering::SeqCst);
+    // 500 ms at one heartbeat every 150 ms: 3 due; a starved client sends at least one.
+    assert!(n >= 1, "{n} heartbeats while the release's Ack was retried");
+}
+
+#[test]
 fn telemetry_gaps_are_counted() {
     let mut c = fake_device(|seq, req| {
         let mut out = good_answer(seq, req.clone());
@@ -493,6 +528,7 @@ fn a_drive_waits_for_the_current_zero_and_then_names_it() {
     c.opts.time_scale = 100.0;
     let e = c.open_loop(3.0).unwrap_err();
     assert_eq!(e.refusal(), Some(NackCode::CurrentZeroPending));
+    assert!(!c.keeping_alive(), "a refused drive is not heartbeated");
     let text = e.to_string();
     assert!(
         text.contains("zero") && text.contains("rig faults"),

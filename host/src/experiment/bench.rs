@@ -91,8 +91,8 @@ pub trait Bench: RigLink<Error = RigError> {
         }
     }
 
-    /// Open-loop drive at `volts` (0 stops), kept alive while on; waits for the rig's
-    /// current zero ([`sim::riglink::drive`]).
+    /// Open-loop drive at `volts` (0 stops), kept alive from its request while on; waits for
+    /// the rig's current zero ([`sim::riglink::drive`]).
     fn open_loop(&mut self, volts: f64) -> Result<(), RigError> {
         sim::riglink::drive(
             self,
@@ -100,13 +100,11 @@ pub trait Bench: RigLink<Error = RigError> {
                 volts: volts as f32,
                 session: 0,
             },
-        )?;
-        self.keep_alive(volts != 0.0);
-        Ok(())
+        )
     }
 
-    /// Release at `hz` (closed loop) or lock (`on` false), kept alive while on; waits for
-    /// the rig's current zero ([`sim::riglink::drive`]).
+    /// Release at `hz` (closed loop) or lock (`on` false), kept alive from its request while
+    /// on; waits for the rig's current zero ([`sim::riglink::drive`]).
     fn release(&mut self, on: bool, hz: f64) -> Result<(), RigError> {
         sim::riglink::drive(
             self,
@@ -115,9 +113,7 @@ pub trait Bench: RigLink<Error = RigError> {
                 target_hz: if on { hz as f32 } else { 0.0 },
                 session: 0,
             },
-        )?;
-        self.keep_alive(on);
-        Ok(())
+        )
     }
 
     /// Locks the gear whatever runs: open loop off, release off, heartbeats off. Best
