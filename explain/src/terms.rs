@@ -17,7 +17,7 @@
 //! | `tooth-compliance` | `saturating` | stroke e - c F_s tanh(F_ax / F_s): the teeth yield c F_ax at first, at most c F_s | three or more loads |
 //! | `inertia-rectification` | `load-dependent` | inertia term (1 + kappa + kappa_tau tau_rot) M_hat w_n^2 e^2 / pi: the share of the carrier's inertial power the drive returns changes with load | two or more speeds and three or more loads |
 //!
-//! User effects: an expression (parsed by [`exmex`], with symbolic partial derivatives) over
+//! User effects: an expression (the rig file's law, [`rigfile::UserLaw`]) over
 //! `w` (cam speed, rad/s), `tau` (load, N m), `t` (time since the first test, s; 0 without a
 //! `t_s` column), `temp` (motor temperature, deg C; the calibration's without a `temp_c`
 //! column), `i` (the model's current, A), `i_f` (its friction current, A), `i_m` (the inertia
@@ -34,8 +34,9 @@ use crate::library::{DataTraits, ThermalDriver};
 /// simpler impostor beat the true law whenever the data cannot pin the shape).
 pub const SHAPE_PENALTY: f64 = 2.197_224_577_336_219_4;
 
-/// Variables a user effect may use, in the order of the data vector of [`Term::add`].
-pub const USER_VARIABLES: [&str; 8] = ["w", "tau", "t", "temp", "i", "i_f", "i_m", "f_ax"];
+/// Variables a user effect may use, in the order of the data vector of [`Term::add`] (the
+/// rig file's: [`rigfile::USER_VARIABLES`]).
+pub use rigfile::USER_VARIABLES;
 
 /// A family member of a library law.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -341,16 +342,8 @@ impl TermParam {
     }
 }
 
-/// A user effect's expression with its derivatives.
-#[derive(Debug, Clone)]
-pub struct UserEffect {
-    /// The expression as written.
-    pub expression: String,
-    expr: exmex::FlatEx<f64>,
-    /// For each variable of the expression (alphabetical, exmex's order): an index into
-    /// the data variables (< 8) or 8 + the parameter's index.
-    slots: Vec<usize>,
-}
+/// A user effect's expression (the rig file's law, [`rigfile::UserLaw`]).
+pub type UserEffect = rigfile::UserLaw;
 
 /// What a term is.
 #[derive(Debug, Clone)]
@@ -549,46 +542,13 @@ impl Term {
     /// (what to fix) when the expression does not parse, uses an unknown name, or leaves a
     /// parameter out.
     pub fn user(name: &str, expression: &str, params: Vec<TermParam>) -> Result<Self, String> {
-        let rewritten = leading_minus(expression)
-            .map_err(|why| format!("user effect {name}: expression '{expression}': {why}"))?;
-        let expr = exmex::parse::<f64>(&rewritten).map_err(|e| {
-            format!("user effect {name}: expression '{expression}' does not parse: {e}")
-        })?;
-        let mut slots = Vec::new();
-        for v in exmex::Express::var_names(&expr) {
-            if let Some(k) = USER_VARIABLES.iter().position(|u| u == v) {
-                slots.push(k);
-            } else if let Some(k) = params.iter().position(|p| &p.key == v) {
-                slots.push(USER_VARIABLES.len() + k);
-            } else {
-                return Err(format!(
-                    "user effect {name}: '{v}' in '{expression}' is neither a variable ({}) nor one of its parameters ({}): declare it under params or fix the name",
-                    USER_VARIABLES.join(", "),
-                    params
-                        .iter()
-                        .map(|p| p.key.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ));
-            }
-        }
-        for (k, p) in params.iter().enumerate() {
-            if !slots.contains(&(USER_VARIABLES.len() + k)) {
-                return Err(format!(
-                    "user effect {name}: parameter {} is not used in '{expression}': use it or drop it",
-                    p.key
-                ));
-            }
-        }
+        let keys: Vec<&str> = params.iter().map(|p| p.key.as_str()).collect();
+        let law = rigfile::UserLaw::compile(name, expression, &keys)?;
         Ok(Self {
             name: name.to_string(),
             note: format!("user effect {expression}"),
             params,
-            kind: TermKind::User(Box::new(UserEffect {
-                expression: expression.to_string(),
-                expr,
-                slots,
-            })),
+            kind: TermKind::User(Box::new(law)),
             heat: HeatCache::default(),
         })
     }
@@ -737,7 +697,7 @@ impl Term {
                 }
             }
             TermKind::User(u) => {
-                let mut vars = vec![0.0; u.slots.len()];
+                let mut scratch = Vec::new();
                 for (j, op) in inputs.ops.iter().enumerate() {
                     let data = [
                         op.omega_n,
@@ -749,15 +709,7 @@ impl Term {
                         at.inertia[j],
                         at.axial[j],
                     ];
-                    for (slot, val) in u.slots.iter().zip(vars.iter_mut()) {
-                        *val = if *slot < data.len() {
-                            data[*slot]
-                        } else {
-                            v[*slot - data.len()]
-                        };
-                    }
-                    let r = exmex::Express::eval(&u.expr, &vars).unwrap_or(f64::NAN);
-                    out[j] += if r.is_finite() { r } else { 0.0 };
+                    out[j] += u.eval(&data, &v, &mut scratch);
                 }
             }
         }
@@ -812,42 +764,8 @@ impl Term {
     }
 }
 
-/// `expression` with each leading (unary) minus written as `(-1)*`, so that it binds as in
-/// mathematics (`-x^2` is `-(x^2)`; exmex itself binds a unary operator tighter than `^`).
-/// A minus right after `/` or `^` is refused (what to write instead), since no such
-/// rewriting keeps its meaning.
-fn leading_minus(expression: &str) -> Result<String, String> {
-    let mut out = String::with_capacity(expression.len() + 8);
-    let mut previous: Option<char> = None;
-    for c in expression.chars() {
-        if c == '-' {
-            match previous {
-                None | Some('(' | ',' | '+' | '-' | '*') => {
-                    out.push_str("(-1)*");
-                    previous = Some('*');
-                    continue;
-                }
-                Some(p @ ('/' | '^')) => {
-                    return Err(format!(
-                        "a minus right after '{p}' is ambiguous: put the negative in parentheses (x{p}(-2), not x{p}-2)"
-                    ));
-                }
-                _ => {}
-            }
-        }
-        out.push(c);
-        if !c.is_whitespace() {
-            previous = Some(c);
-        }
-    }
-    Ok(out)
-}
-
-/// The inertia term's current at `op` (the paper's M_hat w^2 e^2 / pi over the torque
-/// constant), A.
-pub fn inertia_current(model: &CurrentModel, op: &OperatingPoint) -> f64 {
-    model.drive.required_inertia_torque(op.omega_n) / model.torque_constant(op)
-}
+/// The inertia term's current at an operating point (the rig file's user laws use it too).
+pub use rigfile::user_law::inertia_current;
 
 /// The motor's heated share at each point (in time order `order`): rising as
 /// 1 - exp(-on / tau) over the test time and falling as exp(-off / tau) in rests, a rest
@@ -1058,8 +976,14 @@ mod tests {
         let mut out = [0.0];
         t.add(&model(), &inputs, &[1.0], &mut out);
         assert!((out[0] - (-1.0f64).exp()).abs() < 1e-12, "{}", out[0]);
-        assert_eq!(leading_minus("-x^2").unwrap(), "(-1)*x^2");
-        assert_eq!(leading_minus("a - -b * 1e-3").unwrap(), "a - (-1)*b * 1e-3");
+        assert_eq!(
+            rigfile::user_law::leading_minus("-x^2").unwrap(),
+            "(-1)*x^2"
+        );
+        assert_eq!(
+            rigfile::user_law::leading_minus("a - -b * 1e-3").unwrap(),
+            "a - (-1)*b * 1e-3"
+        );
         let e = Term::user("bump", "c * w^-2", vec![p("c")]).unwrap_err();
         assert!(
             e.contains("bump") && e.contains("expression") && e.contains("x^(-2)"),

@@ -294,7 +294,7 @@ pub fn virtual_rig(rig: &RigFile, with_model: bool, seed: u64) -> Result<sim::Si
     // zeroes over a hundred times as many (10 s of virtual time): 0.1 mA.
     config.core.current.zero_samples = config.core.current.zero_samples.saturating_mul(100);
     if with_model {
-        sim::preset::apply_model(&base, &mut config.plant)?;
+        sim::preset::apply_model(&base, &mut config)?;
     }
     config.seed = seed;
     Ok(config)

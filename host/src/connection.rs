@@ -129,7 +129,7 @@ impl DeviceOpts {
                 config.seed = seed;
             }
             let dev =
-                FirmwareDevice::start(elf.as_deref(), config.plant, config.seed, self.speed, None)?;
+                FirmwareDevice::start(elf.as_deref(), &config, config.seed, self.speed, None)?;
             let port = dev.port_name().to_owned();
             let name = format!("the firmware image on the emulated board ({port})");
             board = Some(dev);

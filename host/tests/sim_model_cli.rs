@@ -137,6 +137,41 @@ fn the_virtual_device_runs_the_fitted_model() {
 }
 
 #[test]
+fn the_virtual_device_runs_a_user_effect_of_the_model() {
+    // A law of the user's own (as `rig explain` proposes one: a `[[user_effects]]` entry
+    // and the `[[model.terms]]` entry carrying its value) runs in the virtual device's
+    // plant: each run draws the law's current at its speed and load on top of the rig
+    // without it, so `rig discover` and `rig compare` can test a proposed law.
+    const C: f64 = 0.002; // A per (rad/s N m)
+    let dir = tempfile::tempdir().unwrap();
+    let user = dir.path().join("user.toml");
+    model_file(
+        &user,
+        &format!(
+            "[[model.terms]]\nname = \"brush-float\"\nparams = {{ c = {C} }}\n\n\
+             [[user_effects]]\nname = \"brush-float\"\nexpression = \"c * w * tau\"\n\
+             params = {{ c = {{ unit = \"A s/(rad N m)\", bounds = [-0.1, 0.1] }} }}\n"
+        ),
+    );
+    let base = dir.path().join("base.toml");
+    model_file(&base, "");
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    let without = sweep(dir.path(), "base.csv", &["--model", &s(&base)], &[]);
+    let with = sweep(dir.path(), "user.csv", &["--model", &s(&user)], &[]);
+    for (a, b) in without.iter().zip(&with) {
+        let law = C * b.0 * b.1;
+        let shift = b.2 - a.2;
+        // Same seed, plan and closed-loop speed: the law's current within the run noise.
+        assert!(
+            (shift - law).abs() < 0.03,
+            "at {:.1} rad/s, {:.3} N m: the user effect adds {shift:.4} A, its law {law:.4} A",
+            b.0,
+            b.1
+        );
+    }
+}
+
+#[test]
 fn model_needs_sim_and_a_fitted_rig_file() {
     let dir = tempfile::tempdir().unwrap();
     let said = |c: &mut Command| {

@@ -28,6 +28,10 @@ pub struct PlantSetup {
     pub not_in_plant: Vec<Effect>,
     /// `[[model.terms]]` entries the plant cannot represent, as `name (form)`.
     pub terms_not_in_plant: Vec<String>,
+    /// The model's user effects (`[[model.terms]]` naming `[[user_effects]]`), which the
+    /// plant runs as a drag on the vibrator drawing their extra current
+    /// (`model::plant::Plant::set_user_current`).
+    pub user_terms: Vec<crate::UserTerm>,
 }
 
 impl RigFile {
@@ -75,6 +79,9 @@ impl RigFile {
                     "{what}: expression is empty: give the extra current in A as an expression"
                 ));
             }
+            let keys: Vec<&str> = u.params.keys().map(String::as_str).collect();
+            crate::UserLaw::compile(&u.name, &u.expression, &keys)
+                .map_err(|why| format!("{what}: {why}"))?;
             for (k, p) in &u.params {
                 let [lo, hi] = p.bounds;
                 let start = p.start.unwrap_or(p.null);
@@ -162,7 +169,7 @@ impl RigFile {
     /// represent. Exact: load-dependent friction, current offset, thermal drift (per K),
     /// viscous loss, linear bush (lever arm = hold / force), inertia rectification (its kappa,
     /// also as the `load-dependent` term of `[[model.terms]]`; the drive regenerates when
-    /// kappa < -0.75). Not in the plant: the
+    /// kappa < -0.75), user effects (`user_terms`). Not in the plant: the
     /// speed-dependent axial friction of Eq. (40) with a fixed corner speed (the plant's
     /// `friction_split` applies Eq. 40 with the simulated output speed instead), tooth
     /// compliance, the mesh ripple and a thermal drift against time.
@@ -201,10 +208,19 @@ impl RigFile {
                 other => missing.push(other),
             }
         }
-        // `[[model.terms]]`: the family forms the plant runs by the same law; any other is
-        // named as not in the plant, never dropped.
+        // `[[model.terms]]`: the family forms the plant runs by the same law and the user
+        // effects (as a drag drawing their current); any other is named as not in the
+        // plant, never dropped.
+        let user_terms = crate::user_law::user_terms(self.term_entries(), &self.user_effects)
+            .map_err(|why| RigFileError::RigFile {
+                file: "(in memory)".into(),
+                why,
+            })?;
         for t in self.term_entries() {
             let effect = Effect::from_name(&t.name);
+            if t.form.is_none() && user_terms.iter().any(|u| u.name == t.name) {
+                continue;
+            }
             match (effect, t.form.as_deref()) {
                 (Some(Effect::InertiaRectification), Some("load-dependent")) => {
                     let kappa = t.params.get("kappa").copied().unwrap_or(p.rectification);
@@ -223,6 +239,7 @@ impl RigFile {
             regeneration,
             not_in_plant: missing,
             terms_not_in_plant: missing_terms,
+            user_terms,
         })
     }
 }

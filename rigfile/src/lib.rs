@@ -84,6 +84,7 @@ pub mod plan;
 pub mod row;
 mod sections;
 pub mod text_input;
+pub mod user_law;
 pub mod wire;
 
 pub use effects::{MAX_USER_EFFECTS, PlantSetup, apply_params};
@@ -95,6 +96,7 @@ pub use sections::{
     EffectEntry, FitSection, FrictionSection, GearSection, LimitsSection, LoadSection,
     ModelSection, TermEntry, UserEffectDef, UserParamDef,
 };
+pub use user_law::{USER_VARIABLES, UserLaw, UserTerm};
 
 /// The first line of every rig file the tools write.
 pub const HEADER: &str =

@@ -498,7 +498,7 @@ pub struct UserEffectDef {
     /// Its name (not a library effect's).
     pub name: String,
     /// The extra current in A, an expression over the model's quantities and the parameters
-    /// (checked by `rig explain`).
+    /// (compiled when the file is read: [`crate::UserLaw`]).
     pub expression: String,
     /// Its parameters by name.
     #[serde(default)]

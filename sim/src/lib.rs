@@ -13,6 +13,7 @@ pub mod preset;
 mod rig;
 pub mod riglink;
 pub mod scenarios;
+pub mod user_effects;
 
 pub use error::SimError;
 pub use link::{LineNoise, SimLink};

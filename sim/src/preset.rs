@@ -287,12 +287,13 @@ pub fn axial_dip_for_corner(omega_c: f64) -> (f64, f64) {
     (best.1, best.2)
 }
 
-/// Runs the fitted `[model]` of `rig` in `plant`: mu (the axial friction's) and every
-/// effect, each at its physical place (`rigfile`'s mapping, and the speed-dependent axial
-/// friction as Eq. (40) with its fitted corner, the law `rig explain` fits).
-/// An effect the plant cannot run is an error naming it. Without a `[model]`, nothing
-/// changes.
-pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<(), SimError> {
+/// Runs the fitted `[model]` of `rig` in `config`'s plant: mu (the axial friction's) and
+/// every effect, each at its physical place (`rigfile`'s mapping, and the speed-dependent
+/// axial friction as Eq. (40) with its fitted corner, the law `rig explain` fits), and its
+/// user effects ([`crate::user_effects`]). An effect the plant cannot run is an error
+/// naming it. Without a `[model]`, nothing changes.
+pub fn apply_model(rig: &rigfile::RigFile, config: &mut crate::SimConfig) -> Result<(), SimError> {
+    let plant = &mut config.plant;
     let Some(m) = &rig.model else {
         return Ok(());
     };
@@ -336,6 +337,7 @@ pub fn apply_model(rig: &rigfile::RigFile, plant: &mut PlantParams) -> Result<()
     if let Some(regeneration) = setup.regeneration {
         plant.regeneration = regeneration;
     }
+    config.user_effects = crate::user_effects::UserEffects::of(rig)?;
     Ok(())
 }
 
@@ -390,8 +392,9 @@ mod tests {
                 },
             ],
         );
-        let mut plant = crate::SimConfig::paper().plant;
-        apply_model(&rig, &mut plant).unwrap();
+        let mut config = crate::SimConfig::paper();
+        apply_model(&rig, &mut config).unwrap();
+        let plant = &config.plant;
         assert_eq!(plant.mu_ax, 0.25);
         assert!((plant.effects.current_offset - 0.04).abs() < 1e-12);
         // Eq. (40) with the fitted corner, the law `rig explain` fitted, not an approximation.
@@ -405,7 +408,7 @@ mod tests {
                 params: [("k_per_s".to_string(), 1e-6)].into(),
             }],
         );
-        let e = apply_model(&timed, &mut plant).unwrap_err().to_string();
+        let e = apply_model(&timed, &mut config).unwrap_err().to_string();
         assert!(e.contains("cannot run thermal-drift against time"), "{e}");
         // The seeds' tooth compliance runs as the plant's physics, at its fitted value.
         let tooth = rigfile::RigFile::paper().with_model(
@@ -415,8 +418,8 @@ mod tests {
                 params: [("compliance_um_per_n".to_string(), 15.0)].into(),
             }],
         );
-        apply_model(&tooth, &mut plant).unwrap();
-        assert!((plant.effects.tooth_compliance - 15e-6).abs() < 1e-15);
+        apply_model(&tooth, &mut config).unwrap();
+        assert!((config.plant.effects.tooth_compliance - 15e-6).abs() < 1e-15);
     }
 
     #[test]
@@ -435,16 +438,16 @@ mod tests {
                 .into(),
             }],
         );
-        let mut plant = crate::SimConfig::paper().plant;
-        apply_model(&rig, &mut plant).unwrap();
-        assert_eq!(plant.effects.inertia_kappa, Some((-0.45, 0.03)));
-        assert!(!plant.regeneration);
+        let mut config = crate::SimConfig::paper();
+        apply_model(&rig, &mut config).unwrap();
+        assert_eq!(config.plant.effects.inertia_kappa, Some((-0.45, 0.03)));
+        assert!(!config.plant.regeneration);
         // A term the plant has no law for is named, not silently left out.
         if let Some(m) = rig.model.as_mut() {
             m.terms[0].form = Some("warm-up-in-time".into());
             m.terms[0].name = "thermal-drift".into();
         }
-        let err = apply_model(&rig, &mut crate::SimConfig::paper().plant)
+        let err = apply_model(&rig, &mut crate::SimConfig::paper())
             .unwrap_err()
             .to_string();
         assert!(err.contains("thermal-drift (warm-up-in-time)"), "{err}");

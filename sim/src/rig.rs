@@ -52,6 +52,8 @@ pub struct SimConfig {
     pub watchdog_reset: bool,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// A rig file's user effects the plant runs ([`crate::user_effects`]), or `None`.
+    pub user_effects: Option<crate::user_effects::UserEffects>,
 }
 
 impl SimConfig {
@@ -73,6 +75,7 @@ impl SimConfig {
             calibration_status: ParametersStatus::Valid,
             watchdog_reset: false,
             seed: 1,
+            user_effects: None,
         })
     }
 
@@ -101,6 +104,7 @@ impl SimConfig {
         plant.motor.ambient_c = rig.calibration.temperature_c;
         // The rig's drive (`[drive] decay`), unless the `[model]` fitted its own below.
         plant.regeneration = rig.drive.decay.returns_power();
+        let mut user_effects = None;
         if let Some(m) = &rig.model {
             let setup = rig.plant_effects().map_err(bad)?;
             plant.mu_ax = m.mu;
@@ -108,6 +112,7 @@ impl SimConfig {
             if let Some(regeneration) = setup.regeneration {
                 plant.regeneration = regeneration;
             }
+            user_effects = crate::user_effects::UserEffects::of(rig)?;
         }
         let mut core = CoreConfig::default();
         // The firmware core's estimator runs on the same drive as the plant.
@@ -119,6 +124,7 @@ impl SimConfig {
             calibration_status: ParametersStatus::Valid,
             watchdog_reset: false,
             seed: 1,
+            user_effects,
         })
     }
 
@@ -217,6 +223,8 @@ pub struct SimRig {
     halted: bool,
     /// The paced link, or `None`: every byte leaves at the control step that framed it.
     uart: Option<Uart>,
+    /// A rig file's user effects at work in the plant.
+    user: Option<crate::user_effects::UserDrive>,
 }
 
 impl SimRig {
@@ -261,6 +269,7 @@ impl SimRig {
                 commands: 0,
             },
             uart: None,
+            user: config.user_effects.map(crate::user_effects::UserDrive::new),
         }
     }
 
@@ -382,6 +391,10 @@ impl SimRig {
     }
 
     fn control_step(&mut self) {
+        if let Some(user) = self.user.as_mut() {
+            let dt = f64::from(self.ticks_per_step) / f64::from(ADC_HZ);
+            user.update(&mut self.plant, dt, self.tick as f64 / f64::from(ADC_HZ));
+        }
         let encoder_count = if self.injections.encoder_frozen {
             self.frozen_count
         } else {

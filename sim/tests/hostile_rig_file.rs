@@ -187,7 +187,7 @@ fn use_rig(rig: &RigFile) -> Result<(), String> {
             .map_err(|e| format!("current_model: {e}"))?;
     }
     let mut config = SimConfig::from_rig_file(rig).map_err(|e| format!("virtual rig: {e}"))?;
-    sim::preset::apply_model(rig, &mut config.plant).or_else(|e| {
+    sim::preset::apply_model(rig, &mut config).or_else(|e| {
         // A fitted effect the plant cannot run is named, not a failure of the file.
         if e.to_string().contains("cannot run") {
             Ok(())

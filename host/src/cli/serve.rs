@@ -126,7 +126,7 @@ fn run_firmware(a: &ServeArgs, config: SimConfig) -> Result<ExitCode, RigError> 
     let stop = super::connect::interrupt_flag();
     let noise = line_noise(a);
     let elf = a.firmware.clone().flatten();
-    let dev = FirmwareDevice::start(elf.as_deref(), config.plant, a.seed, a.speed, noise)?;
+    let dev = FirmwareDevice::start(elf.as_deref(), &config, a.seed, a.speed, noise)?;
     let ready = ready(a, dev.port_name(), dev.pace());
     let mut out = std::io::stdout().lock();
     if a.json {

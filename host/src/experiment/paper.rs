@@ -47,7 +47,7 @@ pub fn torque_sweep_with_error(
     let mut config = config(opts.z, Load::Torque(0.0), opts.seed, opts.sensor_supply_v)?;
     config.plant.effects = opts.effects;
     if let Some(rig) = fitted {
-        sim::preset::apply_model(rig, &mut config.plant)?;
+        sim::preset::apply_model(rig, &mut config)?;
     }
     toleranced_sensors(&mut config.plant.sensors);
     let drive = config.plant.drive;
@@ -158,7 +158,7 @@ pub fn table1_fitted(
         }
         config.plant.effects = effects;
         if let Some(rig) = fitted {
-            sim::preset::apply_model(rig, &mut config.plant)?;
+            sim::preset::apply_model(rig, &mut config)?;
         }
         let gear = config.plant.drive.gear;
         let mut bench = InProcessBench::new(config)?;
@@ -209,7 +209,7 @@ pub fn fig5_history(
         use_gear(&mut config, gear);
     }
     if let Some(rig) = fitted {
-        sim::preset::apply_model(rig, &mut config.plant)?;
+        sim::preset::apply_model(rig, &mut config)?;
     }
     let z = config.plant.drive.gear.z();
     let x = config.plant.drive.gear.shift();

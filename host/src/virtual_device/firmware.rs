@@ -15,7 +15,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::thread::JoinHandle;
 
-use model::plant::{Plant, PlantParams};
+use model::plant::Plant;
 
 use super::{Pacing, Served, Shared, WallNoise, lock, spawn};
 use crate::RigError;
@@ -25,17 +25,33 @@ pub struct ImageRig {
     board: emu::Board,
     /// Why the emulation stopped, if it did.
     pub error: Option<String>,
+    /// A rig file's user effects at work in the plant ([`sim::user_effects`]).
+    user: Option<sim::user_effects::UserDrive>,
 }
+
+/// Device time between two updates of the user effects' current on the emulated board, s
+/// (the firmware core's virtual rig updates it at every control step, 1 ms).
+const USER_UPDATE_S: f64 = 1e-3;
 
 impl Served for ImageRig {
     fn to_device(&mut self, bytes: &[u8]) {
         self.board.to_device(bytes);
     }
     fn advance(&mut self, seconds: f64) {
-        if self.error.is_none()
-            && let Err(e) = self.board.advance(seconds)
-        {
-            self.error = Some(e.to_string());
+        let mut left = seconds;
+        while self.error.is_none() && left > 0.0 {
+            let dt = match self.user {
+                Some(_) => left.min(USER_UPDATE_S),
+                None => left,
+            };
+            if let Err(e) = self.board.advance(dt) {
+                self.error = Some(e.to_string());
+            }
+            if let Some(user) = self.user.as_mut() {
+                let t = self.board.time();
+                user.update(self.board.plant_mut(), dt, t);
+            }
+            left -= dt;
         }
     }
     fn device_output(&mut self, out: &mut Vec<u8>) {
@@ -119,11 +135,12 @@ impl std::fmt::Debug for FirmwareDevice {
 }
 
 impl FirmwareDevice {
-    /// Loads `elf` (None: [`default_firmware_elf`]) onto the emulated board around `plant`
-    /// and serves it at `speed` times the wall clock at most, with `noise` on the line.
+    /// Loads `elf` (None: [`default_firmware_elf`]) onto the emulated board around
+    /// `config`'s plant (with its user effects) and serves it at `speed` times the wall
+    /// clock at most, with `noise` on the line.
     pub fn start(
         elf: Option<&Path>,
-        plant: PlantParams,
+        config: &sim::SimConfig,
         seed: u64,
         speed: f64,
         noise: Option<WallNoise>,
@@ -135,6 +152,11 @@ impl FirmwareDevice {
                 why: "no such file: build the release image with `cargo xtask firmware` (or give the ELF to run)".into(),
             });
         }
+        let plant = config.plant;
+        let user = config
+            .user_effects
+            .clone()
+            .map(sim::user_effects::UserDrive::new);
         let config = |time_scale| emu::BoardConfig {
             elf: elf.clone(),
             plant,
@@ -154,7 +176,11 @@ impl FirmwareDevice {
         // Powered up before anyone opens the port, as a board on the bench: the image has
         // booted and listens on its UART by the time the port is announced.
         board.advance(BOOT_S).map_err(fail)?;
-        let rig = ImageRig { board, error: None };
+        let rig = ImageRig {
+            board,
+            error: None,
+            user,
+        };
         let (port, shared, thread) = spawn(rig, pace, noise, Pacing::BoardTime)?;
         Ok(Self {
             port,
@@ -302,7 +328,7 @@ mod tests {
     fn the_release_image_holds_10_hz_with_telemetry_whole_and_estimates_as_the_virtual_rig() {
         let Some(elf) = image() else { return };
         let config = VirtualDevice::paper_config(&sim::Preset::paper());
-        let dev = FirmwareDevice::start(Some(&elf), config.plant, 1, 1.0, None).unwrap();
+        let dev = FirmwareDevice::start(Some(&elf), &config, 1, 1.0, None).unwrap();
         let (image_speed, image_tau) = release_10_hz(dev.port_name(), 2.0);
         assert!(dev.error().is_none(), "{:?}", dev.error());
         let target = std::f64::consts::TAU * 10.0;
@@ -328,7 +354,7 @@ mod tests {
 
     fn serve(elf: &Path) -> FirmwareDevice {
         let config = VirtualDevice::paper_config(&sim::Preset::paper());
-        FirmwareDevice::start(Some(elf), config.plant, 1, 1.0, None).unwrap()
+        FirmwareDevice::start(Some(elf), &config, 1, 1.0, None).unwrap()
     }
 
     fn client(

@@ -246,7 +246,7 @@ impl VirtualDevice {
         if rig.model.is_none() {
             preset.apply(&mut config.plant);
         } else {
-            sim::preset::apply_model(rig, &mut config.plant)?;
+            sim::preset::apply_model(rig, &mut config)?;
         }
         Ok(config)
     }

@@ -283,6 +283,8 @@ pub struct Plant {
     /// from it), and whether it rests on its floor or end stop.
     hung_at: f64,
     resting: bool,
+    /// A user effect's extra current ([`Plant::set_user_current`]), A.
+    user_current: f64,
 }
 
 impl Plant {
@@ -324,8 +326,23 @@ impl Plant {
             cam_rev: (0.0, 0.0, 0.0),
             hung_at: 0.0,
             resting: false,
+            user_current: 0.0,
             params,
         }
+    }
+
+    /// Sets the extra current a rig file's user effects draw here (a law in A of the
+    /// operating point, evaluated by the caller as it changes): the plant runs it as a drag
+    /// on the turning vibrator of the torque that current makes, so at steady speed the
+    /// winding draws that much more, warms by it and slows as a real drag would. A negative
+    /// current lightens the vibrator's own friction, never below none.
+    pub fn set_user_current(&mut self, amps: f64) {
+        self.user_current = if amps.is_finite() { amps } else { 0.0 };
+    }
+
+    /// The extra current last set by [`Plant::set_user_current`], A.
+    pub fn user_current(&self) -> f64 {
+        self.user_current
     }
 
     /// The winding's step response over `dt` at `resistance`: [exp(-dt / tau), the
@@ -641,7 +658,9 @@ impl Plant {
         } else {
             0.0
         };
-        let kinetic = m.coulomb + m.running_loss;
+        // The vibrator's dry losses, with a user effect's drag (`set_user_current`).
+        let kinetic =
+            (m.coulomb + m.running_loss + m.torque_per_amp * ktf * self.user_current).max(0.0);
         // The vibrator's viscous loss: C3's and the `vibrator-viscous-loss` effect's.
         let viscous_torque =
             |w: f64| m.viscous * w.abs() + viscous_loss_torque(p.effects.extra_viscous, w);
