@@ -103,7 +103,9 @@ fn bad_user_effects_are_refused_naming_the_fix() {
     // An unknown name: the rig file itself is refused when read (its expression compiles
     // there), naming the effect and the name.
     let unknown = RESONANCE.replace("(w - w_r)", "(speed - w_r)");
-    let e = RigFile::parse(&unknown, "rig.toml").unwrap_err().to_string();
+    let e = RigFile::parse(&unknown, "rig.toml")
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("'speed'") && e.contains("frame-resonance"),
         "{e}"

@@ -620,10 +620,25 @@ fn overcurrent_trip(session: &mut Connection, hands: &mut dyn Hands) -> Result<S
     hands.set_up(Action::FreeCam)?;
     let tripped = latched.contains(FaultFlags::HW_OVERCURRENT);
     let _ = session.client.clear_faults()?;
-    // The trip cleared and stays cleared with the bridge armed again.
+    // The device's word right after the clear, then whether it stays cleared with the
+    // bridge armed again. Samples the control steps took before the clear can still follow
+    // its reply (the core frames telemetry at its next transmit), so once the device says
+    // cleared, the watch counts from its first sample without a fault: a trip after that is
+    // a trip after the clear.
+    let right_after = session.client.faults()?;
+    session.client.discard_telemetry();
     let after = watch(session, 0.5, |_| false)?;
+    let after_faults = if (right_after.latched | right_after.active).is_empty() {
+        after
+            .samples
+            .iter()
+            .skip_while(|t| !t.faults.is_empty())
+            .fold(FaultFlags::empty(), |f, t| f | t.faults)
+    } else {
+        after.faults()
+    };
     let cleared = session.client.faults()?;
-    let left = cleared.latched | cleared.active | after.faults();
+    let left = right_after.latched | cleared.latched | cleared.active | after_faults;
     let ok = tripped && left.is_empty();
     Ok(step(
         "overcurrent_trip",
