@@ -882,7 +882,7 @@ fn render(law: &Law, dv: &DriverValues, mut out: ProposedLaw) -> ProposedLaw {
     out.expression = terms.join(" + ");
     out.words = words.join(" + ");
     out.user_effect = format!(
-        "[[user_effects]]\nname = \"proposed-law\"  # name it after its cause\nexpression = \"{}\"\nparams = {{ {} }}\n",
+        "# Runs on the virtual rig too: add this and [[model.terms]] with the same name to the\n# model `rig explain --write-model` writes, then `rig sim serve --model FILE`.\n[[user_effects]]\nname = \"proposed-law\"  # name it after its cause\nexpression = \"{}\"\nparams = {{ {} }}\n",
         out.expression,
         params.join(", ")
     );

@@ -70,7 +70,7 @@ fn lack_of_fit_text(e: &Explanation) -> String {
     if let Some(law) = &e.proposed_law {
         let _ = write!(
             s,
-            " A proposed law (units checked: the expression is in A): {} = {}; held out by {} it predicts to {:.1} mA RMSE{}, where the generic shape gets {:.1} mA; in {:.0} % of the resamples. Its [[user_effects]] entry is in the JSON (`proposed_law.user_effect`).",
+            " A proposed law (units checked: the expression is in A): {} = {}; held out by {} it predicts to {:.1} mA RMSE{}, where the generic shape gets {:.1} mA; in {:.0} % of the resamples. Its [[user_effects]] entry is in the JSON (`proposed_law.user_effect`): paste it into the rig file and refit, or add it with a [[model.terms]] entry of its name to the model `--write-model` writes and the virtual rig runs it (`rig sim serve --model FILE`, then `rig discover`).",
             law.expression,
             law.words,
             law.held_out,
