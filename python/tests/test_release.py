@@ -108,9 +108,15 @@ def test_one_release_at_a_time(rig):
             rig.release(freq_hz=5, seconds=1).start()
 
 
+#: Ctrl-C as a terminal delivers it: a shell that starts the tests in the background
+#: without job control (`cmd &` in a script) starts them with SIGINT ignored, and Python
+#: keeps an ignore it inherits, so the scripts put back the KeyboardInterrupt a user has.
+CTRL_C_AS_FROM_A_TERMINAL = "import signal; signal.signal(signal.SIGINT, signal.default_int_handler)"
+
 SCRIPT = textwrap.dedent(
     """
     import os, sys, time
+    {ctrl_c}
     from backdrive_rig import Rig
     rig = Rig.open(sys.argv[1])
     mode = sys.argv[2]
@@ -132,7 +138,7 @@ SCRIPT = textwrap.dedent(
             print("ended_by", r.ended_by, flush=True)
             rig.close()
     """
-)
+).replace("{ctrl_c}", CTRL_C_AS_FROM_A_TERMINAL)
 
 
 def run_script(port, mode, seconds):
@@ -232,6 +238,7 @@ def test_a_hung_interpreter_stops_at_the_duration(served_realtime):
 SWEEP_SCRIPT = textwrap.dedent(
     """
     import sys, time
+    {ctrl_c}
     from backdrive_rig import Rig
     rig = Rig.open(sys.argv[1])
     print("sweeping", flush=True)
@@ -243,7 +250,7 @@ SWEEP_SCRIPT = textwrap.dedent(
         print(f"interrupted after {time.monotonic() - t0:.1f} s", flush=True)
         rig.close()
     """
-)
+).replace("{ctrl_c}", CTRL_C_AS_FROM_A_TERMINAL)
 
 
 def test_ctrl_c_stops_a_running_sweep_with_the_gear_locked(served):
