@@ -337,7 +337,7 @@ pub fn apply_model(rig: &rigfile::RigFile, config: &mut crate::SimConfig) -> Res
     if let Some(regeneration) = setup.regeneration {
         plant.regeneration = regeneration;
     }
-    config.user_effects = crate::user_effects::UserEffects::of(rig)?;
+    config.user_effects = crate::user_effects::UserEffects::of(rig, setup.user_terms)?;
     Ok(())
 }
 

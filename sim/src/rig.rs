@@ -112,7 +112,7 @@ impl SimConfig {
             if let Some(regeneration) = setup.regeneration {
                 plant.regeneration = regeneration;
             }
-            user_effects = crate::user_effects::UserEffects::of(rig)?;
+            user_effects = crate::user_effects::UserEffects::of(rig, setup.user_terms)?;
         }
         let mut core = CoreConfig::default();
         // The firmware core's estimator runs on the same drive as the plant.

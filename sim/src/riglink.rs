@@ -152,21 +152,32 @@ pub fn starts_drive(req: &Request) -> bool {
 /// measuring its current sensor's zero (just booted, or re-zeroing) refuses a drive with
 /// `CurrentZeroPending`: asked again every [`ZERO_RETRY_S`] for at most [`ZERO_WAIT_S`] of
 /// the rig's clock, then that refusal stands.
-///
-/// A drive that starts is kept alive from the moment it is sent, not from its `Ack`: the
-/// rig drives as soon as it reads the request, so an `Ack` lost on a noisy line (its retry
-/// comes a reply timeout later, as long as the rig's comms timeout) must not leave the drive
-/// without heartbeats. Accepted, the heartbeats go on while the drive does and stop when it
-/// stops; refused or unanswered, they stop (a drive the rig took anyway lapses at its comms
-/// timeout, the safe end).
+/// Heartbeats as [`heartbeated`] sends them.
 pub fn drive<L: RigLink + ?Sized>(link: &mut L, req: &Request) -> Result<(), L::Error> {
+    heartbeated(link, req, |l, on| l.keep_alive(on), |l| drive_once(l, req))
+}
+
+/// Runs `send` (drive request `req` and the wait for its `Ack`) on `s` with the heartbeats
+/// `keep_alive` turns on and off. A drive that starts is kept alive from the moment it is
+/// sent, not from its `Ack`: the rig drives as soon as it reads the request, so an `Ack`
+/// lost on a noisy line (its retry comes a reply timeout later, as long as the rig's comms
+/// timeout) must not leave the drive without heartbeats. Accepted, the heartbeats go on
+/// while the drive does and stop when it stops; refused or unanswered, they stop (a drive
+/// the rig took anyway lapses at its comms timeout, the safe end). The scenarios' links and
+/// the host's client both drive through here.
+pub fn heartbeated<S: ?Sized, E>(
+    s: &mut S,
+    req: &Request,
+    keep_alive: impl Fn(&mut S, bool),
+    send: impl FnOnce(&mut S) -> Result<(), E>,
+) -> Result<(), E> {
     let on = starts_drive(req);
     if on {
-        link.keep_alive(true);
+        keep_alive(s, true);
     }
-    let answer = drive_once(link, req);
+    let answer = send(s);
     if answer.is_ok() || on {
-        link.keep_alive(answer.is_ok() && on);
+        keep_alive(s, answer.is_ok() && on);
     }
     answer
 }

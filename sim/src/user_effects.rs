@@ -31,20 +31,19 @@ pub struct UserEffects {
 }
 
 impl UserEffects {
-    /// The user effects of `rig`'s `[model]` (`None` when it has none). An error names the
-    /// entry whose expression does not compile.
-    pub fn of(rig: &RigFile) -> Result<Option<Self>, SimError> {
-        let bad = |e: rigfile::RigFileError| SimError::BadValue {
-            what: "the rig file's [[user_effects]]".into(),
-            why: e.to_string(),
-        };
-        let setup = rig.plant_effects().map_err(bad)?;
-        if setup.user_terms.is_empty() {
+    /// The user effects `terms` of `rig`'s `[model]` (its `plant_effects().user_terms`),
+    /// reading `rig`'s current model; `None` when there are none.
+    pub fn of(rig: &RigFile, terms: Vec<UserTerm>) -> Result<Option<Self>, SimError> {
+        if terms.is_empty() {
             return Ok(None);
         }
+        let model = rig.current_model().map_err(|e| SimError::BadValue {
+            what: "the rig file's [model]".into(),
+            why: e.to_string(),
+        })?;
         Ok(Some(Self {
-            terms: setup.user_terms,
-            model: rig.current_model().map_err(bad)?,
+            terms,
+            model,
             reference_c: rig.calibration.temperature_c,
         }))
     }

@@ -90,19 +90,15 @@ impl<T: Read + Write> Client<T> {
     /// [`sim::riglink::ZERO_RETRY_S`] of device time, for at most
     /// [`sim::riglink::ZERO_WAIT_S`]); then that refusal stands, with its reason.
     ///
-    /// Heartbeats as [`sim::riglink::drive`] sends them: from the moment a drive that starts
-    /// is sent (an `Ack` lost on the line is retried a reply timeout later, as long as the
-    /// device's comms timeout), on while it runs, off once it stops or is refused.
+    /// Heartbeats as [`sim::riglink::heartbeated`] sends them: from the moment a drive that
+    /// starts is sent, on while it runs, off once it stops or is refused.
     fn drive(&mut self, req: &Request) -> Result<(), RigError> {
-        let on = sim::riglink::starts_drive(req);
-        if on {
-            self.set_keep_alive(true);
-        }
-        let answer = self.drive_once(req);
-        if answer.is_ok() || on {
-            self.set_keep_alive(answer.is_ok() && on);
-        }
-        answer
+        sim::riglink::heartbeated(
+            self,
+            req,
+            |c, on| c.set_keep_alive(on),
+            |c| c.drive_once(req),
+        )
     }
 
     fn drive_once(&mut self, req: &Request) -> Result<(), RigError> {
